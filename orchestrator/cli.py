@@ -1,0 +1,239 @@
+"""`railcosim` command line: build, run, inspect, validate, fmu-env.
+
+Bad input → one line on stderr, exit code 2, no traceback. Ctrl-C → results so far are
+written, exit code 130. The process exits with its own status every time (the pythonfmu
+exit-time abort is avoided at its cause, see orchestrator/fmu.py FmuSlave.free).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+from .errors import UserError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+SSP_ROOT = REPO_ROOT / "ssp"
+DEFAULT_SYSTEM = "free_run"
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse prints usage on two)
+        raise UserError(f"{self.prog}: {message}")
+
+
+def _build_dir() -> Path:
+    from fmus.common.build import default_build_dir
+
+    return default_build_dir(REPO_ROOT)
+
+
+def _system_path(name: Optional[str]) -> Path:
+    if name is None:
+        name = DEFAULT_SYSTEM
+    path = Path(name)
+    if path.exists():
+        return path
+    shipped = SSP_ROOT / name
+    if shipped.is_dir():
+        return shipped
+    available = sorted(p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()) \
+        if SSP_ROOT.is_dir() else []
+    raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system "
+                    f"(shipped: {', '.join(available) or 'none yet'})")
+
+
+def cmd_build(args) -> int:
+    from fmus.common.build import build_all
+    from fmus.common.slave import BuildConfig
+    from .packing import pack_systems
+
+    for label, value in (("--sections", args.sections), ("--trains", args.trains), ("--frame", args.frame)):
+        if value < 1:
+            raise UserError(f"{label} {value}: must be at least 1")
+    config = BuildConfig(args.sections, args.trains, args.frame)
+    dest = Path(args.dest) if args.dest else _build_dir()
+    results = build_all(dest, config, force=args.force)
+    for result in results:
+        print(f"{'built ' if result.rebuilt else 'up to date'} {result.path}")
+    if not results:
+        print("no unit under fmus/ has a model yet; nothing to build")
+    for packed in pack_systems(SSP_ROOT, dest, dest.parent):
+        print(f"packed {packed}")
+    return 0
+
+
+def cmd_run(args) -> int:
+    from .run import RunOptions, run_system
+
+    system = _system_path(args.system)
+    overrides = {}
+    for item in args.set or []:
+        key, sep, value = item.partition("=")
+        if not sep or "." not in key:
+            raise UserError(f"--set {item}: expected COMPONENT.VARIABLE=VALUE")
+        overrides[key.strip()] = value.strip()
+    if not args.no_build:
+        from fmus.common.build import build_all
+
+        build_all(_build_dir())
+    options = RunOptions(
+        stop_time=args.stop_time, output_dir=Path(args.output), overrides=overrides,
+        param_sets=args.param_set or [], output_interval=args.output_interval,
+        captures=args.capture or [], algorithm=args.algorithm, in_process=args.in_process,
+        fmu_dirs=[_build_dir()], record=args.record,
+        progress=sys.stderr.isatty())
+    result = run_system(system, options)
+    summary = result.summary
+    print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
+          f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
+          f"results in {result.output_dir}")
+    return 0
+
+
+def _collapse(names: List[str]) -> List[str]:
+    """u_tx[1,1] … u_tx[8,40] → u_tx[8,40]."""
+    seen, shown = {}, []
+    for name in names:
+        base, _, rest = name.partition("[")
+        if not rest:
+            shown.append(name)
+            continue
+        index = tuple(int(i) for i in rest.rstrip("]").split(","))
+        if base not in seen:
+            shown.append(base)
+        seen[base] = tuple(max(a, b) for a, b in zip(seen.get(base, index), index))
+    return [f"{n}[{','.join(map(str, seen[n]))}]" if n in seen else n for n in shown]
+
+
+def cmd_inspect(args) -> int:
+    from .fmu import read_interface
+
+    path = Path(args.target)
+    if path.suffix == ".fmu":
+        interface = read_interface(path)
+        print(f"{path}: {interface.model_identifier} ({interface.generation_tool}), "
+              f"step {interface.default_step_s if interface.default_step_s else 'any'} s")
+        by_base = {}
+        for var in interface.variables.values():
+            by_base.setdefault(var.name.partition("[")[0], []).append(var)
+        for label in _collapse(list(interface.variables)):
+            var = by_base[label.partition("[")[0]][0]
+            print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
+        return 0
+    from .graph import TICKS_PER_SECOND, build_graph
+    from .ssp import open_system
+
+    system = open_system(_system_path(args.target), [_build_dir()])
+    try:
+        graph = build_graph(system)
+        print(f"{system.name}: base step {graph.base_ticks / TICKS_PER_SECOND:g} s, "
+              f"order {' → '.join(graph.order)}")
+        for name, node in graph.nodes.items():
+            print(f"  {name:16s} {node.interface.model_identifier:16s} step "
+                  f"{node.step_ticks / TICKS_PER_SECOND:g} s  params {len(node.parameters)}")
+        pairs = {}
+        for edge in graph.edges:
+            pairs.setdefault((edge.source, edge.target, edge.transition), []).append(edge)
+        for (source, target, transition), edges in pairs.items():
+            print(f"  {source} → {target}: {len(edges)} connection(s), {transition}")
+        for cycle in graph.cycles:
+            print(f"  cycle broken by declared order among: {', '.join(cycle)}")
+    finally:
+        system.close()
+    return 0
+
+
+def cmd_validate(args) -> int:
+    path = Path(args.target)
+    if path.suffix == ".fmu":
+        from fmpy.validation import validate_fmu
+        from .fmu import read_interface
+
+        read_interface(path)
+        problems = validate_fmu(str(path))
+        if problems:
+            raise UserError(f"{path}: " + "; ".join(problems))
+        print(f"{path}: valid")
+        return 0
+    from .graph import build_graph
+    from .ssp import open_system
+
+    system = open_system(_system_path(args.target), [_build_dir()])
+    try:
+        build_graph(system)
+    finally:
+        system.close()
+    print(f"{args.target}: valid")
+    return 0
+
+
+def cmd_fmu_env(args) -> int:
+    from .hostenv import host_environment
+
+    for key, value in host_environment().items():
+        print(f'export {key}="{value}"')
+    return 0
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    build = sub.add_parser("build", help="build the FMUs into build/fmus and pack ssp/ systems")
+    build.add_argument("--sections", type=int, default=8, help="block sections K (default 8)")
+    build.add_argument("--trains", type=int, default=2, help="trains M (default 2)")
+    build.add_argument("--frame", type=int, default=40, help="samples per frame N (default 40)")
+    build.add_argument("--dest", help="output folder (default build/fmus)")
+    build.add_argument("--force", action="store_true", help="rebuild even when up to date")
+    build.set_defaults(func=cmd_build)
+
+    run = sub.add_parser("run", help="run a system (folder or .ssp); default: free_run")
+    run.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name")
+    run.add_argument("--stop-time", type=float, help="seconds (default: the SSD's stopTime)")
+    run.add_argument("--output", default="results", help="results folder (default results/)")
+    run.add_argument("--set", action="append", metavar="COMP.VAR=VALUE", help="override a parameter")
+    run.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
+    run.add_argument("--output-interval", type=float, default=0.1, help="seconds (default 0.1)")
+    run.add_argument("--capture", action="append", metavar="COMP.PORT@T0:T1",
+                     help="full-rate capture of a frame output")
+    run.add_argument("--record", action="append", metavar="COMP.VAR",
+                     help="record only these outputs (default: all scalar outputs)")
+    run.add_argument("--algorithm", default="gauss-seidel", choices=["gauss-seidel", "jacobi"])
+    run.add_argument("--in-process", action="store_true",
+                     help="run the facades in this interpreter without FMI (reference, debugging)")
+    run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    run.set_defaults(func=cmd_run)
+
+    inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")
+    inspect.add_argument("target")
+    inspect.set_defaults(func=cmd_inspect)
+
+    validate = sub.add_parser("validate", help="check an FMU or a system")
+    validate.add_argument("target")
+    validate.set_defaults(func=cmd_validate)
+
+    env = sub.add_parser("fmu-env", help="environment a non-Python FMI host needs for our FMUs")
+    env.set_defaults(func=cmd_fmu_env)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    try:
+        args = make_parser().parse_args(argv)
+        return args.func(args)
+    except UserError as error:
+        message = " ".join(str(error).split())
+        print(f"railcosim: error: {message}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("railcosim: interrupted; results so far are written", file=sys.stderr)
+        return 130
+
+
+def entry_point() -> None:
+    status = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    sys.exit(status)

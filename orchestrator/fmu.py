@@ -1,0 +1,391 @@
+"""Slaves the master steps: an FMU through fmpy, or a facade in-process without FMI.
+
+Both expose the same small interface (preallocated value buffers per FMI type, step, read,
+write), so the master does not know which it drives. The in-process slave is the
+performance reference ("the limit", DESIGN §9) and a debugging aid.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib
+import shutil
+import sys
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .errors import SimulationError, UserError
+from .ssp import UnitDef, safe_extract
+
+FMI_TYPES = ("Real", "Integer", "Boolean", "String")
+_CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
+
+
+@dataclass(frozen=True)
+class Variable:
+    name: str
+    vr: int
+    type: str
+    causality: str
+    variability: str
+    unit: Optional[str]
+    start: object
+    min: Optional[float] = None
+    max: Optional[float] = None
+
+
+@dataclass
+class Interface:
+    """What the master needs to know of a component: variables, units, its own step."""
+
+    model_identifier: str
+    variables: Dict[str, Variable]
+    units: Dict[str, UnitDef]
+    default_step_s: Optional[float]
+    guid: str
+    generation_tool: str
+    version: Optional[str]
+    frame_ports: frozenset = frozenset()   # waveform arrays (railcosim vendor annotation)
+
+
+def read_interface(fmu_path: Path) -> Interface:
+    """Read and check a .fmu's modelDescription; any defect is one clear UserError."""
+    from fmpy import read_model_description
+
+    fmu_path = Path(fmu_path)
+    if not fmu_path.is_file():
+        raise UserError(f"{fmu_path}: FMU not found (run `railcosim build`?)")
+    try:
+        with zipfile.ZipFile(fmu_path) as archive:
+            if "modelDescription.xml" not in archive.namelist():
+                raise UserError(f"{fmu_path}: not an FMU (no modelDescription.xml)")
+    except zipfile.BadZipFile:
+        raise UserError(f"{fmu_path}: not an FMU (not a zip archive)") from None
+    try:
+        md = read_model_description(str(fmu_path), validate=True)
+    except Exception as error:  # fmpy raises plain exceptions with the schema message
+        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise UserError(f"{fmu_path}: invalid modelDescription.xml: {first}") from None
+    if md.fmiVersion != "2.0" or md.coSimulation is None:
+        raise UserError(f"{fmu_path}: not an FMI 2.0 co-simulation FMU")
+    units = {}
+    for unit in md.unitDefinitions:
+        base = unit.baseUnit
+        if base is None:
+            units[unit.name] = UnitDef(unit.name)
+            continue
+        exps = tuple(int(getattr(base, k) or 0) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad"))
+        units[unit.name] = UnitDef(unit.name, exps, float(base.factor or 1.0), float(base.offset or 0.0))
+    variables = {}
+    for v in md.modelVariables:
+        variables[v.name] = Variable(v.name, int(v.valueReference), v.type, v.causality,
+                                     v.variability, v.unit, v.start,
+                                     None if v.min is None else float(v.min),
+                                     None if v.max is None else float(v.max))
+    step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
+    return Interface(md.coSimulation.modelIdentifier, variables, units,
+                     float(step) if step else None, md.guid, md.generationTool or "", md.version,
+                     _frame_ports(fmu_path))
+
+
+def _frame_ports(fmu_path: Path) -> frozenset:
+    """Frame ports named in our VendorAnnotations (absent in foreign FMUs)."""
+    from lxml import etree
+
+    with zipfile.ZipFile(fmu_path) as archive:
+        root = etree.fromstring(archive.read("modelDescription.xml"))
+    node = root.find("VendorAnnotations/Tool[@name='railcosim']/FramePorts")
+    return frozenset((node.text or "").split()) if node is not None else frozenset()
+
+
+class ValueBuffer:
+    """Preallocated value references and values of one FMI type (numpy view on ctypes memory)."""
+
+    def __init__(self, type_name: str, vrs: Sequence[int]):
+        self.type = type_name
+        self.count = len(vrs)
+        self.vr = (ctypes.c_uint * max(self.count, 1))(*vrs)
+        self.vr_array = np.asarray(vrs, dtype=np.int64)
+        if type_name == "String":
+            self.raw = (ctypes.c_char_p * max(self.count, 1))()
+            self.values = [""] * self.count
+        else:
+            self.raw = (_CTYPES[type_name] * max(self.count, 1))()
+            self.values = np.ctypeslib.as_array(self.raw)[:self.count]
+
+
+def _coerce(type_name: str, value):
+    if type_name == "Real":
+        return float(value)
+    if type_name == "Integer":
+        return int(value)
+    if type_name == "Boolean":
+        return bool(value) if not isinstance(value, str) else value.lower() in ("1", "true")
+    return str(value)
+
+
+class FmuSlave:
+    """One FMU instance driven through fmpy's ctypes functions with preallocated buffers."""
+
+    in_process = False
+
+    def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
+        from fmpy.fmi2 import FMU2Slave
+
+        self.name = name
+        self.interface = interface
+        self.unzip_dir = Path(workdir) / name
+        safe_extract(Path(fmu_path), self.unzip_dir)
+        self._fmu = FMU2Slave(guid=interface.guid, unzipDirectory=str(self.unzip_dir),
+                              modelIdentifier=interface.model_identifier, instanceName=name)
+        self._component = None
+        self._fatal = False
+        self.messages: List[str] = []
+        self.inputs: Dict[str, ValueBuffer] = {}
+        self.outputs: Dict[str, ValueBuffer] = {}
+
+    # ---- lifecycle --------------------------------------------------------------------------
+    def instantiate(self) -> None:
+        _LOG_SINKS[self.name.encode()] = self.messages
+        try:
+            self._fmu.instantiate(callbacks=_shared_callbacks(), loggingOn=True)
+        except Exception:
+            raise UserError(f"{self.name}: instantiation failed{self._last_message()}") from None
+        self._component = self._fmu.component
+
+    def _call(self, what: str, function, *args):
+        try:
+            return function(self._component, *args)
+        except Exception as error:
+            status = getattr(error, "status", None)
+            if status is not None and status >= 4:
+                self._fatal = True
+            raise SimulationError(f"{self.name}: {what} failed{self._last_message()}") from None
+
+    def _last_message(self) -> str:
+        return f": {self.messages[-1]}" if self.messages else ""
+
+    def setup_experiment(self, start_time: float, stop_time: Optional[float]) -> None:
+        self._call("setupExperiment", self._fmu.fmi2SetupExperiment, 0, 0.0, start_time,
+                   1 if stop_time is not None else 0, stop_time or 0.0)
+
+    def enter_initialization(self) -> None:
+        self._call("enterInitializationMode", self._fmu.fmi2EnterInitializationMode)
+
+    def exit_initialization(self) -> None:
+        self._call("exitInitializationMode (parameters or data files rejected)",
+                   self._fmu.fmi2ExitInitializationMode)
+
+    def set_values(self, values: Dict[str, object]) -> None:
+        """Set parameters/inputs by name (initialisation only; not on the hot path)."""
+        by_type: Dict[str, list] = {}
+        for name, value in values.items():
+            var = self.interface.variables[name]
+            by_type.setdefault(var.type, []).append((var.vr, _coerce(var.type, value)))
+        for type_name, pairs in by_type.items():
+            buffer = ValueBuffer(type_name, [vr for vr, _ in pairs])
+            if type_name == "String":
+                for k, (_, value) in enumerate(pairs):
+                    buffer.raw[k] = value.encode()
+            else:
+                buffer.values[:] = [value for _, value in pairs]
+            self._call(f"set {type_name} values", getattr(self._fmu, f"fmi2Set{type_name}"),
+                       buffer.vr, buffer.count, buffer.raw)
+
+    def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
+        self.inputs = {t: ValueBuffer(t, vrs) for t, vrs in inputs.items() if vrs}
+        self.outputs = {t: ValueBuffer(t, vrs) for t, vrs in outputs.items() if vrs}
+        self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b) for b in self.inputs.values()]
+        self._getters = [(getattr(self._fmu, f"fmi2Get{b.type}"), b) for b in self.outputs.values()]
+
+    def write_inputs(self) -> None:
+        component = self._component
+        for setter, buffer in self._setters:
+            setter(component, buffer.vr, buffer.count, buffer.raw)
+
+    def read_outputs(self) -> None:
+        component = self._component
+        for getter, buffer in self._getters:
+            getter(component, buffer.vr, buffer.count, buffer.raw)
+            if buffer.type == "String":
+                buffer.values[:] = [s.decode() if s else "" for s in buffer.raw[:buffer.count]]
+
+    def do_step(self, time_s: float, step_s: float) -> None:
+        try:
+            self._fmu.fmi2DoStep(self._component, time_s, step_s, 1)
+        except Exception as error:
+            status = getattr(error, "status", None)
+            if status is not None and status >= 4:
+                self._fatal = True
+            raise SimulationError(f"component {self.name!r} failed its step at t = {time_s:.6g} s"
+                                  f"{self._last_message()}") from None
+
+    def terminate(self) -> None:
+        if self._component is not None and not self._fatal:
+            self._call("terminate", self._fmu.fmi2Terminate)
+
+    def free(self) -> None:
+        """Free the instance and release pythonfmu's interpreter state while it is still valid.
+
+        pythonfmu 0.7.0 keeps a global ``std::shared_ptr<PyState>`` and resets it from a
+        library destructor that runs at process exit *after* the C++ runtime destroyed that
+        global: the reset then reads and writes freed heap memory, which corrupts malloc's
+        free lists and aborts the process (exit 134) later in exit. Calling the library's
+        exported ``finalizePythonInterpreter`` ourselves, once no instance is alive, empties
+        the global first, so the destructor at exit has nothing to release. After fmi2Fatal
+        nothing may be called (FMI 2.0 §2.1.3), and pythonfmu would release its references
+        twice, so a fatal instance is left alone.
+        """
+        if self._component is None or self._fatal:
+            return
+        component, self._component = self._component, None
+        self._fmu.fmi2FreeInstance(component)
+        finalize = getattr(self._fmu.dll, "finalizePythonInterpreter", None)
+        if finalize is not None and _release_library(self.unzip_dir):
+            finalize()
+        try:
+            self._fmu.freeLibrary()
+        except Exception:
+            pass
+
+
+_LIVE_LIBRARIES: Dict[str, int] = {}
+_LOG_SINKS: Dict[bytes, List[str]] = {}
+_CALLBACKS = []
+
+
+def _shared_callbacks():
+    """One callback structure for every instance in this process.
+
+    fmpy's logger proxy (which formats the variadic message) keeps a single global target,
+    so a second structure would redirect or break the first; messages are routed to the
+    instance's own list by instance name instead.
+    """
+    if not _CALLBACKS:
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy.logging import addLoggerProxy
+
+        def log(env, instance, status, category, message):
+            sink = _LOG_SINKS.get(instance)
+            if sink is not None:
+                sink.append((message or b"").decode(errors="replace").strip())
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(log)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(ctypes.byref(callbacks))
+        _CALLBACKS.append((callbacks, log))
+    return _CALLBACKS[0][0]
+
+
+def _claim_library(unzip_dir: Path) -> None:
+    key = str(unzip_dir)
+    _LIVE_LIBRARIES[key] = _LIVE_LIBRARIES.get(key, 0) + 1
+
+
+def _release_library(unzip_dir: Path) -> bool:
+    key = str(unzip_dir)
+    _LIVE_LIBRARIES[key] = _LIVE_LIBRARIES.get(key, 1) - 1
+    return _LIVE_LIBRARIES[key] <= 0
+
+
+class InProcessSlave:
+    """The same facade class, driven directly in this interpreter (no FMI, no ctypes)."""
+
+    in_process = True
+
+    def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
+        self.name = name
+        self.interface = interface
+        self.unzip_dir = Path(workdir) / name
+        safe_extract(Path(fmu_path), self.unzip_dir)
+        resources = self.unzip_dir / "resources"
+        module_name = (resources / "slavemodule.txt").read_text().strip()
+        if str(resources) not in sys.path:
+            sys.path.insert(0, str(resources))
+        module = importlib.import_module(module_name)
+        self._class = getattr(module, interface.model_identifier)
+        self._resources = str(resources)
+        self.messages: List[str] = []
+        self._slave = None
+
+    def instantiate(self) -> None:
+        self._slave = self._class(instance_name=self.name, resources=self._resources)
+
+    def _flush_log(self) -> None:
+        queue = self._slave.log_queue
+        self.messages.extend(m.msg for m in queue)
+        queue.clear()
+
+    def setup_experiment(self, start_time: float, stop_time: Optional[float]) -> None:
+        self._slave.setup_experiment(start_time, stop_time, None)
+
+    def enter_initialization(self) -> None:
+        self._slave.enter_initialization_mode()
+
+    def exit_initialization(self) -> None:
+        try:
+            self._slave.exit_initialization_mode()
+        except Exception as error:
+            self._flush_log()
+            raise SimulationError(f"{self.name}: exitInitializationMode (parameters or data files "
+                                  f"rejected): {error}") from None
+
+    def set_values(self, values: Dict[str, object]) -> None:
+        for name, value in values.items():
+            var = self.interface.variables[name]
+            getattr(self._slave, f"set_{var.type.lower()}")([var.vr], [_coerce(var.type, value)])
+
+    def bind(self, inputs, outputs) -> None:
+        self.inputs = {t: ValueBuffer(t, vrs) for t, vrs in inputs.items() if vrs}
+        self.outputs = {t: ValueBuffer(t, vrs) for t, vrs in outputs.items() if vrs}
+        slave = self._slave
+        if slave is None:  # bound again once instantiated
+            return
+        self._setters = [(getattr(slave, f"set_{b.type.lower()}"), b) for b in self.inputs.values()]
+        self._getters = [(getattr(slave, f"get_{b.type.lower()}"), b) for b in self.outputs.values()]
+
+    def write_inputs(self) -> None:
+        for setter, buffer in self._setters:
+            setter(buffer.vr_array, buffer.values)
+
+    def read_outputs(self) -> None:
+        for getter, buffer in self._getters:
+            buffer.values[:] = getter(buffer.vr_array)
+
+    def do_step(self, time_s: float, step_s: float) -> None:
+        ok = self._slave.do_step(time_s, step_s)
+        if not ok:
+            self._flush_log()
+            raise SimulationError(f"component {self.name!r} failed its step at t = {time_s:.6g} s: "
+                                  f"{self.messages[-1] if self.messages else 'no message'}")
+
+    def terminate(self) -> None:
+        if self._slave is not None:
+            self._slave.terminate()
+
+    def free(self) -> None:
+        self._slave = None
+
+
+def make_slave(name: str, fmu_path: Path, interface: Interface, workdir: Path, in_process: bool):
+    if in_process:
+        return InProcessSlave(name, fmu_path, interface, workdir)
+    slave = FmuSlave(name, fmu_path, interface, workdir)
+    _claim_library(slave.unzip_dir)
+    return slave
+
+
+def new_workdir() -> Path:
+    return Path(tempfile.mkdtemp(prefix="railcosim_run_"))
+
+
+def remove_workdir(path: Path) -> None:
+    shutil.rmtree(path, ignore_errors=True)

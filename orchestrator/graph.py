@@ -1,0 +1,211 @@
+"""System graph: components resolved against their FMUs, checked connections, rates, order.
+
+Pure data and checks: nothing here steps an FMU. Every defect is a UserError naming the
+file and line of the SSD element it comes from.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import reduce
+from typing import Dict, List, Optional, Tuple
+
+from .errors import UserError
+from .fmu import Interface, Variable, read_interface
+from .ssp import Connection, SystemDescription, convert_unit
+
+TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
+
+
+def seconds_to_ticks(seconds: float, what: str) -> int:
+    ticks = round(seconds * TICKS_PER_SECOND)
+    if ticks <= 0 or abs(ticks - seconds * TICKS_PER_SECOND) > 1e-3:
+        raise UserError(f"{what}: {seconds!r} s is not a positive whole number of nanoseconds")
+    return ticks
+
+
+@dataclass
+class Node:
+    name: str
+    interface: Interface
+    fmu_path: str
+    step_ticks: int
+    origin: str
+    parameters: Dict[str, object] = field(default_factory=dict)
+
+
+@dataclass
+class Edge:
+    source: str
+    source_var: Variable
+    target: str
+    target_var: Variable
+    factor: float
+    offset: float
+    transition: str
+    origin: str
+
+
+@dataclass
+class SystemGraph:
+    name: str
+    nodes: Dict[str, Node]
+    edges: List[Edge]
+    order: List[str]
+    base_ticks: int
+    cycles: List[List[str]]
+
+    def step_seconds(self, name: str) -> float:
+        return self.nodes[name].step_ticks / TICKS_PER_SECOND
+
+
+def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
+                extra_parameters=()) -> SystemGraph:
+    nodes: Dict[str, Node] = {}
+    for comp in system.components.values():
+        if comp.fmu_path is None:
+            raise UserError(f"{comp.origin}: component {comp.name!r} has no source FMU")
+        interface = read_interface(comp.fmu_path)
+        step = comp.step_size_s if comp.step_size_s is not None else interface.default_step_s
+        if step is None:
+            raise UserError(f"{comp.origin}: component {comp.name!r} has no step size "
+                            "(add <rcs:StepSize> or osp:StepSizeHint)")
+        ticks = seconds_to_ticks(step, f"{comp.step_origin}: step size of {comp.name!r}")
+        nodes[comp.name] = Node(comp.name, interface, str(comp.fmu_path), ticks, comp.origin)
+        for declared, (kind, ctype, cunit) in comp.connectors.items():
+            var = interface.variables.get(declared)
+            if var is None:
+                raise UserError(f"{comp.origin}: connector {comp.name}.{declared} does not exist "
+                                f"in {comp.fmu_path}")
+            if ctype and ctype != var.type:
+                raise UserError(f"{comp.origin}: connector {comp.name}.{declared} is declared "
+                                f"{ctype} but the FMU has {var.type}")
+        units = {**interface.units, **system.units}
+        for value in comp.parameters:
+            _bind_parameter(nodes[comp.name], value.name, value, units)
+    for value in list(system.system_parameters) + list(extra_parameters):
+        comp_name, _, var_name = value.name.partition(".")
+        if comp_name not in nodes or not var_name:
+            raise UserError(f"{value.origin}: parameter {value.name!r} names no component of the system")
+        units = {**nodes[comp_name].interface.units, **system.units}
+        _bind_parameter(nodes[comp_name], var_name, value, units)
+    for key, raw in (overrides or {}).items():
+        comp_name, _, var_name = key.partition(".")
+        node = nodes.get(comp_name)
+        if node is None or var_name not in node.interface.variables:
+            raise UserError(f"--set {key}: no such variable (component {comp_name!r}"
+                            f"{' exists' if node else ' does not exist'})")
+        var = node.interface.variables[var_name]
+        if var.causality not in ("parameter", "input"):
+            raise UserError(f"--set {key}: {var.causality} variables cannot be set")
+        node.parameters[var_name] = _parse_value(var, raw, f"--set {key}")
+
+    edges = [_edge(system, nodes, conn) for conn in system.connections]
+    base = _base_ticks(system, nodes)
+    order, cycles = _order(list(nodes), edges)
+    return SystemGraph(system.name, nodes, edges, order, base, cycles)
+
+
+def _parse_value(var: Variable, raw, what: str):
+    if not isinstance(raw, str):
+        return raw
+    try:
+        if var.type == "Real":
+            return float(raw)
+        if var.type == "Integer":
+            return int(raw)
+        if var.type == "Boolean":
+            if raw.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return raw.lower() in ("true", "1")
+    except ValueError:
+        raise UserError(f"{what}: {raw!r} is not a valid {var.type}") from None
+    return raw
+
+
+def _bind_parameter(node: Node, var_name: str, value, units) -> None:
+    var = node.interface.variables.get(var_name)
+    if var is None:
+        raise UserError(f"{value.origin}: parameter {var_name!r} does not exist in component {node.name!r}")
+    if var.causality not in ("parameter", "input"):
+        raise UserError(f"{value.origin}: {node.name}.{var_name} is an {var.causality}; "
+                        "only parameters and inputs can be bound")
+    if var.type != value.type:
+        raise UserError(f"{value.origin}: {node.name}.{var_name} is {var.type}, the binding gives {value.type}")
+    result = value.value
+    if var.type == "Real":
+        factor, offset = convert_unit(result, value.unit, var.unit, units, value.origin)
+        result = result * factor + offset
+    node.parameters[var_name] = result
+
+
+def _edge(system: SystemDescription, nodes: Dict[str, Node], conn: Connection) -> Edge:
+    ends = []
+    for element, connector, role in ((conn.start_element, conn.start_connector, "start"),
+                                     (conn.end_element, conn.end_connector, "end")):
+        node = nodes.get(element)
+        if node is None:
+            raise UserError(f"{conn.origin}: connection {role} names component {element!r}, "
+                            "which is not in the system")
+        var = node.interface.variables.get(connector)
+        if var is None:
+            raise UserError(f"{conn.origin}: connection {role} {element}.{connector} does not exist")
+        ends.append((node, var))
+    (src, svar), (dst, dvar) = ends
+    if svar.causality != "output":
+        raise UserError(f"{conn.origin}: connection starts at {src.name}.{svar.name}, which is "
+                        f"an {svar.causality}, not an output")
+    if dvar.causality != "input":
+        raise UserError(f"{conn.origin}: connection ends at {dst.name}.{dvar.name}, which is "
+                        f"an {dvar.causality}, not an input")
+    if svar.type != dvar.type:
+        raise UserError(f"{conn.origin}: type mismatch: {src.name}.{svar.name} is {svar.type}, "
+                        f"{dst.name}.{dvar.name} is {dvar.type}")
+    factor, offset = conn.factor, conn.offset
+    if (factor, offset) != (1.0, 0.0) and svar.type != "Real":
+        raise UserError(f"{conn.origin}: LinearTransformation applies to Real connections only")
+    if svar.type == "Real" and not conn.suppress_unit_conversion:
+        units = {**src.interface.units, **dst.interface.units, **system.units}
+        # SSP: the transformation acts on the start value in the start connector's unit,
+        # then the result is converted to the end connector's unit.
+        unit_factor, unit_offset = convert_unit(1.0, svar.unit, dvar.unit, units, conn.origin)
+        factor, offset = factor * unit_factor, offset * unit_factor + unit_offset
+    if conn.transition != "hold" and svar.type != "Real":
+        raise UserError(f"{conn.origin}: rate transition {conn.transition!r} needs Real values")
+    return Edge(src.name, svar, dst.name, dvar, factor, offset, conn.transition, conn.origin)
+
+
+def _base_ticks(system: SystemDescription, nodes: Dict[str, Node]) -> int:
+    steps = [n.step_ticks for n in nodes.values()]
+    if system.base_step_s is None:
+        return reduce(math.gcd, steps)
+    base = seconds_to_ticks(system.base_step_s, f"{system.ssd_path}: BaseStep")
+    for node in nodes.values():
+        if node.step_ticks % base:
+            raise UserError(f"{node.origin}: step size {node.step_ticks / TICKS_PER_SECOND:g} s of "
+                            f"{node.name!r} is not a multiple of the base step {base / TICKS_PER_SECOND:g} s")
+    return base
+
+
+def _order(names: List[str], edges: List[Edge]) -> Tuple[List[str], List[List[str]]]:
+    """Topological order along the data flow; cycles are broken by declaration order."""
+    successors = {n: set() for n in names}
+    indegree = {n: 0 for n in names}
+    for edge in edges:
+        if edge.source != edge.target and edge.target not in successors[edge.source]:
+            successors[edge.source].add(edge.target)
+            indegree[edge.target] += 1
+    order, cycles = [], []
+    remaining = list(names)
+    while remaining:
+        ready = [n for n in remaining if indegree[n] == 0]
+        if not ready:
+            # a cycle: take the first declared component among those left, and report it
+            cycles.append(list(remaining))
+            ready = [remaining[0]]
+        for name in ready[:1]:
+            order.append(name)
+            remaining.remove(name)
+            for succ in successors[name]:
+                indegree[succ] -= 1
+    return order, cycles

@@ -1,0 +1,223 @@
+"""Multi-rate fixed-step master algorithm on integer nanosecond ticks.
+
+The algorithm only steps slaves and moves values along links; loading is ssp.py/graph.py,
+recording is observers.py, timed events are manipulators (hooks called before each tick).
+
+Semantics (DESIGN §3): a component with step h (a whole multiple of the base step) steps
+at every tick T with T % h == 0, from T to T + h. Gauss-Seidel (default) visits the due
+components in data-flow order, so a consumer in the same macro step sees what its producer
+has just computed (no latency along a chain). Jacobi first gathers every due component's
+inputs, then steps them all: each hop adds one step of latency.
+Rate transitions per connection: hold (latest value), linear (extrapolated from the last
+two values of the source to the consumer's step start), mean (average of the source's
+values since the consumer last read).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from .graph import TICKS_PER_SECOND, SystemGraph
+
+ALGORITHMS = ("gauss-seidel", "jacobi")
+
+
+@dataclass
+class Link:
+    """All connections from one source to one target of one type and transition kind."""
+
+    source: str
+    target: str
+    type: str
+    transition: str
+    source_index: np.ndarray   # slots in the source's output buffer
+    target_index: np.ndarray   # slots in the target's input buffer
+    factor: Optional[np.ndarray]
+    offset: Optional[np.ndarray]
+
+    def __post_init__(self):
+        n = len(self.source_index)
+        self.current = np.zeros(n)
+        self.previous = np.zeros(n)
+        self.current_t: Optional[float] = None
+        self.previous_t: Optional[float] = None
+        self.sum = np.zeros(n)
+        self.count = 0
+
+    def source_updated(self, values: np.ndarray, time_s: float) -> None:
+        if self.transition == "linear":
+            self.previous, self.previous_t = self.current, self.current_t
+            self.current, self.current_t = values[self.source_index].astype(float), time_s
+        elif self.transition == "mean":
+            self.sum += values[self.source_index]
+            self.count += 1
+
+    def gather(self, source_values, target_values, time_s: float) -> None:
+        if self.transition == "hold":
+            value = source_values[self.source_index]
+        elif self.transition == "linear":
+            value = self.current.copy()
+            if self.previous_t is not None and self.current_t > self.previous_t:
+                slope = (self.current - self.previous) / (self.current_t - self.previous_t)
+                value += slope * (time_s - self.current_t)
+        else:
+            if self.count:
+                value = self.sum / self.count
+                self.sum[:] = 0.0
+                self.count = 0
+            else:
+                value = source_values[self.source_index]
+        if self.factor is not None:
+            value = value * self.factor + self.offset
+        target_values[self.target_index] = value
+
+
+class Master:
+    """Steps the slaves of a graph from start to stop; observers and manipulators plug in."""
+
+    def __init__(self, graph: SystemGraph, slaves: Dict[str, object], algorithm: str = "gauss-seidel",
+                 observers: Sequence[object] = (), manipulators: Sequence[object] = ()):
+        if algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}")
+        self.graph = graph
+        self.slaves = slaves
+        self.algorithm = algorithm
+        self.observers = list(observers)
+        self.manipulators = list(manipulators)
+        self.steps_taken = {name: 0 for name in graph.nodes}
+        self.time_ticks = 0
+
+    # ---- setup ------------------------------------------------------------------------------
+    def bind(self, extra_outputs: Dict[str, List[str]] = None) -> None:
+        """Preallocate every buffer and link once; nothing is allocated on the hot path."""
+        extra_outputs = extra_outputs or {}
+        inputs = {n: {} for n in self.graph.nodes}
+        outputs = {n: {} for n in self.graph.nodes}
+
+        def slot(table, name, var):
+            per_type = table[name].setdefault(var.type, [])
+            if var.vr not in per_type:
+                per_type.append(var.vr)
+            return per_type.index(var.vr)
+
+        grouped: Dict[tuple, list] = {}
+        for edge in self.graph.edges:
+            key = (edge.source, edge.target, edge.source_var.type, edge.transition)
+            grouped.setdefault(key, []).append(
+                (slot(outputs, edge.source, edge.source_var), slot(inputs, edge.target, edge.target_var),
+                 edge.factor, edge.offset))
+        for name, variables in extra_outputs.items():
+            node = self.graph.nodes[name]
+            for var_name in variables:
+                slot(outputs, name, node.interface.variables[var_name])
+        self._buffer_layout = (inputs, outputs)
+        for name, slave in self.slaves.items():
+            slave.bind(inputs[name], outputs[name])
+        self.links: List[Link] = []
+        for (source, target, type_name, transition), rows in grouped.items():
+            src, dst, factor, offset = (np.array(col) for col in zip(*rows))
+            scaled = type_name == "Real" and (np.any(factor != 1.0) or np.any(offset != 0.0))
+            self.links.append(Link(source, target, type_name, transition, src.astype(np.int64),
+                                   dst.astype(np.int64), factor if scaled else None,
+                                   offset if scaled else None))
+        self.links_into = {n: [l for l in self.links if l.target == n] for n in self.graph.nodes}
+        self.links_from = {n: [l for l in self.links if l.source == n and l.transition != "hold"]
+                           for n in self.graph.nodes}
+
+    def output_slot(self, component: str, variable: str):
+        """(buffer, index) where the latest value of an output lives after each step."""
+        var = self.graph.nodes[component].interface.variables[variable]
+        buffer = self.slaves[component].outputs[var.type]
+        return buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0])
+
+    # ---- lifecycle ---------------------------------------------------------------------------
+    def initialize(self, start_time_s: float, stop_time_s: Optional[float]) -> None:
+        order = self.graph.order
+        for name in order:
+            slave = self.slaves[name]
+            slave.instantiate()
+            slave.bind(self._buffer_layout[0][name], self._buffer_layout[1][name])
+            slave.setup_experiment(start_time_s, stop_time_s)
+            if self.graph.nodes[name].parameters:
+                slave.set_values(self.graph.nodes[name].parameters)
+        for name in order:
+            self.slaves[name].enter_initialization()
+        for name in order:  # initial exchange along the data flow
+            self._gather(name, start_time_s)
+            self.slaves[name].write_inputs()
+            self.slaves[name].read_outputs()
+        for name in order:
+            self.slaves[name].exit_initialization()
+            self.slaves[name].read_outputs()
+            self._source_updated(name, start_time_s)
+        self.time_ticks = round(start_time_s * TICKS_PER_SECOND)
+        for observer in self.observers:
+            observer.started(self, self.time_ticks)
+
+    def _gather(self, name: str, time_s: float) -> None:
+        slave = self.slaves[name]
+        for link in self.links_into[name]:
+            link.gather(self.slaves[link.source].outputs[link.type].values,
+                        slave.inputs[link.type].values, time_s)
+
+    def _source_updated(self, name: str, time_s: float) -> None:
+        for link in self.links_from[name]:
+            link.source_updated(self.slaves[name].outputs[link.type].values, time_s)
+
+    def run_until(self, stop_ticks: int) -> None:
+        graph, slaves = self.graph, self.slaves
+        base = graph.base_ticks
+        schedule = [(name, graph.nodes[name].step_ticks, slaves[name]) for name in graph.order]
+        gauss_seidel = self.algorithm == "gauss-seidel"
+        steps_taken = self.steps_taken
+        observers = [o for o in self.observers if hasattr(o, "after_tick")]
+        manipulators = self.manipulators
+        tick = self.time_ticks
+        while tick < stop_ticks:
+            for manipulator in manipulators:
+                manipulator.before_tick(self, tick)
+            time_s = tick / TICKS_PER_SECOND
+            due = [(name, step, slave) for name, step, slave in schedule if tick % step == 0]
+            if gauss_seidel:
+                for name, step, slave in due:
+                    self._gather(name, time_s)
+                    slave.write_inputs()
+                    slave.do_step(time_s, step / TICKS_PER_SECOND)
+                    slave.read_outputs()
+                    steps_taken[name] += 1
+                    self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
+            else:
+                for name, step, slave in due:
+                    self._gather(name, time_s)
+                for name, step, slave in due:
+                    slave.write_inputs()
+                    slave.do_step(time_s, step / TICKS_PER_SECOND)
+                    steps_taken[name] += 1
+                for name, step, slave in due:
+                    slave.read_outputs()
+                    self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
+            tick += base
+            self.time_ticks = tick
+            for observer in observers:
+                observer.after_tick(self, tick, due)
+
+    def shutdown(self) -> List[str]:
+        """Terminate and free every slave, whatever happened; returns the problems met."""
+        problems = []
+        for name in self.graph.order:
+            slave = self.slaves[name]
+            try:
+                slave.terminate()
+            except Exception as error:
+                problems.append(str(error))
+            try:
+                slave.free()
+            except Exception as error:
+                problems.append(f"{name}: freeInstance failed: {error}")
+        return problems
+
+    @property
+    def time_s(self) -> float:
+        return self.time_ticks / TICKS_PER_SECOND

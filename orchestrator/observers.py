@@ -1,0 +1,176 @@
+"""Observers: what a run records. They read the master's output buffers after each tick.
+
+* Recorder: chosen scalar outputs at a fixed output interval → results.csv (rows are written
+  and flushed as the run goes, so a failed run keeps everything computed before it failed).
+* WaveformCapture: every sample of a frame output port inside a time window → capture CSV.
+  Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (DESIGN §3).
+* ProgressBar: a terminal progress line on stderr.
+"""
+from __future__ import annotations
+
+import csv
+import re
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .errors import UserError
+from .graph import TICKS_PER_SECOND
+
+_ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
+
+
+def scalar_outputs(interface) -> List[str]:
+    """Outputs a run records by default: scalars and per-section/per-train arrays, not frames."""
+    names = []
+    for name, var in interface.variables.items():
+        if var.causality != "output" or var.type == "String":
+            continue
+        match = _ELEMENT.match(name)
+        index = match.group("index")
+        if index is None or ("," not in index and match.group("base") not in interface.frame_ports):
+            names.append(name)
+    return names
+
+
+class Recorder:
+    """Chosen outputs at every output interval, streamed to CSV."""
+
+    def __init__(self, path: Path, variables: Sequence[Tuple[str, str]], interval_ticks: int):
+        self.path = Path(path)
+        self.variables = list(variables)
+        self.interval_ticks = interval_ticks
+        self.rows_written = 0
+        self._file = None
+
+    def started(self, master, tick: int) -> None:
+        self._slots = [master.output_slot(c, v) for c, v in self.variables]
+        self._file = open(self.path, "w", newline="")
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(["time"] + [f"{c}.{v}" for c, v in self.variables])
+        self._write(tick)
+
+    def after_tick(self, master, tick: int, due) -> None:
+        if tick % self.interval_ticks == 0:
+            self._write(tick)
+
+    def _write(self, tick: int) -> None:
+        row = [repr(tick / TICKS_PER_SECOND)]
+        for buffer, index in self._slots:
+            value = buffer.values[index]
+            row.append(repr(float(value)) if buffer.type == "Real" else str(int(value)))
+        self._writer.writerow(row)
+        self.rows_written += 1
+        if self.rows_written % 100 == 0:
+            self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.flush()
+            self._file.close()
+            self._file = None
+
+
+@dataclass
+class CaptureRequest:
+    component: str
+    port: str          # e.g. "e_coil[1]" (row 1 of e_coil[j,n]) or "u" for u[n]
+    t0: float
+    t1: float
+
+    @classmethod
+    def parse(cls, text: str) -> "CaptureRequest":
+        match = re.match(r"^(?P<comp>[A-Za-z_]\w*)\.(?P<port>[^@]+)@(?P<t0>[^:]+):(?P<t1>.+)$", text)
+        if not match:
+            raise UserError(f"--capture {text}: expected COMPONENT.PORT@T0:T1 (seconds)")
+        try:
+            t0, t1 = float(match.group("t0")), float(match.group("t1"))
+        except ValueError:
+            raise UserError(f"--capture {text}: T0 and T1 must be numbers of seconds") from None
+        if t1 <= t0:
+            raise UserError(f"--capture {text}: T1 must be after T0")
+        return cls(match.group("comp"), match.group("port"), t0, t1)
+
+    def elements(self, interface) -> List[str]:
+        """Element names of the frame, in sample order."""
+        if "[" in self.port:
+            prefix = self.port[:-1] + ","
+        else:
+            prefix = self.port + "["
+        names = [n for n in interface.variables if n.startswith(prefix) and n.endswith("]")
+                 and interface.variables[n].causality == "output"]
+        if not names:
+            raise UserError(f"--capture {self.component}.{self.port}: no such frame output")
+        return sorted(names, key=lambda n: int(n[len(prefix):-1]))
+
+
+class WaveformCapture:
+    def __init__(self, path: Path, request: CaptureRequest, elements: List[str]):
+        self.path = Path(path)
+        self.request = request
+        self.elements = elements
+        self._file = None
+
+    def started(self, master, tick: int) -> None:
+        slots = [master.output_slot(self.request.component, e) for e in self.elements]
+        self._buffer = slots[0][0]
+        self._index = np.array([i for _, i in slots])
+        self._step_ticks = master.graph.nodes[self.request.component].step_ticks
+        self._file = open(self.path, "w", newline="")
+        self._file.write(f"time,{self.request.component}.{self.request.port}\n")
+
+    def after_tick(self, master, tick: int, due) -> None:
+        if not any(name == self.request.component for name, _, _ in due):
+            return
+        start_ticks = tick - master.graph.base_ticks
+        step_start = start_ticks / TICKS_PER_SECOND
+        if step_start + self._step_ticks / TICKS_PER_SECOND <= self.request.t0 or step_start >= self.request.t1:
+            return
+        n = len(self._index)
+        # exact sample instants: (start·N + k·h) / (N·1e9), integers until the one division
+        times = (start_ticks * n + np.arange(n) * self._step_ticks) / (n * TICKS_PER_SECOND)
+        values = self._buffer.values[self._index]
+        keep = (times >= self.request.t0) & (times < self.request.t1)
+        np.savetxt(self._file, np.column_stack([times[keep], values[keep]]), delimiter=",", fmt="%.17g")
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+class ProgressBar:
+    """A one-line progress indicator on a terminal's stderr, refreshed twice a second."""
+
+    def __init__(self, stop_ticks: int, start_ticks: int = 0, stream=sys.stderr, min_seconds: float = 2.0):
+        self.stop_ticks = stop_ticks
+        self.start_ticks = start_ticks
+        self.stream = stream
+        self.min_seconds = min_seconds
+        self._began = time.monotonic()
+        self._last = 0.0
+        self._shown = False
+
+    def started(self, master, tick: int) -> None:
+        self._began = time.monotonic()
+
+    def after_tick(self, master, tick: int, due) -> None:
+        now = time.monotonic()
+        if now - self._last < 0.5 or now - self._began < self.min_seconds:
+            return
+        self._last = now
+        span = max(self.stop_ticks - self.start_ticks, 1)
+        share = (tick - self.start_ticks) / span
+        bar = "#" * int(share * 30)
+        self.stream.write(f"\r[{bar:<30}] {share * 100:5.1f}%  t = {tick / TICKS_PER_SECOND:8.1f} s")
+        self.stream.flush()
+        self._shown = True
+
+    def close(self) -> None:
+        if self._shown:
+            self.stream.write("\n")
+            self.stream.flush()

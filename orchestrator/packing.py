@@ -1,0 +1,40 @@
+"""Pack a shipped system folder and the FMUs it names into one .ssp archive."""
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import List
+
+from lxml import etree
+
+from .ssp import NS
+
+
+def pack_system(folder: Path, fmu_dir: Path, dest: Path) -> Path:
+    """<dest>/<name>.ssp with the folder's files plus each component's FMU under its source path."""
+    ssd = folder / "SystemStructure.ssd"
+    root = etree.parse(str(ssd)).getroot()
+    sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component") if c.get("source")]
+    target = dest / f"{folder.name}.ssp"
+    dest.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as archive:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts:
+                archive.write(path, path.relative_to(folder).as_posix())
+        for source in sorted(set(sources)):
+            if not (folder / source).is_file():
+                archive.write(fmu_dir / Path(source).name, source)
+    return target
+
+
+def pack_systems(ssp_root: Path, fmu_dir: Path, dest: Path) -> List[Path]:
+    """Pack every shipped system whose FMUs are all built."""
+    packed = []
+    if not ssp_root.is_dir():
+        return packed
+    for folder in sorted(p for p in ssp_root.iterdir() if (p / "SystemStructure.ssd").is_file()):
+        root = etree.parse(str(folder / "SystemStructure.ssd")).getroot()
+        sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component")]
+        if all((folder / s).is_file() or (fmu_dir / Path(s).name).is_file() for s in sources):
+            packed.append(pack_system(folder, fmu_dir, dest))
+    return packed

@@ -1,0 +1,437 @@
+"""SSP 1.0 loading: system description, parameter values and mappings → plain dataclasses.
+
+Files are validated against the SSP 1.0 schemas that fmpy ships, then read with lxml so that
+every error can name file, line and element. Supported exactly as the standard says:
+ParameterBindings (external .ssv and inline ParameterValues, prefix), SSM ParameterMapping
+(with Linear, Boolean and Integer mapping transformations), LinearTransformation and
+connector units on connections (unit definitions from the SSD, the SSV or the FMU's
+modelDescription). Anything else that would change the result (Enumeration or Binary
+parameters, EnumerationMappingTransformation, sub-systems, signal dictionaries) is an error
+naming the element; it is never silently ignored.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+from lxml import etree
+
+from .errors import UserError, where
+
+NS = {
+    "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+    "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+    "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues",
+    "ssm": "http://ssp-standard.org/SSP1/SystemStructureParameterMapping",
+}
+RCS_ANNOTATION = "org.railcosim"
+RCS_NS = "http://railcosim.org/SSP/1"
+OSP_ANNOTATION = "com.opensimulationplatform"
+OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+RATE_TRANSITIONS = ("hold", "linear", "mean")
+_SCHEMAS: Dict[str, etree.XMLSchema] = {}
+
+
+@dataclass(frozen=True)
+class UnitDef:
+    """SSP/FMI unit: SI base exponents plus factor/offset to the SI value."""
+
+    name: str
+    exponents: Tuple[int, ...] = (0, 0, 0, 0, 0, 0, 0, 0)  # kg m s A K mol cd rad
+    factor: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass
+class ParameterValue:
+    name: str            # name as it resolves in the element ("var" or "component.var")
+    type: str            # Real | Integer | Boolean | String
+    value: object
+    unit: Optional[str]
+    origin: str          # file:line for messages
+
+
+@dataclass
+class Component:
+    name: str
+    source: str          # as written in the SSD
+    fmu_path: Optional[Path]
+    step_size_s: Optional[float]
+    step_origin: str
+    connectors: Dict[str, Tuple[str, str, Optional[str]]]  # name → (kind, type, unit)
+    parameters: List[ParameterValue]
+    origin: str
+
+
+@dataclass
+class Connection:
+    start_element: str
+    start_connector: str
+    end_element: str
+    end_connector: str
+    factor: float = 1.0
+    offset: float = 0.0
+    transition: str = "hold"
+    suppress_unit_conversion: bool = False
+    origin: str = ""
+
+
+@dataclass
+class SystemDescription:
+    name: str
+    folder: Path
+    ssd_path: Path
+    components: Dict[str, Component]
+    connections: List[Connection]
+    start_time: float = 0.0
+    stop_time: Optional[float] = None
+    base_step_s: Optional[float] = None
+    units: Dict[str, UnitDef] = field(default_factory=dict)
+    system_parameters: List[ParameterValue] = field(default_factory=list)
+    temp_dir: Optional[str] = None
+
+    def close(self) -> None:
+        if self.temp_dir:
+            shutil.rmtree(self.temp_dir, ignore_errors=True)
+            self.temp_dir = None
+
+
+# ---- archives ----------------------------------------------------------------------------------
+def safe_extract(archive_path: Path, dest: Path) -> None:
+    """Extract a zip (.ssp or .fmu), refusing members that would land outside ``dest``."""
+    try:
+        archive = zipfile.ZipFile(archive_path)
+    except zipfile.BadZipFile:
+        raise UserError(f"{archive_path}: not a zip archive") from None
+    except OSError as error:
+        raise UserError(f"{archive_path}: cannot open ({error.strerror})") from None
+    root = dest.resolve()
+    with archive:
+        for member in archive.namelist():
+            target = (dest / member).resolve()
+            if os.path.isabs(member) or not (target == root or root in target.parents):
+                raise UserError(f"{archive_path}: member {member!r} would be extracted outside "
+                                "the extraction folder (zip-slip); refusing the archive")
+        archive.extractall(dest)
+
+
+# ---- schema validation -------------------------------------------------------------------------
+def _schema(name: str) -> etree.XMLSchema:
+    if name not in _SCHEMAS:
+        import fmpy.ssp
+
+        path = Path(fmpy.ssp.__file__).parent / "schema" / name
+        _SCHEMAS[name] = etree.XMLSchema(file=str(path))
+    return _SCHEMAS[name]
+
+
+def parse_validated(path: Path, schema_name: str) -> etree._Element:
+    if not path.is_file():
+        raise UserError(f"{path}: file not found")
+    try:
+        tree = etree.parse(str(path))
+    except etree.XMLSyntaxError as error:
+        raise UserError(f"{path}:{error.lineno}: not well-formed XML: {error.msg}") from None
+    schema = _schema(schema_name)
+    if not schema.validate(tree):
+        entry = schema.error_log[0]
+        raise UserError(f"{path}:{entry.line}: fails the SSP 1.0 schema {schema_name}: {entry.message}")
+    return tree.getroot()
+
+
+def _local(element) -> str:
+    return etree.QName(element).localname
+
+
+def _float(element, attribute, default=None):
+    value = element.get(attribute)
+    return default if value is None else float(value)
+
+
+# ---- units ------------------------------------------------------------------------------------
+_BASE_ORDER = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
+
+
+def read_units(units_element, path: Path) -> Dict[str, UnitDef]:
+    units = {}
+    if units_element is None:
+        return units
+    for unit in units_element.findall("ssc:Unit", NS):
+        base = unit.find("ssc:BaseUnit", NS)
+        exps = tuple(int(base.get(k, 0)) for k in _BASE_ORDER)
+        units[unit.get("name")] = UnitDef(unit.get("name"), exps, _float(base, "factor", 1.0),
+                                          _float(base, "offset", 0.0))
+    return units
+
+
+def convert_unit(value: float, from_unit: Optional[str], to_unit: Optional[str],
+                 units: Dict[str, UnitDef], origin: str) -> Tuple[float, float]:
+    """(factor, offset) mapping a value in ``from_unit`` to ``to_unit``; identity when equal."""
+    if not from_unit or not to_unit or from_unit == to_unit:
+        return 1.0, 0.0
+    src, dst = units.get(from_unit), units.get(to_unit)
+    if src is None or dst is None:
+        missing = from_unit if src is None else to_unit
+        raise UserError(f"{origin}: unit {missing!r} has no definition; cannot convert "
+                        f"{from_unit!r} to {to_unit!r}")
+    if src.exponents != dst.exponents:
+        raise UserError(f"{origin}: units {from_unit!r} and {to_unit!r} are of different kinds")
+    factor = src.factor / dst.factor
+    return factor, (src.offset - dst.offset) / dst.factor
+
+
+# ---- parameter values and mappings -------------------------------------------------------------
+def _read_parameter_set(parameter_set, path: Path, prefix: str) -> Tuple[List[ParameterValue], Dict[str, UnitDef]]:
+    values = []
+    for parameter in parameter_set.find("ssv:Parameters", NS) if parameter_set.find("ssv:Parameters", NS) is not None else []:
+        name = prefix + parameter.get("name")
+        typed = [child for child in parameter if _local(child) != "Annotations"][0]
+        kind = _local(typed)
+        origin = where(path, typed.sourceline)
+        if kind == "Real":
+            value = float(typed.get("value"))
+        elif kind == "Integer":
+            value = int(typed.get("value"))
+        elif kind == "Boolean":
+            value = typed.get("value") in ("true", "1")
+        elif kind == "String":
+            value = typed.get("value")
+        else:
+            raise UserError(f"{origin}: ssv:{kind} parameter {name!r} is not supported "
+                            "(Real, Integer, Boolean and String are)")
+        values.append(ParameterValue(name, kind, value, typed.get("unit"), origin))
+    return values, read_units(parameter_set.find("ssv:Units", NS), path)
+
+
+def _read_mapping(path: Path) -> Dict[str, Tuple[str, Optional[tuple], str]]:
+    root = parse_validated(path, "SystemStructureParameterMapping.xsd")
+    mapping = {}
+    for entry in root.findall("ssm:MappingEntry", NS):
+        origin = where(path, entry.sourceline)
+        transform = None
+        for child in entry:
+            kind = _local(child)
+            if kind == "LinearTransformation":
+                transform = ("linear", _float(child, "factor", 1.0), _float(child, "offset", 0.0))
+            elif kind in ("BooleanMappingTransformation", "IntegerMappingTransformation"):
+                table = {}
+                for item in child.findall("ssc:MapEntry", NS):
+                    cast = (lambda v: v in ("true", "1")) if kind.startswith("Boolean") else int
+                    table[cast(item.get("source"))] = cast(item.get("target"))
+                transform = ("table", table)
+            elif kind != "Annotations":
+                raise UserError(f"{where(path, child.sourceline)}: ssc:{kind} is not supported "
+                                "in a parameter mapping")
+        mapping[entry.get("source")] = (entry.get("target"), transform, origin)
+    return mapping
+
+
+def _apply_mapping(values: List[ParameterValue], mapping) -> List[ParameterValue]:
+    if mapping is None:
+        return values
+    mapped = []
+    for value in values:
+        if value.name not in mapping:
+            mapped.append(value)
+            continue
+        target, transform, origin = mapping[value.name]
+        new_value = value.value
+        if transform and transform[0] == "linear":
+            if value.type != "Real":
+                raise UserError(f"{origin}: LinearTransformation applies to Real parameters, "
+                                f"{value.name!r} is {value.type}")
+            new_value = value.value * transform[1] + transform[2]
+        elif transform and transform[0] == "table":
+            if value.value not in transform[1]:
+                raise UserError(f"{origin}: value {value.value!r} of {value.name!r} has no map entry")
+            new_value = transform[1][value.value]
+        mapped.append(ParameterValue(target, value.type, new_value, value.unit, origin))
+    return mapped
+
+
+def _read_bindings(bindings_element, folder: Path, ssd_path: Path,
+                   units: Dict[str, UnitDef]) -> List[ParameterValue]:
+    values: List[ParameterValue] = []
+    if bindings_element is None:
+        return values
+    for binding in bindings_element.findall("ssd:ParameterBinding", NS):
+        origin = where(ssd_path, binding.sourceline)
+        kind = binding.get("type", "application/x-ssp-parameter-set")
+        if kind != "application/x-ssp-parameter-set":
+            raise UserError(f"{origin}: ParameterBinding type {kind!r} is not supported")
+        prefix = binding.get("prefix", "")
+        source = binding.get("source")
+        if source:
+            ssv_path = folder / source
+            root = parse_validated(ssv_path, "SystemStructureParameterValues.xsd")
+            binding_values, ssv_units = _read_parameter_set(root, ssv_path, prefix)
+        else:
+            inline = binding.find("ssd:ParameterValues/ssv:ParameterSet", NS)
+            if inline is None:
+                raise UserError(f"{origin}: ParameterBinding has neither a source nor inline ParameterValues")
+            binding_values, ssv_units = _read_parameter_set(inline, ssd_path, prefix)
+        units.update(ssv_units)
+        mapping_element = binding.find("ssd:ParameterMapping", NS)
+        mapping = None
+        if mapping_element is not None:
+            if mapping_element.get("source"):
+                mapping = _read_mapping(folder / mapping_element.get("source"))
+            else:
+                raise UserError(f"{where(ssd_path, mapping_element.sourceline)}: inline parameter "
+                                "mappings are not supported; reference an .ssm file")
+        values.extend(_apply_mapping(binding_values, mapping))
+    return values
+
+
+# ---- annotations -------------------------------------------------------------------------------
+def _step_size(component, ssd_path: Path) -> Tuple[Optional[float], str]:
+    ours, osp = None, None
+    for annotation in component.findall("ssd:Annotations/ssc:Annotation", NS):
+        for child in annotation:
+            if _local(child) == "StepSize" and annotation.get("type") == RCS_ANNOTATION:
+                ours = (float(child.get("value")), where(ssd_path, child.sourceline))
+            elif _local(child) == "StepSizeHint" and annotation.get("type") == OSP_ANNOTATION:
+                osp = (float(child.get("value")), where(ssd_path, child.sourceline))
+    chosen = ours or osp
+    return (chosen[0], chosen[1]) if chosen else (None, where(ssd_path, component.sourceline))
+
+
+def _transition(connection, ssd_path: Path) -> str:
+    for annotation in connection.findall("ssd:Annotations/ssc:Annotation", NS):
+        if annotation.get("type") != RCS_ANNOTATION:
+            continue
+        for child in annotation:
+            if _local(child) == "RateTransition":
+                kind = child.get("kind", "hold")
+                if kind not in RATE_TRANSITIONS:
+                    raise UserError(f"{where(ssd_path, child.sourceline)}: rate transition {kind!r} "
+                                    f"unknown (use {', '.join(RATE_TRANSITIONS)})")
+                return kind
+    return "hold"
+
+
+# ---- system ------------------------------------------------------------------------------------
+def open_system(path: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
+    """Load a system from a folder holding SystemStructure.ssd or from a .ssp archive."""
+    path = Path(path)
+    temp_dir = None
+    if path.is_file():
+        temp_dir = tempfile.mkdtemp(prefix="railcosim_ssp_")
+        safe_extract(path, Path(temp_dir))
+        folder = Path(temp_dir)
+    elif path.is_dir():
+        folder = path
+    else:
+        raise UserError(f"{path}: no such system (give a folder with SystemStructure.ssd or a .ssp file)")
+    try:
+        system = read_ssd(folder / "SystemStructure.ssd", folder, fmu_dirs)
+    except BaseException:
+        if temp_dir:
+            shutil.rmtree(temp_dir, ignore_errors=True)
+        raise
+    system.temp_dir = temp_dir
+    return system
+
+
+def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
+    root = parse_validated(ssd_path, "SystemStructureDescription.xsd")
+    system = root.find("ssd:System", NS)
+    units = read_units(root.find("ssd:Units", NS), ssd_path)
+    for unsupported in ("ssd:SignalDictionaries", "ssd:Elements/ssd:System",
+                        "ssd:Elements/ssd:SignalDictionaryReference"):
+        found = system.find(unsupported, NS)
+        if found is not None:
+            raise UserError(f"{where(ssd_path, found.sourceline)}: {unsupported.split('/')[-1]} "
+                            "is not supported (flat systems of FMU components only)")
+    components: Dict[str, Component] = {}
+    for element in system.findall("ssd:Elements/ssd:Component", NS):
+        origin = where(ssd_path, element.sourceline)
+        name = element.get("name")
+        kind = element.get("type", "application/x-fmu-sharedlibrary")
+        if kind != "application/x-fmu-sharedlibrary":
+            raise UserError(f"{origin}: component {name!r} of type {kind!r} is not supported")
+        if element.get("implementation", "any") not in ("any", "CoSimulation"):
+            raise UserError(f"{origin}: component {name!r} asks for implementation "
+                            f"{element.get('implementation')!r}; only CoSimulation is supported")
+        connectors = {}
+        for connector in element.findall("ssd:Connectors/ssd:Connector", NS):
+            typed = [c for c in connector if _local(c) in ("Real", "Integer", "Boolean", "String", "Enumeration", "Binary")]
+            ctype = _local(typed[0]) if typed else None
+            cunit = typed[0].get("unit") if typed else None
+            connectors[connector.get("name")] = (connector.get("kind"), ctype, cunit)
+        step, step_origin = _step_size(element, ssd_path)
+        source = element.get("source")
+        components[name] = Component(
+            name=name, source=source, fmu_path=_resolve_fmu(folder, source, fmu_dirs),
+            step_size_s=step, step_origin=step_origin, connectors=connectors,
+            parameters=_read_bindings(element.find("ssd:ParameterBindings", NS), folder, ssd_path, units),
+            origin=origin)
+    if not components:
+        raise UserError(f"{ssd_path}: the system has no components")
+    connections = []
+    for connection in system.findall("ssd:Connections/ssd:Connection", NS):
+        origin = where(ssd_path, connection.sourceline)
+        factor, offset = 1.0, 0.0
+        for child in connection:
+            kind = _local(child)
+            if kind == "LinearTransformation":
+                factor, offset = _float(child, "factor", 1.0), _float(child, "offset", 0.0)
+            elif kind in ("BooleanMappingTransformation", "IntegerMappingTransformation",
+                          "EnumerationMappingTransformation"):
+                raise UserError(f"{where(ssd_path, child.sourceline)}: ssc:{kind} on a connection "
+                                "is not supported")
+        if not connection.get("startElement") or not connection.get("endElement"):
+            raise UserError(f"{origin}: connections to system connectors are not supported; "
+                            "connect component to component")
+        connections.append(Connection(
+            connection.get("startElement"), connection.get("startConnector"),
+            connection.get("endElement"), connection.get("endConnector"), factor, offset,
+            _transition(connection, ssd_path),
+            connection.get("suppressUnitConversion", "false") == "true", origin))
+    experiment = root.find("ssd:DefaultExperiment", NS)
+    start, stop, base = 0.0, None, None
+    if experiment is not None:
+        start = _float(experiment, "startTime", 0.0)
+        stop = _float(experiment, "stopTime")
+        for annotation in experiment.findall("ssd:Annotations/ssc:Annotation", NS):
+            for child in annotation:
+                if _local(child) == "BaseStep" and annotation.get("type") == RCS_ANNOTATION:
+                    base = float(child.get("value"))
+    return SystemDescription(
+        name=system.get("name") or root.get("name"), folder=folder, ssd_path=ssd_path,
+        components=components, connections=connections, start_time=start, stop_time=stop,
+        base_step_s=base, units=units,
+        system_parameters=_read_bindings(system.find("ssd:ParameterBindings", NS), folder, ssd_path, units))
+
+
+def _resolve_fmu(folder: Path, source: str, fmu_dirs) -> Optional[Path]:
+    """The FMU a component names: in the system folder first, then in the build folders."""
+    if not source:
+        return None
+    candidate = folder / source
+    if candidate.is_file():
+        return candidate
+    for directory in fmu_dirs:
+        other = Path(directory) / Path(source).name
+        if other.is_file():
+            return other
+    return candidate
+
+
+def load_parameter_set(system: SystemDescription, name: str) -> List[ParameterValue]:
+    """A named parameter set: ``NAME.ssv`` in the system folder or its resources/ (system level)."""
+    for candidate in (system.folder / f"{name}.ssv", system.folder / "resources" / f"{name}.ssv"):
+        if candidate.is_file():
+            root = parse_validated(candidate, "SystemStructureParameterValues.xsd")
+            values, units = _read_parameter_set(root, candidate, "")
+            system.units.update(units)
+            return values
+    available = sorted(p.stem for p in list(system.folder.glob("*.ssv")) +
+                       list((system.folder / "resources").glob("*.ssv")))
+    raise UserError(f"--param-set {name}: no {name}.ssv in {system.folder} "
+                    f"(available: {', '.join(available) or 'none'})")

@@ -1,0 +1,33 @@
+"""Shared fixtures: the test FMUs (built once per frame size, cached by content hash)."""
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+FIXTURE_PACKAGE = Path(__file__).resolve().parent / "fixture_fmus" / "rcs_testfmus"
+sys.path.insert(0, str(FIXTURE_PACKAGE.parent))
+
+TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage")
+
+
+def build_test_fmus(frame: int) -> Path:
+    from fmus.common.build import UnitSpec, build_unit
+    from fmus.common.slave import BuildConfig
+
+    dest = REPO / "build" / "test_fmus" / f"n{frame}"
+    for identifier in TEST_UNITS:
+        build_unit(UnitSpec(identifier.lower(), "rcs_testfmus.facade", identifier), dest,
+                   BuildConfig(frame=frame), extra_packages=[FIXTURE_PACKAGE])
+    return dest
+
+
+@pytest.fixture(scope="session")
+def test_fmus():
+    """Folder with the test FMUs built with frame N = 4."""
+    return build_test_fmus(4)
+
+
+@pytest.fixture(scope="session")
+def test_fmus_by_frame():
+    return build_test_fmus

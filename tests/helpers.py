@@ -1,0 +1,23 @@
+"""Small helpers the tests share: write a system, run it through the CLI entry point."""
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.sspgen import ComponentSpec, ConnectionSpec, frame_connections, write_ssd  # noqa: F401
+
+
+def read_csv(path: Path):
+    with open(path) as handle:
+        rows = list(csv.reader(handle))
+    header, data = rows[0], np.array(rows[1:], dtype=float) if len(rows) > 1 else np.zeros((0, len(rows[0])))
+    return header, data
+
+
+def railcosim(*args, cwd=None):
+    """Run the CLI as a user does; returns (exit code, stdout, stderr)."""
+    proc = subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+    return proc.returncode, proc.stdout, proc.stderr
