@@ -38,6 +38,7 @@ class ConnectionSpec:
     factor: float = 1.0
     offset: float = 0.0
     transition: str = "hold"
+    suppress_unit_conversion: bool = False
 
 
 def frame_connections(start: str, end: str, shape: Sequence[int]) -> List[ConnectionSpec]:
@@ -122,6 +123,8 @@ def write_ssd(folder: Path, name: str, components: Sequence[ComponentSpec],
             node = etree.SubElement(links, SSD + "Connection", startElement=start_element,
                                     startConnector=start_connector, endElement=end_element,
                                     endConnector=end_connector)
+            if conn.suppress_unit_conversion:
+                node.set("suppressUnitConversion", "true")
             if (conn.factor, conn.offset) != (1.0, 0.0):
                 etree.SubElement(node, SSC + "LinearTransformation", factor=repr(conn.factor),
                                  offset=repr(conn.offset))

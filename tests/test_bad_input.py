@@ -1,0 +1,109 @@
+"""Bad input: one clear line on stderr naming what and where, exit code 2, no traceback."""
+import json
+import zipfile
+
+import pytest
+
+from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
+
+
+def _expect_error(code, stderr, *fragments):
+    assert code == 2, stderr
+    lines = [l for l in stderr.splitlines() if l.strip()]
+    assert len(lines) == 1, stderr
+    assert "Traceback" not in stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+    return lines[0]
+
+
+def _pair(tmp_path, fmus, connections, base_step=None, gain_step=0.5):
+    folder = tmp_path / "sys"
+    write_ssd(folder, "pair", [
+        ComponentSpec("clock", str(fmus / "TestCounter.fmu"), 0.5),
+        ComponentSpec("gain", str(fmus / "TestGain.fmu"), gain_step),
+    ], connections, stop_time=1.0, base_step_s=base_step)
+    return folder
+
+
+def test_missing_system(tmp_path):
+    _expect_error(*railcosim("run", tmp_path / "nope.ssp", "--no-build")[::2], "nope.ssp")
+
+
+def test_corrupt_fmu_not_a_zip(tmp_path):
+    bad = tmp_path / "bad.fmu"
+    bad.write_bytes(b"this is not a zip")
+    _expect_error(*railcosim("inspect", bad)[::2], "bad.fmu", "not a zip")
+
+
+def test_fmu_without_model_description(tmp_path):
+    bad = tmp_path / "empty.fmu"
+    with zipfile.ZipFile(bad, "w") as archive:
+        archive.writestr("resources/readme.txt", "nothing")
+    _expect_error(*railcosim("validate", bad)[::2], "empty.fmu", "no modelDescription.xml")
+
+
+def test_ssd_failing_the_schema(tmp_path):
+    folder = tmp_path / "sys"
+    folder.mkdir()
+    (folder / "SystemStructure.ssd").write_text(
+        '<?xml version="1.0"?>\n<ssd:SystemStructureDescription '
+        'xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" version="1.0" name="x">\n'
+        '  <ssd:Bogus/>\n</ssd:SystemStructureDescription>\n')
+    _expect_error(*railcosim("run", folder, "--no-build")[::2], "SystemStructure.ssd:", "schema")
+
+
+def test_connection_to_missing_connector(tmp_path, test_fmus):
+    folder = _pair(tmp_path, test_fmus, [ConnectionSpec("clock.t_end", "gain.nothing")])
+    _expect_error(*railcosim("run", folder, "--no-build")[::2], "SystemStructure.ssd:", "gain.nothing",
+                  "does not exist")
+
+
+def test_causality_mismatch(tmp_path, test_fmus):
+    folder = _pair(tmp_path, test_fmus, [ConnectionSpec("gain.u", "clock.u")])
+    _expect_error(*railcosim("run", folder, "--no-build")[::2], "gain.u", "not an output")
+
+
+def test_type_mismatch(tmp_path, test_fmus):
+    folder = _pair(tmp_path, test_fmus, [ConnectionSpec("clock.steps", "gain.u")])
+    _expect_error(*railcosim("run", folder, "--no-build")[::2], "type mismatch", "Integer", "Real")
+
+
+def test_step_not_multiple_of_base_step(tmp_path, test_fmus):
+    folder = _pair(tmp_path, test_fmus, [], base_step=0.2, gain_step=0.5)
+    _expect_error(*railcosim("run", folder, "--no-build")[::2], "not a multiple of the base step")
+
+
+def test_unknown_set_variable(tmp_path, test_fmus):
+    folder = _pair(tmp_path, test_fmus, [])
+    _expect_error(*railcosim("run", folder, "--no-build", "--set", "gain.nope=1")[::2],
+                  "--set gain.nope", "no such variable")
+
+
+def test_bad_command_line_argument(tmp_path):
+    _expect_error(*railcosim("run", "--algorithm", "newton")[::2], "invalid choice")
+
+
+def test_zip_slip_archive(tmp_path):
+    evil = tmp_path / "evil.ssp"
+    with zipfile.ZipFile(evil, "w") as archive:
+        archive.writestr("SystemStructure.ssd", "<x/>")
+        archive.writestr("../../escaped.txt", "gotcha")
+    _expect_error(*railcosim("run", evil, "--no-build")[::2], "zip-slip", "../../escaped.txt")
+    assert not (tmp_path.parent / "escaped.txt").exists()
+
+
+def test_step_failure_mid_run_keeps_results(tmp_path, test_fmus):
+    folder = tmp_path / "sys"
+    write_ssd(folder, "failing", [
+        ComponentSpec("clock", str(test_fmus / "TestCounter.fmu"), 0.1, {"fail_at": 1.0}),
+    ], [], stop_time=5.0)
+    out = tmp_path / "out"
+    code, _, stderr = railcosim("run", folder, "--no-build", "--output", out)
+    _expect_error(code, stderr, "'clock'", "t = 1 s")
+    header, data = read_csv(out / "results.csv")
+    assert data[-1, 0] == pytest.approx(1.0)  # every row up to the failure is there
+    assert data[-1, header.index("clock.steps")] == 10
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["completed"] is False and "clock" in summary["error"]
+    assert summary["sim_time_s"] == pytest.approx(1.0)
