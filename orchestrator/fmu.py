@@ -347,8 +347,6 @@ class InProcessSlave:
         self.inputs = {t: ValueBuffer(t, vrs) for t, vrs in inputs.items() if vrs}
         self.outputs = {t: ValueBuffer(t, vrs) for t, vrs in outputs.items() if vrs}
         slave = self._slave
-        if slave is None:  # bound again once instantiated
-            return
         self._setters = [(getattr(slave, f"set_{b.type.lower()}"), b) for b in self.inputs.values()]
         self._getters = [(getattr(slave, f"get_{b.type.lower()}"), b) for b in self.outputs.values()]
 

@@ -112,9 +112,7 @@ class Master:
             node = self.graph.nodes[name]
             for var_name in variables:
                 slot(outputs, name, node.interface.variables[var_name])
-        self._buffer_layout = (inputs, outputs)
-        for name, slave in self.slaves.items():
-            slave.bind(inputs[name], outputs[name])
+        self._buffer_layout = (inputs, outputs)  # slaves get their buffers once instantiated
         self.links: List[Link] = []
         for (source, target, type_name, transition), rows in grouped.items():
             src, dst, factor, offset = (np.array(col) for col in zip(*rows))
