@@ -19,7 +19,7 @@ from pathlib import Path
 
 from _systems import build_test_fmus, trivial_system
 import orchestrator.run
-from orchestrator.fmu import ValueBuffer
+from orchestrator.fmu import _make_buffers
 from orchestrator.run import RunOptions, run_system
 
 
@@ -30,8 +30,7 @@ class NullSlave:
         self.name, self.messages = name, []
 
     def bind(self, inputs, outputs):
-        self.inputs = {t: ValueBuffer(t, v) for t, v in inputs.items() if v}
-        self.outputs = {t: ValueBuffer(t, v) for t, v in outputs.items() if v}
+        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
 
     def instantiate(self): pass
     def setup_experiment(self, *a): pass

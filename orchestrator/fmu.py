@@ -128,6 +128,18 @@ def _coerce(type_name: str, value):
     return str(value)
 
 
+def _extract_once(fmu_path: Path, workdir: Path) -> Path:
+    """One extraction (and so one loaded library) per FMU file, shared by its instances."""
+    folder = Path(workdir) / f"{Path(fmu_path).stem}_{abs(hash(str(Path(fmu_path).resolve()))):x}"
+    if not folder.is_dir():
+        safe_extract(Path(fmu_path), folder)
+    return folder
+
+
+def _make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
+    return {t: ValueBuffer(t, vrs) for t, vrs in table.items() if vrs}
+
+
 class FmuSlave:
     """One FMU instance driven through fmpy's ctypes functions with preallocated buffers."""
 
@@ -138,8 +150,7 @@ class FmuSlave:
 
         self.name = name
         self.interface = interface
-        self.unzip_dir = Path(workdir) / name
-        safe_extract(Path(fmu_path), self.unzip_dir)
+        self.unzip_dir = _extract_once(fmu_path, workdir)
         self._fmu = FMU2Slave(guid=interface.guid, unzipDirectory=str(self.unzip_dir),
                               modelIdentifier=interface.model_identifier, instanceName=name)
         self._component = None
@@ -197,8 +208,7 @@ class FmuSlave:
                        buffer.vr, buffer.count, buffer.raw)
 
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
-        self.inputs = {t: ValueBuffer(t, vrs) for t, vrs in inputs.items() if vrs}
-        self.outputs = {t: ValueBuffer(t, vrs) for t, vrs in outputs.items() if vrs}
+        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
         self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b) for b in self.inputs.values()]
         self._getters = [(getattr(self._fmu, f"fmi2Get{b.type}"), b) for b in self.outputs.values()]
 
@@ -304,8 +314,7 @@ class InProcessSlave:
     def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
         self.name = name
         self.interface = interface
-        self.unzip_dir = Path(workdir) / name
-        safe_extract(Path(fmu_path), self.unzip_dir)
+        self.unzip_dir = _extract_once(fmu_path, workdir)
         resources = self.unzip_dir / "resources"
         module_name = (resources / "slavemodule.txt").read_text().strip()
         if str(resources) not in sys.path:
@@ -344,8 +353,7 @@ class InProcessSlave:
             getattr(self._slave, f"set_{var.type.lower()}")([var.vr], [_coerce(var.type, value)])
 
     def bind(self, inputs, outputs) -> None:
-        self.inputs = {t: ValueBuffer(t, vrs) for t, vrs in inputs.items() if vrs}
-        self.outputs = {t: ValueBuffer(t, vrs) for t, vrs in outputs.items() if vrs}
+        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
         slave = self._slave
         self._setters = [(getattr(slave, f"set_{b.type.lower()}"), b) for b in self.inputs.values()]
         self._getters = [(getattr(slave, f"get_{b.type.lower()}"), b) for b in self.outputs.values()]

@@ -134,7 +134,7 @@ def _bind_parameter(node: Node, var_name: str, value, units) -> None:
         raise UserError(f"{value.origin}: {node.name}.{var_name} is {var.type}, the binding gives {value.type}")
     result = value.value
     if var.type == "Real":
-        factor, offset = convert_unit(result, value.unit, var.unit, units, value.origin)
+        factor, offset = convert_unit(value.unit, var.unit, units, value.origin)
         result = result * factor + offset
     node.parameters[var_name] = result
 
@@ -168,7 +168,7 @@ def _edge(system: SystemDescription, nodes: Dict[str, Node], conn: Connection) -
         units = {**src.interface.units, **dst.interface.units, **system.units}
         # SSP: the transformation acts on the start value in the start connector's unit,
         # then the result is converted to the end connector's unit.
-        unit_factor, unit_offset = convert_unit(1.0, svar.unit, dvar.unit, units, conn.origin)
+        unit_factor, unit_offset = convert_unit(svar.unit, dvar.unit, units, conn.origin)
         factor, offset = factor * unit_factor, offset * unit_factor + unit_offset
     if conn.transition != "hold" and svar.type != "Real":
         raise UserError(f"{conn.origin}: rate transition {conn.transition!r} needs Real values")

@@ -39,6 +39,8 @@ class Link:
 
     def __post_init__(self):
         n = len(self.source_index)
+        # scratch for the hot path: hold links move values without allocating
+        self.scratch = np.zeros(n, dtype=np.float64 if self.type == "Real" else np.intc)
         self.current = np.zeros(n)
         self.previous = np.zeros(n)
         self.current_t: Optional[float] = None
@@ -56,7 +58,7 @@ class Link:
 
     def gather(self, source_values, target_values, time_s: float) -> None:
         if self.transition == "hold":
-            value = source_values[self.source_index]
+            value = np.take(source_values, self.source_index, out=self.scratch)
         elif self.transition == "linear":
             value = self.current.copy()
             if self.previous_t is not None and self.current_t > self.previous_t:
@@ -70,7 +72,8 @@ class Link:
             else:
                 value = source_values[self.source_index]
         if self.factor is not None:
-            value = value * self.factor + self.offset
+            value = np.multiply(value, self.factor, out=self.scratch)
+            value += self.offset
         target_values[self.target_index] = value
 
 

@@ -169,7 +169,7 @@ def read_units(units_element, path: Path) -> Dict[str, UnitDef]:
     return units
 
 
-def convert_unit(value: float, from_unit: Optional[str], to_unit: Optional[str],
+def convert_unit(from_unit: Optional[str], to_unit: Optional[str],
                  units: Dict[str, UnitDef], origin: str) -> Tuple[float, float]:
     """(factor, offset) mapping a value in ``from_unit`` to ``to_unit``; identity when equal."""
     if not from_unit or not to_unit or from_unit == to_unit:
@@ -188,7 +188,7 @@ def convert_unit(value: float, from_unit: Optional[str], to_unit: Optional[str],
 # ---- parameter values and mappings -------------------------------------------------------------
 def _read_parameter_set(parameter_set, path: Path, prefix: str) -> Tuple[List[ParameterValue], Dict[str, UnitDef]]:
     values = []
-    for parameter in parameter_set.find("ssv:Parameters", NS) if parameter_set.find("ssv:Parameters", NS) is not None else []:
+    for parameter in parameter_set.findall("ssv:Parameters/ssv:Parameter", NS):
         name = prefix + parameter.get("name")
         typed = [child for child in parameter if _local(child) != "Annotations"][0]
         kind = _local(typed)
