@@ -178,7 +178,10 @@ class FmuSlave:
             raise SimulationError(f"{self.name}: {what} failed{self._last_message()}") from None
 
     def _last_message(self) -> str:
-        return f": {self.messages[-1]}" if self.messages else ""
+        # prefer the FMU's own message over pythonfmu's generic "Fatal py exception" wrapper
+        own = [m for m in self.messages if m and not m.startswith("Fatal py exception")]
+        chosen = own or self.messages
+        return f": {chosen[-1]}" if chosen else ""
 
     def setup_experiment(self, start_time: float, stop_time: Optional[float]) -> None:
         self._call("setupExperiment", self._fmu.fmi2SetupExperiment, 0, 0.0, start_time,

@@ -6,6 +6,7 @@ file and line of the SSD element it comes from.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from functools import reduce
 from typing import Dict, List, Optional, Tuple
@@ -82,13 +83,13 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
                                 f"{ctype} but the FMU has {var.type}")
         units = {**interface.units, **system.units}
         for value in comp.parameters:
-            _bind_parameter(nodes[comp.name], value.name, value, units)
+            _bind_parameter(nodes[comp.name], value.name, value, units, system.folder)
     for value in list(system.system_parameters) + list(extra_parameters):
         comp_name, _, var_name = value.name.partition(".")
         if comp_name not in nodes or not var_name:
             raise UserError(f"{value.origin}: parameter {value.name!r} names no component of the system")
         units = {**nodes[comp_name].interface.units, **system.units}
-        _bind_parameter(nodes[comp_name], var_name, value, units)
+        _bind_parameter(nodes[comp_name], var_name, value, units, system.folder)
     for key, raw in (overrides or {}).items():
         comp_name, _, var_name = key.partition(".")
         node = nodes.get(comp_name)
@@ -123,7 +124,7 @@ def _parse_value(var: Variable, raw, what: str):
     return raw
 
 
-def _bind_parameter(node: Node, var_name: str, value, units) -> None:
+def _bind_parameter(node: Node, var_name: str, value, units, system_folder=None) -> None:
     var = node.interface.variables.get(var_name)
     if var is None:
         raise UserError(f"{value.origin}: parameter {var_name!r} does not exist in component {node.name!r}")
@@ -133,6 +134,9 @@ def _bind_parameter(node: Node, var_name: str, value, units) -> None:
     if var.type != value.type:
         raise UserError(f"{value.origin}: {node.name}.{var_name} is {var.type}, the binding gives {value.type}")
     result = value.value
+    if var.type == "String" and var_name.endswith("_file") and result and not os.path.isabs(result) \
+            and system_folder is not None and (system_folder / result).exists():
+        result = str((system_folder / result).resolve())   # DESIGN §5: relative to the system
     if var.type == "Real":
         factor, offset = convert_unit(value.unit, var.unit, units, value.origin)
         result = result * factor + offset

@@ -57,7 +57,7 @@ def diff(manifest: Dict[str, dict], built: Dict[str, dict]) -> List[str]:
 
 
 def write_manifest(fmu_path: Path, manifest_path: Path) -> None:
-    manifest_path.write_text(json.dumps(manifest_of(fmu_path), indent=1, sort_keys=True) + "\n")
+    Path(manifest_path).write_text(json.dumps(manifest_of(Path(fmu_path)), indent=1, sort_keys=True) + "\n")
 
 
 def read_manifest(path: Path) -> Dict[str, dict]:

@@ -138,13 +138,14 @@ class FrameSlave(Fmi2Slave):
         value = self.io[name]
         return value if isinstance(value, str) else value.item()
 
-    def resource_path(self, relative: str) -> str:
-        """Absolute path of a file relative to this FMU's resources folder."""
+    def resource_path(self, path: str) -> str:
+        """A data file named by a parameter: absolute, or relative to the working folder, else
+        to this FMU's resources folder (where the bundled defaults live)."""
         import os
 
-        if os.path.isabs(relative) or not self.resources:
-            return relative
-        return os.path.join(self.resources, relative)
+        if os.path.isabs(path) or os.path.exists(path) or not self.resources:
+            return path
+        return os.path.join(self.resources, path)
 
     # ---- storage ---------------------------------------------------------------------------
     def _allocate(self, ports: Sequence[Port]) -> None:

@@ -1,0 +1,329 @@
+"""Line, rolling-stock and timetable files: JSON validated against the schemas in
+fmus/common/schemas, then checked for what a schema cannot say (order, overlaps, ranges
+along the line). Every error is an FmuInputError naming the file and the field.
+
+Everything is converted to SI on loading; the cores never see km/h or kN.
+"""
+from __future__ import annotations
+
+import bisect
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+from .slave import FmuInputError
+
+HERE = Path(__file__).resolve().parent
+SCHEMAS = HERE / "schemas"
+DATA = HERE / "data"
+DEFAULT_LINE = DATA / "default_line.json"
+DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
+DEFAULT_TIMETABLE = DATA / "default_timetable.json"
+KMH = 1.0 / 3.6
+G = 9.81
+
+
+@lru_cache(maxsize=None)
+def _validator(name: str):
+    import jsonschema
+
+    schema = json.loads((SCHEMAS / name).read_text())
+    return jsonschema.Draft202012Validator(schema)
+
+
+def _field(path) -> str:
+    text = ""
+    for part in path:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else part)
+    return text or "(top level)"
+
+
+def load_json(path, schema: str) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise FmuInputError(f"{path}: file not found")
+    try:
+        document = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise FmuInputError(f"{path}: not valid JSON (line {error.lineno}: {error.msg})") from None
+    errors = sorted(_validator(schema).iter_errors(document), key=lambda e: list(e.absolute_path))
+    if errors:
+        error = errors[0]
+        raise FmuInputError(f"{path}: field {_field(error.absolute_path)}: {error.message}")
+    return document
+
+
+def _fail(path, field: str, message: str):
+    raise FmuInputError(f"{path}: field {field}: {message}")
+
+
+# ---- line ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BlockSection:
+    name: str
+    start_m: float
+    end_m: float
+    signal: str
+    transmitter: str
+    carrier_hz: float
+    ballast_ohm_km: float
+
+
+@dataclass(frozen=True)
+class Station:
+    name: str
+    stop_m: float
+
+
+class Line:
+    """A line in SI units with fast piecewise look-ups along the track."""
+
+    def __init__(self, document: dict, path: Path):
+        self.path = path
+        self.name = document["name"]
+        self.length_m = float(document["length_m"])
+        self.electrification = document["electrification"]["system"]
+        self.nominal_voltage_v = float(document["electrification"].get(
+            "nominal_voltage_v", {"DC3000": 3000.0, "AC25000": 25000.0, "none": 0.0}[self.electrification]))
+        self.sections = [BlockSection(**s) for s in document["block_sections"]]
+        self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
+        self.joints = document.get("insulated_joints", [])
+        self._check(document)
+        grads = sorted(document["gradients"], key=lambda g: g["start_m"])
+        self.gradient_starts = [float(g["start_m"]) for g in grads]
+        self.gradient_permille = [float(g["permille"]) for g in grads]
+        self.curves = [(float(c["start_m"]), float(c["end_m"]), float(c["radius_m"])) for c in document["curves"]]
+        limits = sorted(document["speed_limits"], key=lambda s: s["start_m"])
+        self.limit_starts = [float(s["start_m"]) for s in limits]
+        self.limits_mps = {
+            "passenger": [s["passenger_kmh"] * KMH for s in limits],
+            "freight": [s["freight_kmh"] * KMH for s in limits],
+            "high_speed": [s.get("high_speed_kmh", s["passenger_kmh"]) * KMH for s in limits],
+        }
+        self._build_profile()
+
+    def _check(self, document: dict) -> None:
+        p = self.path
+        previous_end = None
+        for k, s in enumerate(self.sections):
+            if s.end_m <= s.start_m:
+                _fail(p, f"block_sections[{k}].end_m", f"{s.end_m} is not after start_m {s.start_m}")
+            if s.end_m > self.length_m:
+                _fail(p, f"block_sections[{k}].end_m", f"{s.end_m} is beyond the line end {self.length_m}")
+            if previous_end is not None and s.start_m < previous_end - 1e-9:
+                _fail(p, f"block_sections[{k}].start_m", f"{s.start_m} overlaps the previous section (ends {previous_end})")
+            previous_end = s.end_m
+        for k, j in enumerate(self.joints):
+            if j["position_m"] > self.length_m:
+                _fail(p, f"insulated_joints[{k}].position_m", f"{j['position_m']} is outside the line (0..{self.length_m})")
+        for k, st in enumerate(self.stations):
+            if st.stop_m > self.length_m:
+                _fail(p, f"stations[{k}].stop_m", f"{st.stop_m} is outside the line")
+            if k and st.stop_m <= self.stations[k - 1].stop_m:
+                _fail(p, f"stations[{k}].stop_m", "stations must be in running order")
+        for key in ("gradients", "speed_limits"):
+            starts = [item["start_m"] for item in document[key]]
+            if starts[0] != 0:
+                _fail(p, f"{key}[0].start_m", "the first entry must start at 0")
+            for k in range(1, len(starts)):
+                if starts[k] <= starts[k - 1]:
+                    _fail(p, f"{key}[{k}].start_m", "entries must be in increasing order")
+        for k, c in enumerate(document["curves"]):
+            if c["end_m"] <= c["start_m"] or c["end_m"] > self.length_m:
+                _fail(p, f"curves[{k}].end_m", "must be after start_m and within the line")
+
+    def _build_profile(self) -> None:
+        """Cumulative integrals of gradient (‰) and curve resistance (N/kN) at breakpoints, so
+        the average over any train length is two look-ups each (DESIGN: averaged over the train)."""
+        points = {0.0, self.length_m, *self.gradient_starts}
+        for start, end, _ in self.curves:
+            points.update((start, end))
+        xs = sorted(p for p in points if 0.0 <= p <= self.length_m)
+        self._px = xs
+        self._grade_slope, self._curve_slope = [], []
+        self._grade_cum, self._curve_cum = [0.0], [0.0]
+        for a, b in zip(xs[:-1], xs[1:]):
+            mid = 0.5 * (a + b)
+            for slopes, cum, value in ((self._grade_slope, self._grade_cum, self.gradient_at(mid)),
+                                       (self._curve_slope, self._curve_cum, self.curve_resistance_at(mid))):
+                slopes.append(value)
+                cum.append(cum[-1] + value * (b - a))
+
+    def gradient_at(self, x: float) -> float:
+        k = bisect.bisect_right(self.gradient_starts, x) - 1
+        return self.gradient_permille[max(k, 0)]
+
+    def curve_resistance_at(self, x: float) -> float:
+        for start, end, radius in self.curves:
+            if start <= x < end:
+                return 700.0 / radius   # ПТР: w_r = 700/R N/kN (domain-facts §3.4)
+        return 0.0
+
+    def _integral(self, slopes, cumulative, x: float) -> float:
+        """∫0^x of a piecewise-constant profile; held flat (last/first value) beyond the line."""
+        if x <= 0.0:
+            return slopes[0] * x
+        if x >= self.length_m:
+            return cumulative[-1] + slopes[-1] * (x - self.length_m)
+        k = bisect.bisect_right(self._px, x) - 1
+        return cumulative[k] + slopes[k] * (x - self._px[k])
+
+    def mean_gradient(self, head_m: float, length_m: float) -> float:
+        """Gradient [‰] averaged over the train (tail..head); positive uphill."""
+        g, c = self._grade_slope, self._grade_cum
+        return (self._integral(g, c, head_m) - self._integral(g, c, head_m - length_m)) / length_m
+
+    def mean_curve_resistance(self, head_m: float, length_m: float) -> float:
+        g, c = self._curve_slope, self._curve_cum
+        return (self._integral(g, c, head_m) - self._integral(g, c, head_m - length_m)) / length_m
+
+    def mean_path_resistance(self, head_m: float, length_m: float) -> float:
+        """Gradient + curve specific resistance [N/kN] averaged over the train."""
+        return self.mean_gradient(head_m, length_m) + self.mean_curve_resistance(head_m, length_m)
+
+    def speed_limit_mps(self, x: float, category: str) -> float:
+        k = bisect.bisect_right(self.limit_starts, x) - 1
+        return self.limits_mps[category][max(k, 0)]
+
+    def station(self, name: str) -> Optional[Station]:
+        return next((s for s in self.stations if s.name == name), None)
+
+
+def load_line(path=DEFAULT_LINE) -> Line:
+    path = Path(path)
+    return Line(load_json(path, "line.schema.json"), path)
+
+
+# ---- rolling stock -----------------------------------------------------------------------------
+def _curve(points, path, field: str, monotonic: bool = True) -> Tuple[List[float], List[float]]:
+    speeds = [p[0] * KMH for p in points]
+    forces = [p[1] * 1000.0 for p in points]
+    for k in range(1, len(speeds)):
+        if speeds[k] <= speeds[k - 1]:
+            _fail(path, f"{field}[{k}]", "speeds must increase")
+    for k, f in enumerate(forces):
+        if f < 0:
+            _fail(path, f"{field}[{k}]", "effort must not be negative")
+    for k in range(1, len(forces) if monotonic else 0):
+        if forces[k] > forces[k - 1] + 1e-9:
+            _fail(path, f"{field}[{k}]", "effort must not increase with speed (non-monotonic table)")
+    return speeds, forces
+
+
+@dataclass
+class RollingStock:
+    name: str
+    category: str
+    length_m: float
+    max_speed_mps: float
+    gamma: float
+    mass_kg: float
+    powered_mass_kg: float
+    resistance_terms: List[Tuple[float, float, float, float]]  # (weight share, a, b, c) per V km/h
+    effort_speeds: List[float]
+    effort_forces: List[float]
+    notches: int
+    efficiency: float
+    auxiliary_w: float
+    adhesion: Tuple[float, ...]
+    ebrake_kind: Optional[str]
+    ebrake_speeds: List[float]
+    ebrake_forces: List[float]
+    ebrake_efficiency: float
+    brake_kind: str
+    service_decel: float
+    emergency_decel: float
+    brake_delay_s: float
+    brake_time_constant_s: float
+    brake_steps: int
+    electrical_system: str
+    power_factor: float
+    starting_resistance: float   # N/kN near standstill (roller bearings, ПТР 28/(q0+7))
+    path: Path
+
+
+def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
+    path = Path(path)
+    doc = load_json(path, "rolling_stock.schema.json")
+    total = sum(u["count"] * u["mass_t"] for u in doc["units"]) * 1000.0
+    powered = sum(u["count"] * u["mass_t"] for u in doc["units"] if u["powered"]) * 1000.0
+    if powered <= 0:
+        _fail(path, "units", "no powered vehicle")
+    terms, start_res = [], 0.0
+    for k, u in enumerate(doc["units"]):
+        share = u["count"] * u["mass_t"] * 1000.0 / total
+        r = u["resistance"]
+        q0 = u["mass_t"] / u["axles"]
+        a, b, c = r["a"], r["b"], r["c"]
+        if "per_axle_load" in r:
+            p0, p1, p2 = r["per_axle_load"]
+            a, b, c = a + p0 / q0, b + p1 / q0, c + p2 / q0
+        if a <= 0:
+            _fail(path, f"units[{k}].resistance.a", "main resistance must be positive")
+        terms.append((share, a, b, c))
+        start_res += share * 28.0 / (q0 + 7.0)
+    speeds, forces = _curve(doc["traction"]["effort_kn"], path, "traction.effort_kn")
+    eb = doc.get("electric_brake")
+    eb_speeds, eb_forces = _curve(eb["effort_kn"], path, "electric_brake.effort_kn", monotonic=False) if eb else ([0.0, 1.0], [0.0, 0.0])
+    pb = doc["pneumatic_brake"]
+    if pb["emergency_decel_mps2"] < pb["service_decel_mps2"]:
+        _fail(path, "pneumatic_brake.emergency_decel_mps2", "must be at least the service deceleration")
+    electrical = doc["electrical"]
+    return RollingStock(
+        name=doc["name"], category=doc["category"], length_m=float(doc["length_m"]),
+        max_speed_mps=doc["max_speed_kmh"] * KMH, gamma=float(doc["rotating_mass_factor"]),
+        mass_kg=total, powered_mass_kg=powered, resistance_terms=terms,
+        effort_speeds=speeds, effort_forces=forces, notches=int(doc["traction"].get("notches", 1)),
+        efficiency=float(doc["traction"]["efficiency"]), auxiliary_w=doc["traction"]["auxiliary_kw"] * 1000.0,
+        adhesion=tuple(doc["traction"]["adhesion"]),
+        ebrake_kind=eb["kind"] if eb else None, ebrake_speeds=eb_speeds, ebrake_forces=eb_forces,
+        ebrake_efficiency=float(eb.get("efficiency", 0.8)) if eb else 0.0,
+        brake_kind=pb["kind"], service_decel=float(pb["service_decel_mps2"]),
+        emergency_decel=float(pb["emergency_decel_mps2"]), brake_delay_s=float(pb["delay_s"]),
+        brake_time_constant_s=float(pb["time_constant_s"]), brake_steps=int(pb.get("steps", 7)),
+        electrical_system=electrical["system"], power_factor=float(electrical.get("power_factor", 1.0)),
+        starting_resistance=start_res, path=path)
+
+
+# ---- timetable ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TimetableStop:
+    station: str
+    stop_m: float
+    arrival_s: Optional[float]
+    departure_s: Optional[float]
+
+
+def load_timetable(path, line: Line) -> List[TimetableStop]:
+    path = Path(path)
+    doc = load_json(path, "timetable.schema.json")
+    stops, last_time, last_x = [], None, None
+    for k, item in enumerate(doc["stops"]):
+        station = line.station(item["station"])
+        if station is None:
+            _fail(path, f"stops[{k}].station", f"{item['station']!r} is not a station of line {line.name!r}")
+        arrival, departure = item.get("arrival_s"), item.get("departure_s")
+        dwell = item.get("dwell_s")
+        if dwell is not None:
+            if dwell < 0:
+                _fail(path, f"stops[{k}].dwell_s", f"negative dwell {dwell}")
+            if arrival is not None and departure is None:
+                departure = arrival + dwell
+        if arrival is not None and departure is not None and departure < arrival:
+            _fail(path, f"stops[{k}].departure_s", "departure before arrival (negative dwell)")
+        if k == 0 and departure is None:
+            _fail(path, "stops[0].departure_s", "the first stop needs a departure time")
+        if k > 0 and arrival is None:
+            _fail(path, f"stops[{k}].arrival_s", "every stop after the first needs an arrival time")
+        for value, name in ((arrival, "arrival_s"), (departure, "departure_s")):
+            if value is not None:
+                if last_time is not None and value < last_time:
+                    _fail(path, f"stops[{k}].{name}", f"{value} s is earlier than the previous time {last_time} s")
+                last_time = value
+        if last_x is not None and station.stop_m <= last_x:
+            _fail(path, f"stops[{k}].station", "stations must follow the running direction")
+        last_x = station.stop_m
+        stops.append(TimetableStop(station.name, station.stop_m, arrival, departure))
+    return stops

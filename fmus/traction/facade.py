@@ -1,0 +1,78 @@
+"""Traction FMU facade: ports ↔ TractionCore. No physics here (see core.py)."""
+from pythonfmu.default_experiment import DefaultExperiment
+
+from ..common.data import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
+from ..common.slave import FrameSlave, Port
+from .core import TractionCore
+
+
+class Traction(FrameSlave):
+    description = "Train longitudinal dynamics, traction/brake characteristics, energy and traction current"
+
+    @classmethod
+    def declare_ports(cls, build):
+        return [
+            Port("rolling_stock_file", "parameter", "String", start="",
+                 description="rolling-stock JSON; empty: the bundled ЧС7 passenger train"),
+            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            Port("x0", "parameter", unit="m", start=400.0, description="initial head position"),
+            Port("v0", "parameter", unit="m/s", start=0.0, min=0.0),
+            Port("pantograph_voltage", "parameter", unit="V", start=0.0, min=0.0,
+                 description="0: the line's nominal voltage"),
+            Port("mass_scale", "parameter", unit="1", start=1.0, min=0.1, max=10.0),
+            Port("resistance_scale", "parameter", unit="1", start=1.0, min=0.1, max=10.0),
+            Port("max_substep", "parameter", unit="s", start=0.5, min=0.001, max=10.0,
+                 description="longest RK4 sub-step inside a communication step"),
+            Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0,
+                 description=">0 traction share, <0 brake share; outside −1..1 clamped and counted"),
+            Port("emergency_brake", "input", "Boolean", start=False),
+            Port("x", "output", unit="m", description="head position along the line"),
+            Port("v", "output", unit="m/s"),
+            Port("a", "output", unit="m/s2"),
+            Port("force_traction", "output", unit="N"),
+            Port("force_brake", "output", unit="N", description="electric + pneumatic"),
+            Port("i_traction", "output", unit="A", description="line current, positive drawn"),
+            Port("energy", "output", unit="J", description="net energy from the line (drawn − returned)"),
+            Port("energy_returned", "output", unit="J"),
+            Port("notch", "output", "Integer", start=0),
+            Port("brake_step", "output", "Integer", start=0, description="0 released … steps, steps+1 emergency"),
+            Port("commands_clamped", "output", "Integer", start=0),
+            Port("stop_time", "output", unit="s", description="when the train last stopped; −1 while moving"),
+            Port("off_line", "output", "Boolean", start=False, description="head position outside the line"),
+        ]
+
+    def make_default_experiment(self):
+        return DefaultExperiment(start_time=0.0, stop_time=600.0, step_size=0.5)
+
+    def create_core(self):
+        stock_file = self.param("rolling_stock_file") or str(DEFAULT_ROLLING_STOCK)
+        line_file = self.param("line_file") or str(DEFAULT_LINE)
+        return TractionCore(load_rolling_stock(self.resource_path(stock_file)),
+                            load_line(self.resource_path(line_file)),
+                            x0_m=self.param("x0"), v0_mps=self.param("v0"),
+                            pantograph_voltage_v=self.param("pantograph_voltage"),
+                            mass_scale=self.param("mass_scale"), resistance_scale=self.param("resistance_scale"),
+                            max_substep_s=self.param("max_substep"))
+
+    def publish_initial_outputs(self):
+        self._write(self.core._publish(0.0))
+
+    def step_core(self, current_time, step_size):
+        io = self.io
+        self._write(self.core.step(current_time, step_size, float(io["command"]), bool(io["emergency_brake"])))
+
+    def _write(self, out):
+        io = self.io
+        io["x"][...] = out.x_m
+        io["v"][...] = out.v_mps
+        io["a"][...] = out.a_mps2
+        io["force_traction"][...] = out.force_traction_n
+        io["force_brake"][...] = out.force_brake_n
+        io["i_traction"][...] = out.i_traction_a
+        io["energy"][...] = out.energy_j
+        io["energy_returned"][...] = out.energy_returned_j
+        io["notch"][...] = out.notch
+        io["brake_step"][...] = out.brake_step
+        io["commands_clamped"][...] = out.commands_clamped
+        io["stop_time"][...] = out.stop_time_s
+        io["off_line"][...] = out.off_line
