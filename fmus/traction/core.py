@@ -7,14 +7,14 @@ Equation of motion (ПТР form, SI):
 * F_t: traction share × min(effort curve F(v), adhesion ψ(v)·m_powered·g); zero above the
   vehicle's maximum speed.
 * F_e: electric brake (rheostatic or regenerative), immediate, covers the brake demand first.
-* F_p: pneumatic brake. Its target steps with the command after an application delay and
-  the force follows it with a first-order build-up (analytic within constant-target pieces).
+* F_p: pneumatic brake, a state: it follows (brake demand delayed by the application
+  delay − electric brake force) with a first-order build-up, dF_p/dt = (target − F_p)/T.
 * W(v): main resistance Σ share_k·(a + bV + cV²)·m·g/1000 (V in km/h, coefficients in N/kN),
   starting resistance 28/(q0+7) N/kN only as a breakaway threshold at standstill.
 * i + w_r: gradient (‰) and curve resistance 700/R (N/kN), averaged over the train length.
 
-Integration: classical RK4 on (x, v, energy drawn, energy returned) with sub-steps no longer
-than ``max_substep_s`` and split at brake-force kinks; a stop inside a sub-step is located so
+Integration: classical RK4 on (x, v, F_p, energy drawn, energy returned) with sub-steps no longer
+than ``max_substep_s`` and split where the delayed brake demand changes; a stop inside a sub-step is located so
 the speed never goes negative, and a stopped train stays stopped until the tractive (or
 gravity) force exceeds what holds it (breakaway resistance, curve, brakes).
 
@@ -95,12 +95,13 @@ class TractionCore:
         self.x, self.v = float(x0_m), float(v0_mps)
         self.energy_drawn = 0.0
         self.energy_returned = 0.0
-        self.brake_force = 0.0                            # pneumatic, N
-        self._brake_events: List[Tuple[float, float]] = []   # (effective time, target N)
-        self._brake_target_now = 0.0
-        self._last_requested_target = 0.0
+        self.brake_force = 0.0                                # pneumatic, N
+        self._demand_events: List[Tuple[float, float]] = []   # (effective time, brake demand N)
+        self._demand_delayed = 0.0      # demand the pneumatic brake currently acts on
+        self._demand_now = 0.0          # demand as commanded (the electric brake acts at once)
+        self._last_requested_demand = 0.0
         self.out = TractionOutputs(x_m=self.x, v_mps=self.v, stop_time_s=0.0 if self.v == 0 else -1.0)
-        self._share_t, self._share_b, self._emergency = 0.0, 0.0, False
+        self._share_t, self._emergency = 0.0, False
 
     # ---- forces ---------------------------------------------------------------------------
     def max_traction_force(self, v: float) -> float:
@@ -126,33 +127,26 @@ class TractionCore:
         """Gradient + curve force [N], positive against the running direction."""
         return self.line.mean_path_resistance(x, self.stock.length_m) * self.weight_kn
 
-    def _electric_share(self, v: float) -> float:
-        if self._emergency or self._share_b <= 0.0:
+    def _electric_force(self, v: float) -> float:
+        """Electric brake force [N]: takes the current brake demand first, up to its curve."""
+        if self._emergency or self._demand_now <= 0.0:
             return 0.0
-        demand = self._share_b * self.m_eff * self.stock.service_decel
-        return min(demand, self.electric_brake_force(v))
+        return min(self._demand_now, self.electric_brake_force(v))
 
-    def _accel(self, x: float, v: float, f_pneumatic: float) -> Tuple[float, float, float]:
-        """(dv/dt, power drawn W, power returned W) while moving."""
+    def _pneumatic_target(self, v: float) -> float:
+        """What the pneumatic brake is asked for: the delayed demand less the electric brake."""
+        return max(self._demand_delayed - self._electric_force(v), 0.0)
+
+    def _derivatives(self, x: float, v: float, f_p: float):
+        """(dv/dt, dF_p/dt, power drawn W, power returned W) while moving."""
         f_t = self._share_t * self.max_traction_force(v)
-        f_e = self._electric_share(v)
-        net = f_t - f_e - f_pneumatic - self.main_resistance(v) - self.path_resistance(x)
+        f_e = self._electric_force(v)
+        net = f_t - f_e - f_p - self.main_resistance(v) - self.path_resistance(x)
+        tau = self.stock.brake_time_constant_s
+        df_p = (self._pneumatic_target(v) - f_p) / tau if tau > 0.0 else 0.0
         drawn = f_t * v / self.stock.efficiency + self.stock.auxiliary_w
         returned = f_e * v * self.stock.ebrake_efficiency if self.stock.ebrake_kind == "regenerative" else 0.0
-        return net / self.m_eff, drawn, returned
-
-    # ---- pneumatic brake ------------------------------------------------------------------
-    def _request_brake(self, time_s: float, target_n: float) -> None:
-        if target_n != self._last_requested_target:
-            # release acts after the same delay as application (triple valve), kept simple
-            self._brake_events.append((time_s + self.stock.brake_delay_s, target_n))
-            self._last_requested_target = target_n
-
-    def _brake_force_at(self, f0: float, target: float, dt: float) -> float:
-        tau = self.stock.brake_time_constant_s
-        if tau <= 0.0:
-            return target
-        return target + (f0 - target) * math.exp(-dt / tau)
+        return net / self.m_eff, df_p, drawn, returned
 
     # ---- stepping -------------------------------------------------------------------------
     def set_command(self, time_s: float, command: float, emergency: bool) -> None:
@@ -165,29 +159,26 @@ class TractionCore:
             out.commands_clamped += 1
         self._emergency = bool(emergency)
         self._share_t = command if command > 0.0 and not emergency else 0.0
-        self._share_b = -command if command < 0.0 else 0.0
-        if emergency:
-            target = self.m_eff * self.stock.emergency_decel
-        else:
-            # the pneumatic target is what the electric brake cannot give at the current speed
-            demand = self._share_b * self.m_eff * self.stock.service_decel
-            target = max(demand - self.electric_brake_force(self.v) if self.stock.ebrake_kind else demand, 0.0)
-        self._request_brake(time_s, target)
+        share_b = -command if command < 0.0 else 0.0
+        self._demand_now = share_b * self.m_eff * self.stock.service_decel
+        demand = self.m_eff * self.stock.emergency_decel if emergency else self._demand_now
+        if demand != self._last_requested_demand:
+            # the pneumatic brake acts after its application (or release) delay
+            self._demand_events.append((time_s + self.stock.brake_delay_s, demand))
+            self._last_requested_demand = demand
         out.notch = math.ceil(self._share_t * self.stock.notches - 1e-9) if self._share_t > 0 else 0
         out.brake_step = (self.stock.brake_steps + 1 if emergency else
-                          math.ceil(self._share_b * self.stock.brake_steps - 1e-9) if self._share_b > 0 else 0)
+                          math.ceil(share_b * self.stock.brake_steps - 1e-9) if share_b > 0 else 0)
 
     def step(self, time_s: float, step_s: float, command: float, emergency: bool = False) -> TractionOutputs:
         self.set_command(time_s, command, emergency)
         end = time_s + step_s
         t = time_s
+        events = self._demand_events
         while t < end - 1e-12:
-            # next kink of the pneumatic target inside this step
-            while self._brake_events and self._brake_events[0][0] <= t + 1e-12:
-                self._brake_target_now = self._brake_events.pop(0)[1]
-            limit = end
-            if self._brake_events and self._brake_events[0][0] < end:
-                limit = self._brake_events[0][0]
+            while events and events[0][0] <= t + 1e-12:
+                self._demand_delayed = events.pop(0)[1]
+            limit = events[0][0] if events and events[0][0] < end else end
             n = max(1, math.ceil((limit - t) / self.max_substep_s - 1e-9))
             dt = (limit - t) / n
             for _ in range(n):
@@ -196,64 +187,70 @@ class TractionCore:
             t = limit
         return self._publish(end)
 
+    def _rk4(self, x: float, v: float, f_p: float, dt: float):
+        d = self._derivatives
+        a1, b1, p1, r1 = d(x, v, f_p)
+        v2, f2 = v + 0.5 * dt * a1, f_p + 0.5 * dt * b1
+        a2, b2, p2, r2 = d(x + 0.5 * dt * v, v2, f2)
+        v3, f3 = v + 0.5 * dt * a2, f_p + 0.5 * dt * b2
+        a3, b3, p3, r3 = d(x + 0.5 * dt * v2, v3, f3)
+        v4, f4 = v + dt * a3, f_p + dt * b3
+        a4, b4, p4, r4 = d(x + dt * v3, v4, f4)
+        return (x + dt * (v + 2 * v2 + 2 * v3 + v4) / 6.0,
+                v + dt * (a1 + 2 * a2 + 2 * a3 + a4) / 6.0,
+                f_p + dt * (b1 + 2 * b2 + 2 * b3 + b4) / 6.0,
+                dt * (p1 + 2 * p2 + 2 * p3 + p4) / 6.0,
+                dt * (r1 + 2 * r2 + 2 * r3 + r4) / 6.0)
+
     def _substep(self, t: float, dt: float) -> None:
-        target = self._brake_target_now
-        f0 = self.brake_force
-        f_mid = self._brake_force_at(f0, target, 0.5 * dt)
-        f_end = self._brake_force_at(f0, target, dt)
+        if self.stock.brake_time_constant_s <= 0.0:
+            self.brake_force = self._pneumatic_target(self.v)
         if self.v <= 0.0:
-            self._standstill(t, dt, f0, f_end)
+            self._standstill(dt)
             return
-        x, v = self.x, self.v
-        a1, p1, r1 = self._accel(x, v, f0)
-        a2, p2, r2 = self._accel(x + 0.5 * dt * v, v + 0.5 * dt * a1, f_mid)
-        v2 = v + 0.5 * dt * a1
-        a3, p3, r3 = self._accel(x + 0.5 * dt * v2, v + 0.5 * dt * a2, f_mid)
-        v3 = v + 0.5 * dt * a2
-        v4 = v + dt * a3
-        a4, p4, r4 = self._accel(x + dt * v3, v4, f_end)
-        v_new = v + dt * (a1 + 2 * a2 + 2 * a3 + a4) / 6.0
-        if v_new > 0.0:
-            self.x = x + dt * (v + 2 * v2 + 2 * v3 + v4) / 6.0
-            self.v = v_new
-            self.energy_drawn += dt * (p1 + 2 * p2 + 2 * p3 + p4) / 6.0
-            self.energy_returned += dt * (r1 + 2 * r2 + 2 * r3 + r4) / 6.0
-            self.brake_force = f_end
+        x, v, f_p = self.x, self.v, self.brake_force
+        x1, v1, f1, drawn, returned = self._rk4(x, v, f_p, dt)
+        if v1 > 0.0:
+            self.x, self.v, self.brake_force = x1, v1, f1
+            self.energy_drawn += drawn
+            self.energy_returned += returned
             return
-        # the train stops inside this sub-step: locate the stop with the mean deceleration,
-        # refine once with an RK4 step of that length, then stand for the rest
-        a_mean = (v_new - v) / dt
-        t_stop = min(dt, v / -a_mean)
-        for _ in range(2):
-            a1, p1, _ = self._accel(x, v, f0)
-            f_half = self._brake_force_at(f0, target, 0.5 * t_stop)
-            a2, _, _ = self._accel(x + 0.5 * t_stop * v, v + 0.5 * t_stop * a1, f_half)
-            v_half = v + 0.5 * t_stop * a2
-            v_end = v + t_stop * a2
-            if abs(v_end) < 1e-6 or a2 >= 0:
+        # the train stops inside this sub-step: find the stop instant (regula falsi on
+        # v(t_stop) = 0 with RK4 from the sub-step start), then stand for the rest
+        lo, v_lo, hi, v_hi = 0.0, v, dt, v1
+        t_stop = dt
+        for _ in range(40):
+            t_stop = lo + (hi - lo) * v_lo / (v_lo - v_hi)
+            x1, v1, f1, drawn, returned = self._rk4(x, v, f_p, t_stop)
+            if abs(v1) < 1e-7 or hi - lo < 1e-9:
                 break
-            t_stop = min(dt, t_stop + v_end / -a2)
-        self.x = x + t_stop * v_half
-        self.energy_drawn += t_stop * p1
-        self.v = 0.0
-        self.brake_force = self._brake_force_at(f0, target, t_stop)
+            if v1 > 0.0:
+                lo, v_lo = t_stop, v1
+            else:
+                hi, v_hi = t_stop, v1
+        self.x, self.v, self.brake_force = x1, 0.0, f1
+        self.energy_drawn += drawn
+        self.energy_returned += returned
         self.out.stop_time_s = t + t_stop
         if dt - t_stop > 1e-12:
-            self._standstill(t + t_stop, dt - t_stop, self.brake_force, f_end)
+            self._standstill(dt - t_stop)
 
-    def _standstill(self, t: float, dt: float, f0: float, f_end: float) -> None:
+    def _standstill(self, dt: float) -> None:
         """At v = 0: start only when the driving force beats everything that holds the train."""
+        target = self._pneumatic_target(0.0)
+        tau = self.stock.brake_time_constant_s
+        f0 = self.brake_force
+        f_end = target + (f0 - target) * math.exp(-dt / tau) if tau > 0.0 else target
         length = self.stock.length_m
         gradient = self.line.mean_gradient(self.x, length)
         curve = self.line.mean_curve_resistance(self.x, length)
         driving = self._share_t * self.max_traction_force(0.0) - gradient * self.weight_kn  # downhill helps
         holding = (self.breakaway_n_per_kn + curve) * self.weight_kn + self.main_resistance(0.0) + max(f0, f_end)
-        net = driving - holding
         self.energy_drawn += dt * self.stock.auxiliary_w
         self.brake_force = f_end
-        if net > 0.0:
+        if driving > holding:
             # breakaway: accelerate with the net force for the rest of the (short) sub-step
-            a = net / self.m_eff
+            a = (driving - holding) / self.m_eff
             self.v = a * dt
             self.x += 0.5 * a * dt * dt
             self.out.stop_time_s = -1.0
@@ -262,11 +259,11 @@ class TractionCore:
         out = self.out
         v = self.v
         out.x_m, out.v_mps = self.x, v
-        f_e = self._electric_share(v) if v > 0 else 0.0
+        f_e = self._electric_force(v) if v > 0 else 0.0
         out.force_traction_n = self._share_t * self.max_traction_force(v) if v > 0 or self._share_t > 0 else 0.0
         out.force_brake_n = f_e + self.brake_force
         if v > 0:
-            out.a_mps2 = self._accel(self.x, v, self.brake_force)[0]
+            out.a_mps2 = self._derivatives(self.x, v, self.brake_force)[0]
         else:
             out.a_mps2 = 0.0
         drawn = out.force_traction_n * v / self.stock.efficiency + self.stock.auxiliary_w
