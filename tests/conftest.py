@@ -8,7 +8,7 @@ REPO = Path(__file__).resolve().parent.parent
 FIXTURE_PACKAGE = Path(__file__).resolve().parent / "fixture_fmus" / "rcs_testfmus"
 sys.path.insert(0, str(FIXTURE_PACKAGE.parent))
 
-TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage")
+TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule")
 
 
 def build_test_fmus(frame: int) -> Path:
@@ -31,3 +31,13 @@ def test_fmus():
 @pytest.fixture(scope="session")
 def test_fmus_by_frame():
     return build_test_fmus
+
+
+@pytest.fixture(scope="session")
+def product_fmus():
+    """The product FMUs, built (or found up to date) in build/fmus."""
+    from fmus.common.build import build_all, default_build_dir
+
+    dest = default_build_dir(REPO)
+    build_all(dest)
+    return dest

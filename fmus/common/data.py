@@ -51,7 +51,11 @@ def load_json(path, schema: str) -> dict:
     errors = sorted(_validator(schema).iter_errors(document), key=lambda e: list(e.absolute_path))
     if errors:
         error = errors[0]
-        raise FmuInputError(f"{path}: field {_field(error.absolute_path)}: {error.message}")
+        where_ = list(error.absolute_path)
+        if error.validator == "required" and isinstance(error.instance, dict):
+            missing = [name for name in error.validator_value if name not in error.instance]
+            raise FmuInputError(f"{path}: field {_field(where_ + missing[:1])}: missing (required)")
+        raise FmuInputError(f"{path}: field {_field(where_)}: {error.message}")
     return document
 
 

@@ -249,11 +249,14 @@ class TractionCore:
         self.energy_drawn += dt * self.stock.auxiliary_w
         self.brake_force = f_end
         if driving > holding:
-            # breakaway: accelerate with the net force for the rest of the (short) sub-step
-            a = (driving - holding) / self.m_eff
-            self.v = a * dt
-            self.x += 0.5 * a * dt * dt
-            self.out.stop_time_s = -1.0
+            # breakaway: once moving, the starting resistance no longer holds; integrate the
+            # rest of the sub-step as motion from (practically) zero speed
+            x1, v1, f1, drawn, returned = self._rk4(self.x, 1e-9, f0, dt)
+            if v1 > 0.0:
+                self.x, self.v, self.brake_force = x1, v1, f1
+                self.energy_drawn += drawn - dt * self.stock.auxiliary_w
+                self.energy_returned += returned
+                self.out.stop_time_s = -1.0
 
     def _publish(self, time_s: float) -> TractionOutputs:
         out = self.out

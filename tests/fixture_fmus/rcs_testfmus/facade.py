@@ -116,3 +116,30 @@ class TestFrameStage(_FrameUnit):
     def step_core(self, t, h):
         core = self.core
         self.io["y"][:], core["zi"] = lfilter(core["b"], core["a"], self.io["u"], zi=core["zi"])
+
+
+class TestSchedule(FrameSlave):
+    """A timed command: ``schedule`` = "t0:value0;t1:value1;…" (seconds), held between entries."""
+
+    @classmethod
+    def declare_ports(cls, build):
+        return [Port("schedule", "parameter", "String", start="0:0"),
+                Port("command", "output", unit="1")]
+
+    def create_core(self):
+        pairs = [item.split(":") for item in self.param("schedule").split(";") if item.strip()]
+        return sorted((float(t), float(v)) for t, v in pairs)
+
+    def publish_initial_outputs(self):
+        self.io["command"][...] = self._value(0.0)
+
+    def _value(self, time_s):
+        value = 0.0
+        for start, v in self.core:
+            if start <= time_s + 1e-9:
+                value = v
+        return value
+
+    def step_core(self, t, h):
+        # Gauss-Seidel hands this to consumers stepping over [t, t+h): the value in force at t
+        self.io["command"][...] = self._value(t)
