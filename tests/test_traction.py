@@ -168,11 +168,15 @@ def _write(tmp_path, name, doc):
     (lambda d: d["pneumatic_brake"].__setitem__("delay_s", 500), "pneumatic_brake.delay_s"),
 ])
 def test_bad_rolling_stock_names_file_and_field(tmp_path, mutate, field):
-    doc = json.loads((DATA / "passenger_chs7.json").read_text())
+    _assert_rejected(tmp_path, DATA / "passenger_chs7.json", mutate, load_rolling_stock, field)
+
+
+def _assert_rejected(tmp_path, template, mutate, loader, field):
+    doc = json.loads(template.read_text())
     mutate(doc)
-    path = _write(tmp_path, "stock.json", doc)
+    path = _write(tmp_path, "data.json", doc)
     with pytest.raises(FmuInputError) as error:
-        load_rolling_stock(path)
+        loader(path)
     assert str(path) in str(error.value) and f"field {field}" in str(error.value)
 
 
@@ -182,12 +186,7 @@ def test_bad_rolling_stock_names_file_and_field(tmp_path, mutate, field):
     (lambda d: d["gradients"][2].__setitem__("permille", 80), "gradients[2].permille"),
 ])
 def test_bad_line_names_file_and_field(tmp_path, mutate, field):
-    doc = json.loads(DEFAULT_LINE.read_text())
-    mutate(doc)
-    path = _write(tmp_path, "line.json", doc)
-    with pytest.raises(FmuInputError) as error:
-        load_line(path)
-    assert str(path) in str(error.value) and f"field {field}" in str(error.value)
+    _assert_rejected(tmp_path, DEFAULT_LINE, mutate, load_line, field)
 
 
 @pytest.mark.parametrize("stops, field", [

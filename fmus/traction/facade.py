@@ -63,16 +63,14 @@ class Traction(FrameSlave):
 
     def _write(self, out):
         io = self.io
-        io["x"][...] = out.x_m
-        io["v"][...] = out.v_mps
-        io["a"][...] = out.a_mps2
-        io["force_traction"][...] = out.force_traction_n
-        io["force_brake"][...] = out.force_brake_n
-        io["i_traction"][...] = out.i_traction_a
-        io["energy"][...] = out.energy_j
-        io["energy_returned"][...] = out.energy_returned_j
-        io["notch"][...] = out.notch
-        io["brake_step"][...] = out.brake_step
-        io["commands_clamped"][...] = out.commands_clamped
-        io["stop_time"][...] = out.stop_time_s
-        io["off_line"][...] = out.off_line
+        for port, field in _OUTPUT_FIELDS:
+            io[port][...] = getattr(out, field)
+
+
+# output port ← TractionOutputs field
+_OUTPUT_FIELDS = (
+    ("x", "x_m"), ("v", "v_mps"), ("a", "a_mps2"), ("force_traction", "force_traction_n"),
+    ("force_brake", "force_brake_n"), ("i_traction", "i_traction_a"), ("energy", "energy_j"),
+    ("energy_returned", "energy_returned_j"), ("notch", "notch"), ("brake_step", "brake_step"),
+    ("commands_clamped", "commands_clamped"), ("stop_time", "stop_time_s"), ("off_line", "off_line"),
+)
