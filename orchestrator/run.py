@@ -91,6 +91,9 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             extra_outputs.setdefault(comp, []).append(var)
         for request, elements in captures:
             extra_outputs.setdefault(request.component, []).extend(elements)
+        trains = [name for name in graph.order if graph.nodes[name].interface.model_identifier == TRAIN_MODEL]
+        for name in trains:
+            extra_outputs.setdefault(name, []).append("energy")
         master = Master(graph, slaves, options.algorithm, observers, options.manipulators)
         began = time.perf_counter()
         failure: Optional[BaseException] = None
@@ -108,6 +111,7 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             problems = master.shutdown()
         sim_time = master.time_s - system.start_time
         summary = _summary(graph, sim_time, wall, failure)
+        summary["trains"] = [_train_summary(master, name) for name in trains]
         _write_json(out / "summary.json", summary)
         _write_json(out / "metadata.json", _metadata(system, graph, options, stop, master))
         if failure is not None:
@@ -134,6 +138,16 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
             raise UserError(f"--record {item}: only outputs can be recorded")
         chosen.append((comp, var))
     return chosen
+
+
+TRAIN_MODEL = "Traction"   # each traction component is one train in summary.json
+J_PER_KWH = 3.6e6
+
+
+def _train_summary(master: Master, name: str) -> dict:
+    """The DESIGN §8 train keys that exist so far (the ATP/ATO and receiver keys come with them)."""
+    buffer, index = master.output_slot(name, "energy")
+    return {"name": name, "energy_kwh": float(buffer.values[index]) / J_PER_KWH}
 
 
 def _summary(graph: SystemGraph, sim_time: float, wall: float, failure) -> dict:

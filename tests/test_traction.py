@@ -218,9 +218,11 @@ def test_step_size_robustness_through_the_orchestrator(tmp_path, product_fmus, t
     for step in (0.1, 1.0):
         out = tmp_path / f"out{step}"
         run_system(_traction_system(tmp_path, product_fmus, test_fmus, step),
-                   RunOptions(output_dir=out, output_interval=1.0, record=["train.x", "train.stop_time", "train.v"]))
+                   RunOptions(output_dir=out, output_interval=1.0, record=["train.x", "train.stop_time", "train.v", "train.energy"]))
         header, data = read_csv(out / "results.csv")
         finals[step] = dict(zip(header, data[-1]))
+    summary = json.loads((tmp_path / "out1.0" / "summary.json").read_text())
+    assert summary["trains"] == [{"name": "train", "energy_kwh": pytest.approx(finals[1.0]["train.energy"] / 3.6e6)}]
     assert finals[0.1]["train.v"] == finals[1.0]["train.v"] == 0.0
     assert abs(finals[0.1]["train.x"] - finals[1.0]["train.x"]) < 0.5
     assert abs(finals[0.1]["train.stop_time"] - finals[1.0]["train.stop_time"]) < 0.5
