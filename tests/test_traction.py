@@ -234,3 +234,16 @@ def test_bad_rolling_stock_file_through_the_cli(tmp_path, product_fmus, test_fmu
     code, _, stderr = railcosim("run", folder, "--no-build", "--output", tmp_path / "o", "--output-interval", "1")
     assert code == 2 and len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr
     assert "bad_stock.json" in stderr and "field" in stderr
+
+
+def test_relative_data_file_resolves_against_the_system_folder(tmp_path, product_fmus, test_fmus):
+    from orchestrator.run import RunOptions, run_system
+    folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"rolling_stock_file": "resources/emu.json"})
+    (folder / "resources").mkdir()
+    (folder / "resources" / "emu.json").write_text((DATA / "emu_er2.json").read_text())
+    result = run_system(folder, RunOptions(output_dir=tmp_path / "o", output_interval=1.0, stop_time=30.0))
+    resolved = result.graph.nodes["train"].parameters["rolling_stock_file"]
+    assert resolved == str((folder / "resources" / "emu.json").resolve())
+    header, data = read_csv(tmp_path / "o" / "results.csv")
+    # the lighter EMU accelerates harder than the default ЧС7 train: 30 s at full traction
+    assert data[-1, header.index("train.v")] > 15.0
