@@ -1,0 +1,249 @@
+"""ATP: the independent speed-supervision layer with priority over the ATO (DESIGN §4).
+
+What it supervises at each step, as constraints (a ceiling now and targets ahead):
+
+* the line's static limit for the train category, held until the tail clears a lower limit,
+  and each lower limit ahead as a target;
+* the cab signal. ``cab_signal="ALSN"``: the aspect, through the table in
+  fmus/common/signalling.py (ceiling, and the speed to reach at the exit signal of the
+  current block section: 60 km/h on yellow, a stop on red-yellow). ``"digital"``:
+  ``v_permitted`` now and ``v_target`` at the end of the ``free_blocks``-th section ahead.
+  ``"off"``: line limits only (plant studies without a signalling chain).
+
+Fail-safe rules (never more permissive than the last valid code):
+
+* code invalid → the constraints of the last valid code stay in force, anchored where they
+  were (a red-yellow stop stays at *that* signal), together with those of what is shown now;
+* passing a block signal → until the receiver can have decoded the new section (its stated
+  latency: ALSN two cycles + 0.5 s), the ATP assumes the next more restrictive aspect (green
+  → yellow, yellow → red-yellow); passing the exit signal under red-yellow is a signal passed
+  at danger: counted, and the emergency brake is applied.
+
+Braking-curve supervision, ETCS-like margins (domain-facts §3.3): the permitted speed at the
+head is min(ceiling, sqrt(v_t² + 2·a·(x_t − x)) over the targets) with the supervision
+deceleration a. Above it by dV_sbi the ATP commands full service braking until the train is
+back under the permitted speed; above it by dV_ebi (7.5 km/h up to 110 km/h, rising linearly
+to 15 km/h at 210 km/h [S]) it applies the emergency brake until standstill.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
+
+from ..common import signalling as sig
+from ..common.data import Line
+from ..common.slave import FmuInputError
+
+KMH = 1.0 / 3.6
+CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
+NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
+_INF = math.inf
+
+
+def dv_ebi_mps(v_mps: float) -> float:
+    """Emergency-brake intervention margin (ETCS dV_ebi, domain-facts §3.3)."""
+    v_kmh = v_mps * 3.6
+    if v_kmh <= 110.0:
+        return 7.5 * KMH
+    return min(7.5 + 7.5 * (v_kmh - 110.0) / 100.0, 15.0) * KMH
+
+
+def dv_sbi_mps(v_mps: float) -> float:
+    """Service-brake intervention margin: 5.5 km/h up to 110 km/h, rising to 10 km/h at
+    210 km/h (ETCS national-value defaults as commonly quoted [U])."""
+    v_kmh = v_mps * 3.6
+    if v_kmh <= 110.0:
+        return 5.5 * KMH
+    return min(5.5 + 4.5 * (v_kmh - 110.0) / 100.0, 10.0) * KMH
+
+
+@dataclass(frozen=True)
+class Target:
+    position_m: float
+    speed_mps: float
+    signal: bool = False          # a stop target at a signal (the ATO stops short of it)
+
+
+@dataclass
+class Constraints:
+    ceiling_mps: float = _INF
+    targets: List[Target] = field(default_factory=list)
+
+    def add(self, other: "Constraints") -> None:
+        self.ceiling_mps = min(self.ceiling_mps, other.ceiling_mps)
+        self.targets.extend(other.targets)
+
+
+@dataclass
+class AtpResult:
+    intervention: int = NO_INTERVENTION
+    permitted_mps: float = _INF          # supervised speed at the head (curves included)
+    ceiling_mps: float = _INF            # line limit and cab-signal ceiling at the head, no curves
+    constraints: Constraints = field(default_factory=Constraints)
+    aspect: int = sig.WHITE              # aspect the ATP acts upon (after fail-safe rules)
+    stop_now: bool = False               # red: the ATO must stop the train
+
+
+class Atp:
+    def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
+                 supervision_decel_mps2: float, decoding_latency_s: float):
+        if cab_signal not in CAB_SIGNAL_MODES:
+            raise FmuInputError(f"parameter cab_signal: {cab_signal!r} is not one of {', '.join(CAB_SIGNAL_MODES)}")
+        if not supervision_decel_mps2 > 0:
+            raise FmuInputError(f"parameter atp_decel: must be positive, got {supervision_decel_mps2}")
+        self.line, self.category, self.length_m = line, category, train_length_m
+        self.mode = cab_signal
+        self.decel = supervision_decel_mps2
+        self.latency_s = decoding_latency_s
+        self.section_starts = [s.start_m for s in line.sections]
+        self.section_ends = [s.end_m for s in line.sections]
+        self.limit_starts = list(line.limit_starts)
+        self.limits = list(line.limits_mps[category])
+        self.section: Optional[int] = None
+        self.last_valid: Optional[Constraints] = None
+        self.last_valid_aspect = sig.WHITE
+        self.assumed: Optional[Constraints] = None
+        self.assumed_aspect = sig.GREEN
+        self.assumed_until = -_INF
+        self.emergency_latched = False
+        self.service_active = False
+        self.interventions = 0
+        self.emergency_brakings = 0
+        self.signals_passed_at_danger = 0
+        self.max_overspeed_mps = 0.0
+
+    # ---- geometry ---------------------------------------------------------------------------
+    def section_of(self, x: float) -> Optional[int]:
+        k = bisect.bisect_right(self.section_starts, x) - 1
+        if k < 0 or x >= self.section_ends[k]:
+            return None
+        return k
+
+    def exit_signal_m(self, k: int, blocks_ahead: int = 0) -> float:
+        return self.section_ends[min(k + blocks_ahead, len(self.section_ends) - 1)]
+
+    def static_limit(self, x: float) -> float:
+        """Line limit at the head, held until the tail has cleared a lower limit."""
+        tail = x - self.length_m
+        k_tail = max(bisect.bisect_right(self.limit_starts, tail) - 1, 0)
+        k_head = max(bisect.bisect_right(self.limit_starts, x) - 1, 0)
+        return min(self.limits[k_tail:k_head + 1])
+
+    def line_constraints(self, x: float, v: float) -> Constraints:
+        c = Constraints(self.static_limit(x))
+        reach = x + v * v / (2.0 * self.decel) + 200.0
+        k = bisect.bisect_right(self.limit_starts, x)
+        while k < len(self.limit_starts) and self.limit_starts[k] <= reach:
+            c.targets.append(Target(self.limit_starts[k], self.limits[k]))
+            k += 1
+        return c
+
+    # ---- cab signal -------------------------------------------------------------------------
+    def _alsn(self, aspect: int, k: Optional[int]) -> Constraints:
+        ceiling, at_signal = sig.alsn_speeds_mps(self.category, aspect)
+        c = Constraints(_INF if ceiling is None else ceiling)
+        if at_signal is not None and k is not None:
+            c.targets.append(Target(self.exit_signal_m(k), at_signal, signal=at_signal == 0.0))
+        return c
+
+    def _digital(self, v_permitted: float, v_target: float, free_blocks: int, k: Optional[int]) -> Constraints:
+        c = Constraints(max(v_permitted, 0.0))
+        if k is not None:
+            target = max(v_target, 0.0)
+            c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), target, signal=target == 0.0))
+        return c
+
+    def _no_code(self) -> Constraints:
+        return self._alsn(sig.WHITE, None)
+
+    def supervise(self, t: float, x: float, v: float, aspect: int, code_valid: bool,
+                  v_permitted: float, v_target: float, free_blocks: int) -> AtpResult:
+        result = AtpResult()
+        c = self.line_constraints(x, v)
+        k = self.section_of(x)
+        acted_aspect = sig.GREEN
+        if self.mode != "off":
+            crossed = self.section is not None and k != self.section
+            if crossed:
+                self._passed_signal(t)
+            self.section = k
+            if self.mode == "ALSN":
+                shown = self._alsn(aspect, k)
+                acted_aspect = int(aspect)
+            else:
+                shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
+                acted_aspect = int(aspect)
+            if code_valid:
+                self.last_valid, self.last_valid_aspect = shown, int(aspect)
+            c.add(shown)
+            if not code_valid and self.last_valid is not None:
+                c.add(self.last_valid)
+                if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
+                    acted_aspect = self.last_valid_aspect
+            if t < self.assumed_until and self.assumed is not None:
+                c.add(self.assumed)
+                if sig.restrictiveness(self.assumed_aspect) < sig.restrictiveness(acted_aspect):
+                    acted_aspect = self.assumed_aspect
+            result.stop_now = acted_aspect == sig.RED and self.mode == "ALSN"
+        result.aspect = acted_aspect
+        result.constraints = c
+        result.ceiling_mps = c.ceiling_mps
+        permitted = c.ceiling_mps
+        for target in c.targets:
+            if target.position_m >= x:
+                permitted = min(permitted, math.sqrt(target.speed_mps ** 2 + 2.0 * self.decel * (target.position_m - x)))
+            else:
+                permitted = min(permitted, target.speed_mps)
+        result.permitted_mps = permitted
+        self.max_overspeed_mps = max(self.max_overspeed_mps, v - c.ceiling_mps)
+        result.intervention = self._intervene(v, permitted)
+        return result
+
+    def _passed_signal(self, t: float) -> None:
+        """The head passed the exit signal of the previous section."""
+        previous = self.section
+        active = self.last_valid_aspect
+        if self.assumed is not None and t < self.assumed_until \
+                and sig.restrictiveness(self.assumed_aspect) < sig.restrictiveness(active):
+            active = self.assumed_aspect
+        if self.mode == "ALSN":
+            if active == sig.RED_YELLOW:
+                self.signals_passed_at_danger += 1
+                self._emergency()
+            degraded = {sig.GREEN: sig.YELLOW, sig.YELLOW: sig.RED_YELLOW}.get(active, sig.RED)
+            self.assumed_aspect = degraded
+            self.assumed = self._alsn(degraded, None if previous is None else previous + 1)
+        else:
+            stop_here = self.last_valid is not None and any(
+                tg.signal and abs(tg.position_m - self.section_ends[previous]) < 1e-6
+                for tg in self.last_valid.targets) if previous is not None else False
+            if stop_here:
+                self.signals_passed_at_danger += 1
+                self._emergency()
+            self.assumed_aspect = active
+            self.assumed = self.last_valid
+        self.assumed_until = t + self.latency_s
+
+    def _emergency(self) -> None:
+        if not self.emergency_latched:
+            self.emergency_latched = True
+            self.emergency_brakings += 1
+            self.interventions += 1
+
+    def _intervene(self, v: float, permitted: float) -> int:
+        if self.emergency_latched and v <= 1e-3:
+            self.emergency_latched = False
+        if v > permitted + dv_ebi_mps(v):
+            self._emergency()
+        if self.emergency_latched:
+            self.service_active = False
+            return EMERGENCY_INTERVENTION
+        if v > permitted + dv_sbi_mps(v):
+            if not self.service_active:
+                self.interventions += 1
+            self.service_active = True
+        elif v <= permitted:
+            self.service_active = False
+        return SERVICE_INTERVENTION if self.service_active else NO_INTERVENTION

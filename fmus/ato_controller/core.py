@@ -1,0 +1,318 @@
+"""ATP + ATO controller core (no FMI): one train, one timetable, one line.
+
+Per communication step: the ATP supervises (atp.py); the ATO follows the timetable stage by
+stage — wait for the departure time, drive the stage with the chosen strategy (driving.py)
+over the programmes planned at initialisation (planner.py), brake to the stop point,
+dwell — and the ATP's intervention overrides the ATO's command.
+
+Phases: waiting at a stop (before departure) → running → stopped at the stop point (arrival
+recorded, dwell) → … → finished at the last stop.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional
+
+from ..common import signalling as sig
+from ..common.data import Line, RollingStock, TimetableStop
+from ..common.slave import FmuInputError
+from .atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
+from .driving import STRATEGIES, Controllers, make_strategy
+from .planner import InfeasibleStage, StagePlanner
+from .train_model import NominalTrain
+
+KMH = 1.0 / 3.6
+_INF = math.inf
+
+# mode output (Integer)
+MODE_STANDSTILL, MODE_TRACTION, MODE_COAST, MODE_BRAKE, MODE_ATP_SERVICE, MODE_ATP_EMERGENCY = range(6)
+MODE_NAMES = ("standstill", "traction", "coast", "brake", "ATP service brake", "ATP emergency brake")
+WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
+ACCEL_FILTER_S = 1.0
+MIN_BRAKE_SHARE = 0.02
+
+
+@dataclass
+class AtoSettings:
+    strategy: str = "programme"
+    cab_signal: str = "ALSN"
+    braking_decel_mps2: float = 0.0       # 0: min(0.5, 0.6 × service deceleration)
+    atp_decel_mps2: float = 0.0           # 0: 0.7 × service deceleration
+    speed_margin_mps: float = 2.0 * KMH   # ATO drives this far below every limit
+    stop_margin_m: float = 30.0           # stop this far before a signal at danger
+    k1: float = 0.1                       # m/s of cruise speed per s ahead
+    k2: float = 1.0                       # s of extra traction per s late
+    late_threshold_s: float = 16.0        # МИИТ: later than this → maximum permitted speed
+    min_dwell_s: float = 20.0
+    hold_brake: float = 0.3               # brake share held while standing
+    decoding_latency_s: float = 2 * 1.86 + 0.5   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
+    speed_gain: float = 0.2               # 1/s, speed-holding loop
+    hysteresis_mps: float = 1.0 * KMH     # coast → traction again only this far below the set speed
+    brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)
+
+
+@dataclass
+class AtoOutputs:
+    command: float = 0.0
+    emergency_brake: bool = False
+    mode: int = MODE_STANDSTILL
+    v_ref_mps: float = 0.0
+    schedule_deviation_s: float = 0.0
+    v_ceiling_mps: float = 0.0            # what the ATO allows itself now
+    v_permitted_mps: float = 0.0          # ATP's supervised speed at the head
+    aspect: int = sig.WHITE               # aspect the ATP acts upon
+    atp_intervention: int = NO_INTERVENTION
+    atp_interventions: int = 0
+    emergency_brakings: int = 0
+    signals_passed_at_danger: int = 0
+    max_overspeed_mps: float = 0.0
+    stop_index: int = 0                   # stops reached so far (the first stop counts as reached)
+    arrival_time_s: float = -1.0          # at the last stop reached; −1 before any arrival
+    stop_error_m: float = 0.0             # head position − stop point at the last arrival
+    mode_changes: int = 0                 # traction/coast/brake changes while running
+    stage: int = 0
+
+
+class AtoCore:
+    def __init__(self, line: Line, stock: RollingStock, timetable: List[TimetableStop], timetable_path,
+                 category: str, settings: AtoSettings):
+        s = settings
+        if s.strategy not in STRATEGIES:
+            raise FmuInputError(f"parameter strategy: {s.strategy!r} is not one of {', '.join(STRATEGIES)}")
+        if category not in sig.ALSN_SPEEDS_KMH:
+            raise FmuInputError(f"parameter train_category: {category!r} is not one of {', '.join(sig.ALSN_SPEEDS_KMH)}")
+        for name, value in (("speed_margin", s.speed_margin_mps), ("stop_margin", s.stop_margin_m),
+                            ("min_dwell", s.min_dwell_s), ("k1", s.k1), ("k2", s.k2)):
+            if value < 0:
+                raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
+        self.settings = s
+        self.line, self.stock, self.category = line, stock, category
+        self.timetable = timetable
+        self.train = NominalTrain(stock, line)
+        self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else min(0.5, 0.6 * stock.service_decel)
+        a_atp = s.atp_decel_mps2 if s.atp_decel_mps2 > 0 else 0.7 * stock.service_decel
+        if self.a_plan >= a_atp:
+            raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
+                                f"supervision deceleration {a_atp} m/s²")
+        self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s)
+        planner = StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps)
+        self.plans = []
+        for k in range(len(timetable) - 1):
+            origin, destination = timetable[k], timetable[k + 1]
+            scheduled = destination.arrival_s - origin.departure_s
+            try:
+                self.plans.append(planner.plan(origin.stop_m, destination.stop_m, scheduled))
+            except InfeasibleStage as infeasible:
+                raise FmuInputError(
+                    f"{timetable_path}: field stops[{k + 1}].arrival_s: scheduled running time {scheduled:g} s "
+                    f"from {origin.station} to {destination.station} is shorter than the minimum running time "
+                    f"{infeasible.minimum_time_s:.1f} s (earliest arrival "
+                    f"{origin.departure_s + infeasible.minimum_time_s:.1f} s)") from None
+        self.controllers = Controllers(self.train, s.speed_gain, s.hysteresis_mps)
+        self.phase = WAITING
+        self.stage = 0
+        self.strategy = None
+        self.braking_target = None
+        self.restricted = False
+        self.recovering = False
+        self._last_regime = None
+        self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
+        self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else \
+            stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
+        self.out = AtoOutputs(stop_index=1)
+        self.arrivals: List[dict] = []
+
+    # ---- helpers ----------------------------------------------------------------------------
+    def departure_time(self, k: int) -> float:
+        stop = self.timetable[k]
+        earliest = stop.departure_s
+        if self.arrivals and k > 0:
+            earliest = max(earliest, self.arrivals[-1]["arrival_s"] + self.settings.min_dwell_s)
+        return earliest
+
+    def _targets(self, x: float, v: float, atp_result):
+        """(position, speed, is_stop_point) the ATO brakes for, ahead of the head."""
+        s = self.settings
+        stop = self.timetable[self.stage + 1]
+        targets = [(stop.stop_m, 0.0, True)]
+        for target in atp_result.constraints.targets:
+            if target.signal:
+                targets.append((target.position_m - s.stop_margin_m, 0.0, False))
+            else:
+                targets.append((target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0), False))
+        if atp_result.stop_now:
+            targets.append((x + v * v / (2.0 * self.a_plan) + 0.5, 0.0, False))
+        return targets
+
+    def _predict(self, x: float, v: float):
+        """Head position and speed one brake lead time ahead at the measured acceleration: the
+        pneumatic brake answers a new demand only after its delay and build-up, so demands
+        are computed for where the train will be when they take effect (dead-time compensation)."""
+        lead = self.brake_lead_s
+        a = self._accel
+        if v + a * lead <= 0.0:
+            return x, v
+        return x + v * lead + 0.5 * a * lead * lead, v + a * lead
+
+    def _decel_to(self, x: float, v: float, position: float, speed: float) -> float:
+        xp, vp = self._predict(x, v)
+        if vp > speed and position - xp > 0.5:
+            return (vp * vp - speed * speed) / (2.0 * (position - xp))
+        distance = position - x
+        if distance <= 0.05:
+            return _INF if v > speed else 0.0
+        return max((v * v - speed * speed) / (2.0 * distance), 0.0)
+
+    def _required_decel(self, x: float, v: float, targets):
+        best, which = 0.0, None
+        for target in targets:
+            position, speed, _ = target
+            if v <= speed:
+                continue
+            need = self._decel_to(x, v, position, speed)
+            if need > best:
+                best, which = need, target
+        return best, which
+
+    # ---- step ------------------------------------------------------------------------------
+    def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
+             v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
+        out = self.out
+        s = self.settings
+        if self._t_prev is not None and t > self._t_prev:
+            # measured acceleration, low-pass filtered (1 s) so the prediction does not depend
+            # on the step size nor chatter when the electric brake steps in
+            dt = t - self._t_prev
+            self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
+        self._t_prev, self._v_prev = t, v
+        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
+        command, mode = self._drive(t, x, v, atp)
+        if atp.intervention == SERVICE_INTERVENTION:
+            command, mode = -1.0, MODE_ATP_SERVICE
+        elif atp.intervention == EMERGENCY_INTERVENTION:
+            command, mode = -1.0, MODE_ATP_EMERGENCY
+        if self.phase == RUNNING:
+            regime = 1 if command > 0.0 else (-1 if command < 0.0 else 0)
+            if self._last_regime is not None and regime != self._last_regime:
+                out.mode_changes += 1
+            self._last_regime = regime
+        out.command = command
+        out.mode = mode
+        out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
+        out.v_permitted_mps = min(atp.permitted_mps, 1e3)
+        out.aspect = atp.aspect
+        out.atp_intervention = atp.intervention
+        out.atp_interventions = self.atp.interventions
+        out.emergency_brakings = self.atp.emergency_brakings
+        out.signals_passed_at_danger = self.atp.signals_passed_at_danger
+        out.max_overspeed_mps = max(self.atp.max_overspeed_mps, 0.0)
+        out.stage = self.stage
+        return out
+
+    def _drive(self, t: float, x: float, v: float, atp):
+        s = self.settings
+        out = self.out
+        if self.phase == FINISHED:
+            out.v_ref_mps, out.v_ceiling_mps = 0.0, 0.0
+            return -s.hold_brake, MODE_STANDSTILL
+        if self.phase in (WAITING, DWELLING):
+            out.v_ref_mps, out.v_ceiling_mps = 0.0, 0.0
+            departure = self.departure_time(self.stage)
+            out.schedule_deviation_s = max(t - self.timetable[self.stage].departure_s, 0.0) \
+                if self.phase == DWELLING or t > departure else 0.0
+            if t + 1e-9 >= departure and atp.permitted_mps > 1.0 and not atp.stop_now:
+                self._depart(t)
+            else:
+                return -s.hold_brake, MODE_STANDSTILL
+        return self._run(t, x, v, atp)
+
+    def _depart(self, t: float) -> None:
+        self.phase = RUNNING
+        self.strategy = make_strategy(self.settings.strategy, self.plans[self.stage], self.settings.k1, self.settings.k2)
+        self.braking_target = None
+        self._last_regime = None
+
+    def _run(self, t: float, x: float, v: float, atp):
+        s = self.settings
+        out = self.out
+        plan = self.plans[self.stage]
+        origin = self.timetable[self.stage]
+        stop = self.timetable[self.stage + 1]
+        t_run = t - origin.departure_s
+        # arrival: standing at (or just past) the stop point
+        if v <= 1e-3 and x >= stop.stop_m - 1.0 and self.braking_target is not None and self.braking_target[2]:
+            self._arrive(t, x)
+            return -s.hold_brake, MODE_STANDSTILL
+
+        guide = self.strategy.guide(t_run, x, v, out.schedule_deviation_s)
+        deviation = t_run - guide.t_ref_s
+        out.schedule_deviation_s = deviation
+        out.v_ref_mps = guide.v_ref_mps
+
+        # restriction memory → the book's recovery rule
+        if s.cab_signal != "off":
+            if atp.aspect != sig.GREEN:
+                self.restricted = True
+            elif self.restricted:
+                self.restricted = False
+                self.recovering = deviation > 0.0
+        if self.recovering and deviation <= 0.0:
+            self.recovering = False
+        flat_out = self.recovering or deviation > s.late_threshold_s
+
+        ceiling = min(float(_interp_plan(plan, x)), atp.ceiling_mps - s.speed_margin_mps)
+        out.v_ceiling_mps = max(ceiling, 0.0)
+        targets = self._targets(x, v, atp)
+        need, target = self._required_decel(x, v, targets)
+        if self.braking_target is not None:
+            position, speed, station = self.braking_target
+            if v <= speed + 0.05 and not station:
+                self.braking_target = None          # target speed reached: hold it
+        if need >= 0.97 * self.a_plan and target is not None:
+            self.braking_target = target
+        if self.braking_target is not None:
+            position, speed, station = self.braking_target
+            decel = min(self._decel_to(x, v, position, speed), 2.0 * self.a_plan)
+            if station and v <= 1e-3 and x < stop.stop_m - 1.0:
+                self.braking_target = None            # stopped short: creep on
+            else:
+                # the brake stays applied until the target is reached (no release/re-apply)
+                return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
+
+        if flat_out:
+            cruise, coast = _INF, False
+        else:
+            cruise, coast = guide.cruise_mps, guide.coast
+        if atp.stop_now:
+            return self.controllers.brake(x, v, self.a_plan), MODE_BRAKE
+        v_set = min(cruise, ceiling)
+        if coast:
+            self.controllers.coasting = True
+            if v <= ceiling:
+                return 0.0, MODE_COAST
+            command = min(self.controllers.hold(x, v, ceiling, may_brake=True), 0.0)
+        else:
+            command = self.controllers.hold(x, v, v_set, may_brake=v > ceiling)
+        return command, MODE_TRACTION if command > 0 else (MODE_BRAKE if command < 0 else MODE_COAST)
+
+    def _arrive(self, t: float, x: float) -> None:
+        out = self.out
+        stop = self.timetable[self.stage + 1]
+        error = x - stop.stop_m
+        self.arrivals.append({"station": stop.station, "scheduled_arrival_s": stop.arrival_s, "arrival_s": t,
+                              "arrival_deviation_s": t - stop.arrival_s, "stop_error_m": error})
+        out.stop_index = self.stage + 2
+        out.arrival_time_s = t
+        out.stop_error_m = error
+        out.schedule_deviation_s = t - stop.arrival_s
+        self.stage += 1
+        self.braking_target = None
+        self.strategy = None
+        self.phase = FINISHED if self.stage >= len(self.plans) else DWELLING
+
+
+def _interp_plan(plan, x: float) -> float:
+    import numpy as np
+
+    return np.interp(x, plan.s, plan.ceiling_mps)

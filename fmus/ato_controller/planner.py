@@ -1,0 +1,249 @@
+"""Offline running-time calculation per stage (station to station), OSRD-style pipeline:
+
+1. **Static speed profile** (MRSP) on a distance grid: the line's limit for the train's
+   category, applied from the head reaching a lower limit until the *tail* has cleared it
+   (re-acceleration only after the last car, book §3.4), less the ATO speed margin, capped by
+   the vehicle's maximum speed.
+2. **Speed ceiling**: braking curves at the planned deceleration integrated backwards from
+   every limit drop and from the stop point (closed form: a reverse cumulative minimum of
+   v² + 2·a·s).
+3. **Family of driving programmes** parametrised by a cruise speed V1, with the structure of
+   the optimal control (Strobel/Horn, Howlett; domain-facts §3.6): maximum traction up to V1,
+   cruise at V1 (partial traction; above V1 on down-grades the train coasts up to the
+   ceiling instead of braking), MARECO coasting before each braking phase, braking at the
+   planned deceleration. Coasting ends at the MARECO speed Vf = w·V1/(w + R(V1)·V1) with
+   w = V1²·R'(V1) (domain-facts §3.2). V1 = ∞ is the **minimum-time** (flat-out) profile.
+   All candidates are integrated together (numpy over candidates, RK2 in distance).
+4. **Energy-efficient programme**: the V1 whose running time equals the scheduled time,
+   found by interpolation on the family's time–V1 curve and refined twice by a bracket of
+   candidates (no per-iteration scalar loop).
+
+The coasting curves run backwards through down-grades too, so the programme coasts before a
+crest and lets the down-grade bring the speed back (book Fig. 15; MARECO's "accelerating
+slopes"), never below Vf. Simplification (docs/ato.md): above V1 on a down-grade the
+train coasts up to the ceiling instead of MARECO's explicit accelerating-slope search.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional
+
+import numpy as np
+
+from ..common.data import Line
+from .train_model import NominalTrain
+
+PLAN_STEP_M = 10.0            # distance grid of the programmes
+REGIME_TRACTION, REGIME_COAST, REGIME_BRAKE = 1, 0, -1
+_FAMILY_SIZE = 24
+_REFINE_SIZE = 8
+
+
+class InfeasibleStage(ValueError):
+    def __init__(self, minimum_time_s: float):
+        super().__init__(f"minimum running time {minimum_time_s:.1f} s")
+        self.minimum_time_s = minimum_time_s
+
+
+@dataclass
+class Programmes:
+    """Driving programmes of one stage over the grid ``s`` (head position, m)."""
+
+    cruise_mps: np.ndarray        # (C,) V1 of each programme; inf = minimum time
+    coast_end_mps: np.ndarray     # (C,) MARECO Vf
+    v: np.ndarray                 # (C, n) speed
+    t: np.ndarray                 # (C, n) time since departure
+    regime: np.ndarray            # (C, n-1) int8 per grid step: 1 traction, 0 coast, -1 brake
+    energy_j: np.ndarray          # (C,) net energy from the line (η and auxiliaries included)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        return self.t[:, -1]
+
+    def take(self, index) -> "Programmes":
+        index = np.atleast_1d(index)
+        return Programmes(self.cruise_mps[index], self.coast_end_mps[index], self.v[index],
+                          self.t[index], self.regime[index], self.energy_j[index])
+
+
+@dataclass
+class StagePlan:
+    start_m: float
+    end_m: float
+    s: np.ndarray                 # (n,) grid
+    static_mps: np.ndarray        # (n,) MRSP less the margin
+    ceiling_mps: np.ndarray       # (n,) MRSP with braking curves
+    family: Programmes            # sorted by running time, longest first; includes the fitted one
+    chosen: int                   # index of the energy-efficient programme in the family
+    minimum: int                  # index of the minimum-time programme
+    scheduled_time_s: Optional[float]
+
+    @property
+    def minimum_time_s(self) -> float:
+        return float(self.family.time_s[self.minimum])
+
+    def programme(self, index: int):
+        f = self.family
+        return f.v[index], f.t[index], f.regime[index]
+
+
+class StagePlanner:
+    def __init__(self, train: NominalTrain, line: Line, category: str, braking_decel_mps2: float,
+                 speed_margin_mps: float, step_m: float = PLAN_STEP_M):
+        self.train, self.line, self.category = train, line, category
+        self.braking_decel = braking_decel_mps2
+        self.margin = speed_margin_mps
+        self.step_m = step_m
+
+    # ---- speed profiles -----------------------------------------------------------------------
+    def static_profile(self, s: np.ndarray) -> np.ndarray:
+        line, length = self.line, self.train.length_m
+        starts = line.limit_starts + [np.inf]
+        limits = line.limits_mps[self.category]
+        static = np.full(s.shape, self.train.max_speed_mps)
+        for k, limit in enumerate(limits):
+            # a limit holds from its start (head) until the tail has left it
+            inside = (s >= starts[k]) & (s < starts[k + 1] + length)
+            static[inside] = np.minimum(static[inside], limit)
+        return np.maximum(static - self.margin, 0.5)
+
+    def ceiling(self, s: np.ndarray, static: np.ndarray) -> np.ndarray:
+        """min over targets j ≥ i of sqrt(v_j² + 2a(s_j − s_i)), with a stop at the last point."""
+        a = self.braking_decel
+        targets = static ** 2
+        targets[-1] = 0.0
+        key = targets + 2.0 * a * s
+        reverse_min = np.minimum.accumulate(key[::-1])[::-1]
+        return np.sqrt(np.maximum(reverse_min - 2.0 * a * s, 0.0))
+
+    def coast_end_speed(self, cruise_mps: np.ndarray) -> np.ndarray:
+        """MARECO Vf for each V1 (level-track equal marginal cost), clamped to [1 m/s, V1]."""
+        tr = self.train
+        out = np.full(cruise_mps.shape, np.inf)
+        for k, v1 in enumerate(cruise_mps):
+            if np.isfinite(v1):
+                w = v1 * v1 * tr.resistance_slope(v1)
+                r = float(tr.resistance(v1))
+                out[k] = min(max(w * v1 / (w + r * v1), 1.0), v1)
+        return out
+
+    # ---- programmes ---------------------------------------------------------------------------
+    def programmes(self, s, ceiling, cruise_mps: np.ndarray) -> Programmes:
+        tr = self.train
+        ds = s[1] - s[0]
+        n, c = s.size, cruise_mps.size
+        mid = s[:-1] + 0.5 * ds
+        path = tr.path_accel(mid)
+        coast_end = self.coast_end_speed(cruise_mps)
+        a_brake = self.braking_decel
+
+        # coasting/braking envelope, backwards from the stop
+        envelope = np.empty((c, n))
+        envelope[:, -1] = 0.0
+        g = np.zeros(c)
+        switch_energy = 0.5 * np.where(np.isfinite(coast_end), coast_end, 1e9) ** 2
+        for i in range(n - 2, -1, -1):
+            energy = 0.5 * g * g
+            braked = energy + a_brake * ds
+            # the step where braking (backwards) reaches Vf is split: brake up to Vf, coast the
+            # rest; otherwise the coasting curve would jump by a grid cell and the running time
+            # would be discontinuous in V1 (cf. OSRD issue #1401)
+            braking_part = np.clip((switch_energy - energy) / (a_brake * ds), 0.0, 1.0)
+            start = np.minimum(braked, np.maximum(energy, switch_energy))
+            rest = (1.0 - braking_part) * ds
+            half = np.sqrt(2.0 * (start + 0.5 * rest * (tr.resistance(np.sqrt(2.0 * start)) + path[i])).clip(0.0))
+            # on a down-grade coasting speeds the train up, so going backwards the curve falls,
+            # never below Vf (there the train would have to brake while coasting downhill)
+            coasted = np.maximum(start + rest * (tr.resistance(half) + path[i]), switch_energy)
+            g = np.sqrt(2.0 * np.where(braked > switch_energy, coasted, braked))
+            g = np.minimum(g, ceiling[i])
+            envelope[:, i] = g
+
+        v = np.empty((c, n))
+        t = np.zeros((c, n))
+        regime = np.zeros((c, n - 1), dtype=np.int8)
+        traction_work = np.zeros(c)
+        returned_work = np.zeros(c)
+        v[:, 0] = 0.0
+        speed = np.zeros(c)
+        for i in range(n - 1):
+            p = path[i]
+            e = 0.5 * speed * speed
+            a_t = tr.max_traction(speed) - tr.resistance(speed) - p
+            a_c = -tr.resistance(speed) - p
+            v_half_t = np.sqrt(2.0 * (e + 0.5 * ds * a_t).clip(0.0))
+            v_half_c = np.sqrt(2.0 * (e + 0.5 * ds * a_c).clip(0.0))
+            v_trac = np.sqrt(2.0 * (e + ds * (tr.max_traction(v_half_t) - tr.resistance(v_half_t) - p)).clip(0.0))
+            v_coast = np.sqrt(2.0 * (e + ds * (-tr.resistance(v_half_c) - p)).clip(0.0))
+            below = speed < cruise_mps - 1e-9
+            nxt = np.where(below | (v_coast < cruise_mps), np.minimum(v_trac, cruise_mps), v_coast)
+            nxt = np.minimum(nxt, envelope[:, i + 1])
+            mean = 0.5 * (speed + nxt)
+            required = (nxt * nxt - speed * speed) / (2.0 * ds) + tr.resistance(mean) + p
+            regime[:, i] = np.where(required > 1e-4, REGIME_TRACTION, np.where(required < -1e-4, REGIME_BRAKE, REGIME_COAST))
+            traction_work += np.minimum(required.clip(0.0), tr.max_traction(mean))
+            returned_work += np.minimum((-required).clip(0.0), tr.electric_brake(mean))
+            with np.errstate(divide="ignore"):
+                t[:, i + 1] = t[:, i] + np.where(mean > 0, ds / np.where(mean > 0, mean, 1.0), np.inf)
+            speed = nxt
+            v[:, i + 1] = nxt
+        stock = tr.stock
+        energy = traction_work * ds * tr.m_eff / stock.efficiency + stock.auxiliary_w * t[:, -1]
+        if stock.ebrake_kind == "regenerative":
+            energy -= returned_work * ds * tr.m_eff * stock.ebrake_efficiency
+        return Programmes(cruise_mps, coast_end, v, t, regime, energy)
+
+    def plan(self, start_m: float, end_m: float, scheduled_time_s: Optional[float]) -> StagePlan:
+        n = max(int(np.ceil((end_m - start_m) / self.step_m)), 2) + 1
+        s = np.linspace(start_m, end_m, n)
+        static = self.static_profile(s)
+        ceiling = self.ceiling(s, static)
+        top = float(static.max())
+        cruise = np.concatenate([np.linspace(min(8.0, 0.5 * top), top, _FAMILY_SIZE - 1), [np.inf]])
+        family = self.programmes(s, ceiling, cruise)
+        if not np.isfinite(family.time_s[-1]):
+            raise InfeasibleStage(np.inf)    # the train cannot even start on this stage
+        minimum_time = float(family.time_s[-1])
+        if scheduled_time_s is not None and scheduled_time_s < minimum_time:
+            raise InfeasibleStage(minimum_time)
+        if scheduled_time_s is not None:
+            fitted = self._fit(s, ceiling, family, scheduled_time_s)
+            family = _merge(family, fitted)
+        order = np.argsort(-family.time_s, kind="stable")
+        family = family.take(order)
+        times = family.time_s
+        minimum = int(np.argmin(times))
+        if scheduled_time_s is None:
+            chosen = minimum
+        else:
+            chosen = int(np.argmin(np.abs(times - scheduled_time_s) + 1e-9 * np.isinf(family.cruise_mps)))
+        return StagePlan(start_m, end_m, s, static, ceiling, family, chosen, minimum, scheduled_time_s)
+
+    def _fit(self, s, ceiling, family: Programmes, target_s: float) -> Programmes:
+        """Cruise speed whose programme runs in the scheduled time (time falls as V1 rises)."""
+        cruise, times = family.cruise_mps[:-1], family.time_s[:-1]
+        best = None
+        for _ in range(2):
+            slower = np.nonzero(times >= target_s)[0]
+            faster = np.nonzero(times < target_s)[0]
+            if not slower.size:          # even the slowest candidate is early: keep it
+                return family.take([0])
+            lo = cruise[slower.max()]
+            hi = cruise[faster.min()] if faster.size else float(self.static_profile(s).max())
+            trial = np.linspace(lo, hi, _REFINE_SIZE + 2)[1:-1]
+            best = self.programmes(s, ceiling, trial)
+            cruise = np.concatenate([[lo], trial, [hi]])
+            times = np.concatenate([[times[slower.max()]], best.time_s,
+                                    [times[faster.min()] if faster.size else -np.inf]])
+        k = int(np.argmin(np.abs(best.time_s - target_s)))
+        return best.take([k])
+
+
+def _merge(a: Programmes, b: Programmes) -> Programmes:
+    return Programmes(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in
+                        ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j")))
+
+
+def plan_stages(planner: StagePlanner, legs: List[tuple]) -> List[StagePlan]:
+    """``legs``: (start_m, end_m, scheduled_time_s or None) per stage."""
+    return [planner.plan(a, b, T) for a, b, T in legs]

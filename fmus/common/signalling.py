@@ -1,0 +1,62 @@
+"""Cab-signal aspects and the ALSN speed table shared by the receiver and the ATP.
+
+Aspect enumeration (DESIGN §4): 0 white/none (Б), 1 red (К), 2 red-yellow (КЖ), 3 yellow (Ж),
+4 green (З). Lower numbers are more restrictive, except white, which is ranked between red
+and red-yellow by :func:`restrictiveness` (no code: 40 km/h, no stop target).
+
+Speeds per aspect and train category (km/h). ``ceiling``: highest speed while the aspect is
+shown (None: the line's limit). ``at_signal``: speed to be reached at the next (exit) signal
+(0: stop before it). Sources (tags as in reference/domain-facts.md):
+
+* yellow, passenger: reduce to 60 km/h by the end of the block section — ATO book, МИИТ
+  reactions (seed 003 part 2 §S.6) [S];
+* yellow, freight 50 / high-speed 80: the thesis' 4-aspect ALSU values for passing a wayside
+  yellow (seed 000 §4) [S], applied to ALSN by analogy [U];
+* red-yellow: traction–coast band 60…42 km/h (МИИТ) → ceiling 60 km/h passenger [S], freight
+  50 [U]; stop before the red signal (seed 000 §3) [S];
+* red: 20 km/h — ДКСВ vigilance rule "red and v < 20 km/h" (domain-facts §1.3 B) [S];
+* white (no code): 40 km/h — KLUB ``no_code_limit`` 41 km/h (domain-facts §1.3 D) [S].
+
+Everything is a parameter of the data, not of the code: replace this table for another
+railway's rules.
+"""
+from __future__ import annotations
+
+from enum import IntEnum
+from typing import Dict, Optional, Tuple
+
+WHITE, RED, RED_YELLOW, YELLOW, GREEN = 0, 1, 2, 3, 4
+
+
+class Aspect(IntEnum):
+    WHITE = WHITE
+    RED = RED
+    RED_YELLOW = RED_YELLOW
+    YELLOW = YELLOW
+    GREEN = GREEN
+
+
+ASPECT_LABELS = {WHITE: "Б", RED: "К", RED_YELLOW: "КЖ", YELLOW: "Ж", GREEN: "З"}
+ASPECT_NAMES = {WHITE: "white", RED: "red", RED_YELLOW: "red-yellow", YELLOW: "yellow", GREEN: "green"}
+
+# category → aspect → (ceiling km/h or None for the line limit, speed at the exit signal km/h or None)
+ALSN_SPEEDS_KMH: Dict[str, Dict[int, Tuple[Optional[float], Optional[float]]]] = {
+    "passenger": {GREEN: (None, None), YELLOW: (None, 60.0), RED_YELLOW: (60.0, 0.0),
+                  RED: (20.0, None), WHITE: (40.0, None)},
+    "freight": {GREEN: (None, None), YELLOW: (None, 50.0), RED_YELLOW: (50.0, 0.0),
+                RED: (20.0, None), WHITE: (40.0, None)},
+    "high_speed": {GREEN: (None, None), YELLOW: (None, 80.0), RED_YELLOW: (60.0, 0.0),
+                   RED: (20.0, None), WHITE: (40.0, None)},
+}
+
+_RANK = {RED: 0, WHITE: 1, RED_YELLOW: 2, YELLOW: 3, GREEN: 4}
+
+
+def restrictiveness(aspect: int) -> int:
+    """Rank for 'more permissive than' comparisons: higher is more permissive."""
+    return _RANK.get(int(aspect), 0)
+
+
+def alsn_speeds_mps(category: str, aspect: int) -> Tuple[Optional[float], Optional[float]]:
+    ceiling, at_signal = ALSN_SPEEDS_KMH[category].get(int(aspect), ALSN_SPEEDS_KMH[category][RED])
+    return (None if ceiling is None else ceiling / 3.6, None if at_signal is None else at_signal / 3.6)
