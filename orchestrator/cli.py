@@ -195,7 +195,8 @@ def make_parser() -> argparse.ArgumentParser:
     run.add_argument("--output", default="results", help="results folder (default results/)")
     run.add_argument("--set", action="append", metavar="COMP.VAR=VALUE", help="override a parameter")
     run.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
-    run.add_argument("--output-interval", type=float, default=0.1, help="seconds (default 0.1)")
+    run.add_argument("--output-interval", type=float, default=None,
+                     help="seconds (default 0.1, rounded up to a multiple of the base step)")
     run.add_argument("--capture", action="append", metavar="COMP.PORT@T0:T1",
                      help="full-rate capture of a frame output")
     run.add_argument("--record", action="append", metavar="COMP.VAR",
@@ -230,6 +231,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     except KeyboardInterrupt:
         print("railcosim: interrupted; results so far are written", file=sys.stderr)
         return 130
+    except BrokenPipeError:   # e.g. `railcosim inspect X | head`: the reader left, nothing to report
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 def entry_point() -> None:

@@ -18,6 +18,10 @@ from .graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from .master import ALGORITHMS, Master
 from .observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
 from .ssp import load_parameter_set, open_system
+from .verdict import TrainVerdict
+
+
+DEFAULT_OUTPUT_INTERVAL_S = 0.1
 
 
 @dataclass
@@ -26,7 +30,7 @@ class RunOptions:
     output_dir: Path = Path("results")
     overrides: Dict[str, str] = field(default_factory=dict)
     param_sets: Sequence[str] = ()
-    output_interval: float = 0.1
+    output_interval: Optional[float] = None   # None: 0.1 s, rounded up to a multiple of the base step
     captures: Sequence[str] = ()
     algorithm: str = "gauss-seidel"
     in_process: bool = False
@@ -48,7 +52,7 @@ class RunResult:
 def run_system(system_path, options: RunOptions) -> RunResult:
     if options.algorithm not in ALGORITHMS:
         raise UserError(f"--algorithm {options.algorithm}: choose {' or '.join(ALGORITHMS)}")
-    if options.output_interval <= 0:
+    if options.output_interval is not None and options.output_interval <= 0:
         raise UserError(f"--output-interval {options.output_interval}: must be positive")
     system = open_system(Path(system_path), list(options.fmu_dirs))
     workdir = new_workdir()
@@ -62,7 +66,11 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             raise UserError(f"--stop-time {stop}: must be after the start time {system.start_time}")
         start_ticks = round(system.start_time * TICKS_PER_SECOND)
         stop_ticks = round(stop * TICKS_PER_SECOND)
-        interval_ticks = seconds_to_ticks(options.output_interval, "--output-interval")
+        if options.output_interval is None:
+            wanted = seconds_to_ticks(DEFAULT_OUTPUT_INTERVAL_S, "output interval")
+            interval_ticks = -(-wanted // graph.base_ticks) * graph.base_ticks
+        else:
+            interval_ticks = seconds_to_ticks(options.output_interval, "--output-interval")
         if interval_ticks % graph.base_ticks:
             raise UserError(f"--output-interval {options.output_interval}: not a multiple of the "
                             f"base step {graph.base_ticks / TICKS_PER_SECOND:g} s")
@@ -91,9 +99,10 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             extra_outputs.setdefault(comp, []).append(var)
         for request, elements in captures:
             extra_outputs.setdefault(request.component, []).extend(elements)
-        trains = [name for name in graph.order if graph.nodes[name].interface.model_identifier == TRAIN_MODEL]
-        for name in trains:
-            extra_outputs.setdefault(name, []).append("energy")
+        verdict = TrainVerdict(graph)
+        observers.append(verdict)
+        for name, variables in verdict.outputs_needed().items():
+            extra_outputs.setdefault(name, []).extend(variables)
         master = Master(graph, slaves, options.algorithm, observers, options.manipulators)
         began = time.perf_counter()
         failure: Optional[BaseException] = None
@@ -111,9 +120,9 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             problems = master.shutdown()
         sim_time = master.time_s - system.start_time
         summary = _summary(graph, sim_time, wall, failure)
-        summary["trains"] = [_train_summary(master, name) for name in trains]
+        summary["trains"] = verdict.summary()
         _write_json(out / "summary.json", summary)
-        _write_json(out / "metadata.json", _metadata(system, graph, options, stop, master))
+        _write_json(out / "metadata.json", _metadata(system, graph, options, stop, master, interval_ticks))
         if failure is not None:
             raise failure
         if problems:
@@ -140,16 +149,6 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
     return chosen
 
 
-TRAIN_MODEL = "Traction"   # each traction component is one train in summary.json
-J_PER_KWH = 3.6e6
-
-
-def _train_summary(master: Master, name: str) -> dict:
-    """The DESIGN §8 train keys that exist so far (the ATP/ATO and receiver keys come with them)."""
-    buffer, index = master.output_slot(name, "energy")
-    return {"name": name, "energy_kwh": float(buffer.values[index]) / J_PER_KWH}
-
-
 def _summary(graph: SystemGraph, sim_time: float, wall: float, failure) -> dict:
     summary = {
         "system": graph.name,
@@ -165,7 +164,8 @@ def _summary(graph: SystemGraph, sim_time: float, wall: float, failure) -> dict:
     return summary
 
 
-def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, master: Master) -> dict:
+def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, master: Master,
+              interval_ticks: int) -> dict:
     return {
         "system": graph.name,
         "ssd": str(system.ssd_path),
@@ -174,7 +174,7 @@ def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, mast
         "start_time_s": system.start_time,
         "stop_time_s": stop,
         "base_step_s": graph.base_ticks / TICKS_PER_SECOND,
-        "output_interval_s": options.output_interval,
+        "output_interval_s": interval_ticks / TICKS_PER_SECOND,
         "execution_order": graph.order,
         "cycles_broken": graph.cycles,
         "components": {

@@ -82,7 +82,7 @@ class AtpResult:
     permitted_mps: float = _INF          # supervised speed at the head (curves included)
     ceiling_mps: float = _INF            # line limit and cab-signal ceiling at the head, no curves
     constraints: Constraints = field(default_factory=Constraints)
-    aspect: int = sig.WHITE              # aspect the ATP acts upon (after fail-safe rules)
+    aspect: int = sig.WHITE              # shown aspect, or the last valid one while the code is lost
     stop_now: bool = False               # red: the ATO must stop the train
 
 
@@ -183,9 +183,7 @@ class Atp:
                 if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
                     acted_aspect = self.last_valid_aspect
             if t < self.assumed_until and self.assumed is not None:
-                c.add(self.assumed)
-                if sig.restrictiveness(self.assumed_aspect) < sig.restrictiveness(acted_aspect):
-                    acted_aspect = self.assumed_aspect
+                c.add(self.assumed)          # constraints only: the reported aspect stays the shown one
             result.stop_now = acted_aspect == sig.RED and self.mode == "ALSN"
         result.aspect = acted_aspect
         result.constraints = c

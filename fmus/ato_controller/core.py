@@ -120,7 +120,7 @@ class AtoCore:
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else \
             stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
-        self.out = AtoOutputs(stop_index=1)
+        self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
 
     # ---- helpers ----------------------------------------------------------------------------

@@ -1,0 +1,111 @@
+"""AtoController FMU facade: ports ↔ AtoCore. No logic here (see core.py, atp.py, driving.py)."""
+from pythonfmu.default_experiment import DefaultExperiment
+
+from ..common.data import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
+                           load_rolling_stock, load_timetable)
+from ..common.slave import FrameSlave, Port
+from .core import AtoCore, AtoSettings
+
+
+class AtoController(FrameSlave):
+    description = "ATP speed supervision from the cab signal + ATO timetable driving, energy-efficient, precise stopping"
+
+    @classmethod
+    def declare_ports(cls, build):
+        return [
+            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            Port("rolling_stock_file", "parameter", "String", start="",
+                 description="the ATO's nominal train; empty: the bundled ЧС7 passenger train"),
+            Port("timetable_file", "parameter", "String", start="", description="empty: the bundled default timetable"),
+            Port("train_category", "parameter", "String", start="",
+                 description="passenger | freight | high_speed; empty: the rolling stock's category"),
+            Port("strategy", "parameter", "String", start="programme", description="programme | predictive | flat_out"),
+            Port("cab_signal", "parameter", "String", start="ALSN",
+                 description="ALSN (aspect) | digital (v_permitted, v_target, free_blocks) | off (line limits only)"),
+            Port("braking_decel", "parameter", unit="m/s2", start=0.0, min=0.0,
+                 description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
+            Port("atp_decel", "parameter", unit="m/s2", start=0.0, min=0.0,
+                 description="ATP supervision deceleration; 0: 0.7 × service"),
+            Port("speed_margin", "parameter", unit="m/s", start=2.0 / 3.6, min=0.0,
+                 description="the ATO stays this far below every limit"),
+            Port("stop_margin", "parameter", unit="m", start=30.0, min=0.0,
+                 description="stop this far before a signal at danger"),
+            Port("k1", "parameter", unit="1/s", start=0.1, min=0.0,
+                 description="programme strategy: cruise-speed reduction (m/s) per second ahead"),
+            Port("k2", "parameter", unit="1", start=1.0, min=0.0,
+                 description="programme strategy: extra traction time per second late"),
+            Port("late_threshold", "parameter", unit="s", start=16.0, min=0.0,
+                 description="later than this: drive at the maximum permitted speed"),
+            Port("min_dwell", "parameter", unit="s", start=20.0, min=0.0),
+            Port("decoding_latency", "parameter", unit="s", start=2 * 1.86 + 0.5, min=0.0,
+                 description="receiver latency the ATP allows after passing a signal"),
+            Port("x", "input", unit="m", start=0.0, description="head position"),
+            Port("v", "input", unit="m/s", start=0.0),
+            Port("aspect", "input", "Integer", start=0, min=0, max=4,
+                 description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
+            Port("code_valid", "input", "Boolean", start=False),
+            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, description="digital systems"),
+            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, description="digital systems"),
+            Port("free_blocks", "input", "Integer", start=0, min=0, description="digital systems"),
+            Port("command", "output", unit="1", min=-1.0, max=1.0,
+                 description=">0 traction share, <0 brake share (to traction.command)"),
+            Port("emergency_brake", "output", "Boolean", start=False),
+            Port("mode", "output", "Integer", start=0,
+                 description="0 standstill, 1 traction, 2 coast, 3 brake, 4 ATP service, 5 ATP emergency"),
+            Port("v_ref", "output", unit="m/s", description="reference programme speed here"),
+            Port("schedule_deviation", "output", unit="s", description="late > 0"),
+            Port("v_ceiling", "output", unit="m/s", description="highest speed the ATO allows itself here"),
+            Port("v_atp", "output", unit="m/s", description="ATP permitted speed at the head (braking curves included)"),
+            Port("atp_aspect", "output", "Integer", start=0, description="aspect the ATP acts upon (fail-safe rules applied)"),
+            Port("atp_intervention", "output", "Integer", start=0, description="0 none, 1 service, 2 emergency"),
+            Port("atp_interventions", "output", "Integer", start=0),
+            Port("emergency_brakings", "output", "Integer", start=0),
+            Port("signals_passed_at_danger", "output", "Integer", start=0),
+            Port("max_overspeed", "output", unit="m/s", description="largest excess over the line/cab-signal ceiling"),
+            Port("stop_index", "output", "Integer", start=1, description="timetable stops reached (1: at the origin)"),
+            Port("arrival_time", "output", unit="s", start=-1.0, description="at the last stop reached; −1 before"),
+            Port("stop_error", "output", unit="m", description="head − stop point at the last arrival"),
+            Port("mode_changes", "output", "Integer", start=0, description="traction/coast/brake changes while running"),
+            Port("stage", "output", "Integer", start=0, description="timetable stage (0 = first stop to second)"),
+        ]
+
+    def make_default_experiment(self):
+        return DefaultExperiment(start_time=0.0, stop_time=1200.0, step_size=0.5)
+
+    def create_core(self):
+        p = self.param
+        line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
+        stock = load_rolling_stock(self.resource_path(p("rolling_stock_file") or str(DEFAULT_ROLLING_STOCK)))
+        timetable_path = self.resource_path(p("timetable_file") or str(DEFAULT_TIMETABLE))
+        timetable = load_timetable(timetable_path, line)
+        settings = AtoSettings(
+            strategy=p("strategy"), cab_signal=p("cab_signal"), braking_decel_mps2=p("braking_decel"),
+            atp_decel_mps2=p("atp_decel"), speed_margin_mps=p("speed_margin"), stop_margin_m=p("stop_margin"),
+            k1=p("k1"), k2=p("k2"), late_threshold_s=p("late_threshold"), min_dwell_s=p("min_dwell"),
+            decoding_latency_s=p("decoding_latency"))
+        return AtoCore(line, stock, timetable, timetable_path, p("train_category") or stock.category, settings)
+
+    def publish_initial_outputs(self):
+        self._write(self.core.out)
+
+    def step_core(self, current_time, step_size):
+        io = self.io
+        self._write(self.core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
+                                   bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
+                                   int(io["free_blocks"])))
+
+    def _write(self, out):
+        io = self.io
+        for port, field in _OUTPUT_FIELDS:
+            io[port][...] = getattr(out, field)
+
+
+# output port ← AtoOutputs field
+_OUTPUT_FIELDS = (
+    ("command", "command"), ("emergency_brake", "emergency_brake"), ("mode", "mode"), ("v_ref", "v_ref_mps"),
+    ("schedule_deviation", "schedule_deviation_s"), ("v_ceiling", "v_ceiling_mps"), ("v_atp", "v_permitted_mps"),
+    ("atp_aspect", "aspect"), ("atp_intervention", "atp_intervention"), ("atp_interventions", "atp_interventions"),
+    ("emergency_brakings", "emergency_brakings"), ("signals_passed_at_danger", "signals_passed_at_danger"),
+    ("max_overspeed", "max_overspeed_mps"), ("stop_index", "stop_index"), ("arrival_time", "arrival_time_s"),
+    ("stop_error", "stop_error_m"), ("mode_changes", "mode_changes"), ("stage", "stage"),
+)

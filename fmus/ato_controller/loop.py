@@ -1,0 +1,65 @@
+"""The ATO and traction cores in one closed loop, without FMI: for quick studies, the tests
+and the benchmarks. The coupling is the shipped system's (ssp/free_run): Gauss-Seidel, the ATO
+reads the train's position and speed at the start of each step, the train gets its command.
+The cab signal comes from a function of (t, x) returning (aspect, code_valid).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional, Tuple
+
+import numpy as np
+
+from ..common import signalling as sig
+from ..common.data import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from ..traction.core import TractionCore
+from .core import AtoCore, AtoSettings
+
+CabSignal = Callable[[float, float], Tuple[int, bool]]
+
+
+@dataclass
+class LoopResult:
+    ato: AtoCore
+    train: TractionCore
+    # one row per step: t, x, v, command, mode, v_atp (ATP permitted), atp ceiling-equivalent, aspect
+    trace: np.ndarray = field(repr=False)
+
+    COLUMNS = ("t", "x", "v", "command", "mode", "v_atp", "aspect", "energy")
+
+    def column(self, name: str) -> np.ndarray:
+        return self.trace[:, self.COLUMNS.index(name)]
+
+    @property
+    def energy_kwh(self) -> float:
+        return self.train.out.energy_j / 3.6e6
+
+    def energy_at_kwh(self, t: float) -> float:
+        return float(np.interp(t, self.column("t"), self.column("energy"))) / 3.6e6
+
+
+def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[AtoSettings] = None,
+                    line_file=DEFAULT_LINE, stock_file=DEFAULT_ROLLING_STOCK, timetable_file=DEFAULT_TIMETABLE,
+                    category: Optional[str] = None, mass_scale: float = 1.0, resistance_scale: float = 1.0,
+                    pantograph_voltage_v: float = 0.0, cab_signal: Optional[CabSignal] = None) -> LoopResult:
+    line = load_line(line_file)
+    stock = load_rolling_stock(stock_file)
+    timetable = load_timetable(timetable_file, line)
+    settings = settings or AtoSettings(cab_signal="off" if cab_signal is None else "ALSN")
+    ato = AtoCore(line, stock, timetable, timetable_file, category or stock.category, settings)
+    train = TractionCore(stock, line, x0_m=timetable[0].stop_m, mass_scale=mass_scale,
+                         resistance_scale=resistance_scale, pantograph_voltage_v=pantograph_voltage_v)
+    steps = int(round(stop_time_s / step_s))
+    trace = np.empty((steps, len(LoopResult.COLUMNS)))
+    state = train.out
+    for k in range(steps):
+        t = k * step_s
+        aspect, valid = cab_signal(t, state.x_m) if cab_signal else (sig.GREEN, True)
+        out = ato.step(t, step_s, state.x_m, state.v_mps, aspect, valid)
+        trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j)
+        state = train.step(t, step_s, out.command, out.emergency_brake)
+    return LoopResult(ato, train, trace)
+
+
+def arrivals(result: LoopResult) -> List[dict]:
+    return list(result.ato.arrivals)

@@ -1,0 +1,269 @@
+"""ATP + ATO controller: planner, ATP supervision, driving to the timetable, the FMU.
+
+Most checks run the ATO and traction cores in one closed loop (fmus/ato_controller/loop.py);
+the FMU checks run the shipped system through the orchestrator.
+"""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
+from fmus.ato_controller.core import AtoCore, AtoSettings
+from fmus.ato_controller.loop import run_closed_loop
+from fmus.ato_controller.planner import StagePlanner
+from fmus.ato_controller.train_model import NominalTrain
+from fmus.common import signalling as sig
+from fmus.common.data import DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.common.slave import FmuInputError
+from helpers import railcosim
+
+KMH = 1 / 3.6
+RUN_S = 1100.0
+LINE_KM = (19600 - 400) / 1000
+
+
+def _timetable(tmp_path, supplement, name="tt.json"):
+    """Default stops with the scheduled running times = minimum time × (1 + supplement)."""
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    t_ab = planner.plan(400, 10300, None).minimum_time_s * (1 + supplement)
+    t_bc = planner.plan(10300, 19600, None).minimum_time_s * (1 + supplement)
+    stops = [{"station": "A", "departure_s": 60.0},
+             {"station": "B", "arrival_s": round(60 + t_ab), "departure_s": round(60 + t_ab) + 60},
+             {"station": "C", "arrival_s": round(60 + t_ab) + 60 + round(t_bc)}]
+    path = tmp_path / name
+    path.write_text(json.dumps({"train": "test", "stops": stops}))
+    return path
+
+
+def _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=0.5):
+    arrivals = result.ato.arrivals
+    assert [a["station"] for a in arrivals] == ["B", "C"]
+    for a in arrivals:
+        assert abs(a["arrival_deviation_s"]) <= arrival_s, a
+        assert abs(a["stop_error_m"]) <= stop_m, a
+
+
+# ---- planner ----------------------------------------------------------------------------------
+def test_running_time_falls_continuously_with_the_cruise_speed():
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    s = np.linspace(10300, 19600, 931)
+    ceiling = planner.ceiling(s, planner.static_profile(s))
+    family = planner.programmes(s, ceiling, np.linspace(90, 110, 41) * KMH)
+    steps = np.diff(family.time_s)
+    assert np.all(steps < 0)                          # faster cruise, shorter time
+    assert np.max(np.abs(steps)) < 3 * np.median(np.abs(steps))   # no jumps (cf. OSRD #1401)
+
+
+def test_minimum_time_profile_respects_limits_and_the_stop():
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    plan = planner.plan(400, 10300, None)
+    v = plan.family.v[plan.minimum]
+    assert np.all(v <= plan.static_mps + 1e-9)
+    assert v[-1] == 0.0 and v[0] == 0.0
+    # braking into the stop at the planned 0.5 m/s²: v² = 2·a·d near the end
+    d = plan.end_m - plan.s[-30:]
+    assert np.allclose(v[-30:] ** 2, 2 * 0.5 * d, rtol=0.02, atol=0.5)
+
+
+def test_fitted_programme_meets_the_scheduled_time_and_saves_energy():
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    minimum = planner.plan(400, 10300, None).minimum_time_s
+    plan = planner.plan(400, 10300, 1.08 * minimum)
+    f = plan.family
+    assert f.time_s[plan.chosen] == pytest.approx(1.08 * minimum, abs=1.0)
+    assert f.energy_j[plan.chosen] < 0.9 * f.energy_j[plan.minimum]
+
+
+def test_infeasible_timetable_is_an_initialisation_error_with_the_minimum_time(tmp_path):
+    path = tmp_path / "tight.json"
+    path.write_text(json.dumps({"train": "t", "stops": [{"station": "A", "departure_s": 0},
+                                                        {"station": "B", "arrival_s": 300}]}))
+    line, stock = load_line(), load_rolling_stock()
+    with pytest.raises(FmuInputError) as error:
+        AtoCore(line, stock, load_timetable(path, line), path, "passenger", AtoSettings())
+    message = str(error.value)
+    assert str(path) in message and "stops[1].arrival_s" in message
+    assert "minimum running time 4" in message       # about 412 s on the default line
+
+
+# ---- ATP ----------------------------------------------------------------------------------------
+def _atp(cab="ALSN"):
+    return Atp(load_line(), "passenger", 388.0, cab, 0.63, 4.22)
+
+
+def test_red_yellow_code_loss_keeps_the_stop_at_that_signal():
+    atp = _atp()
+    # section 2 is 2600..5200: red-yellow → stop at 5200
+    r = atp.supervise(0.0, 4000.0, 15.0, sig.RED_YELLOW, True, 0, 0, 0)
+    assert any(t.signal and t.position_m == 5200.0 for t in r.constraints.targets)
+    lost = atp.supervise(1.0, 4015.0, 15.0, sig.WHITE, False, 0, 0, 0)
+    assert any(t.signal and t.position_m == 5200.0 for t in lost.constraints.targets)
+    assert lost.permitted_mps <= math.sqrt(2 * 0.63 * (5200 - 4015)) + 1e-9
+    assert lost.ceiling_mps <= 40 * KMH + 1e-9       # white's ceiling applies too
+
+
+def test_loss_of_code_is_never_more_permissive_than_the_last_valid_code():
+    for last in (sig.GREEN, sig.YELLOW, sig.RED_YELLOW):
+        atp = _atp()
+        valid = atp.supervise(0.0, 3000.0, 10.0, last, True, 0, 0, 0)
+        lost = atp.supervise(1.0, 3010.0, 10.0, sig.WHITE, False, 0, 0, 0)
+        assert lost.permitted_mps <= valid.permitted_mps + 1e-9
+        assert lost.ceiling_mps <= valid.ceiling_mps + 1e-9
+
+
+def test_overspeed_gives_service_then_emergency_brake_and_counts():
+    atp = _atp()
+    limit = 80 * KMH                                  # 0..1200 m
+    assert atp.supervise(0.0, 500.0, limit + 3 * KMH, sig.GREEN, True, 0, 0, 0).intervention == 0
+    assert atp.supervise(1.0, 510.0, limit + 6 * KMH, sig.GREEN, True, 0, 0, 0).intervention == SERVICE_INTERVENTION
+    result = atp.supervise(2.0, 520.0, limit + dv_ebi_mps(limit) + 0.5 * KMH, sig.GREEN, True, 0, 0, 0)
+    assert result.intervention == EMERGENCY_INTERVENTION
+    # emergency holds until standstill, even back under the limit
+    assert atp.supervise(3.0, 530.0, 10 * KMH, sig.GREEN, True, 0, 0, 0).intervention == EMERGENCY_INTERVENTION
+    assert atp.supervise(4.0, 531.0, 0.0, sig.GREEN, True, 0, 0, 0).intervention == 0
+    assert (atp.interventions, atp.emergency_brakings) == (2, 1)
+
+
+def test_passing_the_signal_under_red_yellow_is_a_spad_with_emergency_brake():
+    atp = _atp()
+    atp.supervise(0.0, 5150.0, 5.0, sig.RED_YELLOW, True, 0, 0, 0)
+    result = atp.supervise(1.0, 5205.0, 5.0, sig.RED_YELLOW, True, 0, 0, 0)
+    assert atp.signals_passed_at_danger == 1
+    assert result.intervention == EMERGENCY_INTERVENTION
+
+
+def test_after_a_yellow_signal_the_next_section_is_assumed_red_yellow_until_decoded():
+    atp = _atp()
+    atp.supervise(0.0, 5100.0, 15.0, sig.YELLOW, True, 0, 0, 0)
+    # crossed into section 3 (5200..7800) while the receiver still shows the old yellow
+    result = atp.supervise(1.0, 5215.0, 15.0, sig.YELLOW, True, 0, 0, 0)
+    assert any(t.signal and t.position_m == 7800.0 for t in result.constraints.targets)
+    later = atp.supervise(6.0, 5290.0, 15.0, sig.GREEN, True, 0, 0, 0)
+    assert not any(t.signal for t in later.constraints.targets)
+
+
+def test_digital_cab_signal_targets_the_end_of_the_free_blocks():
+    atp = _atp("digital")
+    r = atp.supervise(0.0, 3000.0, 30.0, sig.GREEN, True, 120 * KMH, 0.0, 2)
+    assert r.ceiling_mps == pytest.approx(120 * KMH)
+    assert any(t.signal and t.position_m == 10400.0 for t in r.constraints.targets)   # end of section 2+2
+
+
+# ---- driving to the timetable ------------------------------------------------------------------
+@pytest.mark.parametrize("strategy", ["programme", "predictive"])
+def test_nominal_run_is_on_time_on_the_mark_without_interventions(strategy):
+    result = run_closed_loop(RUN_S, settings=AtoSettings(strategy=strategy, cab_signal="off"))
+    _assert_on_time_and_on_the_mark(result)
+    ato = result.ato
+    assert ato.atp.interventions == 0 and ato.atp.max_overspeed_mps <= 0.0
+    assert ato.out.mode_changes / LINE_KM <= 1.0
+
+
+def test_energy_efficient_driving_saves_over_flat_out_with_8_percent_supplement(tmp_path):
+    timetable = _timetable(tmp_path, 0.08)
+    arrival_b = json.loads(timetable.read_text())["stops"][1]["arrival_s"]
+    results = {s: run_closed_loop(RUN_S, timetable_file=timetable, settings=AtoSettings(strategy=s, cab_signal="off"))
+               for s in ("programme", "predictive", "flat_out")}
+    _assert_on_time_and_on_the_mark(results["programme"])
+    _assert_on_time_and_on_the_mark(results["predictive"])
+    flat_stage = results["flat_out"].energy_at_kwh(arrival_b - 20)   # stage A–B, all standing at B by then
+    for strategy in ("programme", "predictive"):
+        assert results[strategy].energy_at_kwh(arrival_b - 20) <= 0.9 * flat_stage
+        assert results[strategy].energy_kwh <= 0.9 * results["flat_out"].energy_kwh
+
+
+@pytest.mark.parametrize("mass, resistance, voltage", [
+    (1.1, 1.2, 2850.0), (1.1, 0.8, 3150.0), (0.9, 1.2, 2850.0), (0.9, 0.8, 3150.0)])
+@pytest.mark.parametrize("strategy", ["programme", "predictive"])
+def test_robust_to_mass_resistance_and_voltage(tmp_path, strategy, mass, resistance, voltage):
+    timetable = _timetable(tmp_path, 0.08)
+    result = run_closed_loop(RUN_S, timetable_file=timetable, mass_scale=mass, resistance_scale=resistance,
+                             pantograph_voltage_v=voltage, settings=AtoSettings(strategy=strategy, cab_signal="off"))
+    _assert_on_time_and_on_the_mark(result)
+
+
+def test_stop_point_moves_less_than_half_a_metre_between_step_sizes():
+    errors = []
+    for step in (0.1, 1.0):
+        result = run_closed_loop(RUN_S, step_s=step, settings=AtoSettings(cab_signal="off"))
+        errors.append([a["stop_error_m"] for a in result.ato.arrivals])
+    assert np.max(np.abs(np.subtract(*errors))) < 0.5
+
+
+def _red_signal_ahead(clear_s):
+    """A train standing beyond signal 9 (15 200 m): red-yellow in 12 800..15 200, yellow before."""
+    def cab(t, x):
+        if t >= clear_s:
+            return sig.GREEN, True
+        if 12800 <= x < 15200:
+            return sig.RED_YELLOW, True
+        if 10400 <= x < 12800:
+            return sig.YELLOW, True
+        return sig.GREEN, True
+    return cab
+
+
+def test_yellow_then_red_yellow_stops_before_the_red_signal_and_recovers():
+    result = run_closed_loop(1300.0, cab_signal=_red_signal_ahead(900.0))
+    ato = result.ato
+    t, x, v = result.column("t"), result.column("x"), result.column("v")
+    aspects = result.column("aspect")
+    held = (v <= 1e-3) & (x > 12800) & (x < 15200)
+    assert held.any(), "the train did not stop before the red signal"
+    assert 15200 - 40 <= x[held][0] < 15200
+    assert ato.atp.signals_passed_at_danger == 0
+    assert ato.atp.interventions == 0
+    # never above the ATP's permitted speed by more than its service-intervention margin
+    assert np.max(v - result.column("v_atp")) <= 5.5 * KMH
+    seen = [int(a) for k, a in enumerate(aspects) if k == 0 or a != aspects[k - 1]]
+    assert seen[:4] == [sig.GREEN, sig.YELLOW, sig.RED_YELLOW, sig.GREEN]
+    # after the signal clears the train runs on and reaches C, late but on the mark
+    assert [a["station"] for a in ato.arrivals] == ["B", "C"]
+    assert abs(ato.arrivals[-1]["stop_error_m"]) <= 0.5
+
+
+def test_after_a_restriction_the_ato_runs_at_the_permitted_speed_until_on_time():
+    result = run_closed_loop(1300.0, cab_signal=_red_signal_ahead(900.0))
+    t, x, v = result.column("t"), result.column("x"), result.column("v")
+    mode = result.column("mode")
+    after = (t > 905) & (t < 960) & (v > 1.0)
+    # full traction while late (no coasting) right after the aspect clears
+    assert np.all(mode[after] == 1)
+
+
+# ---- the FMU through the orchestrator ----------------------------------------------------------
+def test_free_run_through_the_orchestrator_meets_the_acceptance(tmp_path, product_fmus):
+    out = tmp_path / "run"
+    code, _, stderr = railcosim("run", "free_run", "--output", str(out), "--no-build")
+    assert code == 0, stderr
+    summary = json.loads((out / "summary.json").read_text())
+    (train,) = summary["trains"]
+    assert [s["station"] for s in train["stops"]] == ["B", "C"]
+    for stop in train["stops"]:
+        assert abs(stop["arrival_deviation_s"]) <= 15.0 and abs(stop["stop_error_m"]) <= 0.5
+    assert train["atp_interventions"] == 0 and train["signals_passed_at_danger"] == 0
+    assert train["max_overspeed_kmh"] == 0.0 and train["energy_kwh"] > 100
+
+
+def test_infeasible_timetable_through_the_cli_is_one_line_exit_2(tmp_path, product_fmus):
+    tight = tmp_path / "tight.json"
+    tight.write_text(json.dumps({"train": "t", "stops": [{"station": "A", "departure_s": 0},
+                                                         {"station": "B", "arrival_s": 300}]}))
+    code, _, stderr = railcosim("run", "free_run", "--output", str(tmp_path / "out"), "--no-build",
+                                "--set", f"ato.timetable_file={tight}")
+    assert code == 2
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and "stops[1].arrival_s" in lines[0] and "minimum running time" in lines[0]
+    assert "Traceback" not in stderr
+
+
+def test_unknown_strategy_is_an_initialisation_error(tmp_path, product_fmus):
+    code, _, stderr = railcosim("run", "free_run", "--output", str(tmp_path / "out"), "--no-build",
+                                "--set", "ato.strategy=fastest")
+    assert code == 2 and "parameter strategy" in stderr
