@@ -89,6 +89,13 @@ def cmd_run(args) -> int:
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
           f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
           f"results in {result.output_dir}")
+    for train in summary["trains"]:
+        stops = ", ".join(f"{s['station']} {s['arrival_deviation_s']:+.1f} s / {s['stop_error_m']:+.2f} m"
+                          for s in train.get("stops", []) if s.get("arrival_deviation_s") is not None)
+        atp = (f"; ATP interventions {train['atp_interventions']}, SPAD {train['signals_passed_at_danger']}"
+               if "atp_interventions" in train else "")
+        print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
+              + (f"; arrivals {stops}" if stops else "") + atp)
     return 0
 
 

@@ -267,3 +267,19 @@ def test_unknown_strategy_is_an_initialisation_error(tmp_path, product_fmus):
     code, _, stderr = railcosim("run", "free_run", "--output", str(tmp_path / "out"), "--no-build",
                                 "--set", "ato.strategy=fastest")
     assert code == 2 and "parameter strategy" in stderr
+
+
+def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_tolerance(tmp_path):
+    """ВЛ80 + 62 wagons (5152 t), pneumatic brake with 8 s delay and 25 s build-up: the brake is
+    released ahead of departure, the train is held back when running away downhill, and the stop
+    meets the book's ±10 m for loco-hauled trains (seed 003 §S.5.4)."""
+    from fmus.common.data import DATA
+
+    timetable = tmp_path / "freight.json"
+    timetable.write_text(json.dumps({"train": "freight", "stops": [
+        {"station": "A", "departure_s": 60}, {"station": "B", "arrival_s": 900, "departure_s": 960},
+        {"station": "C", "arrival_s": 1800}]}))
+    result = run_closed_loop(1900.0, line_file=DATA / "default_line_ac.json", stock_file=DATA / "freight_vl80.json",
+                             timetable_file=timetable, settings=AtoSettings(cab_signal="off"))
+    _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=10.0)
+    assert result.ato.atp.interventions == 0

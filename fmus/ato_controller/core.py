@@ -31,6 +31,7 @@ MODE_NAMES = ("standstill", "traction", "coast", "brake", "ATP service brake", "
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
 ACCEL_FILTER_S = 1.0
 MIN_BRAKE_SHARE = 0.02
+CREEP_SPEED_MPS = 5.0 * KMH      # to close up to the stop point after stopping short of the window
 
 
 @dataclass
@@ -44,7 +45,9 @@ class AtoSettings:
     k1: float = 0.1                       # m/s of cruise speed per s ahead
     k2: float = 1.0                       # s of extra traction per s late
     late_threshold_s: float = 16.0        # МИИТ: later than this → maximum permitted speed
+    early_threshold_s: float = 8.0        # earlier than this → hold the programme speed (brake if need be)
     min_dwell_s: float = 20.0
+    stop_window_m: float = 5.0            # standing at most this far short of the stop point is an arrival
     hold_brake: float = 0.3               # brake share held while standing
     decoding_latency_s: float = 2 * 1.86 + 0.5   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
     speed_gain: float = 0.2               # 1/s, speed-holding loop
@@ -83,7 +86,9 @@ class AtoCore:
         if category not in sig.ALSN_SPEEDS_KMH:
             raise FmuInputError(f"parameter train_category: {category!r} is not one of {', '.join(sig.ALSN_SPEEDS_KMH)}")
         for name, value in (("speed_margin", s.speed_margin_mps), ("stop_margin", s.stop_margin_m),
-                            ("min_dwell", s.min_dwell_s), ("k1", s.k1), ("k2", s.k2)):
+                            ("min_dwell", s.min_dwell_s), ("k1", s.k1), ("k2", s.k2),
+                            ("late_threshold", s.late_threshold_s), ("early_threshold", s.early_threshold_s),
+                            ("stop_window", s.stop_window_m)):
             if value < 0:
                 raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
         self.settings = s
@@ -116,10 +121,13 @@ class AtoCore:
         self.braking_target = None
         self.restricted = False
         self.recovering = False
+        self.creeping = False
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else \
             stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
+        # a driver releases the train brake before the departure time: its delay + build-down
+        self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
         self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
 
@@ -221,8 +229,11 @@ class AtoCore:
             departure = self.departure_time(self.stage)
             out.schedule_deviation_s = max(t - self.timetable[self.stage].departure_s, 0.0) \
                 if self.phase == DWELLING or t > departure else 0.0
-            if t + 1e-9 >= departure and atp.permitted_mps > 1.0 and not atp.stop_now:
+            may_go = atp.permitted_mps > 1.0 and not atp.stop_now
+            if t + 1e-9 >= departure and may_go:
                 self._depart(t)
+            elif may_go and t + self.release_lead_s >= departure:
+                return 0.0, MODE_STANDSTILL    # release the brake ahead of the departure time
             else:
                 return -s.hold_brake, MODE_STANDSTILL
         return self._run(t, x, v, atp)
@@ -241,7 +252,8 @@ class AtoCore:
         stop = self.timetable[self.stage + 1]
         t_run = t - origin.departure_s
         # arrival: standing at (or just past) the stop point
-        if v <= 1e-3 and x >= stop.stop_m - 1.0 and self.braking_target is not None and self.braking_target[2]:
+        if v <= 1e-3 and x >= stop.stop_m - s.stop_window_m and self.braking_target is not None \
+                and self.braking_target[2]:
             self._arrive(t, x)
             return -s.hold_brake, MODE_STANDSTILL
 
@@ -274,26 +286,36 @@ class AtoCore:
         if self.braking_target is not None:
             position, speed, station = self.braking_target
             decel = min(self._decel_to(x, v, position, speed), 2.0 * self.a_plan)
-            if station and v <= 1e-3 and x < stop.stop_m - 1.0:
-                self.braking_target = None            # stopped short: creep on
+            if station and v <= 1e-3 and x < stop.stop_m - s.stop_window_m:
+                self.braking_target = None            # stopped short of the window: creep on
+                self.creeping = True
             else:
                 # the brake stays applied until the target is reached (no release/re-apply)
                 return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
 
-        if flat_out:
+        if self.creeping:
+            cruise, coast = CREEP_SPEED_MPS, False
+        elif flat_out:
             cruise, coast = _INF, False
         else:
             cruise, coast = guide.cruise_mps, guide.coast
         if atp.stop_now:
             return self.controllers.brake(x, v, self.a_plan), MODE_BRAKE
         v_set = min(cruise, ceiling)
+        if deviation < -s.early_threshold_s and not self.creeping:
+            # well ahead (e.g. a heavy train running away down a grade): hold the programme speed,
+            # braking if need be (ЭР200 rule "well ahead → drop one grade", book §S.4.2)
+            return self._hold(x, v, min(guide.v_ref_mps, ceiling), may_brake=True)
         if coast:
             self.controllers.coasting = True
             if v <= ceiling:
                 return 0.0, MODE_COAST
             command = min(self.controllers.hold(x, v, ceiling, may_brake=True), 0.0)
-        else:
-            command = self.controllers.hold(x, v, v_set, may_brake=v > ceiling)
+            return command, MODE_BRAKE if command < 0 else MODE_COAST
+        return self._hold(x, v, v_set, may_brake=v > ceiling)
+
+    def _hold(self, x: float, v: float, v_set: float, may_brake: bool):
+        command = self.controllers.hold(x, v, v_set, may_brake=may_brake)
         return command, MODE_TRACTION if command > 0 else (MODE_BRAKE if command < 0 else MODE_COAST)
 
     def _arrive(self, t: float, x: float) -> None:
@@ -308,6 +330,7 @@ class AtoCore:
         out.schedule_deviation_s = t - stop.arrival_s
         self.stage += 1
         self.braking_target = None
+        self.creeping = False
         self.strategy = None
         self.phase = FINISHED if self.stage >= len(self.plans) else DWELLING
 

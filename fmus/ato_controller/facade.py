@@ -36,7 +36,11 @@ class AtoController(FrameSlave):
                  description="programme strategy: extra traction time per second late"),
             Port("late_threshold", "parameter", unit="s", start=16.0, min=0.0,
                  description="later than this: drive at the maximum permitted speed"),
+            Port("early_threshold", "parameter", unit="s", start=8.0, min=0.0,
+                 description="earlier than this: hold the programme speed, braking if need be"),
             Port("min_dwell", "parameter", unit="s", start=20.0, min=0.0),
+            Port("stop_window", "parameter", unit="m", start=5.0, min=0.0,
+                 description="standing at most this far short of the stop point counts as arrived"),
             Port("decoding_latency", "parameter", unit="s", start=2 * 1.86 + 0.5, min=0.0,
                  description="receiver latency the ATP allows after passing a signal"),
             Port("x", "input", unit="m", start=0.0, description="head position"),
@@ -81,7 +85,8 @@ class AtoController(FrameSlave):
         settings = AtoSettings(
             strategy=p("strategy"), cab_signal=p("cab_signal"), braking_decel_mps2=p("braking_decel"),
             atp_decel_mps2=p("atp_decel"), speed_margin_mps=p("speed_margin"), stop_margin_m=p("stop_margin"),
-            k1=p("k1"), k2=p("k2"), late_threshold_s=p("late_threshold"), min_dwell_s=p("min_dwell"),
+            k1=p("k1"), k2=p("k2"), late_threshold_s=p("late_threshold"), early_threshold_s=p("early_threshold"),
+            min_dwell_s=p("min_dwell"), stop_window_m=p("stop_window"),
             decoding_latency_s=p("decoding_latency"))
         return AtoCore(line, stock, timetable, timetable_path, p("train_category") or stock.category, settings)
 
