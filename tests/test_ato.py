@@ -11,7 +11,7 @@ import pytest
 
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from fmus.ato_controller.loop import run_closed_loop
+from fmus.ato_controller.loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.common import signalling as sig
@@ -198,15 +198,7 @@ def test_stop_point_moves_less_than_half_a_metre_between_step_sizes():
 
 def _red_signal_ahead(clear_s):
     """A train standing beyond signal 9 (15 200 m): red-yellow in 12 800..15 200, yellow before."""
-    def cab(t, x):
-        if t >= clear_s:
-            return sig.GREEN, True
-        if 12800 <= x < 15200:
-            return sig.RED_YELLOW, True
-        if 10400 <= x < 12800:
-            return sig.YELLOW, True
-        return sig.GREEN, True
-    return cab
+    return red_signal_ahead(load_line(), 15200.0, clear_s)
 
 
 def test_yellow_then_red_yellow_stops_before_the_red_signal_and_recovers():

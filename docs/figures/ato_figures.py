@@ -17,10 +17,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from fmus.ato_controller.core import AtoSettings  # noqa: E402
-from fmus.ato_controller.loop import run_closed_loop  # noqa: E402
+from fmus.ato_controller.loop import red_signal_ahead, run_closed_loop  # noqa: E402
 from fmus.ato_controller.planner import StagePlanner  # noqa: E402
 from fmus.ato_controller.train_model import NominalTrain  # noqa: E402
-from fmus.common import signalling as sig  # noqa: E402
 from fmus.common.data import load_line, load_rolling_stock  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
@@ -68,15 +67,7 @@ def speed_distance(folder: Path) -> dict:
 
 
 def red_yellow() -> None:
-    def cab(t, x):
-        if t >= 900.0:
-            return sig.GREEN, True
-        if 12800 <= x < 15200:
-            return sig.RED_YELLOW, True
-        if 10400 <= x < 12800:
-            return sig.YELLOW, True
-        return sig.GREEN, True
-
+    cab = red_signal_ahead(load_line(), 15200.0, 900.0)
     r = run_closed_loop(1300.0, cab_signal=cab)
     fig, ax = plt.subplots(figsize=(11, 4.5))
     x = r.column("x") / 1000

@@ -100,9 +100,7 @@ class AtoController(FrameSlave):
                                    int(io["free_blocks"])))
 
     def _write(self, out):
-        io = self.io
-        for port, field in _OUTPUT_FIELDS:
-            io[port][...] = getattr(out, field)
+        self.write_outputs(out, _OUTPUT_FIELDS)
 
 
 # output port ← AtoOutputs field

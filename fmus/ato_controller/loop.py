@@ -63,3 +63,24 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
 
 def arrivals(result: LoopResult) -> List[dict]:
     return list(result.ato.arrivals)
+
+
+def red_signal_ahead(line, red_signal_m: float, clear_s: float) -> CabSignal:
+    """Scripted ALSN codes of a 3-aspect block with the section beyond the signal at
+    ``red_signal_m`` occupied until ``clear_s``: red-yellow in the section before the signal,
+    yellow in the one before that, green elsewhere and after the clear (no receiver latency;
+    the ATP's own latency rules still apply)."""
+    ends = [s.end_m for s in line.sections]
+    k = ends.index(red_signal_m)
+    ry = (line.sections[k].start_m, line.sections[k].end_m)
+    y = (line.sections[k - 1].start_m, line.sections[k - 1].end_m) if k > 0 else (0.0, 0.0)
+
+    def cab(t: float, x: float):
+        if t >= clear_s:
+            return sig.GREEN, True
+        if ry[0] <= x < ry[1]:
+            return sig.RED_YELLOW, True
+        if y[0] <= x < y[1]:
+            return sig.YELLOW, True
+        return sig.GREEN, True
+    return cab

@@ -138,6 +138,12 @@ class FrameSlave(Fmi2Slave):
         value = self.io[name]
         return value if isinstance(value, str) else value.item()
 
+    def write_outputs(self, out, fields) -> None:
+        """Copy a core's output record to the ports: ``fields`` is ((port, attribute), ...)."""
+        io = self.io
+        for port, attribute in fields:
+            io[port][...] = getattr(out, attribute)
+
     def resource_path(self, path: str) -> str:
         """A data file named by a parameter: absolute, or relative to the working folder, else
         to this FMU's resources folder (where the bundled defaults live)."""

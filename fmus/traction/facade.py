@@ -62,9 +62,7 @@ class Traction(FrameSlave):
         self._write(self.core.step(current_time, step_size, float(io["command"]), bool(io["emergency_brake"])))
 
     def _write(self, out):
-        io = self.io
-        for port, field in _OUTPUT_FIELDS:
-            io[port][...] = getattr(out, field)
+        self.write_outputs(out, _OUTPUT_FIELDS)
 
 
 # output port ← TractionOutputs field
