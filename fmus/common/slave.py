@@ -132,6 +132,10 @@ class FrameSlave(Fmi2Slave):
     def make_default_experiment(self) -> Optional[DefaultExperiment]:
         return None
 
+    def frame_experiment(self, fs_hz: float, stop_time_s: float = 10.0) -> DefaultExperiment:
+        """DefaultExperiment of a signal FMU: its step is one frame at the default sample rate."""
+        return DefaultExperiment(start_time=0.0, stop_time=stop_time_s, step_size=self.build.frame / fs_hz)
+
     # ---- helpers for facades -----------------------------------------------------------------
     def param(self, name: str):
         """Current value of a scalar parameter (Python scalar)."""

@@ -1,0 +1,115 @@
+"""ALSN numeric codes: the KPT-5/KPT-7 timing tables (fmus/common/data/alsn_codes.json) and the
+decoder's classification windows, shared by the wayside coder and the locomotive receiver.
+
+Codes are named by the aspect they give on the locomotive and carry its enumeration (DESIGN §4):
+З (Z) = 4 green, Ж (Zh) = 3 yellow, КЖ (KZh) = 2 red-yellow; 0 = no code.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Tuple
+
+import numpy as np
+
+from . import signalling as sig
+from .slave import FmuInputError
+
+CODES_FILE = Path(__file__).resolve().parent / "data" / "alsn_codes.json"
+CODE_NAMES = {"Z": sig.GREEN, "Zh": sig.YELLOW, "KZh": sig.RED_YELLOW}
+NO_CODE = 0
+SUPPORTED_CARRIERS_HZ = (25.0, 50.0, 75.0)
+MIN_SAMPLES_PER_CARRIER_PERIOD = 8
+
+# decoder rules, firmware kpt.h (domain-facts §1.3 A) [S]
+LONG_INTERVAL_S = 0.35
+KPT5_WINDOW_S = (1.47, 1.73)
+KPT7_WINDOW_S = (1.73, 1.99)
+CODE_TIMEOUT_S = 2.0
+# plausibility of the parts of a cycle (our addition, docs/loco_receiver.md): the shortest code
+# pulse is 0.22 s and the longest 0.44 s, the short intervals 0.12 s, all ±5 % drift, plus the
+# smearing of the receiver filters
+PULSE_S = (0.17, 0.50)
+SHORT_INTERVAL_MIN_S = 0.06
+
+
+@dataclass(frozen=True)
+class Transmitter:
+    name: str
+    cycle_s: float
+    pulses: Dict[int, np.ndarray]     # code → (P, 2) pulse [start, end) within the cam period, s
+
+
+def load_transmitters(path=CODES_FILE) -> Dict[str, Transmitter]:
+    path = Path(path)
+    if not path.is_file():
+        raise FmuInputError(f"{path}: file not found")
+    try:
+        doc = json.loads(path.read_text())
+        table = doc["transmitters"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise FmuInputError(f"{path}: field transmitters: missing or not valid JSON") from None
+    result = {}
+    for name, spec in table.items():
+        where = f"transmitters.{name}"
+        cycle = spec.get("cycle_s")
+        if not isinstance(cycle, (int, float)) or cycle <= 0:
+            raise FmuInputError(f"{path}: field {where}.cycle_s: must be a positive number of seconds")
+        pulses = {}
+        for code_name, code in CODE_NAMES.items():
+            timings = spec.get("codes", {}).get(code_name)
+            field = f"{where}.codes.{code_name}"
+            if not isinstance(timings, list) or len(timings) % 2 or not timings:
+                raise FmuInputError(f"{path}: field {field}: expected pulse, interval, ... pairs")
+            if any(not isinstance(d, (int, float)) or d <= 0 for d in timings):
+                raise FmuInputError(f"{path}: field {field}: every timing must be positive")
+            if abs(sum(timings) - cycle) > 1e-6:
+                raise FmuInputError(f"{path}: field {field}: timings sum to {sum(timings):.4f} s, "
+                                    f"not the cycle {cycle} s")
+            edges = np.concatenate([[0.0], np.cumsum(timings)])
+            pulses[code] = np.stack([edges[0:-1:2], edges[1::2]], axis=1)
+        result[name] = Transmitter(name, float(cycle), pulses)
+    return result
+
+
+def classify_cycle(short_intervals: int, cycle_s: float) -> Tuple[int, str]:
+    """(code, transmitter) of one cycle by the kpt.h rules; (NO_CODE, "") when invalid."""
+    if short_intervals > 2 or short_intervals < 0:        # < 0: marked implausible by the receiver
+        return NO_CODE, ""
+    period = cycle_s * 2.0 if short_intervals == 0 else cycle_s   # КЖ repeats twice per period
+    if KPT5_WINDOW_S[0] < period < KPT5_WINDOW_S[1]:
+        kind = "KPT-5"
+    elif KPT7_WINDOW_S[0] <= period < KPT7_WINDOW_S[1]:
+        kind = "KPT-7"
+    else:
+        return NO_CODE, ""
+    return {2: sig.GREEN, 1: sig.YELLOW, 0: sig.RED_YELLOW}[short_intervals], kind
+
+
+SYSTEMS = ("ALSN",)   # the digital systems arrive with their own issue
+
+
+def check_system(system: str) -> None:
+    if system not in SYSTEMS:
+        raise FmuInputError(f"parameter system: {system!r} is not available ({', '.join(SYSTEMS)})")
+
+
+def check_carrier_and_rate(carrier_hz: float, fs_hz: float, where: str) -> None:
+    if not any(abs(carrier_hz - c) < 1e-9 for c in SUPPORTED_CARRIERS_HZ):
+        raise FmuInputError(f"{where}carrier: {carrier_hz:g} Hz is not an ALSN carrier "
+                            f"({', '.join(f'{c:g}' for c in SUPPORTED_CARRIERS_HZ)} Hz)")
+    if fs_hz < MIN_SAMPLES_PER_CARRIER_PERIOD * carrier_hz:
+        raise FmuInputError(f"parameter fs: {fs_hz:g} Hz is below {MIN_SAMPLES_PER_CARRIER_PERIOD}× the "
+                            f"carrier {carrier_hz:g} Hz")
+
+
+def speeds_for(category: str, aspect: int, v_max_mps: float) -> Tuple[float, float, int]:
+    """(v_permitted, v_target at the next signal, free_blocks) the receiver reports for an aspect."""
+    ceiling, at_signal = sig.alsn_speeds_mps(category, aspect)
+    permitted = v_max_mps if ceiling is None else min(ceiling, v_max_mps)
+    if aspect == sig.RED:
+        return permitted, 0.0, 0
+    target = permitted if at_signal is None else at_signal
+    free = {sig.GREEN: 2, sig.YELLOW: 1}.get(aspect, 0)
+    return permitted, target, free

@@ -1,0 +1,71 @@
+"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore. No logic here (see core.py)."""
+from ..common import alsn
+from ..common.slave import FrameSlave, Port
+from .core import LocoReceiverCore, ReceiverSettings
+
+DEFAULT_FS_HZ = 4000.0
+
+
+class LocoReceiver(FrameSlave):
+    description = "ALSN locomotive receiver: gain control, band-pass, envelope, impulse relay, KPT decoder"
+
+    @classmethod
+    def declare_ports(cls, build):
+        n = build.frame
+        return [
+            Port("system", "parameter", "String", start="ALSN", description="cab-signal system (ALSN; digital systems later)"),
+            Port("carrier", "parameter", unit="Hz", start=50.0, min=1.0, description="25, 50 or 75 Hz"),
+            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
+                 description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
+            Port("train_category", "parameter", "String", start="passenger", description="passenger | freight | high_speed"),
+            Port("v_max", "parameter", unit="m/s", start=0.0, min=0.0,
+                 description="speed reported on green; 0: the category's maximum"),
+            Port("filter_order", "parameter", "Integer", start=3, min=1, max=8,
+                 description="Butterworth prototype order (band-pass order is twice this)"),
+            Port("filter_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0, description="0: 0.4 × carrier"),
+            Port("agc_limit", "parameter", unit="V", start=0.5, min=0.0, description="input amplitude where gain reduction starts"),
+            Port("agc_recovery", "parameter", unit="1/s", start=10.0, min=0.0, description="gain recovery rate, dB per second"),
+            Port("pick_up", "parameter", unit="V", start=0.12, min=0.0, description="relay pick-up (input-referred envelope)"),
+            Port("drop_out", "parameter", unit="V", start=0.08, min=0.0),
+            Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
+            Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
+            Port("code", "output", "Integer", start=0, description="last decoded cycle: 0 none/invalid, 2 КЖ, 3 Ж, 4 З"),
+            Port("code_valid", "output", "Boolean", start=False),
+            Port("v_permitted", "output", unit="m/s"),
+            Port("v_target", "output", unit="m/s"),
+            Port("free_blocks", "output", "Integer", start=0),
+            Port("level", "output", unit="V", description="carrier amplitude at the coil (peak-hold, 1 s release)"),
+            Port("errors", "output", "Integer", start=0, description="invalid cycles"),
+            Port("decoded_codes", "output", "Integer", start=0, description="valid cycles"),
+            Port("transmitter", "output", "Integer", start=0, description="5 (KPT-5) or 7 (KPT-7) of the last valid cycle"),
+            Port("joints", "output", "Integer", start=0, description="changes of transmitter type (joints passed)"),
+            Port("relay", "output", "Boolean", start=False, description="impulse relay state at the frame end"),
+        ]
+
+    def make_default_experiment(self):
+        return self.frame_experiment(DEFAULT_FS_HZ)
+
+    def create_core(self):
+        p = self.param
+        alsn.check_system(p("system"))
+        settings = ReceiverSettings(
+            carrier_hz=p("carrier"), fs_hz=p("fs"), train_category=p("train_category"), v_max_mps=p("v_max"),
+            filter_order=p("filter_order"), filter_bandwidth_hz=p("filter_bandwidth"), agc_limit_v=p("agc_limit"),
+            agc_recovery_db_per_s=p("agc_recovery"), pick_up_v=p("pick_up"), drop_out_v=p("drop_out"))
+        core = LocoReceiverCore(self.build.frame, settings)
+        self.required_step_s = self.build.frame / settings.fs_hz
+        return core
+
+    def publish_initial_outputs(self):
+        self.write_outputs(self.core.out, _OUTPUT_FIELDS)
+
+    def step_core(self, current_time, step_size):
+        self.write_outputs(self.core.step(current_time, self.io["e_coil"]), _OUTPUT_FIELDS)
+
+
+# output port ← ReceiverOutputs field
+_OUTPUT_FIELDS = (
+    ("aspect", "aspect"), ("code", "code"), ("code_valid", "code_valid"), ("v_permitted", "v_permitted_mps"),
+    ("v_target", "v_target_mps"), ("free_blocks", "free_blocks"), ("level", "level_v"), ("errors", "errors"),
+    ("decoded_codes", "decoded_codes"), ("transmitter", "transmitter"), ("joints", "joints"), ("relay", "relay"),
+)

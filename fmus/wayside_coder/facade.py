@@ -1,0 +1,66 @@
+"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore. No logic here (see core.py)."""
+from ..common import alsn
+from ..common.data import DEFAULT_LINE, load_line
+from ..common.slave import FrameSlave, Port
+from .core import CoderSettings, WaysideCoderCore
+
+DEFAULT_FS_HZ = 4000.0
+
+
+class WaysideCoder(FrameSlave):
+    description = "ALSN wayside coder: automatic-block aspects from occupancy, KPT-5/KPT-7 code transmitters per section"
+
+    @classmethod
+    def declare_ports(cls, build):
+        k, n = build.sections, build.frame
+        return [
+            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            Port("codes_file", "parameter", "String", start="",
+                 description="code timing tables (JSON); empty: the bundled KPT-5/KPT-7 tables"),
+            Port("system", "parameter", "String", start="ALSN", description="cab-signal system (ALSN; digital systems later)"),
+            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
+                 description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
+            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+                 description="0: each section's carrier from the line file; else 25, 50 or 75 Hz for all"),
+            Port("amplitude", "parameter", unit="V", start=4.0, min=0.0, description="peak transmitter voltage"),
+            Port("block_aspects", "parameter", "Integer", start=3, min=3, max=4),
+            Port("coding", "parameter", "String", start="always", description="always | on_occupation"),
+            Port("switch_on_delay", "parameter", unit="s", start=0.0, min=0.0),
+            Port("timing_scale", "parameter", unit="1", start=1.0, min=0.5, max=2.0,
+                 description="all code timings × this (transmitter drift)"),
+            Port("relay_time_constant", "parameter", unit="s", start=0.0, min=0.0,
+                 description="transmitter-relay switching transient; 0: ideal keying"),
+            Port("seed", "parameter", "Integer", start=1, description="random cam phase per section"),
+            Port("occupied", "input", "Boolean", start=False, shape=(k,)),
+            Port("fault_main", "input", "Boolean", start=False),
+            Port("fault_reserve", "input", "Boolean", start=False),
+            Port("u_tx", "output", unit="V", shape=(k, n), frame=True, description="transmitter voltage into each section"),
+            Port("code_tx", "output", "Integer", start=0, shape=(k,), description="code sent: 0 none, 2 КЖ, 3 Ж, 4 З"),
+            Port("signal", "output", "Integer", start=0, shape=(k,),
+                 description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
+            Port("status", "output", "Integer", start=0, description="0 ok, 1 on the reserve transmitter, 2 failed"),
+        ]
+
+    def make_default_experiment(self):
+        return self.frame_experiment(DEFAULT_FS_HZ)
+
+    def create_core(self):
+        p = self.param
+        alsn.check_system(p("system"))
+        line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
+        codes = alsn.load_transmitters(self.resource_path(p("codes_file") or str(alsn.CODES_FILE)))
+        settings = CoderSettings(
+            fs_hz=p("fs"), carrier_hz=p("carrier"), amplitude_v=p("amplitude"), block_aspects=p("block_aspects"),
+            coding=p("coding"), switch_on_delay_s=p("switch_on_delay"), timing_scale=p("timing_scale"),
+            relay_time_constant_s=p("relay_time_constant"), seed=p("seed"))
+        core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)
+        self.required_step_s = self.build.frame / settings.fs_hz
+        return core
+
+    def step_core(self, current_time, step_size):
+        io = self.io
+        out = self.core.step(current_time, io["occupied"], bool(io["fault_main"]), bool(io["fault_reserve"]))
+        io["u_tx"][...] = out.u_tx
+        io["code_tx"][...] = out.code_tx
+        io["signal"][...] = out.signal
+        io["status"][...] = out.status
