@@ -27,10 +27,11 @@ same result, DESIGN §3):
    and an old code can outlive a change of the code sent by at most one cycle + 2 s, within
    the stated latency.
 
-Display rule (fail-safe, our choice, docs/loco_receiver.md): a more restrictive code, or the
-first code after none, is shown after one valid cycle; a more permissive code only after two
-identical consecutive valid cycles (kpt.h's rule). A wrong (noise-forged) permissive cycle can
-therefore show at most until the next true cycle.
+Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
+the one shown — or, after a loss of code, than the last one shown — is shown after one valid
+cycle; a more permissive code only after two identical consecutive valid cycles (kpt.h's
+rule). Only a cold start (no code seen yet) takes any code after one cycle, which keeps the
+acquisition within two cycles + 0.5 s from any cam phase.
 """
 from __future__ import annotations
 
@@ -123,6 +124,7 @@ class LocoReceiverCore:
         self._short = 0
         self._implausible = False
         self._previous_cycle = alsn.NO_CODE
+        self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
         self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
@@ -236,11 +238,14 @@ class LocoReceiverCore:
             out.joints += 1
         out.transmitter = transmitter
         self._last_valid_s = time_s
-        shown = out.aspect if out.code_valid else None
-        if shown is None or sig.restrictiveness(code) < sig.restrictiveness(shown) \
-                or code == shown or code == self._previous_cycle:
+        # compare with what is shown, or after a loss of code with the last code shown (as the
+        # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
+        reference = out.aspect if out.code_valid else self._last_shown
+        if reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference) \
+                or code == self._previous_cycle:
             out.aspect = code
             out.code_valid = True
+            self._last_shown = code
             self._publish_speeds()
         self._previous_cycle = code
 
