@@ -1,0 +1,88 @@
+"""RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
+from ..common.data import DEFAULT_LINE, load_line
+from ..common.slave import FrameSlave, Port
+from .core import RailLineCore, RailSettings
+from .track_circuit import CircuitParameters
+
+DEFAULT_FS_HZ = 4000.0
+OFF_LINE_M = -1000.0
+
+
+class RailLine(FrameSlave):
+    description = "Rail line plant: coded track circuits (MNA networks), coil EMF with joints and traction interference, track relays"
+
+    @classmethod
+    def declare_ports(cls, build):
+        k, m, n = build.sections, build.trains, build.frame
+        c = CircuitParameters()
+        s = RailSettings()
+        return [
+            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0, description=f"sample rate; step = {n}/fs"),
+            Port("train_length", "parameter", unit="m", start=400.0, shape=(m,), min=1.0),
+            Port("coil_offset", "parameter", unit="m", start=s.coil_offset_m, description="coils ahead of the first wheelset"),
+            Port("coil_gain", "parameter", unit="H", start=s.coil_gain_h, min=0.0, description="EMF = gain · d(i)/dt"),
+            Port("coil_length", "parameter", unit="m", start=s.coil_length_m, min=0.0, description="coil sensitivity length"),
+            Port("transformer_ratio", "parameter", unit="1", start=s.transformer_ratio, min=0.0, description="u_tx → rail feed"),
+            Port("rail_r", "parameter", unit="Ohm/km", start=c.rail_r_ohm_per_km, min=0.0, description="rail loop resistance"),
+            Port("rail_l", "parameter", unit="H/km", start=c.rail_l_h_per_km, min=0.0, description="rail loop inductance"),
+            Port("ballast", "parameter", unit="Ohm.km", start=c.ballast_ohm_km, min=0.0, description="design ballast resistance"),
+            Port("feed_r", "parameter", unit="Ohm", start=c.feed_r_ohm, min=0.0),
+            Port("relay_r", "parameter", unit="Ohm", start=c.relay_r_ohm, min=0.0),
+            Port("bond_r", "parameter", unit="Ohm", start=c.bond_r_ohm, min=0.0),
+            Port("bond_l", "parameter", unit="H", start=c.bond_l_h, min=0.0),
+            Port("shunt_r", "parameter", unit="Ohm", start=c.shunt_r_ohm, min=0.0, description="wheelset shunt"),
+            Port("segment", "parameter", unit="m", start=c.segment_m, min=1.0, description="network π-section length"),
+            Port("asymmetry_min", "parameter", unit="1", start=s.asymmetry_range[0], min=0.0, max=1.0),
+            Port("asymmetry_max", "parameter", unit="1", start=s.asymmetry_range[1], min=0.0, max=1.0),
+            Port("seed", "parameter", "Integer", start=1),
+            Port("relay_pick_up", "parameter", unit="1", start=s.relay_pick_up, description="share of the free-circuit relay voltage"),
+            Port("relay_drop_out", "parameter", unit="1", start=s.relay_drop_out),
+            Port("relay_pick_up_delay", "parameter", unit="s", start=s.relay_pick_up_delay_s, min=0.0),
+            Port("relay_drop_out_delay", "parameter", unit="s", start=s.relay_drop_out_delay_s, min=0.0),
+            Port("u_tx", "input", unit="V", shape=(k, n), frame=True, description="code voltage per section (coder)"),
+            Port("x_head", "input", unit="m", start=OFF_LINE_M, shape=(m,), description="first wheelset; off the line: ignored"),
+            Port("v", "input", unit="m/s", start=0.0, shape=(m,)),
+            Port("i_traction", "input", unit="A", start=0.0, shape=(m,)),
+            Port("broken_rail_at", "input", unit="m", start=-1.0, description="fault: broken rail position; < 0 none"),
+            Port("ballast_override", "input", unit="Ohm.km", start=0.0, shape=(k,), description="fault: wet ballast; 0 = design"),
+            Port("feed_open", "input", "Boolean", start=False, shape=(k,), description="fault: bond disconnected / feed failed"),
+            Port("e_coil", "output", unit="V", shape=(m, n), frame=True, description="receiver coil EMF per train"),
+            Port("occupied", "output", "Boolean", start=False, shape=(k,)),
+            Port("i_axle", "output", unit="A", shape=(m,), description="rms code current under the first wheelset"),
+            Port("off_line", "output", "Boolean", start=True, shape=(m,)),
+        ]
+
+    def make_default_experiment(self):
+        return self.frame_experiment(DEFAULT_FS_HZ)
+
+    def create_core(self):
+        p, io = self.param, self.io
+        circuit = CircuitParameters(
+            rail_r_ohm_per_km=p("rail_r"), rail_l_h_per_km=p("rail_l"), ballast_ohm_km=p("ballast"), feed_r_ohm=p("feed_r"),
+            relay_r_ohm=p("relay_r"), bond_r_ohm=p("bond_r"), bond_l_h=p("bond_l"), shunt_r_ohm=p("shunt_r"),
+            segment_m=p("segment"))
+        settings = RailSettings(
+            fs_hz=p("fs"), circuit=circuit, transformer_ratio=p("transformer_ratio"), coil_offset_m=p("coil_offset"),
+            coil_gain_h=p("coil_gain"), coil_length_m=p("coil_length"),
+            train_length_m=tuple(float(x) for x in io["train_length"]),
+            asymmetry_range=(p("asymmetry_min"), p("asymmetry_max")), seed=p("seed"),
+            relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
+            relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"))
+        line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
+        core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
+        self.required_step_s = self.build.frame / settings.fs_hz
+        return core
+
+    def publish_initial_outputs(self):
+        self.io["off_line"][...] = True
+
+    def step_core(self, current_time, step_size):
+        io = self.io
+        core = self.core
+        core.set_faults(float(io["broken_rail_at"]), io["ballast_override"], io["feed_open"])
+        out = core.step(current_time, io["u_tx"], io["x_head"], io["v"], io["i_traction"])
+        io["e_coil"][...] = out.e_coil
+        io["occupied"][...] = out.occupied
+        io["i_axle"][...] = out.i_axle
+        io["off_line"][...] = out.off_line

@@ -1,0 +1,159 @@
+"""Electrical networks from components with pins, Modelica-style, solved by modified nodal
+analysis (no FMI, no track-circuit knowledge here).
+
+A network is nodes plus components; each component class stamps itself into the nodal
+matrices. Three kinds cover the track circuit (a new component is one small class):
+
+* ``Conductance(a, b, g)`` — resistor, ballast leakage, wheelset shunt, relay;
+* ``RLBranch(a, b, r, l)`` — series R–L (rail segment, impedance-bond winding); its current
+  a → b is a state;
+* ``NortonSource(a, b, g, input, gain)`` — a voltage gain·u[input] behind an internal
+  resistance 1/g.
+
+With node voltages v, branch currents i and inputs u:
+
+    KCL:       G·v + Q·i = P·u            (Q[a,k] = +1, Q[b,k] = −1: branch k leaves a)
+    branches:  L·di/dt = Qᵀ·v − R·i
+
+so the node voltages are algebraic (there is a conductance to ground at every node) and
+
+    di/dt = A·i + B·u,  A = −L⁻¹(Qᵀ G⁻¹ Q + R),  B = L⁻¹ Qᵀ G⁻¹ P,  v = G⁻¹(P·u − Q·i).
+
+``phasor`` solves the same equations at one frequency; ``discretise`` gives the exact
+zero-order-hold model at the sample rate (scipy.linalg.expm of the augmented matrix).
+Ground is the node named ``"0"``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Tuple
+
+import numpy as np
+from scipy.linalg import expm
+
+GROUND = "0"
+
+
+@dataclass(frozen=True)
+class Conductance:
+    a: str
+    b: str
+    g: float
+
+    def stamp(self, net: "Network") -> None:
+        net._conductance(self.a, self.b, self.g)
+
+
+@dataclass(frozen=True)
+class RLBranch:
+    a: str
+    b: str
+    r: float
+    l: float
+
+    def stamp(self, net: "Network") -> None:
+        net._branch(self.a, self.b, self.r, self.l)
+
+
+@dataclass(frozen=True)
+class NortonSource:
+    """Voltage gain·u[input] behind the internal resistance 1/g."""
+    a: str
+    b: str
+    g: float
+    input: int
+    gain: float = 1.0
+
+    def stamp(self, net: "Network") -> None:
+        net._conductance(self.a, self.b, self.g)
+        net._injection(self.a, self.b, self.g * self.gain, self.input)
+
+
+@dataclass
+class StateSpace:
+    a: np.ndarray
+    b: np.ndarray
+    node_from_state: np.ndarray      # v = node_from_state @ i + node_from_input @ u
+    node_from_input: np.ndarray
+
+
+class Network:
+    def __init__(self, inputs: int = 1):
+        self.inputs = inputs
+        self.node_index: Dict[str, int] = {}
+        self._g: List[Tuple[int, int, float]] = []
+        self._p: List[Tuple[int, int, float]] = []
+        self.branches: List[Tuple[int, int, float, float]] = []
+        self.branch_names: List[Tuple[str, str]] = []
+
+    def node(self, name: str) -> int:
+        if name == GROUND:
+            return -1
+        return self.node_index.setdefault(name, len(self.node_index))
+
+    def add(self, *components) -> "Network":
+        for component in components:
+            component.stamp(self)
+        return self
+
+    def _conductance(self, a: str, b: str, g: float) -> None:
+        ia, ib = self.node(a), self.node(b)
+        for i, j, value in ((ia, ia, g), (ib, ib, g), (ia, ib, -g), (ib, ia, -g)):
+            if i >= 0 and j >= 0:
+                self._g.append((i, j, value))
+
+    def _injection(self, a: str, b: str, g: float, input_index: int) -> None:
+        ia, ib = self.node(a), self.node(b)
+        if ia >= 0:
+            self._p.append((ia, input_index, g))
+        if ib >= 0:
+            self._p.append((ib, input_index, -g))
+
+    def _branch(self, a: str, b: str, r: float, l: float) -> None:
+        self.branches.append((self.node(a), self.node(b), r, l))
+        self.branch_names.append((a, b))
+
+    # ---- matrices -----------------------------------------------------------------------------
+    def matrices(self):
+        n, m = len(self.node_index), len(self.branches)
+        g = np.zeros((n, n))
+        for i, j, value in self._g:
+            g[i, j] += value
+        p = np.zeros((n, self.inputs))
+        for i, k, value in self._p:
+            p[i, k] += value
+        q = np.zeros((n, m))
+        for k, (a, b, _, _) in enumerate(self.branches):
+            if a >= 0:
+                q[a, k] = 1.0
+            if b >= 0:
+                q[b, k] = -1.0
+        r = np.array([b[2] for b in self.branches])
+        l = np.array([b[3] for b in self.branches])
+        return g, p, q, r, l
+
+    def phasor(self, omega: float, u: np.ndarray):
+        """Node voltages and branch currents (complex) for inputs u at angular frequency ω."""
+        g, p, q, r, l = self.matrices()
+        z = r + 1j * omega * l
+        y = g + (q / z) @ q.T
+        v = np.linalg.solve(y, p @ np.asarray(u, dtype=complex))
+        return v, (q.T @ v) / z
+
+    def state_space(self) -> StateSpace:
+        g, p, q, r, l = self.matrices()
+        g_inv_q = np.linalg.solve(g, q)
+        g_inv_p = np.linalg.solve(g, p)
+        a = -(q.T @ g_inv_q + np.diag(r)) / l[:, None]
+        b = (q.T @ g_inv_p) / l[:, None]
+        return StateSpace(a, b, -g_inv_q, g_inv_p)
+
+
+def discretise(system: StateSpace, step_s: float):
+    """Exact zero-order-hold discretisation: x[n+1] = Φ·x[n] + Γ·u[n]."""
+    n, m = system.b.shape
+    augmented = np.zeros((n + m, n + m))
+    augmented[:n, :n] = system.a * step_s
+    augmented[:n, n:] = system.b * step_s
+    exp = expm(augmented)
+    return exp[:n, :n], exp[:n, n:]

@@ -1,0 +1,106 @@
+"""One coded track circuit (block section) as a network of components (network.py).
+
+Layout along the section, running direction left → right (domain-facts §1.4: the code is fed
+at the signal end ahead of the train, the track relay sits at the entry end):
+
+    entry joint            relay end                                   feed end      exit joint
+        |── relay leads (n0) ─[rail segment]─ n1 ─ … ─ n(S−1) ─[rail segment]─ nS ── stub ──|
+            relay R, bond                                              source, bond
+
+* rail segments: series R–L of the rail loop (two rails) and half the ballast conductance at
+  each end node (π sections of at most ``segment_m``);
+* feed end at ``bond_lead_offset`` before the exit joint: the code source (u_tx × transformer
+  ratio behind the feed resistance) and the impedance bond's signal winding (R–L to the other
+  rail); the rails between the bond leads and the joint carry no signal current (seed 002's
+  ≈ 1 m null zone);
+* relay end at the entry joint: the track relay (a resistance referred to the rails) and the
+  bond winding;
+* wheelsets: a 0.06 Ω conductance at a node (the train's front-most axle in the section);
+* faults: broken rail (the segment containing it opens), ballast override, bond disconnected
+  or feed failed (no source at the feed end).
+
+Also the uniform-line two-port (ABCD) solution used to validate the network (domain-facts §2.2).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .network import Conductance, Network, NortonSource, RLBranch
+
+OPEN_OHM = 1e9
+
+
+@dataclass(frozen=True)
+class CircuitParameters:
+    rail_r_ohm_per_km: float = 0.52        # rail loop, worked example (domain-facts §2.1) [S]
+    rail_l_h_per_km: float = 1.18e-3       # L_int 0.177 + L_ext ≈ 1.0 mH/km [S]/[D]
+    ballast_ohm_km: float = 1.0            # normative minimum [S]
+    feed_r_ohm: float = 0.5                # track transformer + limiting resistor, at the rails [U]
+    relay_r_ohm: float = 4.0               # relay end equipment at the rails [U]
+    bond_r_ohm: float = 0.05               # impedance bond signal winding [U]
+    bond_l_h: float = 0.02                 # (|Z| ≈ 6.3 Ω at 50 Hz) [U]
+    shunt_r_ohm: float = 0.06              # normative train shunt [S]
+    segment_m: float = 50.0
+
+
+@dataclass(frozen=True)
+class Faults:
+    ballast_ohm_km: float = 0.0            # 0: the parameter value
+    broken_rail_m: float = -1.0            # absolute position, < 0: none
+    feed_open: bool = False                # bond disconnected or feed failed: no code source
+
+
+def two_port(z_per_km: complex, y_per_km: complex, length_km: float) -> np.ndarray:
+    """ABCD matrix of a uniform line: [[cosh γl, Zc sinh γl], [sinh γl / Zc, cosh γl]]."""
+    gamma = np.sqrt(z_per_km * y_per_km)
+    zc = np.sqrt(z_per_km / y_per_km)
+    return np.array([[np.cosh(gamma * length_km), zc * np.sinh(gamma * length_km)],
+                     [np.sinh(gamma * length_km) / zc, np.cosh(gamma * length_km)]])
+
+
+class TrackCircuit:
+    def __init__(self, start_m: float, end_m: float, lead_offset_m: float, params: CircuitParameters):
+        self.start_m, self.end_m = start_m, end_m
+        self.feed_m = end_m - lead_offset_m
+        self.params = params
+        count = max(int(np.ceil((self.feed_m - start_m) / params.segment_m)), 1)
+        self.nodes_m = np.linspace(start_m, self.feed_m, count + 1)
+        self.segments = count
+
+    def ballast(self, faults: Faults) -> float:
+        return faults.ballast_ohm_km if faults.ballast_ohm_km > 0 else self.params.ballast_ohm_km
+
+    def network(self, shunt_node: Optional[int], faults: Faults = Faults(), transformer_ratio: float = 1.0) -> Network:
+        """Input 0 is the code voltage u_tx (× the transformer ratio at the rails)."""
+        p = self.params
+        net = Network(inputs=1)
+        length_km = (self.feed_m - self.start_m) / 1000.0 / self.segments
+        g_half = 0.5 * length_km / self.ballast(faults)
+        for k in range(self.segments):
+            a, b = f"n{k}", f"n{k + 1}"
+            r = p.rail_r_ohm_per_km * length_km
+            if 0 <= faults.broken_rail_m and self.nodes_m[k] <= faults.broken_rail_m < self.nodes_m[k + 1]:
+                r = OPEN_OHM
+            net.add(RLBranch(a, b, r, p.rail_l_h_per_km * length_km),
+                    Conductance(a, "0", g_half), Conductance(b, "0", g_half))
+        feed, relay = f"n{self.segments}", "n0"
+        net.add(RLBranch(relay, "0", p.bond_r_ohm, p.bond_l_h), Conductance(relay, "0", 1.0 / p.relay_r_ohm))
+        if not faults.feed_open:
+            net.add(RLBranch(feed, "0", p.bond_r_ohm, p.bond_l_h),
+                    NortonSource(feed, "0", 1.0 / p.feed_r_ohm, 0, transformer_ratio))
+        else:
+            net.add(Conductance(feed, "0", 1.0 / OPEN_OHM))
+        if shunt_node is not None:
+            net.add(Conductance(f"n{shunt_node}", "0", 1.0 / p.shunt_r_ohm))
+        return net
+
+    def nearest_node(self, x_m: float) -> int:
+        return int(np.clip(np.rint((x_m - self.start_m) / (self.nodes_m[1] - self.nodes_m[0])), 0, self.segments))
+
+    def shunt_branch(self, node: int) -> int:
+        """Index of the rail segment on the feed side of a node (the code current toward the
+        shunt flows in it); the feed-end node uses its own segment."""
+        return min(node, self.segments - 1)
