@@ -82,8 +82,8 @@ class RailOutputs:
 class _Model:
     phi_n: np.ndarray       # (nx, nx) state after a frame
     psi: np.ndarray         # (nx, N) input → state after a frame
-    out_o: np.ndarray       # (N, 2, nx) state → outputs per sample
-    out_t: np.ndarray       # (N, 2, N) inputs → outputs per sample
+    out_o: np.ndarray       # (N·2, nx) state → outputs per sample (shunt current, entry current)
+    out_t: np.ndarray       # (N·2, N) inputs → outputs per sample
 
 
 class RailLineCore:
@@ -113,6 +113,7 @@ class RailLineCore:
         self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0), c)
                          for sec in line.sections]
         self.starts = np.array([sec.start_m for sec in line.sections])
+        self._feed_m = None
         self.ends = np.array([sec.end_m for sec in line.sections])
         self._ends_ext = np.append(self.ends, -np.inf)
         self._starts_list = self.starts.tolist()
@@ -123,6 +124,7 @@ class RailLineCore:
         self.asymmetry = rng.uniform(lo, hi, self.count) * rng.choice([-1.0, 1.0], self.count)
         self.joint_zones = [(j["position_m"] - float(j.get("bond_lead_offset_m", 1.0)), j["position_m"],
                              j["position_m"] + float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
+        self._feed_m = np.array([c.feed_m for c in self.circuits])
         margin = s.coil_length_m
         self._joint_band = [(lo - margin, hi + margin) for lo, _, hi in self.joint_zones] + \
             [(c.feed_m - margin, c.end_m + margin) for c in self.circuits]
@@ -133,7 +135,10 @@ class RailLineCore:
         self._amplitude: Dict[Tuple[int, Faults], np.ndarray] = {}
         self._log_amplitude: Dict[Tuple[int, Faults], np.ndarray] = {}
         self._relay_ref = np.array([self._relay_voltage(k, None, Faults(), reference=True) for k in range(self.count)])
-        self.states = [np.zeros(self._model(k, None).phi_n.shape[0]) for k in range(self.count)]
+        size = max(self._model(k, None).phi_n.shape[0] for k in range(self.count))
+        self.states = np.zeros((self.count, size))
+        self._phi_stack = np.zeros((self.count, size, size))
+        self._psi_stack = np.zeros((self.count, size, frame))
         self._config = [None] * self.count
         self.relay_up = np.ones(self.count, dtype=bool)
         self._relay_timer = np.zeros(self.count)
@@ -194,7 +199,8 @@ class RailLineCore:
         for m in range(n - 1, -1, -1):
             psi[:, m] = column
             column = phi @ column
-        model = _Model(np.linalg.matrix_power(phi, n), psi, out_o, out_t)
+        # outputs of all samples at once: (N·2, nx) and (N·2, N) matrices
+        model = _Model(np.linalg.matrix_power(phi, n), psi, out_o.reshape(n * 2, nx), out_t.reshape(n * 2, n))
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
@@ -263,14 +269,13 @@ class RailLineCore:
             heads.append(x_k + v_k * (times - t_k))          # per sample from the anchor: same for any frame
             at_tick.append(self._anchor[j][0] + self._anchor[j][1] * (tick - self._anchor[j][2]))
         # the front-most wheelset of each train in each section shunts it
-        shunts: Dict[int, float] = {}
+        front = np.full(self.count, -np.inf)
         for j in range(self.trains):
-            head, tail = at_tick[j], at_tick[j] - s.train_length_m[j]
-            for k in range(self.count):
-                if head >= self.starts[k] and tail < self.ends[k]:
-                    front = min(head, self.circuits[k].feed_m)
-                    shunts[k] = max(shunts.get(k, -np.inf), front)
-        configs = [None if k not in shunts else self.circuits[k].nearest_node(shunts[k]) for k in range(self.count)]
+            head = at_tick[j]
+            inside = (head >= self.starts) & (head - s.train_length_m[j] < self.ends)
+            if inside.any():
+                front = np.where(inside, np.maximum(front, np.minimum(head, self._feed_m)), front)
+        configs = [None if front[k] == -np.inf else self.circuits[k].nearest_node(front[k]) for k in range(self.count)]
         # sections whose currents a coil needs this frame
         coil_sections = set()
         for j in range(self.trains):
@@ -279,18 +284,20 @@ class RailLineCore:
             coil_sections.update(k for k in (k_axle, k_coil) if k >= 0)
             if 0 <= k_axle < self.count - 1:
                 coil_sections.add(k_axle + 1)
-        currents = {}
         for k in range(self.count):
             active = self._active[k]
             if active is None or active[0] != configs[k]:
-                active = self._active[k] = (configs[k], self._model(k, configs[k]),
-                                            self._relay_voltage(k, configs[k], self._fault_of(k)))
-            model = active[1]
-            u = u_tx[k]
-            x0 = self.states[k]
-            if k in coil_sections:
-                currents[k] = np.einsum("nij,j->ni", model.out_o, x0) + np.einsum("nim,m->ni", model.out_t, u)
-            self.states[k] = model.phi_n @ x0 + model.psi @ u
+                model = self._model(k, configs[k])
+                self._active[k] = (configs[k], model, self._relay_voltage(k, configs[k], self._fault_of(k)))
+                size = model.phi_n.shape[0]
+                self._phi_stack[k, :size, :size] = model.phi_n       # sections padded to one size:
+                self._psi_stack[k, :size] = model.psi                # one product advances them all
+        u = u_tx[:self.count]
+        currents = {}
+        for k in coil_sections:
+            model, x0 = self._active[k][1], self.states[k, :self._active[k][1].phi_n.shape[0]]
+            currents[k] = (model.out_o @ x0 + model.out_t @ u[k]).reshape(n, 2)
+        self.states = (self._phi_stack @ self.states[..., None])[..., 0] + (self._psi_stack @ u[..., None])[..., 0]
         self._update_relays(n * self.dt)
         for j in range(self.trains):
             if heads[j][-1] + s.coil_offset_m + s.coil_length_m < 0.0 or heads[j][0] > self.line.length_m:
@@ -305,17 +312,15 @@ class RailLineCore:
 
     def _update_relays(self, step_s: float) -> None:
         s = self.settings
-        for k in range(self.count):
-            level = self._active[k][2]
-            wants_up = level >= s.relay_pick_up if not self.relay_up[k] else level > s.relay_drop_out
-            if wants_up == self.relay_up[k]:
-                self._relay_timer[k] = 0.0
-                continue
-            self._relay_timer[k] += step_s
-            delay = s.relay_pick_up_delay_s if wants_up else s.relay_drop_out_delay_s
-            if self._relay_timer[k] >= delay - 1e-12:
-                self.relay_up[k] = wants_up
-                self._relay_timer[k] = 0.0
+        levels = np.array([active[2] for active in self._active])
+        wants_up = np.where(self.relay_up, levels > s.relay_drop_out, levels >= s.relay_pick_up)
+        changing = wants_up != self.relay_up
+        self._relay_timer = np.where(changing, self._relay_timer + step_s, 0.0)
+        delay = np.where(wants_up, s.relay_pick_up_delay_s, s.relay_drop_out_delay_s)
+        done = changing & (self._relay_timer >= delay - 1e-12)
+        if done.any():
+            self.relay_up = np.where(done, wants_up, self.relay_up)
+            self._relay_timer[done] = 0.0
 
     def _coil(self, j: int, times: np.ndarray, head: np.ndarray, currents, configs) -> None:
         s, out = self.settings, self.out
@@ -350,28 +355,33 @@ class RailLineCore:
         return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - log_amplitude[node])
 
     def _coil_general(self, j: int, times: np.ndarray, head: np.ndarray, currents, configs):
-        """Sample by sample: which rails each part of the coil is over (joints, null zones)."""
+        """Sample by sample, the share of the coil's sensitivity window over each stretch of
+        rail: its own section up to the feed leads (shunt current), the stub from the leads to
+        the joint (nothing), the next section's entry end (its unshunted current)."""
         s = self.settings
         n = times.size
         axle_section = self.section_of(head)
-        coil = head[None, :] + s.coil_offset_m + self._coil_spread[:, None]           # (Q, N)
-        coil_section = self.section_of(coil)
-        seen = np.zeros(coil.shape)
+        centre = head + s.coil_offset_m
+        lo, hi = centre - 0.5 * s.coil_length_m, centre + 0.5 * s.coil_length_m
+        width = max(s.coil_length_m, 1e-9)
+
+        def share(a, b):
+            return np.clip(np.minimum(hi, b) - np.maximum(lo, a), 0.0, None) / width if s.coil_length_m > 0 \
+                else ((centre >= a) & (centre < b)).astype(float)
+        seen = np.zeros(n)
         i_axle = np.zeros(n)
         for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
             if k not in currents:
                 continue
-            own = axle_section[None, :] == k
+            own = axle_section == k
             shunt_current = currents[k][:, 0] * self._scale(k, head, configs[k])
-            i_axle = np.where(axle_section == k, shunt_current, i_axle)
-            # coil over its own section, between the wheelset and the feed leads
-            mask = own & (coil_section == k) & (coil <= self.circuits[k].feed_m)
-            seen = np.where(mask, shunt_current[None, :], seen)
-            # coil over the next section before the wheelset has crossed: its entry-end current
+            i_axle = np.where(own, shunt_current, i_axle)
+            view = share(-np.inf, self.circuits[k].feed_m) * shunt_current
             if k + 1 in currents:
-                ahead = own & (coil_section == k + 1)
-                seen = np.where(ahead, currents[k + 1][None, :, 1], seen)
-        return seen.mean(axis=0) + self._traction(j, times, coil), i_axle
+                view = view + share(self.ends[k], np.inf) * currents[k + 1][:, 1]
+            seen = np.where(own, view, seen)
+        coil = centre[None, :] + self._coil_spread[:, None]
+        return seen + self._traction(j, times, coil), i_axle
 
     def _traction_wave(self, j: int, times: np.ndarray) -> np.ndarray:
         """Traction return current i_tr(t) of train j (DC with rectifier ripple, or AC 50 Hz)."""
