@@ -66,11 +66,11 @@ def _typed(parent, value, unit: Optional[str] = None, namespace: str = SSV):
     return node
 
 
-def _annotation(parent, kind: str, namespace: str, tag: str, **attrs):
+def _annotation(parent, annotation_type: str, namespace: str, tag: str, **attrs):
     annotations = parent.find(SSD + "Annotations")
     if annotations is None:
         annotations = etree.SubElement(parent, SSD + "Annotations")
-    annotation = etree.SubElement(annotations, SSC + "Annotation", type=kind)
+    annotation = etree.SubElement(annotations, SSC + "Annotation", type=annotation_type)
     etree.SubElement(annotation, "{%s}%s" % (namespace, tag), **{k: str(v) for k, v in attrs.items()})
 
 

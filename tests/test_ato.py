@@ -17,7 +17,7 @@ from fmus.ato_controller.train_model import NominalTrain
 from fmus.common import signalling as sig
 from fmus.common.data import DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.common.slave import FmuInputError
-from helpers import railcosim
+from helpers import railcosim, read_csv
 
 KMH = 1 / 3.6
 RUN_S = 1100.0
@@ -105,16 +105,21 @@ def test_red_yellow_code_loss_keeps_the_stop_at_that_signal():
     lost = atp.supervise(1.0, 4015.0, 15.0, sig.WHITE, False, 0, 0, 0)
     assert any(t.signal and t.position_m == 5200.0 for t in lost.constraints.targets)
     assert lost.permitted_mps <= math.sqrt(2 * 0.63 * (5200 - 4015)) + 1e-9
-    assert lost.ceiling_mps <= 40 * KMH + 1e-9       # white's ceiling applies too
+    assert lost.ceiling_mps <= 60 * KMH + 1e-9 and lost.aspect == sig.RED_YELLOW
+    # longer than the decoding latency: the no-code rules are added (white's 40 km/h)
+    later = atp.supervise(5.5, 4090.0, 11.0, sig.WHITE, False, 0, 0, 0)
+    assert any(t.signal and t.position_m == 5200.0 for t in later.constraints.targets)
+    assert later.ceiling_mps <= 40 * KMH + 1e-9
 
 
 def test_loss_of_code_is_never_more_permissive_than_the_last_valid_code():
     for last in (sig.GREEN, sig.YELLOW, sig.RED_YELLOW):
         atp = _atp()
         valid = atp.supervise(0.0, 3000.0, 10.0, last, True, 0, 0, 0)
-        lost = atp.supervise(1.0, 3010.0, 10.0, sig.WHITE, False, 0, 0, 0)
-        assert lost.permitted_mps <= valid.permitted_mps + 1e-9
-        assert lost.ceiling_mps <= valid.ceiling_mps + 1e-9
+        for t_lost in (1.0, 6.0):          # within and beyond the decoding latency
+            lost = atp.supervise(t_lost, 3010.0, 10.0, sig.WHITE, False, 0, 0, 0)
+            assert lost.permitted_mps <= valid.permitted_mps + 1e-9
+            assert lost.ceiling_mps <= valid.ceiling_mps + 1e-9
 
 
 def test_overspeed_gives_service_then_emergency_brake_and_counts():
@@ -230,9 +235,9 @@ def test_after_a_restriction_the_ato_runs_at_the_permitted_speed_until_on_time()
 
 
 # ---- the FMU through the orchestrator ----------------------------------------------------------
-def test_free_run_through_the_orchestrator_meets_the_acceptance(tmp_path, product_fmus):
+def test_train_and_ato_through_the_orchestrator_meet_the_acceptance(tmp_path, product_fmus):
     out = tmp_path / "run"
-    code, _, stderr = railcosim("run", "free_run", "--output", str(out), "--no-build")
+    code, _, stderr = railcosim("run", "ato_only", "--output", str(out), "--no-build")
     assert code == 0, stderr
     summary = json.loads((out / "summary.json").read_text())
     (train,) = summary["trains"]
@@ -247,7 +252,7 @@ def test_infeasible_timetable_through_the_cli_is_one_line_exit_2(tmp_path, produ
     tight = tmp_path / "tight.json"
     tight.write_text(json.dumps({"train": "t", "stops": [{"station": "A", "departure_s": 0},
                                                          {"station": "B", "arrival_s": 300}]}))
-    code, _, stderr = railcosim("run", "free_run", "--output", str(tmp_path / "out"), "--no-build",
+    code, _, stderr = railcosim("run", "ato_only", "--output", str(tmp_path / "out"), "--no-build",
                                 "--set", f"ato.timetable_file={tight}")
     assert code == 2
     lines = stderr.strip().splitlines()
@@ -256,7 +261,7 @@ def test_infeasible_timetable_through_the_cli_is_one_line_exit_2(tmp_path, produ
 
 
 def test_unknown_strategy_is_an_initialisation_error(tmp_path, product_fmus):
-    code, _, stderr = railcosim("run", "free_run", "--output", str(tmp_path / "out"), "--no-build",
+    code, _, stderr = railcosim("run", "ato_only", "--output", str(tmp_path / "out"), "--no-build",
                                 "--set", "ato.strategy=fastest")
     assert code == 2 and "parameter strategy" in stderr
 
@@ -275,3 +280,24 @@ def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_toler
                              timetable_file=timetable, settings=AtoSettings(cab_signal="off"))
     _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=10.0)
     assert result.ato.atp.interventions == 0
+
+
+def test_free_run_with_the_alsn_chain_departs_on_a_decoded_green(tmp_path, product_fmus):
+    """The default system, shortened: coder → rail line → receiver → ATP/ATO → train. The
+    receiver decodes З at the origin, the ATP acts on it, the train departs on time and runs
+    without intervention (the full run is benchmarks/bench_free_run.py)."""
+    out = tmp_path / "run"
+    code, _, stderr = railcosim("run", "free_run", "--output", str(out), "--no-build", "--stop-time", "120",
+                                "--record", "rx.aspect", "--record", "ato.atp_aspect", "--record", "train.x",
+                                "--record", "train.v", "--record", "rail.occupied[1]")
+    assert code == 0, stderr
+    header, data = read_csv(out / "results.csv")
+    col = {name: data[:, i] for i, name in enumerate(header)}
+    settled = col["time"] > 6.0
+    assert np.all(col["rx.aspect"][settled] == sig.GREEN) and np.all(col["ato.atp_aspect"][settled] == sig.GREEN)
+    assert np.all(col["rail.occupied[1]"][col["time"] > 1.0] == 1)
+    moving = col["train.v"] > 0.01
+    assert 60.0 <= col["time"][moving][0] <= 61.0
+    assert col["train.x"][-1] > 800.0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trains"][0]["atp_interventions"] == 0

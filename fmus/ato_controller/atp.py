@@ -104,6 +104,7 @@ class Atp:
         self.section: Optional[int] = None
         self.last_valid: Optional[Constraints] = None
         self.last_valid_aspect = sig.WHITE
+        self.last_valid_s = -_INF
         self.assumed: Optional[Constraints] = None
         self.assumed_aspect = sig.GREEN
         self.assumed_until = -_INF
@@ -176,12 +177,19 @@ class Atp:
                 shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
                 acted_aspect = int(aspect)
             if code_valid:
-                self.last_valid, self.last_valid_aspect = shown, int(aspect)
-            c.add(shown)
+                self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
             if not code_valid and self.last_valid is not None:
                 c.add(self.last_valid)
-                if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
+                if t - self.last_valid_s <= self.latency_s:
+                    # a dropout shorter than the decoding latency (joints: seed 002): the last valid
+                    # code still holds, never anything more permissive; no-code rules after that
                     acted_aspect = self.last_valid_aspect
+                else:
+                    c.add(shown)
+                    if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
+                        acted_aspect = self.last_valid_aspect
+            else:
+                c.add(shown)
             if t < self.assumed_until and self.assumed is not None:
                 c.add(self.assumed)          # constraints only: the reported aspect stays the shown one
             result.stop_now = acted_aspect == sig.RED and self.mode == "ALSN"

@@ -24,6 +24,7 @@ MIN_SAMPLES_PER_CARRIER_PERIOD = 8
 
 # decoder rules, firmware kpt.h (domain-facts §1.3 A) [S]
 LONG_INTERVAL_S = 0.35
+LONG_INTERVAL_MAX_S = 1.0     # the longest code interval is 0.86 s (KPT-7 Ж) + 5 % drift: longer = pulses missed
 KPT5_WINDOW_S = (1.47, 1.73)
 KPT7_WINDOW_S = (1.73, 1.99)
 CODE_TIMEOUT_S = 2.0

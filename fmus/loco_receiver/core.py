@@ -29,8 +29,10 @@ same result, DESIGN §3):
 
 Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
 the one shown — or, after a loss of code, than the last one shown — is shown after one valid
-cycle; a more permissive code only after two identical consecutive valid cycles (kpt.h's
-rule). Only a cold start (no code seen yet) takes any code after one cycle, which keeps the
+*clean* cycle — its pulses within a factor 2.5 of each other in level (a cycle that straddles
+an insulated joint mixes two track circuits' codes and levels) and not started after a gap
+longer than any code's long interval (pulses were missed, so it may begin mid-pattern and
+under-count) — anything else only after two identical consecutive valid cycles (kpt.h's rule). Only a cold start (no code seen yet) takes any code after one cycle, which keeps the
 acquisition within two cycles + 0.5 s from any cam phase.
 """
 from __future__ import annotations
@@ -49,6 +51,9 @@ from . import filters
 LEVEL_RELEASE_S = 1.0
 # longer than any short interval (0.12 s + 5 % drift + filter smearing), shorter than any long one
 UNAMBIGUOUS_OFF_S = 0.2
+# a cycle whose pulses differ in level by more than this straddles an insulated joint (the
+# feed end of one section against the entry end of the next, ≈ 10× apart, seed 002)
+LEVEL_SPREAD = 2.5
 CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
 
 
@@ -123,6 +128,9 @@ class LocoReceiverCore:
         self._cycle_start_s: Optional[float] = None
         self._short = 0
         self._implausible = False
+        self._pulse_peak = 0.0
+        self._cycle_peaks = []
+        self._after_gap = False
         self._previous_cycle = alsn.NO_CODE
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
@@ -181,15 +189,26 @@ class LocoReceiverCore:
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
         relay = self._relay_states(envelope)
+        level = envelope / gain                              # input-referred: comparable across gains
         if relay[0] != self._relay or relay[-1] != self._relay or not (relay[0] == relay).all():
             changes = np.flatnonzero(relay != np.concatenate([[self._relay], relay[:-1]]))
             first = round(t * s.fs_hz)
+            peaks = np.maximum.reduceat(level, np.concatenate([[0], changes])) if changes[0] > 0 \
+                else np.maximum.reduceat(level, changes)
+            segment = 0 if changes[0] > 0 else -1            # peaks[segment] = the stretch before an edge
             for n in changes:
+                if segment >= 0 and self._relay:
+                    self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
                 self._edge((first + n) * self.dt, bool(relay[n]))
-            self._relay = bool(relay[-1])
+                self._relay = bool(relay[n])
+                segment += 1
+            if self._relay:
+                self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
+        elif self._relay:
+            self._pulse_peak = max(self._pulse_peak, float(level.max()))
         self._watchdog(t + x.size * self.dt)
         out = self.out
-        out.level_v = self._level(envelope / gain)
+        out.level_v = self._level(level)
         out.relay = self._relay
         return out
 
@@ -198,6 +217,8 @@ class LocoReceiverCore:
         self._last_edge_s = time_s
         if not rising:
             self._last_fall_s = time_s
+            self._cycle_peaks.append(self._pulse_peak)
+            self._pulse_peak = 0.0
             if self._last_rise_s is not None and not (alsn.PULSE_S[0] <= time_s - self._last_rise_s <= alsn.PULSE_S[1]):
                 self._implausible = True          # a pulse split by noise, or carrier without keying
             return
@@ -210,6 +231,7 @@ class LocoReceiverCore:
             self._cycle_start_s = time_s
             self._short = 0
             self._implausible = False
+            self._cycle_peaks = []
         elif self._last_fall_s is not None:
             interval = time_s - self._last_fall_s
             if interval > alsn.LONG_INTERVAL_S:
@@ -218,6 +240,10 @@ class LocoReceiverCore:
                 self._cycle_start_s = time_s
                 self._short = 0
                 self._implausible = False
+                self._cycle_peaks = []
+                # longer than any code's long interval: pulses were missed (a joint, the gain
+                # recovering), so the cycle now starting may begin mid-pattern
+                self._after_gap = interval > alsn.LONG_INTERVAL_MAX_S
             else:
                 self._short += 1
                 if interval < alsn.SHORT_INTERVAL_MIN_S:
@@ -241,8 +267,10 @@ class LocoReceiverCore:
         # compare with what is shown, or after a loss of code with the last code shown (as the
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
-        if reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference) \
-                or code == self._previous_cycle:
+        peaks = self._cycle_peaks
+        clean = bool(peaks) and max(peaks) <= LEVEL_SPREAD * max(min(peaks), 1e-12) and not self._after_gap
+        confirmed = code == self._previous_cycle
+        if confirmed or (clean and (reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference))):
             out.aspect = code
             out.code_valid = True
             self._last_shown = code

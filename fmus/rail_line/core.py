@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
+from scipy.signal import lfilter
 
 from ..common.data import Line
 from ..common.slave import FmuInputError
@@ -64,6 +65,7 @@ class RailSettings:
     seed: int = 1
     dc_ripple: Tuple[float, float] = (0.02, 0.01)       # 300 Hz, 600 Hz shares of the DC traction current [U]
     ac_harmonics: Tuple[float, float] = (0.10, 0.05)    # 150 Hz, 250 Hz shares on AC lines [U]
+    traction_time_constant_s: float = 0.1               # traction circuit lag seen in the rails [U]
     relay_pick_up: float = 0.8            # share of the free-circuit relay voltage at the design ballast
     relay_drop_out: float = 0.5
     relay_pick_up_delay_s: float = 1.0
@@ -96,7 +98,8 @@ class RailLineCore:
         for name, value in (("fs", s.fs_hz), ("transformer_ratio", s.transformer_ratio), ("coil_gain", s.coil_gain_h),
                             ("coil_length", s.coil_length_m), ("rail_r", c.rail_r_ohm_per_km), ("rail_l", c.rail_l_h_per_km),
                             ("ballast", c.ballast_ohm_km), ("feed_r", c.feed_r_ohm), ("relay_r", c.relay_r_ohm),
-                            ("bond_l", c.bond_l_h), ("shunt_r", c.shunt_r_ohm), ("segment", c.segment_m)):
+                            ("bond_l", c.bond_l_h), ("shunt_r", c.shunt_r_ohm), ("segment", c.segment_m),
+                            ("traction_time_constant", s.traction_time_constant_s)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
         if not 0 < s.relay_drop_out < s.relay_pick_up <= 1.0:
@@ -144,6 +147,10 @@ class RailLineCore:
         self._relay_timer = np.zeros(self.count)
         self._index = np.arange(frame)
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
+        lag = np.exp(-self.dt / s.traction_time_constant_s)
+        self._lag_b, self._lag_a = np.array([1.0 - lag]), np.array([1.0, -lag])
+        self._traction_state = np.zeros((trains, 1))
+        self._i_traction = np.zeros((trains, frame))
         self._last_current = np.zeros(trains)
         self._sensing = np.zeros(trains, dtype=bool)
         self._anchor = [(None, 0.0, 0.0, 0.0)] * trains       # (x_k, v_k, t_k, i_traction)
@@ -268,6 +275,7 @@ class RailLineCore:
             x_k, v_k, t_k, _ = self._anchor[j]
             heads.append(x_k + v_k * (times - t_k))          # per sample from the anchor: same for any frame
             at_tick.append(self._anchor[j][0] + self._anchor[j][1] * (tick - self._anchor[j][2]))
+        self._smooth_traction(i_traction, n)
         # the front-most wheelset of each train in each section shunts it
         front = np.full(self.count, -np.inf)
         for j in range(self.trains):
@@ -383,11 +391,20 @@ class RailLineCore:
         coil = centre[None, :] + self._coil_spread[:, None]
         return seen + self._traction(j, times, coil), i_axle
 
+    def _smooth_traction(self, i_traction: np.ndarray, n: int) -> None:
+        """The traction current reaches the rails through the traction circuit's inductance
+        (smoothing reactor, motors): a first-order lag of ``traction_time_constant`` [U]. It
+        also turns the steps of a slowly sampled traction FMU into ramps, which the coils would
+        otherwise see as EMF spikes of tens of volts."""
+        held = np.repeat(np.asarray(i_traction[:self.trains], dtype=float)[:, None], n, axis=1)
+        self._i_traction, self._traction_state = lfilter(self._lag_b, self._lag_a, held, axis=1,
+                                                          zi=self._traction_state)
+
     def _traction_wave(self, j: int, times: np.ndarray) -> np.ndarray:
         """Traction return current i_tr(t) of train j (DC with rectifier ripple, or AC 50 Hz)."""
         s = self.settings
-        i_tr = self._anchor[j][3]
-        if i_tr == 0.0 or not (self.ac or self.dc):
+        i_tr = self._i_traction[j]            # smoothed per sample (see _smooth_traction)
+        if not (self.ac or self.dc) or not i_tr.any():
             return np.zeros(times.size)
         if self.dc:
             r300, r600 = s.dc_ripple

@@ -36,6 +36,8 @@ class RailLine(FrameSlave):
             Port("asymmetry_min", "parameter", unit="1", start=s.asymmetry_range[0], min=0.0, max=1.0),
             Port("asymmetry_max", "parameter", unit="1", start=s.asymmetry_range[1], min=0.0, max=1.0),
             Port("seed", "parameter", "Integer", start=1),
+            Port("traction_time_constant", "parameter", unit="s", start=s.traction_time_constant_s, min=0.0,
+                 description="lag of the traction current in the rails"),
             Port("relay_pick_up", "parameter", unit="1", start=s.relay_pick_up, description="share of the free-circuit relay voltage"),
             Port("relay_drop_out", "parameter", unit="1", start=s.relay_drop_out),
             Port("relay_pick_up_delay", "parameter", unit="s", start=s.relay_pick_up_delay_s, min=0.0),
@@ -67,6 +69,7 @@ class RailLine(FrameSlave):
             coil_gain_h=p("coil_gain"), coil_length_m=p("coil_length"),
             train_length_m=tuple(float(x) for x in io["train_length"]),
             asymmetry_range=(p("asymmetry_min"), p("asymmetry_max")), seed=p("seed"),
+            traction_time_constant_s=p("traction_time_constant"),
             relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
             relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
