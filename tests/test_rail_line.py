@@ -226,3 +226,46 @@ def test_coder_rail_line_receiver_chain_decodes_under_a_moving_train(tmp_path, p
     last = dict(zip(header, data[-1]))
     assert last["rail.occupied[1]"] == 1 and last["coder.code_tx[1]"] == 4
     assert last["rx.aspect"] == 4 and last["rx.code_valid"] == 1
+
+
+def test_faults_injected_as_inputs_drop_the_relay_and_the_code():
+    core = _steady_carrier_core()
+    free = np.zeros(8)
+    no_feed = np.zeros(8, dtype=bool)
+
+    def settle(broken=-1.0, ballast=free, feed_open=no_feed, x=-1000.0):
+        core.set_faults(broken, ballast, feed_open)
+        _, _, axle = _run(core, 3.0, lambda t: x, 0.0, sections=range(8))   # bond L/R ≈ 0.4 s: let it settle
+        return core.out.occupied[:8].copy(), axle[-10:].mean()
+
+    occupied, _ = settle()
+    assert not occupied.any()
+    occupied, _ = settle(broken=9000.0)                       # broken rail in section 4
+    assert occupied.tolist() == [False, False, False, True, False, False, False, False]
+    wet = free.copy()
+    wet[5] = 0.4                                               # section 6 ballast well below the design 1 Ω·km
+    occupied, _ = settle(ballast=wet)
+    assert occupied[5] and occupied.sum() == 1                 # right-side failure: shows occupied
+    _, coded = settle(x=9000.0)
+    feed = no_feed.copy()
+    feed[3] = True                                             # bond disconnected / transmitter failed in section 4
+    occupied, cut = settle(feed_open=feed, x=9000.0)
+    assert occupied[3] and coded > 0.5 and cut < 0.01 * coded
+
+
+def test_ac_traction_adds_50_hz_and_odd_harmonics_at_the_coil():
+    import json
+    from fmus.common.data import DATA
+
+    line = load_line(DATA / "default_line_ac.json")
+    core = RailLineCore(line, 8, 2, N, RailSettings())
+    core.asymmetry[:] = 0.02
+    _, emf, _ = _run(core, 1.0, lambda t: 5000.0, 0.0, u_amplitude=0.0, i_traction=300.0)
+    spectrum = np.abs(np.fft.rfft(emf[int(0.5 * FS):]))
+    freqs = np.fft.rfftfreq(emf[int(0.5 * FS):].size, 1 / FS)
+    peak = {f: spectrum[np.argmin(np.abs(freqs - f))] for f in (50, 100, 150, 250)}
+    assert peak[50] > 5 * peak[100] and peak[150] > 5 * peak[100] and peak[250] > 5 * peak[100]
+    # EMF amplitude at 50 Hz = M·ω·a·I·√2
+    expected = core.settings.coil_gain_h * 2 * np.pi * 50 * 0.02 * 300 * np.sqrt(2)
+    assert 2 * peak[50] / (emf.size - int(0.5 * FS)) == pytest.approx(expected, rel=0.05)
+    assert json.loads((DATA / "default_line_ac.json").read_text())["electrification"]["system"] == "AC25000"

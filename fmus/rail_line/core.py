@@ -298,8 +298,11 @@ class RailLineCore:
                 model = self._model(k, configs[k])
                 self._active[k] = (configs[k], model, self._relay_voltage(k, configs[k], self._fault_of(k)))
                 size = model.phi_n.shape[0]
-                self._phi_stack[k, :size, :size] = model.phi_n       # sections padded to one size:
-                self._psi_stack[k, :size] = model.psi                # one product advances them all
+                self._phi_stack[k] = 0.0                             # sections padded to one size:
+                self._psi_stack[k] = 0.0                             # one product advances them all
+                self._phi_stack[k, :size, :size] = model.phi_n
+                self._psi_stack[k, :size] = model.psi
+                self.states[k, size:] = 0.0       # a branch the new network lacks (feed opened) carries nothing
         u = u_tx[:self.count]
         currents = {}
         for k in coil_sections:
