@@ -9,7 +9,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from functools import reduce
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Tuple
 
 from .errors import UserError
 from .fmu import Interface, Variable, read_interface

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.sspgen import ComponentSpec, ConnectionSpec, frame_connections, write_ssd  # noqa: F401
+from orchestrator.sspgen import ComponentSpec, ConnectionSpec, frame_connections, write_ssd  # noqa: F401  (re-exported for the tests)
 
 
 def read_csv(path: Path):

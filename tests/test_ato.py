@@ -15,7 +15,7 @@ from fmus.ato_controller.loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.common import signalling as sig
-from fmus.common.data import DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.common.data import load_line, load_rolling_stock, load_timetable
 from fmus.common.slave import FmuInputError
 from helpers import railcosim, read_csv
 
@@ -209,7 +209,7 @@ def _red_signal_ahead(clear_s):
 def test_yellow_then_red_yellow_stops_before_the_red_signal_and_recovers():
     result = run_closed_loop(1300.0, cab_signal=_red_signal_ahead(900.0))
     ato = result.ato
-    t, x, v = result.column("t"), result.column("x"), result.column("v")
+    x, v = result.column("x"), result.column("v")
     aspects = result.column("aspect")
     held = (v <= 1e-3) & (x > 12800) & (x < 15200)
     assert held.any(), "the train did not stop before the red signal"
@@ -227,7 +227,7 @@ def test_yellow_then_red_yellow_stops_before_the_red_signal_and_recovers():
 
 def test_after_a_restriction_the_ato_runs_at_the_permitted_speed_until_on_time():
     result = run_closed_loop(1300.0, cab_signal=_red_signal_ahead(900.0))
-    t, x, v = result.column("t"), result.column("x"), result.column("v")
+    t, v = result.column("t"), result.column("v")
     mode = result.column("mode")
     after = (t > 905) & (t < 960) & (v > 1.0)
     # full traction while late (no coasting) right after the aspect clears

@@ -1,6 +1,5 @@
 """Built FMUs validate cleanly, match their committed contract manifests, rebuild only on change,
 and many instances of one FMU live in one process."""
-import json
 import subprocess
 import sys
 from pathlib import Path

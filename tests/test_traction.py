@@ -2,9 +2,7 @@
 validation, and the FMU through the orchestrator (step-size robustness)."""
 import dataclasses
 import json
-import math
 
-import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 

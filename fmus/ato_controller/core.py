@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import List
+
+import numpy as np
 
 from ..common import signalling as sig
 from ..common.data import Line, RollingStock, TimetableStop
@@ -187,7 +189,6 @@ class AtoCore:
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
         out = self.out
-        s = self.settings
         if self._t_prev is not None and t > self._t_prev:
             # measured acceleration, low-pass filtered (1 s) so the prediction does not depend
             # on the step size nor chatter when the electric brake steps in
@@ -273,7 +274,7 @@ class AtoCore:
             self.recovering = False
         flat_out = self.recovering or deviation > s.late_threshold_s
 
-        ceiling = min(float(_interp_plan(plan, x)), atp.ceiling_mps - s.speed_margin_mps)
+        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps)
         out.v_ceiling_mps = max(ceiling, 0.0)
         targets = self._targets(x, v, atp)
         need, target = self._required_decel(x, v, targets)
@@ -333,9 +334,3 @@ class AtoCore:
         self.creeping = False
         self.strategy = None
         self.phase = FINISHED if self.stage >= len(self.plans) else DWELLING
-
-
-def _interp_plan(plan, x: float) -> float:
-    import numpy as np
-
-    return np.interp(x, plan.s, plan.ceiling_mps)

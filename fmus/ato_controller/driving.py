@@ -20,11 +20,12 @@ until back on schedule.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
 
-from .planner import REGIME_BRAKE, REGIME_COAST, REGIME_TRACTION, StagePlan
+from .planner import REGIME_TRACTION, StagePlan
 from .train_model import NominalTrain
 
 STRATEGIES = ("programme", "predictive", "flat_out")
@@ -42,7 +43,7 @@ class Guidance:
     programme: int               # index in the stage family
 
 
-class Strategy:
+class Strategy(ABC):
     def __init__(self, plan: StagePlan, k1: float, k2: float):
         self.plan, self.k1, self.k2 = plan, k1, k2
         self.current = plan.chosen
@@ -60,8 +61,9 @@ class Strategy:
         t = np.interp(x, plan.s, plan.family.t[programme])
         return float(v), float(t)
 
+    @abstractmethod
     def guide(self, t_run: float, x: float, v: float, deviation_s: float) -> Guidance:
-        raise NotImplementedError
+        """What to do at head position x, t_run seconds after the scheduled departure."""
 
 
 class ProgrammeFollowing(Strategy):

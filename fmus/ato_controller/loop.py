@@ -6,7 +6,7 @@ The cab signal comes from a function of (t, x) returning (aspect, code_valid).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, Optional, Tuple
 
 import numpy as np
 
@@ -59,10 +59,6 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
         trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j)
         state = train.step(t, step_s, out.command, out.emergency_brake)
     return LoopResult(ato, train, trace)
-
-
-def arrivals(result: LoopResult) -> List[dict]:
-    return list(result.ato.arrivals)
 
 
 def red_signal_ahead(line, red_signal_m: float, clear_s: float) -> CabSignal:

@@ -26,7 +26,7 @@ train coasts up to the ceiling instead of MARECO's explicit accelerating-slope s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -81,10 +81,6 @@ class StagePlan:
     @property
     def minimum_time_s(self) -> float:
         return float(self.family.time_s[self.minimum])
-
-    def programme(self, index: int):
-        f = self.family
-        return f.v[index], f.t[index], f.regime[index]
 
 
 class StagePlanner:
@@ -242,8 +238,3 @@ class StagePlanner:
 def _merge(a: Programmes, b: Programmes) -> Programmes:
     return Programmes(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in
                         ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j")))
-
-
-def plan_stages(planner: StagePlanner, legs: List[tuple]) -> List[StagePlan]:
-    """``legs``: (start_m, end_m, scheduled_time_s or None) per stage."""
-    return [planner.plan(a, b, T) for a, b, T in legs]

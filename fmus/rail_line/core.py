@@ -367,7 +367,7 @@ class RailLineCore:
 
     def _coil_general(self, j: int, times: np.ndarray, head: np.ndarray, currents, configs):
         """Sample by sample, the share of the coil's sensitivity window over each stretch of
-        rail: its own section up to the feed leads (shunt current), the stub from the leads to
+        rail: its own section up to the feed leads (shunt current), the dead end from the leads to
         the joint (nothing), the next section's entry end (its unshunted current)."""
         s = self.settings
         n = times.size

@@ -84,7 +84,6 @@ class Network:
         self._g: List[Tuple[int, int, float]] = []
         self._p: List[Tuple[int, int, float]] = []
         self.branches: List[Tuple[int, int, float, float]] = []
-        self.branch_names: List[Tuple[str, str]] = []
 
     def node(self, name: str) -> int:
         if name == GROUND:
@@ -111,7 +110,6 @@ class Network:
 
     def _branch(self, a: str, b: str, r: float, l: float) -> None:
         self.branches.append((self.node(a), self.node(b), r, l))
-        self.branch_names.append((a, b))
 
     # ---- matrices -----------------------------------------------------------------------------
     def matrices(self):

@@ -4,7 +4,7 @@ Layout along the section, running direction left → right (domain-facts §1.4: 
 at the signal end ahead of the train, the track relay sits at the entry end):
 
     entry joint            relay end                                   feed end      exit joint
-        |── relay leads (n0) ─[rail segment]─ n1 ─ … ─ n(S−1) ─[rail segment]─ nS ── stub ──|
+        |── relay leads (n0) ─[rail segment]─ n1 ─ … ─ n(S−1) ─[rail segment]─ nS ── dead end ──|
             relay R, bond                                              source, bond
 
 * rail segments: series R–L of the rail loop (two rails) and half the ballast conductance at
@@ -99,8 +99,3 @@ class TrackCircuit:
 
     def nearest_node(self, x_m: float) -> int:
         return int(np.clip(np.rint((x_m - self.start_m) / (self.nodes_m[1] - self.nodes_m[0])), 0, self.segments))
-
-    def shunt_branch(self, node: int) -> int:
-        """Index of the rail segment on the feed side of a node (the code current toward the
-        shunt flows in it); the feed-end node uses its own segment."""
-        return min(node, self.segments - 1)

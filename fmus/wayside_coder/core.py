@@ -26,7 +26,7 @@ any length N give the same samples (DESIGN §3).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Optional
 
 import numpy as np
 from scipy.signal import lfilter
