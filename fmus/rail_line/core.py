@@ -196,11 +196,10 @@ class RailLineCore:
             out_o[i] = row_power
             markov[i] = row_power @ gamma[:, 0]
             row_power = row_power @ phi
-        out_t = np.zeros((n, 2, n))
-        for i in range(n):
-            out_t[i, :, i] = direct
-            for m in range(i):
-                out_t[i, :, m] = markov[i - 1 - m]
+        # block Toeplitz: sample i responds to input m < i through C·Φ^(i−1−m)·Γ, to m = i through D
+        lag = np.arange(n)[:, None] - 1 - np.arange(n)[None, :]
+        out_t = np.where((lag >= 0)[:, None, :], markov[np.clip(lag, 0, None)].transpose(0, 2, 1), 0.0)
+        out_t[np.arange(n), :, np.arange(n)] = direct
         psi = np.empty((nx, n))
         column = gamma[:, 0].copy()
         for m in range(n - 1, -1, -1):
