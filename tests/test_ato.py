@@ -283,21 +283,29 @@ def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_toler
 
 
 def test_free_run_with_the_alsn_chain_departs_on_a_decoded_green(tmp_path, product_fmus):
-    """The default system, shortened: coder → rail line → receiver → ATP/ATO → train. The
-    receiver decodes З at the origin, the ATP acts on it, the train departs on time and runs
-    without intervention (the full run is benchmarks/bench_free_run.py)."""
+    """The default system, shortened to the first two joints: coder → rail line → receiver →
+    ATP/ATO → train. The receiver decodes З at the origin, the ATP acts on it, the train departs
+    on time and passes the joints at 2.6 and 5.2 km with no aspect artefact and no intervention
+    (the full run is benchmarks/bench_free_run.py)."""
     out = tmp_path / "run"
-    code, _, stderr = railcosim("run", "free_run", "--output", str(out), "--no-build", "--stop-time", "120",
+    code, _, stderr = railcosim("run", "free_run", "--output", str(out), "--no-build", "--stop-time", "280",
                                 "--record", "rx.aspect", "--record", "ato.atp_aspect", "--record", "train.x",
                                 "--record", "train.v", "--record", "rail.occupied[1]")
     assert code == 0, stderr
     header, data = read_csv(out / "results.csv")
     col = {name: data[:, i] for i, name in enumerate(header)}
     settled = col["time"] > 6.0
-    assert np.all(col["rx.aspect"][settled] == sig.GREEN) and np.all(col["ato.atp_aspect"][settled] == sig.GREEN)
-    assert np.all(col["rail.occupied[1]"][col["time"] > 1.0] == 1)
+    # the receiver may lose the code for a moment at a joint (white: gain recovery, seed 002),
+    # never show a wrong code; the ATP bridges the dropout with the last valid green
+    assert set(np.unique(col["rx.aspect"][settled])) <= {sig.GREEN, sig.WHITE}
+    assert np.all(col["ato.atp_aspect"][settled] == sig.GREEN)
+    standing = (col["time"] > 1.0) & (col["time"] < 100.0)
+    assert np.all(col["rail.occupied[1]"][standing] == 1)
+    assert col["rail.occupied[1]"][-1] == 0                  # the tail has left section 1
     moving = col["train.v"] > 0.01
     assert 60.0 <= col["time"][moving][0] <= 61.0
-    assert col["train.x"][-1] > 800.0
+    assert col["train.x"][-1] > 5250.0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["trains"][0]["atp_interventions"] == 0
+    train = summary["trains"][0]
+    assert train["atp_interventions"] == 0
+    assert [a["aspect"] for a in train["aspects"]] == ["white", "green"]

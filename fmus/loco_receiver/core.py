@@ -29,8 +29,9 @@ same result, DESIGN §3):
 
 Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
 the one shown — or, after a loss of code, than the last one shown — is shown after one valid
-*clean* cycle — its pulses within a factor 2.5 of each other in level (a cycle that straddles
-an insulated joint mixes two track circuits' codes and levels) and not started after a gap
+*clean* cycle — its pulses, and the pulse just before it, within a factor 2.5 of each other in
+level (a cycle that straddles or follows an insulated joint mixes two track circuits' codes
+and levels, and may start mid-pattern) and not started after a gap
 longer than any code's long interval (pulses were missed, so it may begin mid-pattern and
 under-count) — anything else only after two identical consecutive valid cycles (kpt.h's rule). Only a cold start (no code seen yet) takes any code after one cycle, which keeps the
 acquisition within two cycles + 0.5 s from any cam phase.
@@ -54,6 +55,8 @@ UNAMBIGUOUS_OFF_S = 0.2
 # a cycle whose pulses differ in level by more than this straddles an insulated joint (the
 # feed end of one section against the entry end of the next, ≈ 10× apart, seed 002)
 LEVEL_SPREAD = 2.5
+# how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
+PENDING_S = 0.05
 CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
 
 
@@ -131,6 +134,8 @@ class LocoReceiverCore:
         self._pulse_peak = 0.0
         self._cycle_peaks = []
         self._after_gap = False
+        self._boundary_peak: Optional[float] = None
+        self._pending = None                             # (code, decide at, lowest, highest level)
         self._previous_cycle = alsn.NO_CODE
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
@@ -206,6 +211,8 @@ class LocoReceiverCore:
                 self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
         elif self._relay:
             self._pulse_peak = max(self._pulse_peak, float(level.max()))
+        if self._pending is not None:
+            self._settle_pending(t + x.size * self.dt)
         self._watchdog(t + x.size * self.dt)
         out = self.out
         out.level_v = self._level(level)
@@ -240,6 +247,9 @@ class LocoReceiverCore:
                 self._cycle_start_s = time_s
                 self._short = 0
                 self._implausible = False
+                # the level of the pulse before the boundary: a cycle whose pulses jump from it
+                # (≈ 10× at a joint) began in another track circuit, possibly mid-pattern
+                self._boundary_peak = self._cycle_peaks[-1] if self._cycle_peaks else None
                 self._cycle_peaks = []
                 # longer than any code's long interval: pulses were missed (a joint, the gain
                 # recovering), so the cycle now starting may begin mid-pattern
@@ -268,20 +278,41 @@ class LocoReceiverCore:
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
         peaks = self._cycle_peaks
-        clean = bool(peaks) and max(peaks) <= LEVEL_SPREAD * max(min(peaks), 1e-12) and not self._after_gap
+        levels = peaks + ([self._boundary_peak] if self._boundary_peak is not None else [])
+        clean = bool(peaks) and max(levels) <= LEVEL_SPREAD * max(min(levels), 1e-12) and not self._after_gap
         confirmed = code == self._previous_cycle
-        if confirmed or (clean and (reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference))):
-            out.aspect = code
-            out.code_valid = True
-            self._last_shown = code
-            self._publish_speeds()
+        self._pending = None
+        if confirmed:
+            self._show(code)
+        elif clean and (reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference)):
+            # one cycle is enough, unless the pulse that ended it is from another track circuit
+            # (the coils crossed a joint and the dropout passed for the long interval): decide
+            # once that pulse's level is known
+            self._pending = (code, time_s + PENDING_S, min(levels), max(levels))
         self._previous_cycle = code
+
+    def _show(self, code: int) -> None:
+        out = self.out
+        out.aspect = code
+        out.code_valid = True
+        self._last_shown = code
+        self._publish_speeds()
+
+    def _settle_pending(self, now_s: float) -> None:
+        code, due, low, high = self._pending
+        if self._relay and now_s < due:
+            return
+        level = self._pulse_peak if self._relay else (self._cycle_peaks[0] if self._cycle_peaks else 0.0)
+        self._pending = None
+        if max(high, level) <= LEVEL_SPREAD * max(min(low, level), 1e-12):
+            self._show(code)
 
     def _watchdog(self, now_s: float) -> None:
         out = self.out
         quiet = now_s - (self._last_edge_s if self._last_edge_s is not None else self._started_s)
         stale = now_s - (self._last_valid_s if self._last_valid_s is not None else self._started_s)
         if quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S:
+            self._pending = None
             if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
                 out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
             out.code_valid = False
