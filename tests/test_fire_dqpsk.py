@@ -1,0 +1,85 @@
+"""The thesis' 16-command system with our frame synchronisation (issue 7 groundwork): round
+trip, slips never yield another command, a steady tone never yields one, noise never yields a
+wrong one."""
+import numpy as np
+import pytest
+
+from fmus.common import dqpsk
+from fmus.common import fire_dqpsk as fd
+
+FS = 4000.0
+
+
+def _receive(samples):
+    receiver = fd.FrameReceiver()
+    symbols = dqpsk.correlate(samples, FS, fd.CARRIER_HZ, fd.BAUD)
+    accepted = []
+    for kind in fd.classify(symbols):
+        receiver.push([kind])
+        accepted.append(receiver.command)
+    return receiver, accepted
+
+
+@pytest.mark.parametrize("command", [1, 2, 7, 11, 16])
+def test_every_command_round_trips_after_two_identical_words(command):
+    receiver, accepted = _receive(fd.transmit([command] * 4, FS, 1.0, 0.3))
+    assert receiver.command == command and receiver.rejected == 0
+    first = next(i for i, c in enumerate(accepted) if c is not None)
+    assert first <= 3 * fd.FRAME_SYMBOLS + 1                  # lock, then two words
+
+
+@pytest.mark.parametrize("command", [3, 9, 14])
+@pytest.mark.parametrize("slip_symbols", [-2, -1, 1, 2])
+def test_a_slip_of_whole_symbols_never_yields_another_command(command, slip_symbols):
+    samples = fd.transmit([command] * 12, FS)
+    per_symbol = FS / fd.BAUD
+    cut = int(round(5.3 * fd.FRAME_SYMBOLS * per_symbol))
+    if slip_symbols > 0:                                      # symbols lost
+        slipped = np.concatenate([samples[:cut], samples[cut + int(round(slip_symbols * per_symbol)):]])
+    else:                                                     # symbols repeated
+        extra = samples[cut - int(round(-slip_symbols * per_symbol)):cut]
+        slipped = np.concatenate([samples[:cut], extra, samples[cut:]])
+    _, accepted = _receive(slipped)
+    assert set(accepted) <= {None, command}
+    assert accepted[-1] == command                            # locks again on the true frames
+
+
+def test_without_the_sync_a_one_symbol_slip_reads_a_rotated_valid_word():
+    """The reason for the sync symbol: framing by code validity alone decodes another command."""
+    from fmus.common import fire_code
+
+    word = fire_code.encode(11)
+    rotated = ((word << 2) | (word >> 10)) & 0xFFF
+    assert fire_code.is_codeword(rotated) and fire_code.decode(rotated) != 11
+
+
+def test_a_steady_tone_never_yields_a_command():
+    t = np.arange(int(10 * FS)) / FS
+    receiver, accepted = _receive(np.cos(2 * np.pi * fd.CARRIER_HZ * t + 0.4))
+    assert set(accepted) == {None} and receiver.decoded == 0
+
+
+@pytest.mark.parametrize("snr_db", [6.0, 0.0, -3.0, -9.0, -15.0])
+def test_noise_never_yields_a_wrong_command(snr_db):
+    rng = np.random.default_rng(int(snr_db) + 50)
+    commands = list(rng.integers(1, 17, 60))
+    sequence = [c for c in commands for _ in range(3)]       # each command held for three frames
+    samples = fd.transmit(sequence, FS, 1.0)
+    sigma = np.sqrt(0.5 / 10 ** (snr_db / 10))                # SNR over the whole band (A²/2 / σ²)
+    receiver = fd.FrameReceiver()
+    symbols = dqpsk.correlate(samples + sigma * rng.standard_normal(samples.size), FS, fd.CARRIER_HZ, fd.BAUD)
+    kinds = fd.classify(symbols)
+    sent = np.repeat(sequence, fd.FRAME_SYMBOLS)[:kinds.size]
+    wrong = 0
+    for k, kind in enumerate(kinds):
+        receiver.push([kind])
+        # the accepted command may lag behind a change until the timeout, never be anything else
+        window = sent[max(0, k - (fd.TIMEOUT_FRAMES + 1) * fd.FRAME_SYMBOLS):k + 1]
+        if receiver.command is not None and receiver.command not in set(window):
+            wrong += 1
+    assert wrong == 0
+
+
+def test_unknown_command_is_refused():
+    with pytest.raises(ValueError, match="command 17"):
+        fd.frame_increments(17)
