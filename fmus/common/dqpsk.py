@@ -16,7 +16,7 @@ import numpy as np
 from scipy import special, stats
 
 INCREMENTS = {0b00: np.pi / 4, 0b01: 3 * np.pi / 4, 0b11: -3 * np.pi / 4, 0b10: -np.pi / 4}
-_INCREMENT_OF_DIBIT = np.array([INCREMENTS[d] for d in range(4)])
+INCREMENT_OF_DIBIT = np.array([INCREMENTS[d] for d in range(4)])
 # decision: quadrant of the phase difference → dibit
 _DIBIT_OF_QUADRANT = {0: 0b00, 1: 0b01, 2: 0b11, 3: 0b10}      # quadrants 0..3 from 0 rad counter-clockwise
 
@@ -26,15 +26,16 @@ def symbol_index(n_samples: int, fs_hz: float, baud: float, first_sample: int = 
     return np.floor((first_sample + np.arange(n_samples)) * baud / fs_hz + 1e-9).astype(np.int64)
 
 
-def phases(dibits: np.ndarray, start_phase: float = 0.0) -> np.ndarray:
-    """Absolute carrier phase of each symbol: a reference symbol, then one per dibit."""
-    return start_phase + np.concatenate([[0.0], np.cumsum(_INCREMENT_OF_DIBIT[np.asarray(dibits)])])
-
-
 def modulate(dibits, fs_hz: float, carrier_hz: float, baud: float, amplitude: float = 1.0,
              start_phase: float = 0.0) -> np.ndarray:
     """Samples of the reference symbol followed by one symbol per dibit."""
-    phase = phases(dibits, start_phase)
+    return modulate_increments(INCREMENT_OF_DIBIT[np.asarray(dibits)], fs_hz, carrier_hz, baud, amplitude, start_phase)
+
+
+def modulate_increments(increments, fs_hz: float, carrier_hz: float, baud: float, amplitude: float = 1.0,
+                        start_phase: float = 0.0) -> np.ndarray:
+    """Samples of a reference symbol followed by one symbol per phase increment (rad)."""
+    phase = start_phase + np.concatenate([[0.0], np.cumsum(increments)])
     count = int(np.ceil(phase.size * fs_hz / baud - 1e-9))
     symbol = np.minimum(symbol_index(count, fs_hz, baud), phase.size - 1)
     t = np.arange(count) / fs_hz

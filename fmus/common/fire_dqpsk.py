@@ -76,18 +76,14 @@ def frame_increments(command: int) -> np.ndarray:
         raise ValueError(f"command {command} is not one of 1…{len(COMMANDS)}")
     bits = fire_code.to_bits(fire_code.encode(command))
     dibits = bits[0::2] * 2 + bits[1::2]
-    return np.concatenate([[0.0], dqpsk._INCREMENT_OF_DIBIT[dibits]])
+    return np.concatenate([[0.0], dqpsk.INCREMENT_OF_DIBIT[dibits]])
 
 
 def transmit(commands: List[int], fs_hz: float, amplitude: float = 1.0, start_phase: float = 0.0,
              carrier_hz: float = CARRIER_HZ, baud: float = BAUD) -> np.ndarray:
     """Samples of consecutive frames, one per command (a reference symbol first)."""
     increments = np.concatenate([frame_increments(c) for c in commands])
-    phase = start_phase + np.concatenate([[0.0], np.cumsum(increments)])
-    count = int(np.ceil(phase.size * fs_hz / baud - 1e-9))
-    symbol = np.minimum(dqpsk.symbol_index(count, fs_hz, baud), phase.size - 1)
-    t = np.arange(count) / fs_hz
-    return amplitude * np.cos(2 * np.pi * carrier_hz * t + phase[symbol])
+    return dqpsk.modulate_increments(increments, fs_hz, carrier_hz, baud, amplitude, start_phase)
 
 
 SYNC = -1
