@@ -86,6 +86,7 @@ class _Model:
     psi: np.ndarray         # (nx, N) input → state after a frame
     out_o: np.ndarray       # (N·2, nx) state → outputs per sample (shunt current, entry current)
     out_t: np.ndarray       # (N·2, N) inputs → outputs per sample
+    relay_level: float      # relay-end voltage relative to the free circuit at the design ballast
 
 
 class RailLineCore:
@@ -112,11 +113,11 @@ class RailLineCore:
         self.line, self.settings = line, s
         self.count, self.sections, self.trains, self.frame = len(line.sections), sections, trains, frame
         self.dt = 1.0 / s.fs_hz
-        offsets = {round(j["position_m"], 6): float(j.get("bond_lead_offset_m", 1.0)) for j in line.joints}
+        leads = [(float(j["position_m"]), float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
+        offsets = {round(position, 6): offset for position, offset in leads}
         self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0), c)
                          for sec in line.sections]
         self.starts = np.array([sec.start_m for sec in line.sections])
-        self._feed_m = None
         self.ends = np.array([sec.end_m for sec in line.sections])
         self._ends_ext = np.append(self.ends, -np.inf)
         self._starts_list = self.starts.tolist()
@@ -125,8 +126,7 @@ class RailLineCore:
         self.dc = line.electrification == "DC3000"
         rng = np.random.default_rng(s.seed)
         self.asymmetry = rng.uniform(lo, hi, self.count) * rng.choice([-1.0, 1.0], self.count)
-        self.joint_zones = [(j["position_m"] - float(j.get("bond_lead_offset_m", 1.0)), j["position_m"],
-                             j["position_m"] + float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
+        self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
         self._feed_m = np.array([c.feed_m for c in self.circuits])
         margin = s.coil_length_m
         self._joint_band = [(lo - margin, hi + margin) for lo, _, hi in self.joint_zones] + \
@@ -142,7 +142,6 @@ class RailLineCore:
         self.states = np.zeros((self.count, size))
         self._phi_stack = np.zeros((self.count, size, size))
         self._psi_stack = np.zeros((self.count, size, frame))
-        self._config = [None] * self.count
         self.relay_up = np.ones(self.count, dtype=bool)
         self._relay_timer = np.zeros(self.count)
         self._index = np.arange(frame)
@@ -153,7 +152,7 @@ class RailLineCore:
         self._i_traction = np.zeros((trains, frame))
         self._last_current = np.zeros(trains)
         self._sensing = np.zeros(trains, dtype=bool)
-        self._anchor = [(None, 0.0, 0.0, 0.0)] * trains       # (x_k, v_k, t_k, i_traction)
+        self._anchor = [(None, 0.0, 0.0)] * trains             # (x_k, v_k, t_k) of the last position update
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool))
 
@@ -206,7 +205,8 @@ class RailLineCore:
             psi[:, m] = column
             column = phi @ column
         # outputs of all samples at once: (N·2, nx) and (N·2, N) matrices
-        model = _Model(np.linalg.matrix_power(phi, n), psi, out_o.reshape(n * 2, nx), out_t.reshape(n * 2, n))
+        model = _Model(np.linalg.matrix_power(phi, n), psi, out_o.reshape(n * 2, nx), out_t.reshape(n * 2, n),
+                       self._relay_voltage(k, node, faults))
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
@@ -247,12 +247,11 @@ class RailLineCore:
             self.faults, self.broken_rail_m = faults, float(broken_rail_m)
             self._refresh_faults()
 
-    def _positions(self, j: int, t: float, x: float, v: float, i_tr: float):
-        """x(t) = x_k + v_k·(t − t_k) between position updates (DESIGN §3)."""
+    def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
+        """A new position update starts x(t) = x_k + v_k·(t − t_k) (DESIGN §3)."""
         anchor = self._anchor[j]
         if anchor[0] is None or x != anchor[0] or v != anchor[1]:
-            self._anchor[j] = anchor = (x, v, t, i_tr)
-        return anchor[0] + anchor[1] * (t - anchor[2])
+            self._anchor[j] = (x, v, t)
 
     def section_of(self, x):
         k = np.searchsorted(self.starts, x, side="right") - 1
@@ -270,10 +269,10 @@ class RailLineCore:
         tick = np.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
         heads, at_tick = [], []
         for j in range(self.trains):
-            self._positions(j, t, float(x_head[j]), float(v[j]), float(i_traction[j]))
-            x_k, v_k, t_k, _ = self._anchor[j]
+            self._update_anchor(j, t, float(x_head[j]), float(v[j]))
+            x_k, v_k, t_k = self._anchor[j]
             heads.append(x_k + v_k * (times - t_k))          # per sample from the anchor: same for any frame
-            at_tick.append(self._anchor[j][0] + self._anchor[j][1] * (tick - self._anchor[j][2]))
+            at_tick.append(x_k + v_k * (tick - t_k))
         self._smooth_traction(i_traction, n)
         # the front-most wheelset of each train in each section shunts it
         front = np.full(self.count, -np.inf)
@@ -295,7 +294,7 @@ class RailLineCore:
             active = self._active[k]
             if active is None or active[0] != configs[k]:
                 model = self._model(k, configs[k])
-                self._active[k] = (configs[k], model, self._relay_voltage(k, configs[k], self._fault_of(k)))
+                self._active[k] = (configs[k], model)
                 size = model.phi_n.shape[0]
                 self._phi_stack[k] = 0.0                             # sections padded to one size:
                 self._psi_stack[k] = 0.0                             # one product advances them all
@@ -322,7 +321,7 @@ class RailLineCore:
 
     def _update_relays(self, step_s: float) -> None:
         s = self.settings
-        levels = np.array([active[2] for active in self._active])
+        levels = np.array([active[1].relay_level for active in self._active])
         wants_up = np.where(self.relay_up, levels > s.relay_drop_out, levels >= s.relay_pick_up)
         changing = wants_up != self.relay_up
         self._relay_timer = np.where(changing, self._relay_timer + step_s, 0.0)
