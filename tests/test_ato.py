@@ -153,11 +153,15 @@ def test_after_a_yellow_signal_the_next_section_is_assumed_red_yellow_until_deco
     assert not any(t.signal for t in later.constraints.targets)
 
 
-def test_digital_cab_signal_targets_the_end_of_the_free_blocks():
+def test_digital_cab_signal_targets_the_next_signal_and_a_stop_after_the_free_blocks():
     atp = _atp("digital")
-    r = atp.supervise(0.0, 3000.0, 30.0, sig.GREEN, True, 120 * KMH, 0.0, 2)
+    r = atp.supervise(0.0, 3000.0, 30.0, sig.GREEN, True, 120 * KMH, 100 * KMH, 2)
     assert r.ceiling_mps == pytest.approx(120 * KMH)
-    assert any(t.signal and t.position_m == 10400.0 for t in r.constraints.targets)   # end of section 2+2
+    targets = {(t.position_m, round(t.speed_mps * 3.6), t.signal) for t in r.constraints.targets}
+    assert (5200.0, 100, False) in targets                      # the next signal (end of section 2)
+    assert (10400.0, 0, True) in targets                        # the section after two free ones
+    open_line = atp.supervise(0.5, 3010.0, 30.0, sig.GREEN, True, 120 * KMH, 120 * KMH, 6)
+    assert not any(t.signal for t in open_line.constraints.targets)
 
 
 # ---- driving to the timetable ------------------------------------------------------------------

@@ -1,29 +1,44 @@
-"""The thesis' 16-command system with our frame synchronisation (issue 7 groundwork): round
-trip, slips never yield another command, a steady tone never yields one, noise never yields a
-wrong one."""
+"""The thesis' 16-command system with our frame synchronisation: round trip, slips never
+yield another command, a steady tone never yields one, noise never yields a wrong one
+(symbol-level: ideal symbol timing; the whole chain is in test_digital.py)."""
 import numpy as np
 import pytest
 
 from fmus.common import dqpsk
 from fmus.common import fire_dqpsk as fd
+from fmus.common.digital import Acceptor
 
 FS = 4000.0
+FRAME_S = fd.FRAME_SYMBOLS / fd.BAUD
+
+
+class _Receiver:
+    """Framer + acceptance fed one symbol correlation at a time."""
+
+    def __init__(self):
+        self.framer = fd.FireFramer()
+        self.acceptor = Acceptor(fd.SYSTEM, 1, FRAME_S)
+        self.symbols = 0
+
+    def push(self, symbol):
+        self.symbols += 1
+        now = self.symbols / fd.BAUD
+        for message in self.framer.push(np.array([symbol])):
+            self.acceptor.push(now, message)
+        self.acceptor.expire(now)
+        return self.acceptor.command
 
 
 def _receive(samples):
-    receiver = fd.FrameReceiver()
-    symbols = dqpsk.correlate(samples, FS, fd.CARRIER_HZ, fd.BAUD)
-    accepted = []
-    for kind in fd.classify(symbols):
-        receiver.push([kind])
-        accepted.append(receiver.command)
-    return receiver, accepted
+    receiver = _Receiver()
+    accepted = [receiver.push(z) for z in dqpsk.correlate(samples, FS, fd.CARRIER_HZ, fd.BAUD)]
+    return receiver.acceptor, accepted
 
 
 @pytest.mark.parametrize("command", [1, 2, 7, 11, 16])
 def test_every_command_round_trips_after_two_identical_words(command):
-    receiver, accepted = _receive(fd.transmit([command] * 4, FS, 1.0, 0.3))
-    assert receiver.command == command and receiver.rejected == 0
+    acceptor, accepted = _receive(fd.transmit([command] * 4, FS, 1.0, 0.3))
+    assert acceptor.command == command and acceptor.rejected == 0
     first = next(i for i, c in enumerate(accepted) if c is not None)
     assert first <= 3 * fd.FRAME_SYMBOLS + 1                  # lock, then two words
 
@@ -55,8 +70,8 @@ def test_without_the_sync_a_one_symbol_slip_reads_a_rotated_valid_word():
 
 def test_a_steady_tone_never_yields_a_command():
     t = np.arange(int(10 * FS)) / FS
-    receiver, accepted = _receive(np.cos(2 * np.pi * fd.CARRIER_HZ * t + 0.4))
-    assert set(accepted) == {None} and receiver.decoded == 0
+    acceptor, accepted = _receive(np.cos(2 * np.pi * fd.CARRIER_HZ * t + 0.4))
+    assert set(accepted) == {None} and acceptor.accepted == 0
 
 
 @pytest.mark.parametrize("snr_db", [6.0, 0.0, -3.0, -9.0, -15.0])
@@ -66,18 +81,24 @@ def test_noise_never_yields_a_wrong_command(snr_db):
     sequence = [c for c in commands for _ in range(3)]       # each command held for three frames
     samples = fd.transmit(sequence, FS, 1.0)
     sigma = np.sqrt(0.5 / 10 ** (snr_db / 10))                # SNR over the whole band (A²/2 / σ²)
-    receiver = fd.FrameReceiver()
+    receiver = _Receiver()
     symbols = dqpsk.correlate(samples + sigma * rng.standard_normal(samples.size), FS, fd.CARRIER_HZ, fd.BAUD)
-    kinds = fd.classify(symbols)
-    sent = np.repeat(sequence, fd.FRAME_SYMBOLS)[:kinds.size]
+    sent = np.repeat(sequence, fd.FRAME_SYMBOLS)
     wrong = 0
-    for k, kind in enumerate(kinds):
-        receiver.push([kind])
+    for k, z in enumerate(symbols[:sent.size]):
+        command = receiver.push(z)
         # the accepted command may lag behind a change until the timeout, never be anything else
-        window = sent[max(0, k - (fd.TIMEOUT_FRAMES + 1) * fd.FRAME_SYMBOLS):k + 1]
-        if receiver.command is not None and receiver.command not in set(window):
+        window = sent[max(0, k - 4 * fd.FRAME_SYMBOLS):k + 1]
+        if command is not None and command not in set(window):
             wrong += 1
     assert wrong == 0
+
+
+def test_words_carry_the_track_and_block_parity():
+    framer = fd.FireFramer()
+    symbols = dqpsk.correlate(fd.transmit([9] * 4, FS, track=0, block=1), FS, fd.CARRIER_HZ, fd.BAUD)
+    messages = framer.push(symbols)
+    assert messages and all(m.command == 9 and m.track == 0 and m.block == 1 for m in messages)
 
 
 def test_unknown_command_is_refused():

@@ -7,7 +7,9 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
 * the cab signal. ``cab_signal="ALSN"``: the aspect, through the table in
   fmus/common/signalling.py (ceiling, and the speed to reach at the exit signal of the
   current block section: 60 km/h on yellow, a stop on red-yellow). ``"digital"``:
-  ``v_permitted`` now and ``v_target`` at the end of the ``free_blocks``-th section ahead.
+  ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
+  and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
+  (the section after the free ones is occupied; fmus/common/digital.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -34,6 +36,7 @@ from typing import List, Optional
 
 from ..common import signalling as sig
 from ..common.data import Line
+from ..common.digital import FREE_BLOCKS_OPEN
 from ..common.slave import FmuInputError
 
 KMH = 1.0 / 3.6
@@ -153,7 +156,9 @@ class Atp:
         c = Constraints(max(v_permitted, 0.0))
         if k is not None:
             target = max(v_target, 0.0)
-            c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), target, signal=target == 0.0))
+            c.targets.append(Target(self.exit_signal_m(k), target, signal=target == 0.0))
+            if free_blocks < FREE_BLOCKS_OPEN:       # the section after the free ones is occupied
+                c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), 0.0, signal=True))
         return c
 
     def _no_code(self) -> Constraints:

@@ -88,14 +88,6 @@ def classify_cycle(short_intervals: int, cycle_s: float) -> Tuple[int, str]:
     return {2: sig.GREEN, 1: sig.YELLOW, 0: sig.RED_YELLOW}[short_intervals], kind
 
 
-SYSTEMS = ("ALSN",)   # the digital systems arrive with their own issue
-
-
-def check_system(system: str) -> None:
-    if system not in SYSTEMS:
-        raise FmuInputError(f"parameter system: {system!r} is not available ({', '.join(SYSTEMS)})")
-
-
 def check_carrier_and_rate(carrier_hz: float, fs_hz: float, where: str) -> None:
     if not any(abs(carrier_hz - c) < 1e-9 for c in SUPPORTED_CARRIERS_HZ):
         raise FmuInputError(f"{where}carrier: {carrier_hz:g} Hz is not an ALSN carrier "

@@ -11,33 +11,40 @@ starts with a **sync symbol whose phase increment is 0**, an increment the data 
 * locks on when two sync symbols arrive exactly 7 symbols apart, and decodes only the 6 data
   symbols between consecutive syncs that keep that spacing; a sync out of place, or a missing
   one, drops the lock (a slip, a noise hit) and nothing is decoded until it locks again;
-* discards words that fail the Fire check;
-* accepts a command only after two identical consecutive decoded words (cf. ALSN's two cycles);
-* drops it (no code) when no word has confirmed it for three frames (1.4 s): a held command
-  can never outlive a change of the command sent by more than that.
+* discards words that fail the Fire check (reported as ``None``); what is accepted, and when,
+  is the common rule of digital.Acceptor.
 
 A slip can thus never yield a rotated word, and a steady unmodulated tone (all increments 0:
 sync symbols only, no data) never yields a command.
 
-Commands: Table 2.1 of the thesis (16 rows, speeds passenger/freight as printed; unreadable
-cells marked [U]). Information words: command n ↦ 6-bit word n (1…16); the code's d_min = 4
-holds between any two command words.
+Commands: Table 2.1 of the thesis (16 rows, speeds high-speed/passenger/freight as printed;
+unreadable cells marked [U]). Information word (6 bits, the thesis leaves the map to us):
+command − 1 in the low 4 bits, the track parity in bit 4 and the block-section parity in bit 5
+(the thesis has no protection against adjacent tracks and sections; ALS-EN has, seed 000 §5 —
+we use the two spare bits for it). The code's d_min = 4 holds between any two words.
+
+What a command means to the ATP (docs/digital_channels.md): the cab signal, the free blocks,
+and Table 2.1's *permissible* speed of the train's category as the speed for passing the next
+signal (0 with no free block: stop there); the ceiling is the category's top speed of the
+table (cmd 16), or 20 km/h on commands 1 and 3 (moving on a red / flashing white). Our plain-
+line automatic block sends, by free blocks 0…6: 2 (КЖ), 7, 12, 13, 14, 15, 16.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import numpy as np
 
 from . import dqpsk, fire_code
+from . import signalling as sig
+from .digital import DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 175.0
 BAUD = 15.0
 DATA_SYMBOLS = fire_code.N_BITS // 2
 FRAME_SYMBOLS = DATA_SYMBOLS + 1
 SYNC_TOLERANCE_RAD = np.pi / 8
-TIMEOUT_FRAMES = 3            # command not confirmed for three frames (1.4 s): no code, restrictive
 
 
 @dataclass(frozen=True)
@@ -70,19 +77,30 @@ COMMANDS = {c.number: c for c in (
 )}
 
 
-def frame_increments(command: int) -> np.ndarray:
-    """Phase increments of one frame: the sync symbol (0) and the 6 dibits of the code word."""
+_ASPECT = {"red": sig.RED, "red-yellow": sig.RED_YELLOW, "white-flashing": sig.WHITE,
+           "yellow": sig.YELLOW, "green": sig.GREEN}
+_CATEGORY_COLUMN = {"high_speed": 0, "passenger": 1, "freight": 2}
+COMMAND_OF_FREE_BLOCKS = (2, 7, 12, 13, 14, 15, 16)
+RELEASE_COMMANDS = (1, 3)          # moving on a red or a flashing white: 20 km/h from now on
+
+
+def info_word(command: int, track: int, block: int) -> int:
     if command not in COMMANDS:
         raise ValueError(f"command {command} is not one of 1…{len(COMMANDS)}")
-    bits = fire_code.to_bits(fire_code.encode(command))
+    return (command - 1) | (track & 1) << 4 | (block & 1) << 5
+
+
+def frame_increments(command: int, track: int = 1, block: int = 0) -> np.ndarray:
+    """Phase increments of one frame: the sync symbol (0) and the 6 dibits of the code word."""
+    bits = fire_code.to_bits(fire_code.encode(info_word(command, track, block)))
     dibits = bits[0::2] * 2 + bits[1::2]
     return np.concatenate([[0.0], dqpsk.INCREMENT_OF_DIBIT[dibits]])
 
 
 def transmit(commands: List[int], fs_hz: float, amplitude: float = 1.0, start_phase: float = 0.0,
-             carrier_hz: float = CARRIER_HZ, baud: float = BAUD) -> np.ndarray:
+             carrier_hz: float = CARRIER_HZ, baud: float = BAUD, track: int = 1, block: int = 0) -> np.ndarray:
     """Samples of consecutive frames, one per command (a reference symbol first)."""
-    increments = np.concatenate([frame_increments(c) for c in commands])
+    increments = np.concatenate([frame_increments(c, track, block) for c in commands])
     return dqpsk.modulate_increments(increments, fs_hz, carrier_hz, baud, amplitude, start_phase)
 
 
@@ -90,39 +108,40 @@ SYNC = -1
 
 
 def classify(symbols: np.ndarray) -> np.ndarray:
-    """Per phase difference: SYNC (−1) or the data dibit (0…3)."""
+    """Per phase difference of consecutive symbols: SYNC (−1) or the data dibit (0…3)."""
     difference = np.angle(symbols[1:] * np.conj(symbols[:-1]))
     data = dqpsk.decide(symbols)
     return np.where(np.abs(difference) < SYNC_TOLERANCE_RAD, SYNC, data)
 
 
-class FrameReceiver:
-    """Symbol-by-symbol framing, Fire check and two-identical-words acceptance."""
+class FireFramer(Framer):
+    """Frame synchronisation on the sync symbol, then the Fire check (module docstring)."""
 
     def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        self.previous: Optional[complex] = None
         self.since_sync: Optional[int] = None     # symbols since the last sync, None: not locked
         self.locked = False
         self.data: List[int] = []
-        self.previous_word: Optional[int] = None
-        self.command: Optional[int] = None        # accepted command, None: none
-        self.rejected = 0                         # words that failed the Fire check
-        self.decoded = 0
-        self.since_word = 0                       # symbols since the command in force was last confirmed
 
-    def push(self, kinds) -> None:
-        for kind in np.asarray(kinds):
-            kind = int(kind)
-            self.since_word += 1
-            if self.since_word > TIMEOUT_FRAMES * FRAME_SYMBOLS:
-                self.command = None                   # no confirmed word for too long: no code
+    def push(self, symbols: np.ndarray) -> List[Optional[Message]]:
+        if self.previous is not None:
+            symbols = np.concatenate([[self.previous], symbols])
+        if symbols.size < 2:
+            self.previous = symbols[-1] if symbols.size else self.previous
+            return []
+        self.previous = symbols[-1]
+        messages: List[Optional[Message]] = []
+        for kind in classify(symbols).tolist():
             if kind == SYNC:
                 if self.since_sync == FRAME_SYMBOLS:
                     if self.locked and len(self.data) == DATA_SYMBOLS:
-                        self._word(self.data)
+                        messages.append(self._word(self.data))
                     self.locked = True
                 else:
                     self.locked = False               # sync out of place: a slip or a hit
-                    self.previous_word = None
                 self.since_sync = 1
                 self.data = []
                 continue
@@ -134,20 +153,46 @@ class FrameReceiver:
                 self.locked = False
                 self.since_sync = None
                 self.data = []
-                self.previous_word = None
+                messages.append(None)
+        return messages
 
-    def _word(self, dibits: List[int]) -> None:
-        bits = []
+    @staticmethod
+    def _word(dibits: List[int]) -> Optional[Message]:
+        word = 0
         for d in dibits:
-            bits += [(d >> 1) & 1, d & 1]
-        info = int(fire_code.decode(fire_code.from_bits(bits)))
-        if info < 0 or info not in COMMANDS:
-            self.rejected += 1
-            self.previous_word = None
-            return
-        self.decoded += 1
-        if info == self.previous_word:
-            self.command = info
-        if info == self.command:
-            self.since_word = 0                   # the command in force is confirmed
-        self.previous_word = info
+            word = word << 2 | d
+        info = int(fire_code.decode(word))
+        if info < 0 or (info & 0xF) + 1 not in COMMANDS:
+            return None
+        return Message((info & 0xF) + 1, info >> 4 & 1, info >> 5 & 1)
+
+
+class FireDqpsk(DigitalSystem):
+    name = "FIRE_DQPSK"
+    carrier_hz = CARRIER_HZ
+    message_symbols = FRAME_SYMBOLS
+
+    def baud(self, carrier_hz: float) -> float:
+        return BAUD
+
+    def increments(self, message: Message) -> np.ndarray:
+        return frame_increments(message.command, message.track, message.block)
+
+    def command_for(self, free_blocks: int) -> int:
+        return COMMAND_OF_FREE_BLOCKS[min(max(free_blocks, 0), len(COMMAND_OF_FREE_BLOCKS) - 1)]
+
+    def commands(self) -> Tuple[int, ...]:
+        return tuple(COMMANDS)
+
+    def indication(self, command: int, category: str) -> Indication:
+        c = COMMANDS[command]
+        column = _CATEGORY_COLUMN[category]
+        ceiling = 20.0 if command in RELEASE_COMMANDS else float(COMMANDS[16].permitted_kmh[column])
+        target = 0.0 if c.free_blocks == 0 else float(c.permitted_kmh[column])
+        return Indication(command, _ASPECT[c.aspect], c.free_blocks, ceiling, target)
+
+    def framer(self, track_parity: int) -> Framer:
+        return FireFramer()
+
+
+SYSTEM = FireDqpsk()

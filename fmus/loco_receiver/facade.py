@@ -1,20 +1,26 @@
-"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore. No logic here (see core.py)."""
-from ..common import alsn
+"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
+FIRE_DQPSK). No logic here (see core.py, digital.py)."""
+from ..common import cab_systems
 from ..common.slave import FrameSlave, Port
 from .core import LocoReceiverCore, ReceiverSettings
+from .digital import CHANNELS, DigitalReceiverCore, DigitalReceiverSettings
+
+ALSN_DEFAULT_CARRIER_HZ = 50.0
 
 DEFAULT_FS_HZ = 4000.0
 
 
 class LocoReceiver(FrameSlave):
-    description = "ALSN locomotive receiver: gain control, band-pass, envelope, impulse relay, KPT decoder"
+    description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
+                   "decoder) or ALS-EN / FIRE_DQPSK (correlation demodulator, code check, 2-out-of-3 channels)")
 
     @classmethod
     def declare_ports(cls, build):
         n = build.frame
         return [
-            Port("system", "parameter", "String", start="ALSN", description="cab-signal system (ALSN; digital systems later)"),
-            Port("carrier", "parameter", unit="Hz", start=50.0, min=1.0, description="25, 50 or 75 Hz"),
+            Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
+            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+                 description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz"),
             Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
                  description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
             Port("train_category", "parameter", "String", start="passenger", description="passenger | freight | high_speed"),
@@ -22,11 +28,18 @@ class LocoReceiver(FrameSlave):
                  description="speed reported on green; 0: the category's maximum"),
             Port("filter_order", "parameter", "Integer", start=3, min=1, max=8,
                  description="Butterworth prototype order (band-pass order is twice this)"),
-            Port("filter_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0, description="0: 0.4 × carrier"),
+            Port("filter_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0, description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate"),
             Port("agc_limit", "parameter", unit="V", start=0.5, min=0.0, description="input amplitude where gain reduction starts"),
             Port("agc_recovery", "parameter", unit="1/s", start=10.0, min=0.0, description="gain recovery rate, dB per second"),
             Port("pick_up", "parameter", unit="V", start=0.12, min=0.0, description="relay pick-up (input-referred envelope)"),
             Port("drop_out", "parameter", unit="V", start=0.08, min=0.0),
+            Port("track_parity", "parameter", "Integer", start=1, min=0, max=1,
+                 description="digital: parity of the track the train runs on (messages of the other are discarded)"),
+            Port("limiter", "parameter", unit="V", start=4.0, min=0.0, description="digital: input limiter; 0 none"),
+            Port("min_level", "parameter", unit="V", start=0.01, min=0.0,
+                 description="digital: squelch, carrier amplitude below which nothing is decided"),
+            Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,),
+                 description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
             Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code", "output", "Integer", start=0, description="last decoded cycle: 0 none/invalid, 2 КЖ, 3 Ж, 4 З"),
@@ -39,7 +52,11 @@ class LocoReceiver(FrameSlave):
             Port("decoded_codes", "output", "Integer", start=0, description="valid cycles"),
             Port("transmitter", "output", "Integer", start=0, description="5 (KPT-5) or 7 (KPT-7) of the last valid cycle"),
             Port("joints", "output", "Integer", start=0, description="changes of transmitter type (joints passed)"),
-            Port("relay", "output", "Boolean", start=False, description="impulse relay state at the frame end"),
+            Port("relay", "output", "Boolean", start=False,
+                 description="ALSN: impulse relay state at the frame end; digital: carrier above the squelch"),
+            Port("channel_code", "output", "Integer", start=0, shape=(CHANNELS,),
+                 description="digital: each channel's command (raw id), 0 none"),
+            Port("foreign", "output", "Integer", start=0, description="digital: messages of the other track discarded"),
         ]
 
     def make_default_experiment(self):
@@ -47,12 +64,20 @@ class LocoReceiver(FrameSlave):
 
     def create_core(self):
         p = self.param
-        alsn.check_system(p("system"))
-        settings = ReceiverSettings(
-            carrier_hz=p("carrier"), fs_hz=p("fs"), train_category=p("train_category"), v_max_mps=p("v_max"),
-            filter_order=p("filter_order"), filter_bandwidth_hz=p("filter_bandwidth"), agc_limit_v=p("agc_limit"),
-            agc_recovery_db_per_s=p("agc_recovery"), pick_up_v=p("pick_up"), drop_out_v=p("drop_out"))
-        core = LocoReceiverCore(self.build.frame, settings)
+        system = cab_systems.digital_system(p("system"))
+        if system is None:
+            settings = ReceiverSettings(
+                carrier_hz=p("carrier") or ALSN_DEFAULT_CARRIER_HZ, fs_hz=p("fs"), train_category=p("train_category"),
+                v_max_mps=p("v_max"), filter_order=p("filter_order"), filter_bandwidth_hz=p("filter_bandwidth"),
+                agc_limit_v=p("agc_limit"), agc_recovery_db_per_s=p("agc_recovery"), pick_up_v=p("pick_up"),
+                drop_out_v=p("drop_out"))
+            core = LocoReceiverCore(self.build.frame, settings)
+        else:
+            settings = DigitalReceiverSettings(
+                fs_hz=p("fs"), carrier_hz=p("carrier"), train_category=p("train_category"), v_max_mps=p("v_max"),
+                track_parity=p("track_parity"), limiter_v=p("limiter"), min_level_v=p("min_level"),
+                band_width_hz=p("filter_bandwidth"))
+            core = DigitalReceiverCore(system, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
         return core
 
@@ -60,7 +85,13 @@ class LocoReceiver(FrameSlave):
         self.write_outputs(self.core.out, _OUTPUT_FIELDS)
 
     def step_core(self, current_time, step_size):
-        self.write_outputs(self.core.step(current_time, self.io["e_coil"]), _OUTPUT_FIELDS)
+        io = self.io
+        if isinstance(self.core, DigitalReceiverCore):
+            self.write_outputs(self.core.step(current_time, io["e_coil"], io["channel_fault"]), _OUTPUT_FIELDS)
+            io["channel_code"][...] = self.core.channel_codes
+            io["foreign"][...] = self.core.acceptor.foreign
+        else:
+            self.write_outputs(self.core.step(current_time, io["e_coil"]), _OUTPUT_FIELDS)
 
 
 # output port ← ReceiverOutputs field

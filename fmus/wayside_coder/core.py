@@ -52,6 +52,10 @@ class CoderSettings:
     timing_scale: float = 1.0           # all code timings × this (transmitter drift)
     relay_time_constant_s: float = 0.0  # 0: ideal keying
     seed: int = 1
+    # digital systems only
+    track_parity: int = 1               # 1 odd track, 0 even (adjacent-track protection)
+    generator_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
+    generator_ripple_db: float = 0.5
 
 
 @dataclass
@@ -62,24 +66,65 @@ class CoderOutputs:
     status: int = STATUS_OK
 
 
+def check_settings(line: Line, sections: int, s: CoderSettings) -> None:
+    """What every coder (ALSN or digital) checks of its line and parameters."""
+    if len(line.sections) > sections:
+        raise FmuInputError(f"{line.path}: field block_sections: {len(line.sections)} sections, but this "
+                            f"build models {sections}; rebuild with `railcosim build --sections "
+                            f"{len(line.sections)}`")
+    if s.block_aspects not in (3, 4):
+        raise FmuInputError(f"parameter block_aspects: {s.block_aspects} (3 or 4)")
+    if s.coding not in ("always", "on_occupation"):
+        raise FmuInputError(f"parameter coding: {s.coding!r} is not always or on_occupation")
+    for name, value in (("fs", s.fs_hz), ("amplitude", s.amplitude_v), ("timing_scale", s.timing_scale)):
+        if not value > 0:
+            raise FmuInputError(f"parameter {name}: must be positive, got {value}")
+    for name, value in (("switch_on_delay", s.switch_on_delay_s), ("relay_time_constant", s.relay_time_constant_s)):
+        if value < 0:
+            raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
+    if s.track_parity not in (0, 1):
+        raise FmuInputError(f"parameter track_parity: {s.track_parity} (0 even track, 1 odd track)")
+
+
+class CodingSwitch:
+    """`coding = on_occupation`: a section is coded once occupied for the switch-on delay."""
+
+    def __init__(self, count: int, settings: CoderSettings):
+        self.settings = settings
+        self.occupied_since = np.full(count, np.inf)
+
+    def coded(self, t: float, occupied: np.ndarray) -> np.ndarray:
+        s = self.settings
+        self.occupied_since = np.where(occupied, np.minimum(self.occupied_since, t), np.inf)
+        if s.coding == "always":
+            return np.ones(occupied.size, dtype=bool)
+        return t - self.occupied_since >= s.switch_on_delay_s - 1e-12
+
+
+def sections_to_occupied(occupied: np.ndarray, count: int) -> np.ndarray:
+    """For each section, how many sections ahead the first occupied one lies (1: the next);
+    beyond the last modelled section the line is taken as free (a large number)."""
+    occ = np.concatenate([np.asarray(occupied[:count], dtype=bool), [False]])
+    index = np.where(occ, np.arange(count + 1), count + 10)
+    next_occupied = np.minimum.accumulate(index[::-1])[::-1]
+    return next_occupied[1:] - np.arange(count)
+
+
+def block_signals(ahead: np.ndarray, block_aspects: int) -> np.ndarray:
+    """Aspect of the signal at each section's exit from the distance to the occupancy ahead."""
+    signals = np.full(ahead.size, SIGNAL_GREEN)
+    signals[ahead == 1] = SIGNAL_RED
+    signals[ahead == 2] = SIGNAL_YELLOW
+    if block_aspects == 4:
+        signals[ahead == 3] = SIGNAL_YELLOW_GREEN
+    return signals
+
+
 class WaysideCoderCore:
     def __init__(self, line: Line, sections: int, frame: int, settings: CoderSettings,
                  transmitters: Optional[dict] = None):
         s = settings
-        if len(line.sections) > sections:
-            raise FmuInputError(f"{line.path}: field block_sections: {len(line.sections)} sections, but this "
-                                f"build models {sections}; rebuild with `railcosim build --sections "
-                                f"{len(line.sections)}`")
-        if s.block_aspects not in (3, 4):
-            raise FmuInputError(f"parameter block_aspects: {s.block_aspects} (3 or 4)")
-        if s.coding not in ("always", "on_occupation"):
-            raise FmuInputError(f"parameter coding: {s.coding!r} is not always or on_occupation")
-        for name, value in (("fs", s.fs_hz), ("amplitude", s.amplitude_v), ("timing_scale", s.timing_scale)):
-            if not value > 0:
-                raise FmuInputError(f"parameter {name}: must be positive, got {value}")
-        for name, value in (("switch_on_delay", s.switch_on_delay_s), ("relay_time_constant", s.relay_time_constant_s)):
-            if value < 0:
-                raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
+        check_settings(line, sections, s)
         transmitters = transmitters or alsn.load_transmitters()
         self.settings = s
         self.count = len(line.sections)           # modelled sections; ports beyond stay silent
@@ -109,7 +154,7 @@ class WaysideCoderCore:
         self.omega = 2.0 * np.pi * carriers
         self.codes = np.zeros(k, dtype=np.int64)
         self.signals = np.zeros(k, dtype=np.int64)
-        self.occupied_since = np.full(k, np.inf)
+        self.switch = CodingSwitch(k, s)
         if s.relay_time_constant_s > 0:
             a = np.exp(-1.0 / (s.fs_hz * s.relay_time_constant_s))
             self._relay = (np.array([1.0 - a]), np.array([1.0, -a]))
@@ -122,29 +167,14 @@ class WaysideCoderCore:
 
     # ---- block logic --------------------------------------------------------------------------
     def block_signals(self, occupied: np.ndarray) -> np.ndarray:
-        """Aspect of the signal at each section's exit from the occupancy ahead (line beyond: free)."""
-        k = self.count
-        occ = np.concatenate([np.asarray(occupied[:k], dtype=bool), [False]])
-        # distance (in sections) from each section to the first occupied section ahead of it
-        index = np.where(occ, np.arange(k + 1), k + 10)
-        next_occupied = np.minimum.accumulate(index[::-1])[::-1]
-        ahead = next_occupied[1:] - np.arange(k)
-        signals = np.full(k, SIGNAL_GREEN)
-        signals[ahead == 1] = SIGNAL_RED
-        signals[ahead == 2] = SIGNAL_YELLOW
-        if self.settings.block_aspects == 4:
-            signals[ahead == 3] = SIGNAL_YELLOW_GREEN
-        return signals
+        return block_signals(sections_to_occupied(occupied, self.count), self.settings.block_aspects)
 
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False) -> CoderOutputs:
         s = self.settings
         k, out = self.count, self.out
         signals = self.block_signals(occupied)
-        codes = _CODE_OF_SIGNAL[signals]
-        occ = np.asarray(occupied[:k], dtype=bool)
-        self.occupied_since = np.where(occ, np.minimum(self.occupied_since, t), np.inf)
-        if s.coding == "on_occupation":
-            codes = np.where(t - self.occupied_since >= s.switch_on_delay_s - 1e-12, codes, alsn.NO_CODE)
+        codes = np.where(self.switch.coded(t, np.asarray(occupied[:k], dtype=bool)), _CODE_OF_SIGNAL[signals],
+                         alsn.NO_CODE)
         out.status = STATUS_FAILED if (fault_main and fault_reserve) else (STATUS_PARTIAL if fault_main or fault_reserve else STATUS_OK)
         if out.status == STATUS_FAILED:
             codes = np.zeros(k, dtype=np.int64)

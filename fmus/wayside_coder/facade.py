@@ -1,14 +1,17 @@
-"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore. No logic here (see core.py)."""
-from ..common import alsn
+"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN) or DigitalCoderCore (ALS-EN,
+FIRE_DQPSK). No logic here (see core.py, digital.py)."""
+from ..common import alsn, cab_systems
 from ..common.data import DEFAULT_LINE, load_line
 from ..common.slave import FrameSlave, Port
 from .core import CoderSettings, WaysideCoderCore
+from .digital import DigitalCoderCore
 
 DEFAULT_FS_HZ = 4000.0
 
 
 class WaysideCoder(FrameSlave):
-    description = "ALSN wayside coder: automatic-block aspects from occupancy, KPT-5/KPT-7 code transmitters per section"
+    description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters "
+                   "or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
 
     @classmethod
     def declare_ports(cls, build):
@@ -17,11 +20,12 @@ class WaysideCoder(FrameSlave):
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
             Port("codes_file", "parameter", "String", start="",
                  description="code timing tables (JSON); empty: the bundled KPT-5/KPT-7 tables"),
-            Port("system", "parameter", "String", start="ALSN", description="cab-signal system (ALSN; digital systems later)"),
+            Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
             Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
                  description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
             Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
-                 description="0: each section's carrier from the line file; else 25, 50 or 75 Hz for all"),
+                 description="0: ALSN each section's carrier from the line file, digital the system's "
+                             "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); else this carrier for all"),
             Port("amplitude", "parameter", unit="V", start=4.0, min=0.0, description="peak transmitter voltage"),
             Port("block_aspects", "parameter", "Integer", start=3, min=3, max=4),
             Port("coding", "parameter", "String", start="always", description="always | on_occupation"),
@@ -30,15 +34,24 @@ class WaysideCoder(FrameSlave):
                  description="all code timings × this (transmitter drift)"),
             Port("relay_time_constant", "parameter", unit="s", start=0.0, min=0.0,
                  description="transmitter-relay switching transient; 0: ideal keying"),
-            Port("seed", "parameter", "Integer", start=1, description="random cam phase per section"),
+            Port("seed", "parameter", "Integer", start=1, description="random cam / symbol-clock phase per section"),
+            Port("track_parity", "parameter", "Integer", start=1, min=0, max=1,
+                 description="digital: parity of this track sent in every message (1 odd, 0 even)"),
+            Port("generator_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0,
+                 description="digital: generator band-pass width; 0: 10/3 × the symbol rate"),
             Port("occupied", "input", "Boolean", start=False, shape=(k,)),
             Port("fault_main", "input", "Boolean", start=False),
             Port("fault_reserve", "input", "Boolean", start=False),
+            Port("wrong_command_main", "input", "Integer", start=0,
+                 description="digital: 0 healthy, else the main controller computes this command everywhere"),
+            Port("wrong_command_reserve", "input", "Integer", start=0,
+                 description="digital: 0 healthy, else the reserve controller computes this command everywhere"),
             Port("u_tx", "output", unit="V", shape=(k, n), frame=True, description="transmitter voltage into each section"),
-            Port("code_tx", "output", "Integer", start=0, shape=(k,), description="code sent: 0 none, 2 КЖ, 3 Ж, 4 З"),
+            Port("code_tx", "output", "Integer", start=0, shape=(k,),
+                 description="code sent, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; FIRE_DQPSK command 1-16; ALS-EN KLUB register"),
             Port("signal", "output", "Integer", start=0, shape=(k,),
                  description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
-            Port("status", "output", "Integer", start=0, description="0 ok, 1 on the reserve transmitter, 2 failed"),
+            Port("status", "output", "Integer", start=0, description="0 ok, 1 one transmitter/controller failed, 2 both"),
         ]
 
     def make_default_experiment(self):
@@ -46,20 +59,29 @@ class WaysideCoder(FrameSlave):
 
     def create_core(self):
         p = self.param
-        alsn.check_system(p("system"))
+        system = cab_systems.digital_system(p("system"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
-        codes = alsn.load_transmitters(self.resource_path(p("codes_file") or str(alsn.CODES_FILE)))
         settings = CoderSettings(
             fs_hz=p("fs"), carrier_hz=p("carrier"), amplitude_v=p("amplitude"), block_aspects=p("block_aspects"),
             coding=p("coding"), switch_on_delay_s=p("switch_on_delay"), timing_scale=p("timing_scale"),
-            relay_time_constant_s=p("relay_time_constant"), seed=p("seed"))
-        core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)
+            relay_time_constant_s=p("relay_time_constant"), seed=p("seed"), track_parity=p("track_parity"),
+            generator_bandwidth_hz=p("generator_bandwidth"))
+        if system is None:
+            codes = alsn.load_transmitters(self.resource_path(p("codes_file") or str(alsn.CODES_FILE)))
+            core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)
+        else:
+            core = DigitalCoderCore(system, line, self.build.sections, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
         return core
 
     def step_core(self, current_time, step_size):
         io = self.io
-        out = self.core.step(current_time, io["occupied"], bool(io["fault_main"]), bool(io["fault_reserve"]))
+        faults = bool(io["fault_main"]), bool(io["fault_reserve"])
+        if isinstance(self.core, DigitalCoderCore):
+            out = self.core.step(current_time, io["occupied"], *faults, int(io["wrong_command_main"]),
+                                 int(io["wrong_command_reserve"]))
+        else:
+            out = self.core.step(current_time, io["occupied"], *faults)
         io["u_tx"][...] = out.u_tx
         io["code_tx"][...] = out.code_tx
         io["signal"][...] = out.signal

@@ -1,0 +1,183 @@
+"""What the digital cab-signal systems share (issue 7; docs/digital_channels.md): the message
+model, the interface a system implements (ALS-EN in als_en.py, the thesis' FIRE_DQPSK in
+fire_dqpsk.py), and the receiver's acceptance rules. No FMI and no signal processing here.
+
+A **message** carries a system command plus two parity bits the wayside adds for protection
+(seed 000 §5, ALS-EN): the parity of the track (a code induced from the adjacent track of a
+double-track line is discarded) and of the block section (a code leaking from the next section
+across a failed insulated joint, or from under the tail of the train ahead, cannot make the
+display more permissive while the own section's code is still being received).
+
+What a decoded command means to the ATP (our reading of the sources, docs/digital_channels.md):
+
+* ``free_blocks`` — free block sections ahead; when below :data:`FREE_BLOCKS_OPEN` the section
+  after them is occupied, so the train must stop at the end of the last free one;
+* ``permitted_kmh`` — the ceiling from now on (the category's maximum, or a release speed
+  such as 20 km/h when moving on a red);
+* ``target_kmh`` — the speed for passing the next signal (0: stop at it).
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from . import signalling as sig
+from .slave import FmuInputError
+
+FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
+CATEGORIES = ("passenger", "freight", "high_speed")
+
+
+@dataclass(frozen=True)
+class Message:
+    command: int              # system command id
+    track: int                # track parity 0/1
+    block: int                # block-section parity 0/1
+
+
+@dataclass(frozen=True)
+class Indication:
+    code: int                 # raw id reported on the `code` port
+    aspect: int               # DESIGN §4 enumeration
+    free_blocks: int
+    permitted_kmh: float      # ceiling from now on
+    target_kmh: float         # speed for passing the next signal
+
+
+class Framer(ABC):
+    """Symbol correlations → decoded messages (None for a word discarded by the code check)."""
+
+    @abstractmethod
+    def push(self, symbols: np.ndarray) -> List[Optional[Message]]:
+        ...
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget the symbol history (the symbol timing was re-chosen)."""
+
+
+class DigitalSystem(ABC):
+    name: str
+    carrier_hz: float             # default carrier
+    message_symbols: int          # symbols per message cycle
+
+    @abstractmethod
+    def baud(self, carrier_hz: float) -> float:
+        """Symbol rate at a carrier (ALS-EN: a fixed number of carrier cycles per symbol)."""
+
+    @abstractmethod
+    def increments(self, message: Message) -> np.ndarray:
+        """Phase increment (rad) of each symbol of one message cycle."""
+
+    @abstractmethod
+    def command_for(self, free_blocks: int) -> int:
+        """The command a plain-line automatic block sends with this many free sections ahead."""
+
+    @abstractmethod
+    def indication(self, command: int, category: str) -> Indication:
+        ...
+
+    @abstractmethod
+    def commands(self) -> Tuple[int, ...]:
+        ...
+
+    @abstractmethod
+    def framer(self, track_parity: int) -> Framer:
+        ...
+
+    def rank(self, command: int) -> tuple:
+        """Higher is more permissive: aspect, then free blocks, then the speeds."""
+        ind = self.indication(command, "passenger")
+        return sig.restrictiveness(ind.aspect), ind.free_blocks, ind.target_kmh, ind.permitted_kmh
+
+    def check_command(self, command: int, where: str) -> None:
+        if command not in self.commands():
+            raise FmuInputError(f"{where}: command {command} is not one of the {self.name} commands "
+                                f"({min(self.commands())}…{max(self.commands())})")
+
+    def message_s(self, carrier_hz: float) -> float:
+        return self.message_symbols / self.baud(carrier_hz)
+
+
+def check_category(category: str) -> None:
+    if category not in CATEGORIES:
+        raise FmuInputError(f"parameter train_category: {category!r} is not one of {', '.join(CATEGORIES)}")
+
+
+def check_modem_rate(system: DigitalSystem, carrier_hz: float, fs_hz: float, where: str = "parameter ") -> None:
+    """The sample rate must carry the carrier (Nyquist with room for the receiver's 500 Hz
+    anti-alias filter) and give every symbol enough samples for its correlation."""
+    baud = system.baud(carrier_hz)
+    if not 100.0 <= carrier_hz <= 400.0:
+        raise FmuInputError(f"{where}carrier: {carrier_hz:g} Hz is outside the 100…400 Hz band of the "
+                            f"{system.name} modem")
+    if fs_hz < 4.0 * carrier_hz or fs_hz < 1000.0:
+        raise FmuInputError(f"{where}fs: {fs_hz:g} Hz cannot carry a {carrier_hz:g} Hz {system.name} carrier "
+                            f"(needs ≥ max(4 × carrier, 1000 Hz))")
+    if fs_hz / baud < 16:
+        raise FmuInputError(f"{where}fs: {fs_hz:g} Hz gives {fs_hz / baud:.1f} samples per {baud:g} Bd symbol "
+                            f"(needs ≥ 16)")
+
+
+class Acceptor:
+    """The receiver's acceptance rules, common to both digital systems (our design, fail-safe):
+
+    * a message from the other track is discarded (counted in ``foreign``);
+    * a message no more permissive than the command in force — or, after a loss, than the
+      last one accepted — takes effect at once (one message); anything more permissive, and
+      anything at a cold start, only after two identical consecutive messages;
+    * a more permissive message of the *other* block parity counts only if no message of the
+      command's own parity arrived within the last message period: a code leaking from the
+      next section cannot win while the own section's code is still there, but at a real
+      joint the old code stops and the new one is taken one message later;
+    * no confirming message of the command in force for ``timeout_messages`` periods → no
+      code (the ATP then applies its no-code rules).
+    """
+
+    def __init__(self, system: DigitalSystem, track_parity: int, message_s: float, timeout_messages: int = 3):
+        self.system = system
+        self.track = track_parity
+        self.message_s = message_s
+        self.timeout_s = timeout_messages * message_s
+        self.command: Optional[int] = None       # in force
+        self.block: Optional[int] = None
+        self.last_command: Optional[int] = None  # last accepted, kept through a loss
+        self.candidate: Optional[Message] = None
+        self.confirmed_s = -np.inf
+        self.seen_s = [-np.inf, -np.inf]         # last message of each block parity
+        self.accepted = 0
+        self.rejected = 0
+        self.foreign = 0
+
+    def push(self, time_s: float, message: Optional[Message]) -> None:
+        if message is None:
+            self.rejected += 1
+            self.candidate = None
+            return
+        if message.track != self.track:
+            self.foreign += 1
+            self.candidate = None
+            return
+        self.accepted += 1
+        own_parity_recent = self.block is not None and time_s - self.seen_s[self.block] <= self.message_s * 1.05
+        self.seen_s[message.block] = time_s
+        reference = self.command if self.command is not None else self.last_command
+        permissive = reference is None or self.system.rank(message.command) > self.system.rank(reference)
+        if message.command == self.command and message.block == self.block:
+            self.confirmed_s = time_s
+        elif not permissive:
+            self._take(message, time_s)
+        elif self.candidate == message and not (message.block != self.block and own_parity_recent):
+            self._take(message, time_s)
+        self.candidate = message
+
+    def _take(self, message: Message, time_s: float) -> None:
+        self.command, self.block, self.last_command = message.command, message.block, message.command
+        self.confirmed_s = time_s
+
+    def expire(self, now_s: float) -> None:
+        if self.command is not None and now_s - self.confirmed_s > self.timeout_s:
+            self.command = None

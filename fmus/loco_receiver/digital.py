@@ -1,0 +1,213 @@
+"""Locomotive receiver for the digital systems (ALS-EN, FIRE_DQPSK): coil EMF → amplitude
+limiter → anti-alias low-pass → band-pass → symbol timing and I/Q correlation → differential
+decision → framing and code check → acceptance → three channels voted 2-out-of-3 (seed 000
+§10; no FMI here).
+
+* **Front end.** Back-to-back zener limiter at ±`limiter` V (seed 000 §10.3: КС133А), the
+  6th-order Chebyshev low-pass at 500 Hz (1 dB ripple; the thesis' anti-alias filter, an
+  analog design in python-control discretised with Tustin), then a digital band-pass at the
+  carrier (Butterworth, 4th order, 10/3 of the symbol rate wide).
+* **Symbol timing and correlation.** The transmitter's symbol clock is unknown. The baseband
+  signal x·e^(−jωt) is integrated over one symbol (integrate-and-dump, running sums from a
+  carried cumulative sum) at 8 candidate instants per symbol; each candidate keeps a running
+  mean of |Z|² over about 8 symbols, and the receiver samples at the best one (switching only
+  when another is > 1 dB better: a window that straddles a phase jump loses energy, so the
+  best instant is the symbol end, filter delays included). A switch restarts the framing.
+* **Squelch.** Symbols whose amplitude is below `min_level` are not decided (the framing
+  restarts), so a dead channel shows no code rather than noise decisions.
+* **Decision, framing, code check**: the system's framer (als_en.py, fire_dqpsk.py);
+  **acceptance**: digital.Acceptor (track parity, one message towards restrictive, two
+  identical towards permissive, block-parity rule, 3-message timeout).
+* **2-out-of-3.** The three channels are identical hardware on the same coil signal, so they
+  decode the same messages: the chain runs once and its result feeds every channel (exact,
+  not an approximation). Per-channel faults (`channel_fault[i]`) act on a channel's output:
+  1 failed and excluded by its self-test; 2 stuck at the most permissive command (a dangerous
+  undetected fault); 3 silent without being detected. The command in force is one that two
+  counted channels agree on, else none (redundancy.vote_2oo3).
+
+Outputs follow the ALSN receiver's record (core.ReceiverOutputs): ``code`` is the system's
+raw id (FIRE: command 1–16; ALS-EN: KLUB register 9–15), ``errors`` counts discarded words,
+``decoded_codes`` accepted own-track messages, ``joints`` changes of block parity (sections
+entered), ``relay`` carrier present (above the squelch).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
+
+import numpy as np
+from scipy.signal import lfilter
+
+from ..common import redundancy
+from ..common import signalling as sig
+from ..common.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
+from ..common.filter_design import chebyshev_low_pass
+from ..common.slave import FmuInputError
+from . import filters
+from .core import ReceiverOutputs
+
+ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
+TIMING_CANDIDATES = 8
+TIMING_AVERAGE = 1.0 / 8.0          # weight of a new |Z|² in a candidate's running mean
+TIMING_SWITCH = 10 ** 0.1           # another candidate must be 1 dB better
+CHANNELS = 3
+CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
+
+
+@dataclass
+class DigitalReceiverSettings:
+    fs_hz: float = 4000.0
+    carrier_hz: float = 0.0          # 0: the system's default
+    train_category: str = "passenger"
+    v_max_mps: float = 0.0           # 0: the system's speed for the category
+    track_parity: int = 1
+    limiter_v: float = 4.0           # 0: no limiter
+    min_level_v: float = 0.01        # squelch (carrier amplitude at the coil)
+    band_width_hz: float = 0.0       # 0: 10/3 × the symbol rate
+
+
+class SymbolClock:
+    """Integrate-and-dump correlation at the best of several candidate symbol instants."""
+
+    def __init__(self, fs_hz: float, carrier_hz: float, baud: float, frame: int):
+        self.samples_per_symbol = fs_hz / baud
+        self.window = int(round(self.samples_per_symbol))
+        self.spacing = self.samples_per_symbol / TIMING_CANDIDATES
+        self.omega = 2 * np.pi * carrier_hz / fs_hz
+        self.oscillator = np.exp(-1j * self.omega * np.arange(frame))
+        self.history = np.zeros(self.window + 1, dtype=complex)   # running sums, last window+1 samples
+        self.next_instant = TIMING_CANDIDATES                      # first instant with a full window
+        self.metric = np.zeros(TIMING_CANDIDATES)
+        self.chosen = 0
+
+    def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, bool]:
+        """(correlations at the chosen instants in this frame, True if the timing was re-chosen
+        after them)."""
+        n = x.size
+        baseband = x * self.oscillator[:n] * np.exp(-1j * self.omega * first)
+        running = self.history[-1] + np.cumsum(baseband)
+        joined = np.concatenate([self.history, running])           # joined[i] ↔ sample first − window − 1 + i
+        self.history = joined[-(self.window + 1):]
+        last = first + n - 1
+        end_instant = int(np.floor((last + 1) / self.spacing)) + 1
+        instants = np.arange(self.next_instant, end_instant)
+        ends = np.floor(instants * self.spacing).astype(np.int64)
+        keep = ends <= last
+        instants, ends = instants[keep], ends[keep]
+        if instants.size == 0:
+            return np.zeros(0, dtype=complex), False
+        self.next_instant = int(instants[-1]) + 1
+        at = ends - (first - self.window - 1)
+        sums = joined[at] - joined[at - self.window]
+        candidate = instants % TIMING_CANDIDATES
+        for c, power in zip(candidate.tolist(), (sums.real ** 2 + sums.imag ** 2).tolist()):
+            self.metric[c] += TIMING_AVERAGE * (power - self.metric[c])
+        symbols = sums[candidate == self.chosen]
+        best = int(np.argmax(self.metric))
+        if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
+            self.chosen = best
+            return symbols, True
+        return symbols, False
+
+    def amplitude(self, symbols: np.ndarray) -> np.ndarray:
+        """Carrier amplitude (V) of a correlation over one whole symbol."""
+        return 2.0 * np.abs(symbols) / self.window
+
+
+@dataclass
+class ChannelState:
+    fault: int = CHANNEL_OK
+    command: Optional[int] = None
+
+
+class DigitalReceiverCore:
+    def __init__(self, system: DigitalSystem, frame: int, settings: DigitalReceiverSettings):
+        s = settings
+        check_category(s.train_category)
+        self.carrier_hz = s.carrier_hz if s.carrier_hz > 0 else system.carrier_hz
+        check_modem_rate(system, self.carrier_hz, s.fs_hz)
+        if s.track_parity not in (0, 1):
+            raise FmuInputError(f"parameter track_parity: {s.track_parity} (0 even track, 1 odd track)")
+        for name, value in (("limiter", s.limiter_v), ("min_level", s.min_level_v), ("band_width", s.band_width_hz)):
+            if value < 0:
+                raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
+        self.system, self.settings, self.frame = system, s, frame
+        self.baud = system.baud(self.carrier_hz)
+        bandwidth = s.band_width_hz or 10.0 / 3.0 * self.baud
+        if bandwidth >= 2 * self.carrier_hz:
+            raise FmuInputError(f"parameter band_width: {bandwidth:g} Hz must be below twice the carrier")
+        self.anti_alias = chebyshev_low_pass(ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB, s.fs_hz)
+        self.band_pass = filters.band_pass(self.carrier_hz, bandwidth, 2, s.fs_hz)
+        self._aa_state = self.anti_alias.initial_state()
+        self._bp_state = self.band_pass.initial_state()
+        self.clock = SymbolClock(s.fs_hz, self.carrier_hz, self.baud, frame)
+        self.framer = system.framer(s.track_parity)
+        self.message_s = system.message_s(self.carrier_hz)
+        self.acceptor = Acceptor(system, s.track_parity, self.message_s)
+        self.channels = [ChannelState() for _ in range(CHANNELS)]
+        self.most_permissive = max(system.commands(), key=system.rank)
+        self._level = 0.0
+        self._block: Optional[int] = None
+        self.out = ReceiverOutputs()
+        self.channel_codes = np.zeros(CHANNELS, dtype=np.int64)
+        self._publish(None)
+
+    def step(self, t: float, e_coil: np.ndarray, channel_faults=(0, 0, 0)) -> ReceiverOutputs:
+        s = self.settings
+        first = round(t * s.fs_hz)
+        x = np.asarray(e_coil, dtype=float)
+        if s.limiter_v > 0:
+            x = np.clip(x, -s.limiter_v, s.limiter_v)
+        x, self._aa_state = lfilter(self.anti_alias.b, self.anti_alias.a, x, zi=self._aa_state)
+        x, self._bp_state = lfilter(self.band_pass.b, self.band_pass.a, x, zi=self._bp_state)
+        symbols, retimed = self.clock.push(x, first)
+        if symbols.size:
+            amplitude = self.clock.amplitude(symbols)
+            self._level = float(amplitude[-1])
+            if (amplitude < s.min_level_v).any():
+                self.framer.reset()                      # squelched: no decisions on noise
+                symbols = symbols[np.flatnonzero(amplitude < s.min_level_v)[-1] + 1:]
+            end_s = (first + x.size) / s.fs_hz
+            for message in self.framer.push(symbols):
+                self.acceptor.push(end_s, message)
+        if retimed:
+            self.framer.reset()
+        self.acceptor.expire((first + x.size) / s.fs_hz)
+        self._publish(self._vote(channel_faults))
+        return self.out
+
+    def _vote(self, faults) -> Optional[int]:
+        command = self.acceptor.command
+        for index, channel in enumerate(self.channels):
+            channel.fault = int(faults[index])
+            channel.command = {CHANNEL_OK: command, CHANNEL_FAILED: None, CHANNEL_SILENT: None,
+                               CHANNEL_STUCK_PERMISSIVE: self.most_permissive}.get(channel.fault, None)
+            self.channel_codes[index] = 0 if channel.command is None else \
+                self.system.indication(channel.command, self.settings.train_category).code
+        healthy = [c.fault != CHANNEL_FAILED for c in self.channels]
+        return redundancy.vote_2oo3([c.command for c in self.channels], healthy)
+
+    def _publish(self, command: Optional[int]) -> None:
+        s, out, acceptor = self.settings, self.out, self.acceptor
+        out.level_v = self._level
+        out.relay = self._level >= s.min_level_v
+        out.errors = acceptor.rejected
+        out.decoded_codes = acceptor.accepted
+        if acceptor.block is not None and acceptor.block != self._block:
+            if self._block is not None:
+                out.joints += 1
+            self._block = acceptor.block
+        if command is None:
+            last = acceptor.last_command
+            stop = last is not None and self.system.indication(last, s.train_category).aspect in (sig.RED_YELLOW, sig.RED)
+            out.aspect = sig.RED if stop else sig.WHITE
+            out.code, out.code_valid, out.free_blocks = 0, False, 0
+            out.v_permitted_mps = out.v_target_mps = (20.0 if stop else 40.0) / 3.6
+            return
+        ind = self.system.indication(command, s.train_category)
+        ceiling = ind.permitted_kmh / 3.6
+        if s.v_max_mps > 0:
+            ceiling = min(ceiling, s.v_max_mps)
+        out.aspect, out.code, out.code_valid, out.free_blocks = ind.aspect, ind.code, True, ind.free_blocks
+        out.v_permitted_mps = ceiling
+        out.v_target_mps = min(ind.target_kmh / 3.6, ceiling)
