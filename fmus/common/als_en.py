@@ -86,7 +86,13 @@ def sync_info(position: int, track: int, block: int, route: int = 0) -> int:
 
 
 def command_id(indication: int, speed_index: int) -> int:
-    return indication * 16 + speed_index
+    """Our command number, 1…144 (0 is left for "none" on the ports)."""
+    return 1 + indication * 16 + speed_index
+
+
+def command_fields(command: int) -> Tuple[int, int]:
+    """(indication, speed index) of a command number."""
+    return divmod(command - 1, 16)
 
 
 def speed_index(kmh: float) -> int:
@@ -95,7 +101,7 @@ def speed_index(kmh: float) -> int:
 
 def message_words(message: Message) -> Tuple[Tuple[int, int], Tuple[int, int]]:
     """((subchannel-1 word, subchannel-2 word) for p = 0, the same for p = 1)."""
-    indication, speed = divmod(message.command, 16)
+    indication, speed = command_fields(message.command)
     return ((word(indication, 1), word(sync_info(0, message.track, message.block), 2)),
             (word(speed, 1), word(sync_info(1, message.track, message.block), 2)))
 
@@ -201,7 +207,7 @@ class AlsEn(DigitalSystem):
         return tuple(command_id(i, s) for i in range(LAST_INDICATION + 1) for s in range(16))
 
     def indication(self, command: int, category: str) -> Indication:
-        indication, speed = divmod(command, 16)
+        indication, speed = command_fields(command)
         ceiling = CATEGORY_MAX_KMH[category]
         if indication == RED:
             return Indication(9, sig.RED, 0, 20.0, min(SPEEDS_KMH[speed], 20.0))

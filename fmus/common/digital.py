@@ -129,10 +129,12 @@ class Acceptor:
     * a message no more permissive than the command in force — or, after a loss, than the
       last one accepted — takes effect at once (one message); anything more permissive, and
       anything at a cold start, only after two identical consecutive messages;
-    * a more permissive message of the *other* block parity counts only if no message of the
-      command's own parity arrived within the last message period: a code leaking from the
-      next section cannot win while the own section's code is still there, but at a real
-      joint the old code stops and the new one is taken one message later;
+    * a more permissive message of the *other* block parity does not count while the command
+      in force (of this parity) is still being confirmed: a code leaking from the next section
+      across a failed joint, or from under the tail of the train ahead, cannot win while the
+      own section's code is still there. At a real joint the old code stops, times out, and
+      the new one is then taken after two identical messages. (Equal or more restrictive
+      messages of the new section are taken at once, which is what a joint usually brings.)
     * no confirming message of the command in force for ``timeout_messages`` periods → no
       code (the ATP then applies its no-code rules).
     """
@@ -147,7 +149,6 @@ class Acceptor:
         self.last_command: Optional[int] = None  # last accepted, kept through a loss
         self.candidate: Optional[Message] = None
         self.confirmed_s = -np.inf
-        self.seen_s = [-np.inf, -np.inf]         # last message of each block parity
         self.accepted = 0
         self.rejected = 0
         self.foreign = 0
@@ -162,15 +163,13 @@ class Acceptor:
             self.candidate = None
             return
         self.accepted += 1
-        own_parity_recent = self.block is not None and time_s - self.seen_s[self.block] <= self.message_s * 1.05
-        self.seen_s[message.block] = time_s
         reference = self.command if self.command is not None else self.last_command
         permissive = reference is None or self.system.rank(message.command) > self.system.rank(reference)
         if message.command == self.command and message.block == self.block:
             self.confirmed_s = time_s
         elif not permissive:
             self._take(message, time_s)
-        elif self.candidate == message and not (message.block != self.block and own_parity_recent):
+        elif self.candidate == message and (self.command is None or message.block == self.block):
             self._take(message, time_s)
         self.candidate = message
 

@@ -141,7 +141,9 @@ class FireFramer(Framer):
                         messages.append(self._word(self.data))
                     self.locked = True
                 else:
-                    self.locked = False               # sync out of place: a slip or a hit
+                    if self.locked:
+                        messages.append(None)         # sync out of place: a slip or a hit
+                    self.locked = False
                 self.since_sync = 1
                 self.data = []
                 continue

@@ -10,7 +10,8 @@ decision → framing and code check → acceptance → three channels voted 2-ou
 * **Symbol timing and correlation.** The transmitter's symbol clock is unknown. The baseband
   signal x·e^(−jωt) is integrated over one symbol (integrate-and-dump, running sums from a
   carried cumulative sum) at 8 candidate instants per symbol; each candidate keeps a running
-  mean of |Z|² over about 8 symbols, and the receiver samples at the best one (switching only
+  mean of |Z|² over about 8 symbols (one observation counts at most twice the best mean, so an
+  impulse cannot steer it), and the receiver samples at the best one (switching only
   when another is > 1 dB better: a window that straddles a phase jump loses energy, so the
   best instant is the symbol end, filter delays included). A switch restarts the framing.
 * **Squelch.** Symbols whose amplitude is below `min_level` are not decided (the framing
@@ -78,6 +79,7 @@ class SymbolClock:
         self.history = np.zeros(self.window + 1, dtype=complex)   # running sums, last window+1 samples
         self.next_instant = TIMING_CANDIDATES                      # first instant with a full window
         self.metric = np.zeros(TIMING_CANDIDATES)
+        self.observed = 0
         self.chosen = 0
 
     def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, bool]:
@@ -101,7 +103,12 @@ class SymbolClock:
         sums = joined[at] - joined[at - self.window]
         candidate = instants % TIMING_CANDIDATES
         for c, power in zip(candidate.tolist(), (sums.real ** 2 + sums.imag ** 2).tolist()):
-            self.metric[c] += TIMING_AVERAGE * (power - self.metric[c])
+            if self.observed < TIMING_CANDIDATES:          # the first symbol sets every candidate
+                self.metric[c] = power
+                self.observed += 1
+                continue
+            # an impulse must not steer the timing: one observation counts at most twice the best mean
+            self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
         symbols = sums[candidate == self.chosen]
         best = int(np.argmax(self.metric))
         if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
