@@ -33,8 +33,11 @@ entered), ``relay`` carrier present (above the squelch).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+import cmath
+import math
 
 import numpy as np
 from scipy.signal import lfilter
@@ -52,6 +55,7 @@ TIMING_CANDIDATES = 8
 TIMING_AVERAGE = 1.0 / 8.0          # weight of a new |Z|² in a candidate's running mean
 TIMING_SWITCH = 10 ** 0.1           # another candidate must be 1 dB better
 CHANNELS = 3
+_NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
 
 
@@ -76,7 +80,10 @@ class SymbolClock:
         self.spacing = self.samples_per_symbol / TIMING_CANDIDATES
         self.omega = 2 * np.pi * carrier_hz / fs_hz
         self.oscillator = np.exp(-1j * self.omega * np.arange(frame))
-        self.history = np.zeros(self.window + 1, dtype=complex)   # running sums, last window+1 samples
+        # running sum of the baseband signal per sample, in a ring long enough for one window
+        # behind the oldest sample of a frame
+        self.ring = np.zeros(self.window + 1 + frame, dtype=complex)
+        self._steps = np.arange(frame)
         self.next_instant = TIMING_CANDIDATES                      # first instant with a full window
         self.metric = np.zeros(TIMING_CANDIDATES)
         self.observed = 0
@@ -85,36 +92,39 @@ class SymbolClock:
     def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, bool]:
         """(correlations at the chosen instants in this frame, True if the timing was re-chosen
         after them)."""
-        n = x.size
-        baseband = x * self.oscillator[:n] * np.exp(-1j * self.omega * first)
-        running = self.history[-1] + np.cumsum(baseband)
-        joined = np.concatenate([self.history, running])           # joined[i] ↔ sample first − window − 1 + i
-        self.history = joined[-(self.window + 1):]
+        n, ring, size = x.size, self.ring, self.ring.size
+        rotation = cmath.exp(-1j * self.omega * first)
+        running = ring[(first - 1) % size] + np.cumsum(x * self.oscillator[:n] * rotation)
+        start = first % size
+        if start + n <= size:
+            ring[start:start + n] = running
+        else:
+            ring[(first + self._steps[:n]) % size] = running
         last = first + n - 1
-        end_instant = int(np.floor((last + 1) / self.spacing)) + 1
-        instants = np.arange(self.next_instant, end_instant)
-        ends = np.floor(instants * self.spacing).astype(np.int64)
-        keep = ends <= last
-        instants, ends = instants[keep], ends[keep]
-        if instants.size == 0:
-            return np.zeros(0, dtype=complex), False
-        self.next_instant = int(instants[-1]) + 1
-        at = ends - (first - self.window - 1)
-        sums = joined[at] - joined[at - self.window]
-        candidate = instants % TIMING_CANDIDATES
-        for c, power in zip(candidate.tolist(), (sums.real ** 2 + sums.imag ** 2).tolist()):
+        symbols, retimed = [], False
+        instant, spacing, window = self.next_instant, self.spacing, self.window
+        while math.floor(instant * spacing) <= last:
+            end = math.floor(instant * spacing)
+            z = ring[end % size] - ring[(end - window) % size]
+            power = z.real * z.real + z.imag * z.imag
+            c = instant % TIMING_CANDIDATES
             if self.observed < TIMING_CANDIDATES:          # the first symbol sets every candidate
                 self.metric[c] = power
                 self.observed += 1
-                continue
-            # an impulse must not steer the timing: one observation counts at most twice the best mean
-            self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
-        symbols = sums[candidate == self.chosen]
+            else:
+                # an impulse must not steer the timing: one observation counts at most twice the best mean
+                self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
+            if c == self.chosen:
+                symbols.append(z)
+            instant += 1
+        if instant == self.next_instant:
+            return _NO_SYMBOLS, False
+        self.next_instant = instant
         best = int(np.argmax(self.metric))
         if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
             self.chosen = best
-            return symbols, True
-        return symbols, False
+            retimed = True
+        return np.array(symbols, dtype=complex), retimed
 
     def amplitude(self, symbols: np.ndarray) -> np.ndarray:
         """Carrier amplitude (V) of a correlation over one whole symbol."""
@@ -155,6 +165,9 @@ class DigitalReceiverCore:
         self.most_permissive = max(system.commands(), key=system.rank)
         self._level = 0.0
         self._block: Optional[int] = None
+        self._indications = {}
+        self._voted_for = None
+        self._vote_result: Optional[int] = None
         self.out = ReceiverOutputs()
         self.channel_codes = np.zeros(CHANNELS, dtype=np.int64)
         self._publish(None)
@@ -183,16 +196,26 @@ class DigitalReceiverCore:
         self._publish(self._vote(channel_faults))
         return self.out
 
+    def _indication(self, command: int):
+        found = self._indications.get(command)
+        if found is None:
+            found = self._indications[command] = self.system.indication(command, self.settings.train_category)
+        return found
+
     def _vote(self, faults) -> Optional[int]:
         command = self.acceptor.command
+        key = (command, int(faults[0]), int(faults[1]), int(faults[2]))
+        if key == self._voted_for:
+            return self._vote_result
+        self._voted_for = key
         for index, channel in enumerate(self.channels):
             channel.fault = int(faults[index])
             channel.command = {CHANNEL_OK: command, CHANNEL_FAILED: None, CHANNEL_SILENT: None,
                                CHANNEL_STUCK_PERMISSIVE: self.most_permissive}.get(channel.fault, None)
-            self.channel_codes[index] = 0 if channel.command is None else \
-                self.system.indication(channel.command, self.settings.train_category).code
+            self.channel_codes[index] = 0 if channel.command is None else self._indication(channel.command).code
         healthy = [c.fault != CHANNEL_FAILED for c in self.channels]
-        return redundancy.vote_2oo3([c.command for c in self.channels], healthy)
+        self._vote_result = redundancy.vote_2oo3([c.command for c in self.channels], healthy)
+        return self._vote_result
 
     def _publish(self, command: Optional[int]) -> None:
         s, out, acceptor = self.settings, self.out, self.acceptor
@@ -206,12 +229,12 @@ class DigitalReceiverCore:
             self._block = acceptor.block
         if command is None:
             last = acceptor.last_command
-            stop = last is not None and self.system.indication(last, s.train_category).aspect in (sig.RED_YELLOW, sig.RED)
+            stop = last is not None and self._indication(last).aspect in (sig.RED_YELLOW, sig.RED)
             out.aspect = sig.RED if stop else sig.WHITE
             out.code, out.code_valid, out.free_blocks = 0, False, 0
             out.v_permitted_mps = out.v_target_mps = (20.0 if stop else 40.0) / 3.6
             return
-        ind = self.system.indication(command, s.train_category)
+        ind = self._indication(command)
         ceiling = ind.permitted_kmh / 3.6
         if s.v_max_mps > 0:
             ceiling = min(ceiling, s.v_max_mps)
