@@ -26,7 +26,7 @@ def _receive(samples, track=1, carrier=als_en.CARRIER_HZ, baud=BAUD):
     accepted = []
     for k, z in enumerate(dqpsk.correlate(samples, FS, carrier, baud)):
         now = (k + 1) / baud
-        for message in framer.push(np.array([z])):
+        for _, message in framer.push(np.array([z])):
             acceptor.push(now, message)
         acceptor.expire(now)
         accepted.append(acceptor.command)

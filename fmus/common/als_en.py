@@ -47,7 +47,7 @@ import numpy as np
 
 from . import bauer_code
 from . import signalling as sig
-from .digital import DigitalSystem, Framer, Indication, Message
+from .digital import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 174.38
 CYCLES_PER_SYMBOL = 16
@@ -135,25 +135,26 @@ class AlsEnFramer(Framer):
         self.boundary = 0                           # bit count mod 8 at which words end
         self.last: Optional[Tuple[int, int]] = None  # (indication or speed, sync info) of the last word
 
-    def push(self, symbols: np.ndarray) -> List[Optional[Message]]:
+    def push(self, symbols: np.ndarray) -> List[Decoded]:
+        first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
         if self.previous is not None:
             symbols = np.concatenate([[self.previous], symbols])
         if symbols.size < 2:
             self.previous = symbols[-1] if symbols.size else self.previous
             return []
         self.previous = symbols[-1]
-        messages: List[Optional[Message]] = []
-        for dibit in dibits_of(symbols).tolist():
+        messages: List[Decoded] = []
+        for index, dibit in enumerate(dibits_of(symbols).tolist(), start=first):
             self.register_1 = (self.register_1 << 1 | dibit >> 1) & 0xFFFF
             self.register_2 = (self.register_2 << 1 | dibit & 1) & 0xFFFF
             self.bits += 1
             if self.locked:
                 if self.bits % WORD_BITS == self.boundary:
-                    messages += self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)
+                    messages += [(index, m) for m in self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)]
             elif self.bits >= 2 * WORD_BITS and self._aligned():
                 self.locked, self.boundary = True, self.bits % WORD_BITS
                 self.last = (decode_word(self.register_1 >> 8, 1), decode_word(self.register_2 >> 8, 2))
-                messages += self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)
+                messages += [(index, m) for m in self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)]
         return messages
 
     def _aligned(self) -> bool:

@@ -29,6 +29,12 @@ from .slave import FmuInputError
 
 FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
 CATEGORIES = ("passenger", "freight", "high_speed")
+TIMEOUT_MESSAGES, TIMEOUT_MARGIN_S = 2, 0.1        # acceptance timeout (Acceptor)
+LATENCY_MESSAGES, LATENCY_MARGIN_S = 2, 0.2        # stated decoding latency (DESIGN §8)
+
+
+def stated_latency_s(message_s: float) -> float:
+    return LATENCY_MESSAGES * message_s + LATENCY_MARGIN_S
 
 
 @dataclass(frozen=True)
@@ -47,11 +53,16 @@ class Indication:
     target_kmh: float         # speed for passing the next signal
 
 
+Decoded = Tuple[int, Optional[Message]]     # (index of the symbol that completed it, message or None)
+
+
 class Framer(ABC):
-    """Symbol correlations → decoded messages (None for a word discarded by the code check)."""
+    """Symbol correlations → decoded messages (None for a word discarded by the code check or
+    a lost alignment), each with the index, among the pushed symbols, of the symbol that
+    completed it."""
 
     @abstractmethod
-    def push(self, symbols: np.ndarray) -> List[Optional[Message]]:
+    def push(self, symbols: np.ndarray) -> List[Decoded]:
         ...
 
     @abstractmethod
@@ -135,15 +146,18 @@ class Acceptor:
       own section's code is still there. At a real joint the old code stops, times out, and
       the new one is then taken after two identical messages. (Equal or more restrictive
       messages of the new section are taken at once, which is what a joint usually brings.)
-    * no confirming message of the command in force for ``timeout_messages`` periods → no
-      code (the ATP then applies its no-code rules).
+    * no confirming message of the command in force for two message periods + 0.1 s → no
+      code (the ATP then applies its no-code rules). One lost message is bridged; and since a
+      changed command is sent from the next message boundary on, an old command can never be
+      shown for longer than the stated latency (DESIGN §8: two messages + 0.2 s) after the
+      change, even when every message after it is lost.
     """
 
-    def __init__(self, system: DigitalSystem, track_parity: int, message_s: float, timeout_messages: int = 3):
+    def __init__(self, system: DigitalSystem, track_parity: int, message_s: float):
         self.system = system
         self.track = track_parity
         self.message_s = message_s
-        self.timeout_s = timeout_messages * message_s
+        self.timeout_s = TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S
         self.command: Optional[int] = None       # in force
         self.block: Optional[int] = None
         self.last_command: Optional[int] = None  # last accepted, kept through a loss

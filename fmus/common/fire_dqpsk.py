@@ -38,7 +38,7 @@ import numpy as np
 
 from . import dqpsk, fire_code
 from . import signalling as sig
-from .digital import DigitalSystem, Framer, Indication, Message
+from .digital import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 175.0
 BAUD = 15.0
@@ -126,23 +126,24 @@ class FireFramer(Framer):
         self.locked = False
         self.data: List[int] = []
 
-    def push(self, symbols: np.ndarray) -> List[Optional[Message]]:
+    def push(self, symbols: np.ndarray) -> List[Decoded]:
+        first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
         if self.previous is not None:
             symbols = np.concatenate([[self.previous], symbols])
         if symbols.size < 2:
             self.previous = symbols[-1] if symbols.size else self.previous
             return []
         self.previous = symbols[-1]
-        messages: List[Optional[Message]] = []
-        for kind in classify(symbols).tolist():
+        messages: List[Decoded] = []
+        for index, kind in enumerate(classify(symbols).tolist(), start=first):
             if kind == SYNC:
                 if self.since_sync == FRAME_SYMBOLS:
                     if self.locked and len(self.data) == DATA_SYMBOLS:
-                        messages.append(self._word(self.data))
+                        messages.append((index, self._word(self.data)))
                     self.locked = True
                 else:
                     if self.locked:
-                        messages.append(None)         # sync out of place: a slip or a hit
+                        messages.append((index, None))  # sync out of place: a slip or a hit
                     self.locked = False
                 self.since_sync = 1
                 self.data = []
@@ -155,7 +156,7 @@ class FireFramer(Framer):
                 self.locked = False
                 self.since_sync = None
                 self.data = []
-                messages.append(None)
+                messages.append((index, None))
         return messages
 
     @staticmethod

@@ -18,7 +18,7 @@ decision → framing and code check → acceptance → three channels voted 2-ou
   restarts), so a dead channel shows no code rather than noise decisions.
 * **Decision, framing, code check**: the system's framer (als_en.py, fire_dqpsk.py);
   **acceptance**: digital.Acceptor (track parity, one message towards restrictive, two
-  identical towards permissive, block-parity rule, 3-message timeout).
+  identical towards permissive, block-parity rule, timeout after two lost messages).
 * **2-out-of-3.** The three channels are identical hardware on the same coil signal, so they
   decode the same messages: the chain runs once and its result feeds every channel (exact,
   not an approximation). Per-channel faults (`channel_fault[i]`) act on a channel's output:
@@ -89,9 +89,9 @@ class SymbolClock:
         self.observed = 0
         self.chosen = 0
 
-    def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, bool]:
-        """(correlations at the chosen instants in this frame, True if the timing was re-chosen
-        after them)."""
+    def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, list, bool]:
+        """(correlations at the chosen instants in this frame, the sample index each ends at,
+        True if the timing was re-chosen after them)."""
         n, ring, size = x.size, self.ring, self.ring.size
         rotation = cmath.exp(-1j * self.omega * first)
         running = ring[(first - 1) % size] + np.cumsum(x * self.oscillator[:n] * rotation)
@@ -101,7 +101,7 @@ class SymbolClock:
         else:
             ring[(first + self._steps[:n]) % size] = running
         last = first + n - 1
-        symbols, retimed = [], False
+        symbols, ends, retimed = [], [], False
         instant, spacing, window = self.next_instant, self.spacing, self.window
         while math.floor(instant * spacing) <= last:
             end = math.floor(instant * spacing)
@@ -116,15 +116,16 @@ class SymbolClock:
                 self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
             if c == self.chosen:
                 symbols.append(z)
+                ends.append(end)
             instant += 1
         if instant == self.next_instant:
-            return _NO_SYMBOLS, False
+            return _NO_SYMBOLS, ends, False
         self.next_instant = instant
         best = int(np.argmax(self.metric))
         if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
             self.chosen = best
             retimed = True
-        return np.array(symbols, dtype=complex), retimed
+        return np.array(symbols, dtype=complex), ends, retimed
 
     def amplitude(self, symbols: np.ndarray) -> np.ndarray:
         """Carrier amplitude (V) of a correlation over one whole symbol."""
@@ -180,16 +181,18 @@ class DigitalReceiverCore:
             x = np.clip(x, -s.limiter_v, s.limiter_v)
         x, self._aa_state = lfilter(self.anti_alias.b, self.anti_alias.a, x, zi=self._aa_state)
         x, self._bp_state = lfilter(self.band_pass.b, self.band_pass.a, x, zi=self._bp_state)
-        symbols, retimed = self.clock.push(x, first)
+        symbols, ends, retimed = self.clock.push(x, first)
         if symbols.size:
             amplitude = self.clock.amplitude(symbols)
             self._level = float(amplitude[-1])
             if (amplitude < s.min_level_v).any():
                 self.framer.reset()                      # squelched: no decisions on noise
-                symbols = symbols[np.flatnonzero(amplitude < s.min_level_v)[-1] + 1:]
-            end_s = (first + x.size) / s.fs_hz
-            for message in self.framer.push(symbols):
-                self.acceptor.push(end_s, message)
+                keep = np.flatnonzero(amplitude < s.min_level_v)[-1] + 1
+                symbols, ends = symbols[keep:], ends[keep:]
+            for index, message in self.framer.push(symbols):
+                decided_s = (ends[index] + 1) / s.fs_hz   # when its last symbol was integrated
+                self.acceptor.expire(decided_s)
+                self.acceptor.push(decided_s, message)
         if retimed:
             self.framer.reset()
         self.acceptor.expire((first + x.size) / s.fs_hz)
