@@ -172,7 +172,7 @@ def test_receiver_2oo3_outvotes_one_faulty_channel_and_never_follows_a_minority(
 @pytest.mark.parametrize("name", SYSTEMS)
 def test_the_adjacent_tracks_code_never_gives_a_command(name):
     chain = Chain(name, coder={"track_parity": 0}, receiver={"track_parity": 1})
-    rows = chain.run(6 * chain.message_s, _occupied(6))
+    rows = chain.run(10 * chain.message_s, _occupied(6))
     assert not any(r[5] for r in rows) and chain.receiver.acceptor.foreign >= 3
 
 

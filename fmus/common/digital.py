@@ -74,6 +74,7 @@ class DigitalSystem(ABC):
     name: str
     carrier_hz: float             # default carrier
     message_symbols: int          # symbols per message cycle
+    decode_lag_symbols: int = 0   # symbols after a message's last one before it is decoded
 
     @abstractmethod
     def baud(self, carrier_hz: float) -> float:

@@ -7,10 +7,15 @@ starts with a **sync symbol whose phase increment is 0**, an increment the data 
 (data increments are odd multiples of π/4). A frame is 7 symbols: sync + 6 data symbols
 (12 bits), 0.467 s at 15 Bd. The receiver
 
-* classifies each phase difference as sync (|Δφ| < π/8) or a data dibit (its quadrant);
-* locks on when two sync symbols arrive exactly 7 symbols apart, and decodes only the 6 data
-  symbols between consecutive syncs that keep that spacing; a sync out of place, or a missing
-  one, drops the lock (a slip, a noise hit) and nothing is decoded until it locks again;
+* takes a phase difference as a sync when |Δφ| < π/8 (the boundary half-way to the nearest
+  data increment), else as the data dibit of its quadrant;
+* locks on when two syncs arrive exactly 7 symbols apart; then keeps the frame positions
+  (flywheel): the 6 symbols after a sync are data whatever they look like, and a word is
+  decoded only when the syncs before *and* after it were both seen where due. A sync missed
+  where due loses the words on both sides of it; two in a row drop the lock (a slip or a
+  long hit), and nothing is decoded until it locks again. (A first version dropped the lock
+  at any sync out of place: the noise study showed it lost 70 % of the messages at an
+  Eb/N0 of 8 dB, because the sync lies only π/4 from the data increments);
 * discards words that fail the Fire check (reported as ``None``); what is accepted, and when,
   is the common rule of digital.Acceptor.
 
@@ -45,6 +50,7 @@ BAUD = 15.0
 DATA_SYMBOLS = fire_code.N_BITS // 2
 FRAME_SYMBOLS = DATA_SYMBOLS + 1
 SYNC_TOLERANCE_RAD = np.pi / 8
+LOCK_MISSES = 2               # syncs missed in a row before the lock is dropped
 
 
 @dataclass(frozen=True)
@@ -122,8 +128,11 @@ class FireFramer(Framer):
 
     def reset(self) -> None:
         self.previous: Optional[complex] = None
-        self.since_sync: Optional[int] = None     # symbols since the last sync, None: not locked
+        self.since_sync: Optional[int] = None     # acquisition: symbols since the last sync seen
         self.locked = False
+        self.position = 0                         # locked: symbols since the expected sync
+        self.leading_sync = False                 # locked: the sync opening this frame was seen
+        self.misses = 0
         self.data: List[int] = []
 
     def push(self, symbols: np.ndarray) -> List[Decoded]:
@@ -134,30 +143,42 @@ class FireFramer(Framer):
             self.previous = symbols[-1] if symbols.size else self.previous
             return []
         self.previous = symbols[-1]
+        difference = np.abs(np.angle(symbols[1:] * np.conj(symbols[:-1])))
+        syncs = (difference < SYNC_TOLERANCE_RAD).tolist()
+        dibits = dqpsk.decide(symbols).tolist()
         messages: List[Decoded] = []
-        for index, kind in enumerate(classify(symbols).tolist(), start=first):
-            if kind == SYNC:
-                if self.since_sync == FRAME_SYMBOLS:
-                    if self.locked and len(self.data) == DATA_SYMBOLS:
-                        messages.append((index, self._word(self.data)))
-                    self.locked = True
-                else:
-                    if self.locked:
-                        messages.append((index, None))  # sync out of place: a slip or a hit
-                    self.locked = False
+        for index, (sync, dibit) in enumerate(zip(syncs, dibits), start=first):
+            if self.locked:
+                self._locked(index, sync, dibit, messages)
+            elif sync:
+                if self.since_sync == FRAME_SYMBOLS:      # two syncs a frame apart: locked
+                    self.locked, self.position, self.leading_sync, self.misses = True, 0, True, 0
+                    self.data = []
                 self.since_sync = 1
-                self.data = []
-                continue
-            if self.since_sync is None:
-                continue
-            self.since_sync += 1
-            self.data.append(kind)
-            if self.since_sync > FRAME_SYMBOLS:       # sync missing where it was due
-                self.locked = False
-                self.since_sync = None
-                self.data = []
-                messages.append((index, None))
+            elif self.since_sync is not None:
+                self.since_sync += 1
         return messages
+
+    def _locked(self, index: int, sync: bool, dibit: int, messages: List[Decoded]) -> None:
+        """Flywheel: data positions are decided as data whatever they look like; a word is
+        decoded only between two syncs both seen where expected, so a slip, which puts data
+        where a sync is due, can never yield a rotated word."""
+        self.position += 1
+        if self.position < FRAME_SYMBOLS:
+            self.data.append(dibit)
+            return
+        self.position = 0
+        if sync:
+            if self.leading_sync and len(self.data) == DATA_SYMBOLS:
+                messages.append((index, self._word(self.data)))
+            self.leading_sync, self.misses = True, 0
+        else:
+            messages.append((index, None))            # no sync where due: this word is lost
+            self.leading_sync = False
+            self.misses += 1
+            if self.misses >= LOCK_MISSES:
+                self.locked, self.since_sync = False, None
+        self.data = []
 
     @staticmethod
     def _word(dibits: List[int]) -> Optional[Message]:
@@ -174,6 +195,7 @@ class FireDqpsk(DigitalSystem):
     name = "FIRE_DQPSK"
     carrier_hz = CARRIER_HZ
     message_symbols = FRAME_SYMBOLS
+    decode_lag_symbols = 1          # a word is taken when the next frame's sync confirms the spacing
 
     def baud(self, carrier_hz: float) -> float:
         return BAUD

@@ -10,10 +10,11 @@ decision → framing and code check → acceptance → three channels voted 2-ou
 * **Symbol timing and correlation.** The transmitter's symbol clock is unknown. The baseband
   signal x·e^(−jωt) is integrated over one symbol (integrate-and-dump, running sums from a
   carried cumulative sum) at 8 candidate instants per symbol; each candidate keeps a running
-  mean of |Z|² over about 8 symbols (one observation counts at most twice the best mean, so an
-  impulse cannot steer it), and the receiver samples at the best one (switching only
+  mean of |Z|² over about 16 symbols (one observation counts at most twice the best mean, so
+  an impulse cannot steer it), and the receiver samples at the best one (switching only
   when another is > 1 dB better: a window that straddles a phase jump loses energy, so the
-  best instant is the symbol end, filter delays included). A switch restarts the framing.
+  best instant is the symbol end, filter delays included). A re-choice by up to two
+  candidates (¼ symbol) keeps the symbol count; a larger jump restarts the framing.
 * **Squelch.** Symbols whose amplitude is below `min_level` are not decided (the framing
   restarts), so a dead channel shows no code rather than noise decisions.
 * **Decision, framing, code check**: the system's framer (als_en.py, fire_dqpsk.py);
@@ -52,8 +53,9 @@ from .core import ReceiverOutputs
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
 TIMING_CANDIDATES = 8
-TIMING_AVERAGE = 1.0 / 8.0          # weight of a new |Z|² in a candidate's running mean
+TIMING_AVERAGE = 1.0 / 16.0         # weight of a new |Z|² in a candidate's running mean
 TIMING_SWITCH = 10 ** 0.1           # another candidate must be 1 dB better
+TIMING_DRIFT = 2                    # a re-choice by up to this many candidates keeps the symbol count
 CHANNELS = 3
 _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
@@ -88,6 +90,7 @@ class SymbolClock:
         self.metric = np.zeros(TIMING_CANDIDATES)
         self.observed = 0
         self.chosen = 0
+        self.last_taken = -TIMING_CANDIDATES
 
     def push(self, x: np.ndarray, first: int) -> Tuple[np.ndarray, list, bool]:
         """(correlations at the chosen instants in this frame, the sample index each ends at,
@@ -114,17 +117,21 @@ class SymbolClock:
             else:
                 # an impulse must not steer the timing: one observation counts at most twice the best mean
                 self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
-            if c == self.chosen:
+            # a small re-choice of timing keeps the symbol count: an instant less than ¾ symbol
+            # after the last one taken belongs to the same symbol
+            if c == self.chosen and instant - self.last_taken >= TIMING_CANDIDATES - TIMING_DRIFT:
                 symbols.append(z)
                 ends.append(end)
+                self.last_taken = instant
             instant += 1
         if instant == self.next_instant:
             return _NO_SYMBOLS, ends, False
         self.next_instant = instant
         best = int(np.argmax(self.metric))
         if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
+            step = (best - self.chosen) % TIMING_CANDIDATES
+            retimed = min(step, TIMING_CANDIDATES - step) > TIMING_DRIFT   # a jump, not a drift
             self.chosen = best
-            retimed = True
         return np.array(symbols, dtype=complex), ends, retimed
 
     def amplitude(self, symbols: np.ndarray) -> np.ndarray:

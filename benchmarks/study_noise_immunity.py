@@ -1,0 +1,292 @@
+"""Noise immunity of ALSN, ALS-EN and FIRE_DQPSK side by side (issue 7). A study, not a speed
+benchmark: its tables and plots are in docs/noise_immunity.md.
+
+1. **Bit error rate vs Eb/N0** of the two modems (ideal symbol timing, integrate-and-dump,
+   differential decision) against the theory of differentially detected 4-phase DPSK.
+2. **Message error rate, undetected-error rate and wrong-side failures** of the whole chain —
+   the wayside generator (square wave + Chebyshev band-pass), white noise or impulse noise at
+   the coil, the receiver core exactly as in the FMU (limiter, anti-alias, band-pass, symbol
+   timing recovery, framing, code check, acceptance) — Monte Carlo with fixed seeds:
+
+   * message error rate (MER) = 1 − messages decoded correctly / messages sent;
+   * undetected errors = messages that passed the code check but differ from the one sent;
+   * wrong-side failure = the receiver shows a command more permissive than every command sent
+     within the stated latency before (DESIGN §8: two messages + 0.2 s; ALSN two cycles + 0.5 s),
+     counted as events and as time;
+   * availability = share of time a command is shown that was sent within the latency before
+     (after the first four messages).
+
+   Messages: random plain-line commands (free blocks 0…6), each held for six messages, so
+   the acceptance rules meet changes in both directions. SNR is taken over the whole 0–2 kHz
+   band (carrier power A²/2 against σ²), as in study_alsn_noise.py; the receivers' in-band
+   SNR is 20–25 dB higher. Impulse noise: damped oscillations (5–40 V against a 0.2 V signal,
+   100–400 Hz, 2–10 ms decay) at random times, Poisson at a given rate.
+   ALSN: a message is one code cycle (КЖ/Ж/З from a KPT-5 section), decoded by the ALSN
+   receiver core.
+3. **A steady unmodulated tone at the carrier and the adjacent track's signal alone** (the other
+   track parity) must never give a command.
+
+    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--plots]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import maximum_filter1d
+from scipy.signal import lfilter
+
+from fmus.common import als_en, cab_systems, dqpsk
+from fmus.common import signalling as sig
+from fmus.common.data import load_line
+from fmus.common.digital import Message, stated_latency_s
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.wayside_coder.core import CoderSettings
+from fmus.wayside_coder.digital import DigitalCoderCore
+
+FS = 4000.0
+AMPLITUDE_V = 0.2
+CHUNK = 40000                       # 10 s of signal per receiver step (the core is frame-length invariant)
+GRID_S = 0.01
+HOLD = 6
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+# ---- 1. modem bit error rate -------------------------------------------------------------------
+def ber(system_name: str, ebn0_db: float, symbols: int, seed: int) -> float:
+    rng = np.random.default_rng(seed)
+    dibits = rng.integers(0, 4, symbols)
+    if system_name == "FIRE_DQPSK":
+        carrier, baud = 175.0, 15.0
+        increments = dqpsk.INCREMENT_OF_DIBIT[dibits]
+    else:
+        carrier = als_en.CARRIER_HZ
+        baud = carrier / als_en.CYCLES_PER_SYMBOL
+        increments = als_en.INCREMENT_OF_DIBIT[dibits]
+    x = dqpsk.modulate_increments(increments, FS, carrier, baud, 1.0, 0.3)
+    sigma = np.sqrt(FS / (8.0 * baud * 10 ** (ebn0_db / 10)))      # Eb/N0 = A²·fs / (8·σ²·baud)
+    z = dqpsk.correlate(x + sigma * rng.standard_normal(x.size), FS, carrier, baud)
+    decided = dqpsk.decide(z) if system_name == "FIRE_DQPSK" else als_en.dibits_of(z)
+    errors = np.bitwise_xor(decided[:symbols], dibits)
+    return float((np.unpackbits(errors.astype(np.uint8)[:, None], axis=1)[:, -2:].sum()) / (2 * symbols))
+
+
+# ---- 2. the digital chain --------------------------------------------------------------------------
+class Transmission:
+    """A message sequence through the generator, sample by sample in chunks."""
+
+    def __init__(self, system, messages, seed_phase: float = 0.4):
+        self.system = system
+        coder = DigitalCoderCore(system, load_line(), 8, 1, CoderSettings(fs_hz=FS, amplitude_v=AMPLITUDE_V))
+        self.shaping, self.scale = coder.shaping, coder.scale
+        self.state = np.zeros(self.shaping.a.size - 1)
+        self.carrier = system.carrier_hz
+        self.baud = system.baud(self.carrier)
+        cache = {}
+        increments = np.concatenate([cache.setdefault(m, system.increments(m)) for m in messages])
+        self.phase = np.mod(seed_phase + np.concatenate([[0.0], np.cumsum(increments)]), 2 * np.pi)
+        self.samples = int(np.ceil(self.phase.size * FS / self.baud))
+
+    def chunk(self, first: int, count: int) -> np.ndarray:
+        n = first + np.arange(count)
+        symbol = np.minimum(np.floor(n * self.baud / FS + 1e-9).astype(np.int64), self.phase.size - 1)
+        square = np.where(np.cos(2 * np.pi * self.carrier * n / FS + self.phase[symbol]) >= 0, 1.0, -1.0)
+        shaped, self.state = lfilter(self.shaping.b, self.shaping.a, square, zi=self.state)
+        return self.scale * shaped
+
+
+def impulses(rate_per_s: float, rng):
+    def add(first: int, count: int) -> np.ndarray:
+        e = np.zeros(count)
+        for start in np.flatnonzero(rng.random(count) < rate_per_s / FS):
+            length = min(count - start, 400)
+            t = np.arange(length) / FS
+            e[start:start + length] += rng.choice([-1, 1]) * rng.uniform(5.0, 40.0) * \
+                np.exp(-t / rng.uniform(0.002, 0.01)) * np.sin(2 * np.pi * rng.uniform(100, 400) * t + rng.uniform(0, 6.3))
+        return e
+    return add
+
+
+def white(snr_db: float, rng):
+    sigma = np.sqrt(AMPLITUDE_V ** 2 / 2 / 10 ** (snr_db / 10))
+    return lambda first, count: sigma * rng.standard_normal(count)
+
+
+def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, tone: bool = False) -> dict:
+    system = cab_systems.digital_system(name)
+    rng = np.random.default_rng(seed)
+    free = rng.integers(0, 7, (count + HOLD - 1) // HOLD)
+    # track_parity 0: the adjacent track's signal, received by a train on track 1
+    messages = [Message(system.command_for(int(n)), track_parity, 0) for n in free for _ in range(HOLD)][:count]
+    tx = Transmission(system, messages)
+    receiver = DigitalReceiverCore(system, CHUNK, DigitalReceiverSettings(fs_hz=FS, track_parity=1))
+    acceptor = receiver.acceptor
+    events = []                                              # (time, decoded message or None, command in force)
+    original = acceptor.push
+
+    def spy(time_s, message):
+        original(time_s, message)
+        events.append((time_s, message, acceptor.command, acceptor.confirmed_s))
+    acceptor.push = spy
+    length = system.message_symbols
+    message_s = length / tx.baud
+    carrier = system.carrier_hz
+    for first in range(0, tx.samples, CHUNK):
+        count_now = min(CHUNK, tx.samples - first)
+        if tone:
+            e = AMPLITUDE_V * np.cos(2 * np.pi * carrier * (first + np.arange(count_now)) / FS + 0.4)
+        else:
+            e = tx.chunk(first, count_now)
+        if noise is not None:
+            e = e + noise(first, count_now)
+        if count_now < CHUNK:
+            e = np.concatenate([e, np.zeros(CHUNK - count_now)])
+        receiver.step(first / FS, e)
+    # message outcomes: a decoded message belongs to the one whose last symbol it just integrated
+    commands = np.array([m.command for m in messages])
+    correct = undetected = detected = 0
+    for time_s, message, _, _ in events:
+        if message is None:
+            detected += 1
+            continue
+        symbol = int(np.floor(time_s * tx.baud - 0.5))           # the last symbol, filter delays included
+        index = (symbol - 1 - system.decode_lag_symbols) // length
+        if 0 <= index < count and message.command == commands[index] and message.track == 1:
+            correct += 1
+        elif message.track == 1:
+            undetected += 1
+    # what is shown, on a 10 ms grid, against what was sent within the latency before
+    ranks = {c: r for r, c in enumerate(sorted(system.commands(), key=system.rank))}
+    grid = int(tx.samples / FS / GRID_S)
+    shown = np.full(grid, -1, dtype=np.int16)
+    for k, (time_s, _, command, confirmed_s) in enumerate(events):
+        if command is None:
+            continue
+        until = events[k + 1][0] if k + 1 < len(events) else grid * GRID_S
+        until = min(until, confirmed_s + acceptor.timeout_s)
+        shown[int(np.ceil(time_s / GRID_S)):int(np.ceil(until / GRID_S))] = ranks[command]
+    sent = np.full(grid, -1, dtype=np.int16)
+    starts = (1 + np.arange(count) * length) / tx.baud
+    for k in range(count):
+        sent[int(starts[k] / GRID_S):int((starts[k] + message_s) / GRID_S) + 1] = ranks[commands[k]] \
+            if track_parity == 1 else -1
+    window = int(np.ceil(stated_latency_s(message_s) / GRID_S))
+    recent = maximum_filter1d(sent, size=window + 1, origin=window // 2)   # max over [t − latency, t]
+    wrong = shown > recent
+    settled = np.arange(grid) * GRID_S > 4 * message_s
+    lowest = -maximum_filter1d(-sent, size=window + 1, origin=window // 2)
+    available = (shown >= 0) & (shown <= recent) & (shown >= lowest)
+    return {"messages": count, "seconds": tx.samples / FS, "correct": correct,
+            "mer": 1.0 - correct / count, "undetected": undetected, "detected": detected,
+            "wrong_side_events": int(np.sum(wrong[1:] & ~wrong[:-1]) + wrong[0]),
+            "wrong_side_s": float(wrong.sum() * GRID_S),
+            "availability": float(available[settled].mean()),
+            "accepted": acceptor.accepted, "foreign": acceptor.foreign}
+
+
+# ---- 2b. ALSN --------------------------------------------------------------------------------------
+def alsn_chain(cycles: int, noise, seed: int) -> dict:
+    """ALSN through coder → receiver in 10 ms frames (the coder keys per frame); a message is a
+    code cycle."""
+    from fmus.loco_receiver.channel import CodeChannel
+    rng = np.random.default_rng(seed)
+    codes = [sig.RED_YELLOW, sig.YELLOW, sig.GREEN]
+    ahead = {sig.RED_YELLOW: [1], sig.YELLOW: [2], sig.GREEN: []}
+    hold_s = HOLD * 1.6
+    seconds = cycles * 1.6
+    schedule = [codes[i] for i in rng.integers(0, 3, int(seconds / hold_s) + 2)]
+
+    def occupancy(t):
+        occ = np.zeros(8, dtype=bool)
+        for a in ahead[schedule[int(t / hold_s)]]:
+            occ[a] = True
+        return occ
+
+    channel = CodeChannel(0, coupling=AMPLITUDE_V / 4.0)       # the coder's 4 V → 0.2 V at the coil
+    cycles_seen = []
+    original = channel.receiver._cycle
+
+    def spy(short, length, time_s):
+        original(short, length, time_s)
+        cycles_seen.append((time_s, channel.receiver.out.code))
+    channel.receiver._cycle = spy
+    def disturb(t, e):
+        return e + noise(int(round(t[0] * FS)), t.size)
+    rows = channel.run(seconds, occupancy, disturb if noise is not None else None)
+    # a cycle ending at t carries the code sent during the cycle before t
+    correct = undetected = detected = 0
+    for t, code in cycles_seen:
+        # the coder changes code mid-cycle (cam contacts), so a cycle may carry either code
+        during = {schedule[int(max(t - 1.7, 0.0) / hold_s)], schedule[int(t / hold_s)]}
+        if code == 0:
+            detected += 1
+        elif code in during:
+            correct += 1
+        else:
+            undetected += 1
+    # cycles sent: КЖ is keyed twice per cam period
+    per_cycle = {sig.RED_YELLOW: 0.8, sig.YELLOW: 1.6, sig.GREEN: 1.6}
+    sent_cycles = int(sum(min(hold_s, seconds - k * hold_s) / per_cycle[c]
+                          for k, c in enumerate(schedule) if k * hold_s < seconds))
+    latency = 2 * 1.6 + 0.5
+    grid_t = rows[:, 0]
+    sent_rank = np.array([sig.restrictiveness(c) for c in rows[:, 3].astype(int)])
+    shown_rank = np.where(rows[:, 2] > 0, [sig.restrictiveness(int(a)) for a in rows[:, 1]], -1)
+    window = int(latency / GRID_S)
+    recent = maximum_filter1d(sent_rank, size=window + 1, origin=window // 2)
+    wrong = shown_rank > recent
+    lowest = -maximum_filter1d(-sent_rank, size=window + 1, origin=window // 2)
+    settled = grid_t > 6.0
+    return {"messages": sent_cycles, "seconds": seconds, "correct": correct, "mer": 1.0 - correct / sent_cycles,
+            "undetected": undetected, "detected": detected,
+            "wrong_side_events": int(np.sum(wrong[1:] & ~wrong[:-1]) + wrong[0]),
+            "wrong_side_s": float(wrong.sum() * GRID_S),
+            "availability": float(np.mean(((shown_rank >= lowest) & (shown_rank <= recent) & (shown_rank >= 0))[settled]))}
+
+
+# ---- main ------------------------------------------------------------------------------------------
+SNRS_DB = (0.0, -6.0, -10.0, -13.0, -16.0, -20.0)
+IMPULSE_RATES = (0.5, 2.0, 5.0)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--messages", type=int, default=100000, help="digital messages per condition")
+    parser.add_argument("--alsn-cycles", type=int, default=2000, help="ALSN code cycles per condition")
+    parser.add_argument("--ber-symbols", type=int, default=200000)
+    parser.add_argument("--output", default=str(DOCS / "figures" / "noise_immunity.json"))
+    args = parser.parse_args()
+    results = {"ber": {}, "white": {}, "impulse": {}, "tone": {}, "adjacent": {}}
+    began = time.perf_counter()
+    for name in ("FIRE_DQPSK", "ALS-EN"):
+        results["ber"][name] = {str(e): ber(name, e, args.ber_symbols, 11 + int(e)) for e in (2, 4, 6, 8, 10)}
+    results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
+    print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
+    for snr in SNRS_DB:
+        row = {}
+        for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
+            row[name] = run_digital(name, args.messages, white(snr, np.random.default_rng(100 + seed)), 7 + seed)
+        row["ALSN"] = alsn_chain(args.alsn_cycles, white(snr, np.random.default_rng(99)), 5)
+        results["white"][str(snr)] = row
+        print("white", snr, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
+    for rate in IMPULSE_RATES:
+        row = {}
+        for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
+            row[name] = run_digital(name, args.messages, impulses(rate, np.random.default_rng(200 + seed)), 17 + seed)
+        row["ALSN"] = alsn_chain(args.alsn_cycles, impulses(rate, np.random.default_rng(199)), 5)
+        results["impulse"][str(rate)] = row
+        print("impulse", rate, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
+    for name in ("FIRE_DQPSK", "ALS-EN"):
+        results["tone"][name] = run_digital(name, max(args.messages // 10, 100), None, 3, tone=True)
+        results["adjacent"][name] = run_digital(name, args.messages, None, 4, track_parity=0)
+        print("tone/adjacent", name, json.dumps(results["tone"][name]), json.dumps(results["adjacent"][name]),
+              f"{time.perf_counter() - began:.0f} s", flush=True)
+    Path(args.output).write_text(json.dumps(results, indent=1) + "\n")
+    print(f"written {args.output} in {time.perf_counter() - began:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
