@@ -87,7 +87,7 @@ class SymbolClock:
         self.ring = np.zeros(self.window + 1 + frame, dtype=complex)
         self._steps = np.arange(frame)
         self.next_instant = TIMING_CANDIDATES                      # first instant with a full window
-        self.metric = np.zeros(TIMING_CANDIDATES)
+        self.metric = [0.0] * TIMING_CANDIDATES
         self.observed = 0
         self.chosen = 0
         self.last_taken = -TIMING_CANDIDATES
@@ -111,12 +111,13 @@ class SymbolClock:
             z = ring[end % size] - ring[(end - window) % size]
             power = z.real * z.real + z.imag * z.imag
             c = instant % TIMING_CANDIDATES
+            metric = self.metric
             if self.observed < TIMING_CANDIDATES:          # the first symbol sets every candidate
-                self.metric[c] = power
+                metric[c] = power
                 self.observed += 1
             else:
                 # an impulse must not steer the timing: one observation counts at most twice the best mean
-                self.metric[c] += TIMING_AVERAGE * (min(power, 2.0 * self.metric.max()) - self.metric[c])
+                metric[c] += TIMING_AVERAGE * (min(power, 2.0 * max(metric)) - metric[c])
             # a small re-choice of timing keeps the symbol count: an instant less than ¾ symbol
             # after the last one taken belongs to the same symbol
             if c == self.chosen and instant - self.last_taken >= TIMING_CANDIDATES - TIMING_DRIFT:
@@ -127,7 +128,7 @@ class SymbolClock:
         if instant == self.next_instant:
             return _NO_SYMBOLS, ends, False
         self.next_instant = instant
-        best = int(np.argmax(self.metric))
+        best = max(range(TIMING_CANDIDATES), key=self.metric.__getitem__)
         if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
             step = (best - self.chosen) % TIMING_CANDIDATES
             retimed = min(step, TIMING_CANDIDATES - step) > TIMING_DRIFT   # a jump, not a drift
