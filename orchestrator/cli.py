@@ -82,7 +82,7 @@ def cmd_run(args) -> int:
         stop_time=args.stop_time, output_dir=Path(args.output), overrides=overrides,
         param_sets=args.param_set or [], output_interval=args.output_interval,
         captures=args.capture or [], algorithm=args.algorithm, in_process=args.in_process,
-        fmu_dirs=[_build_dir()], record=args.record,
+        fmu_dirs=[_build_dir()], record=args.record, scenario=args.scenario,
         progress=sys.stderr.isatty())
     result = run_system(system, options)
     summary = result.summary
@@ -212,6 +212,7 @@ def make_parser() -> argparse.ArgumentParser:
     run.add_argument("--in-process", action="store_true",
                      help="run the facades in this interpreter without FMI (reference, debugging)")
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    run.add_argument("--scenario", metavar="FILE", help="timed events (JSON, OSP-like; docs/scenarios.md)")
     run.set_defaults(func=cmd_run)
 
     inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")

@@ -93,9 +93,16 @@ class Master:
         self.time_ticks = 0
 
     # ---- setup ------------------------------------------------------------------------------
-    def bind(self, extra_outputs: Dict[str, List[str]] = None) -> None:
-        """Preallocate every buffer and link once; nothing is allocated on the hot path."""
+    def bind(self, extra_outputs: Dict[str, List[str]] = None, extra_inputs: Dict[str, List[str]] = None) -> None:
+        """Preallocate every buffer and link once; nothing is allocated on the hot path.
+        ``extra_inputs``: unconnected inputs a manipulator writes."""
         extra_outputs = extra_outputs or {}
+        for manipulator in self.manipulators:
+            for name, variables in getattr(manipulator, "outputs_needed", dict)().items():
+                extra_outputs.setdefault(name, []).extend(variables)
+            for name, variables in getattr(manipulator, "inputs_needed", dict)().items():
+                extra_inputs = extra_inputs or {}
+                extra_inputs.setdefault(name, []).extend(variables)
         inputs = {n: {} for n in self.graph.nodes}
         outputs = {n: {} for n in self.graph.nodes}
 
@@ -115,6 +122,10 @@ class Master:
             node = self.graph.nodes[name]
             for var_name in variables:
                 slot(outputs, name, node.interface.variables[var_name])
+        for name, variables in (extra_inputs or {}).items():
+            node = self.graph.nodes[name]
+            for var_name in variables:
+                slot(inputs, name, node.interface.variables[var_name])
         self._buffer_layout = (inputs, outputs)  # slaves get their buffers once instantiated
         self.links: List[Link] = []
         for (source, target, type_name, transition), rows in grouped.items():
@@ -154,6 +165,9 @@ class Master:
             self.slaves[name].read_outputs()
             self._source_updated(name, start_time_s)
         self.time_ticks = round(start_time_s * TICKS_PER_SECOND)
+        for manipulator in self.manipulators:
+            if hasattr(manipulator, "bound"):
+                manipulator.bound(self)
         for observer in self.observers:
             observer.started(self, self.time_ticks)
 
@@ -175,6 +189,16 @@ class Master:
         steps_taken = self.steps_taken
         observers = [o for o in self.observers if hasattr(o, "after_tick")]
         manipulators = self.manipulators
+        # components whose inputs / outputs a manipulator adjusts after each gather / read
+        adjust_in: Dict[str, list] = {}
+        adjust_out: Dict[str, list] = {}
+        for manipulator in manipulators:
+            if hasattr(manipulator, "components"):
+                ins, outs = manipulator.components()
+                for name in ins:
+                    adjust_in.setdefault(name, []).append(manipulator.adjust_inputs)
+                for name in outs:
+                    adjust_out.setdefault(name, []).append(manipulator.adjust_outputs)
         tick = self.time_ticks
         while tick < stop_ticks:
             for manipulator in manipulators:
@@ -184,20 +208,28 @@ class Master:
             if gauss_seidel:
                 for name, step, slave in due:
                     self._gather(name, time_s)
+                    for adjust in adjust_in.get(name, ()):
+                        adjust(name)
                     slave.write_inputs()
                     slave.do_step(time_s, step / TICKS_PER_SECOND)
                     slave.read_outputs()
+                    for adjust in adjust_out.get(name, ()):
+                        adjust(name)
                     steps_taken[name] += 1
                     self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
             else:
                 for name, step, slave in due:
                     self._gather(name, time_s)
+                    for adjust in adjust_in.get(name, ()):
+                        adjust(name)
                 for name, step, slave in due:
                     slave.write_inputs()
                     slave.do_step(time_s, step / TICKS_PER_SECOND)
                     steps_taken[name] += 1
                 for name, step, slave in due:
                     slave.read_outputs()
+                    for adjust in adjust_out.get(name, ()):
+                        adjust(name)
                     self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
             tick += base
             self.time_ticks = tick

@@ -17,6 +17,7 @@ from .fmu import make_slave, new_workdir, remove_workdir
 from .graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from .master import ALGORITHMS, Master
 from .observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
+from .scenario import ScenarioManipulator, load_scenario
 from .ssp import load_parameter_set, open_system
 from .verdict import TrainVerdict
 
@@ -38,6 +39,7 @@ class RunOptions:
     record: Optional[Sequence[str]] = None    # "comp.var"; None → all scalar outputs
     progress: bool = False
     manipulators: Sequence[object] = ()
+    scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
 
 
 @dataclass
@@ -59,7 +61,13 @@ def run_system(system_path, options: RunOptions) -> RunResult:
     try:
         extra = [v for name in options.param_sets for v in load_parameter_set(system, name)]
         graph = build_graph(system, options.overrides, extra)
-        stop = options.stop_time if options.stop_time is not None else system.stop_time
+        manipulators = list(options.manipulators)
+        scenario = None
+        if options.scenario is not None:
+            scenario = ScenarioManipulator(load_scenario(options.scenario), graph)
+            manipulators.append(scenario)
+        stop = options.stop_time if options.stop_time is not None else \
+            (scenario.scenario.end_s if scenario is not None and scenario.scenario.end_s else system.stop_time)
         if stop is None:
             raise UserError(f"{system.ssd_path}: no stop time (give --stop-time or a DefaultExperiment stopTime)")
         if stop <= system.start_time:
@@ -103,7 +111,7 @@ def run_system(system_path, options: RunOptions) -> RunResult:
         observers.append(verdict)
         for name, variables in verdict.outputs_needed().items():
             extra_outputs.setdefault(name, []).extend(variables)
-        master = Master(graph, slaves, options.algorithm, observers, options.manipulators)
+        master = Master(graph, slaves, options.algorithm, observers, manipulators)
         began = time.perf_counter()
         failure: Optional[BaseException] = None
         try:
@@ -121,6 +129,9 @@ def run_system(system_path, options: RunOptions) -> RunResult:
         sim_time = master.time_s - system.start_time
         summary = _summary(graph, sim_time, wall, failure)
         summary["trains"] = verdict.summary()
+        if scenario is not None:
+            summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
+                                   "events_applied": scenario.applied}
         _write_json(out / "summary.json", summary)
         _write_json(out / "metadata.json", _metadata(system, graph, options, stop, master, interval_ticks))
         if failure is not None:

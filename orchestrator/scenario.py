@@ -1,0 +1,212 @@
+"""Timed events on any input or output of any component, applied by the master (a
+manipulator, in libcosim's sense), read from a scenario file in the manner of the OSP
+scenario format (issue 8; docs/scenarios.md):
+
+    { "description": "main transmitter fails, then the reserve",
+      "events": [
+        { "time": 60.0, "model": "coder", "variable": "fault_main", "action": "set", "value": true },
+        { "time": 90.0, "model": "rail", "variable": "ballast_override[3]", "action": "set", "value": 0.3 },
+        { "time": 95.0, "model": "train", "variable": "v", "action": "bias", "value": 1.5 },
+        { "time": 120.0, "model": "coder", "variable": "fault_main", "action": "reset" } ] }
+
+* ``set`` (OSP: ``override``, accepted too) — the variable takes ``value`` from ``time`` on,
+  whatever its link delivers; on an output, every consumer (and the recorder) sees ``value``;
+* ``bias`` — ``value`` is added to what the link (or, unconnected, the start value) delivers;
+* ``reset`` — back to the link's value (or the start value).
+
+Parameters are fixed once a run starts (our FMUs' parameters have variability fixed): set them
+with ``--set`` or a parameter set instead; an event on one is an error naming it. Events are
+applied before the tick at which they fall (time rounded to the base step), so a component due
+at that tick already steps with the new value.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+from .errors import UserError
+from .graph import TICKS_PER_SECOND, SystemGraph
+
+ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
+
+
+@dataclass(frozen=True)
+class Event:
+    time_s: float
+    component: str
+    variable: str
+    action: str          # set | bias | reset
+    value: object = None
+
+
+@dataclass
+class Scenario:
+    path: Path
+    description: str
+    events: List[Event]
+    end_s: Optional[float] = None
+
+
+def load_scenario(path) -> Scenario:
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: scenario file not found")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise UserError(f"{path}: not valid JSON ({error})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("events"), list):
+        raise UserError(f"{path}: field events: a list of events is required")
+    defaults = doc.get("defaultOpts", {}) if isinstance(doc.get("defaultOpts", {}), dict) else {}
+    events = []
+    for index, item in enumerate(doc["events"]):
+        where = f"{path}: field events[{index}]"
+        if not isinstance(item, dict):
+            raise UserError(f"{where}: an object is required")
+        merged = {"model": defaults.get("model"), "variable": defaults.get("variable"), **item}
+        time_s = merged.get("time")
+        if not isinstance(time_s, (int, float)) or isinstance(time_s, bool) or time_s < 0:
+            raise UserError(f"{where}.time: a time ≥ 0 in seconds is required, got {time_s!r}")
+        for key in ("model", "variable"):
+            if not isinstance(merged.get(key), str) or not merged[key]:
+                raise UserError(f"{where}.{key}: a name is required")
+        action = ACTIONS.get(str(merged.get("action", "")).lower())
+        if action is None:
+            raise UserError(f"{where}.action: {merged.get('action')!r} is not one of set, override, bias, reset")
+        if action != "reset" and "value" not in merged:
+            raise UserError(f"{where}.value: required for {action}")
+        events.append(Event(float(time_s), merged["model"], merged["variable"], action, merged.get("value")))
+    end = doc.get("end")
+    if end is not None and (not isinstance(end, (int, float)) or end <= 0):
+        raise UserError(f"{path}: field end: a positive time in seconds, got {end!r}")
+    events.sort(key=lambda e: e.time_s)          # stable: same-time events keep their file order
+    return Scenario(path, str(doc.get("description", "")), events, None if end is None else float(end))
+
+
+class ScenarioManipulator:
+    """Applies a scenario's events; the master calls :meth:`before_tick`, and after each gather
+    (inputs) or read (outputs) of a component with events, :meth:`adjust_inputs` /
+    :meth:`adjust_outputs`."""
+
+    def __init__(self, scenario: Scenario, graph: SystemGraph):
+        self.scenario = scenario
+        self.graph = graph
+        self.pending = list(scenario.events)
+        self.active: Dict[Tuple[str, str], Tuple[str, object]] = {}
+        self.applied: List[dict] = []
+        connected = {(e.target, e.target_var.name) for e in graph.edges}
+        self.kinds: Dict[Tuple[str, str], str] = {}
+        for index, event in enumerate(scenario.events):
+            where = f"{scenario.path}: field events[{index}]"
+            node = graph.nodes.get(event.component)
+            if node is None:
+                raise UserError(f"{where}.model: no component {event.component!r} in {graph.name} "
+                                f"({', '.join(graph.nodes)})")
+            var = node.interface.variables.get(event.variable)
+            if var is None:
+                raise UserError(f"{where}.variable: {event.component} has no variable {event.variable!r}")
+            if var.causality not in ("input", "output"):
+                raise UserError(f"{where}.variable: {event.component}.{event.variable} is a {var.causality}; "
+                                f"set it with --set or a parameter set")
+            if var.type == "String" or (event.action == "bias" and var.type == "Boolean"):
+                raise UserError(f"{where}.action: {event.action} is not possible on a {var.type} variable")
+            if event.action != "reset":
+                _typed(var.type, event.value, f"{where}.value")
+            key = (event.component, event.variable)
+            self.kinds[key] = "output" if var.causality == "output" else \
+                ("linked" if key in connected else "free")
+        self.slots: Dict[Tuple[str, str], tuple] = {}
+
+    # ---- what the master must bind ----------------------------------------------------------
+    def inputs_needed(self) -> Dict[str, List[str]]:
+        needed: Dict[str, List[str]] = {}
+        for (component, variable), kind in self.kinds.items():
+            if kind == "free":
+                needed.setdefault(component, []).append(variable)
+        return needed
+
+    def outputs_needed(self) -> Dict[str, List[str]]:
+        needed: Dict[str, List[str]] = {}
+        for (component, variable), kind in self.kinds.items():
+            if kind == "output":
+                needed.setdefault(component, []).append(variable)
+        return needed
+
+    def components(self) -> Tuple[set, set]:
+        """(components whose inputs are adjusted, components whose outputs are adjusted)."""
+        inputs = {c for (c, _), k in self.kinds.items() if k != "output"}
+        outputs = {c for (c, _), k in self.kinds.items() if k == "output"}
+        return inputs, outputs
+
+    def bound(self, master) -> None:
+        """Resolve buffer slots once the slaves are bound; free inputs start at their start value."""
+        for (component, variable), kind in self.kinds.items():
+            var = self.graph.nodes[component].interface.variables[variable]
+            slave = master.slaves[component]
+            buffer = (slave.outputs if kind == "output" else slave.inputs)[var.type]
+            index = int((buffer.vr_array == var.vr).nonzero()[0][0])
+            start = _typed(var.type, var.start if var.start is not None else 0, "start")
+            self.slots[(component, variable)] = (buffer, index, var.type, start)
+            if kind == "free":
+                buffer.values[index] = start
+
+    # ---- hooks --------------------------------------------------------------------------------
+    def before_tick(self, master, tick: int) -> None:
+        while self.pending and round(self.pending[0].time_s * TICKS_PER_SECOND) <= tick + master.graph.base_ticks // 2:
+            event = self.pending.pop(0)
+            key = (event.component, event.variable)
+            buffer, index, type_name, start = self.slots[key]
+            if event.action == "reset":
+                self.active.pop(key, None)
+            else:
+                self.active[key] = (event.action, _typed(type_name, event.value, "value"))
+            if self.kinds[key] == "free":
+                buffer.values[index] = self._value(key, start)
+            self.applied.append({"t": tick / TICKS_PER_SECOND, "model": event.component,
+                                 "variable": event.variable, "action": event.action, "value": event.value})
+
+    def adjust_inputs(self, component: str) -> None:
+        """After the master gathered ``component``'s linked inputs."""
+        self._adjust(component, "linked")
+
+    def adjust_outputs(self, component: str) -> None:
+        """After the master read ``component``'s outputs."""
+        self._adjust(component, "output")
+
+    def _adjust(self, component: str, kind: str) -> None:
+        for key, (action, value) in self.active.items():
+            if key[0] != component or self.kinds[key] != kind:
+                continue
+            buffer, index, _, _ = self.slots[key]
+            buffer.values[index] = value if action == "set" else buffer.values[index] + value
+
+    def _value(self, key, base):
+        action, value = self.active.get(key, ("reset", None))
+        if action == "set":
+            return value
+        if action == "bias":
+            return base + value
+        return base
+
+
+def _typed(type_name: str, value, where: str):
+    try:
+        if type_name == "Real":
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        if type_name == "Integer":
+            if isinstance(value, bool) or int(value) != float(value):
+                raise ValueError
+            return int(value)
+        if type_name == "Boolean":
+            if isinstance(value, bool) or value in (0, 1):
+                return bool(value)
+            if isinstance(value, str) and value.lower() in ("true", "false"):
+                return value.lower() == "true"
+            raise ValueError
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: {value!r} is not a {type_name} value") from None
+    return value
