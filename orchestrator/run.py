@@ -19,7 +19,7 @@ from .master import ALGORITHMS, Master
 from .observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
 from .scenario import ScenarioManipulator, load_scenario
 from .ssp import load_parameter_set, open_system
-from .verdict import TrainVerdict
+from .verdict import ReceiverVerdict, TrainVerdict
 
 
 DEFAULT_OUTPUT_INTERVAL_S = 0.1
@@ -107,10 +107,11 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             extra_outputs.setdefault(comp, []).append(var)
         for request, elements in captures:
             extra_outputs.setdefault(request.component, []).extend(elements)
-        verdict = TrainVerdict(graph)
-        observers.append(verdict)
-        for name, variables in verdict.outputs_needed().items():
-            extra_outputs.setdefault(name, []).extend(variables)
+        verdict, receivers = TrainVerdict(graph), ReceiverVerdict(graph)
+        for judge in (verdict, receivers):
+            observers.append(judge)
+            for name, variables in judge.outputs_needed().items():
+                extra_outputs.setdefault(name, []).extend(variables)
         master = Master(graph, slaves, options.algorithm, observers, manipulators)
         began = time.perf_counter()
         failure: Optional[BaseException] = None
@@ -129,6 +130,7 @@ def run_system(system_path, options: RunOptions) -> RunResult:
         sim_time = master.time_s - system.start_time
         summary = _summary(graph, sim_time, wall, failure)
         summary["trains"] = verdict.summary()
+        summary["receivers"] = receivers.summary()
         if scenario is not None:
             summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
                                    "events_applied": scenario.applied}

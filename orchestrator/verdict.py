@@ -128,3 +128,162 @@ class TrainVerdict:
                     stops=train.stops, aspects=train.aspects)
             entries.append(entry)
         return entries
+
+
+# ---- receivers: decoded codes, errors, wrong-side failures (DESIGN §8) ---------------------------
+RECEIVER_MODEL = "LocoReceiver"
+RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
+SPEED_TOLERANCE_KMH = 0.5
+
+
+@dataclass
+class _Receiver:
+    name: str
+    train: str
+    rail: str
+    coder: str
+    slot: int                      # the train's index j on the rail line (1-based)
+    system: object                 # DigitalSystem, or None for ALSN
+    category: str
+    latency_s: float
+    episode_start_s: Optional[float] = None
+    counted: bool = False
+    failures: int = 0
+    wrong_side_s: float = 0.0
+    last_check_s: Optional[float] = None
+    events: List[dict] = field(default_factory=list)
+
+
+def receivers_of(graph: SystemGraph) -> List[_Receiver]:
+    """Receivers fed by a rail line whose train and coder are known; others are not judged."""
+    from fmus.common import alsn, cab_systems, digital
+    from fmus.common.slave import FmuInputError
+
+    found = []
+    for name in graph.order:
+        node = graph.nodes[name]
+        if node.interface.model_identifier != RECEIVER_MODEL:
+            continue
+        feed = next((e for e in graph.edges if e.target == name and e.target_var.name.startswith("e_coil[")), None)
+        if feed is None:
+            continue
+        rail = feed.source
+        slot = int(feed.source_var.name.split("[")[1].split(",")[0])
+        train = next((e.source for e in graph.edges if e.target == rail and e.target_var.name == f"x_head[{slot}]"), None)
+        coder = next((e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("u_tx[")), None)
+        if train is None or coder is None:
+            continue
+        params = node.parameters
+        try:
+            system = cab_systems.digital_system(str(params.get("system", "ALSN")))
+        except FmuInputError:
+            continue                  # the receiver itself reports it at initialisation
+        category = str(params.get("train_category", "passenger"))
+        if system is None:
+            cycle = max(tx.cycle_s for tx in alsn.load_transmitters().values())
+            latency = 2 * cycle + 0.5
+        else:
+            carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
+            latency = digital.stated_latency_s(system.message_s(carrier))
+        found.append(_Receiver(name, train, rail, coder, slot, system, category, latency))
+    return found
+
+
+class ReceiverVerdict:
+    """Observer: judges every receiver against the code transmitted into the section under its
+    train's coils (the rail line's ``coil_section``, the coder's ``code_tx``). More permissive
+    (aspect, free blocks or speed) for longer than the system's stated latency is a wrong-side
+    failure, counted once per episode."""
+
+    def __init__(self, graph: SystemGraph):
+        self.graph = graph
+        self.receivers = receivers_of(graph)
+
+    def outputs_needed(self) -> Dict[str, List[str]]:
+        needed: Dict[str, List[str]] = {}
+        for r in self.receivers:
+            needed.setdefault(r.name, []).extend(RECEIVER_OUTPUTS)
+            needed.setdefault(r.rail, []).append(f"coil_section[{r.slot}]")
+            codes = [v for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx[")]
+            needed.setdefault(r.coder, []).extend(codes)
+        return needed
+
+    def started(self, master, tick: int) -> None:
+        self._slots = {}
+        for component, variables in self.outputs_needed().items():
+            for var in variables:
+                self._slots[(component, var)] = master.output_slot(component, var)
+
+    def _value(self, component: str, var: str):
+        buffer, index = self._slots[(component, var)]
+        return buffer.values[index]
+
+    def after_tick(self, master, tick: int, due) -> None:
+        now = tick / TICKS_PER_SECOND
+        stepped = {name for name, _, _ in due}
+        for r in self.receivers:
+            if r.name not in stepped:
+                continue
+            section = int(self._value(r.rail, f"coil_section[{r.slot}]"))
+            if section <= 0:
+                r.episode_start_s = None
+                continue
+            sent = int(self._value(r.coder, f"code_tx[{section}]"))
+            if self._more_permissive(r, sent):
+                if r.episode_start_s is None:
+                    r.episode_start_s, r.counted = now, False
+                elif now - r.episode_start_s > r.latency_s:
+                    if not r.counted:
+                        r.failures += 1
+                        r.counted = True
+                        r.events.append({"t": r.episode_start_s, "section": section, "code_sent": sent})
+                    r.wrong_side_s += now - max(r.last_check_s or now, r.episode_start_s + r.latency_s)
+            else:
+                r.episode_start_s = None
+            r.last_check_s = now
+
+    def _more_permissive(self, r: _Receiver, sent: int) -> bool:
+        from fmus.common import signalling as sig
+
+        aspect = int(self._value(r.name, "aspect"))
+        if r.system is None:                       # ALSN: code_tx is in the aspect enumeration
+            return sig.restrictiveness(aspect) > sig.restrictiveness(sent if sent else sig.WHITE)
+        shown = (sig.restrictiveness(aspect), int(self._value(r.name, "free_blocks")),
+                 float(self._value(r.name, "v_target")) * 3.6, float(self._value(r.name, "v_permitted")) * 3.6)
+        if not bool(self._value(r.name, "code_valid")):
+            return False                           # white / red: the no-code rules, never permissive
+        meant = transmitted_indication(r.system, sent, r.category)
+        if meant is None:                          # nothing sent: any valid code is more than that
+            return True
+        return (shown[0] > sig.restrictiveness(meant.aspect) or shown[1] > meant.free_blocks
+                or shown[2] > meant.target_kmh + SPEED_TOLERANCE_KMH
+                or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH)
+
+    def summary(self) -> List[dict]:
+        entries = []
+        for r in self.receivers:
+            entry = {"receiver": r.name, "train": r.train, "system": "ALSN" if r.system is None else r.system.name,
+                     "latency_s": r.latency_s, "wrong_side_failures": r.failures,
+                     "wrong_side_s": round(r.wrong_side_s, 3), "wrong_side_events": r.events}
+            if hasattr(self, "_slots"):
+                entry.update(decoded_codes=int(self._value(r.name, "decoded_codes")),
+                             code_errors=int(self._value(r.name, "errors")))
+            entries.append(entry)
+        return entries
+
+
+def transmitted_indication(system, code: int, category: str):
+    """What a coder's raw ``code_tx`` means (the most permissive reading where the raw id is
+    ambiguous: ALS-EN's KLUB register 15 is 'five or more' free blocks); None for no code."""
+    from fmus.common import als_en
+
+    if code <= 0:
+        return None
+    if system.name == "FIRE_DQPSK":
+        return system.indication(code, category)
+    if code == 9:
+        return system.indication(als_en.command_id(als_en.RED, len(als_en.SPEEDS_KMH) - 1), category)
+    if code == 5:
+        return system.indication(als_en.command_id(als_en.WHITE_FLASHING, len(als_en.SPEEDS_KMH) - 1), category)
+    free = 0 if code == 10 else (6 if code == 15 else code - 10)
+    return system.indication(system.command_for(free), category)

@@ -10,9 +10,11 @@ decision → framing and code check → acceptance → three channels voted 2-ou
 * **Symbol timing and correlation.** The transmitter's symbol clock is unknown. The baseband
   signal x·e^(−jωt) is integrated over one symbol (integrate-and-dump, running sums from a
   carried cumulative sum) at 8 candidate instants per symbol; each candidate keeps a running
-  mean of |Z|² over about 16 symbols (one observation counts at most twice the best mean, so
-  an impulse cannot steer it), and the receiver samples at the best one (switching only
-  when another is > 1 dB better: a window that straddles a phase jump loses energy, so the
+  mean of |Z|² relative to the signal level over about 16 symbols (one observation counts at
+  most twice the level, so an impulse cannot steer it; a level jump of 4× — a joint, the next
+  track circuit's code on another symbol clock — restarts the search from the next symbol),
+  and the receiver samples at the best one (after the first symbols, switching only when
+  another is > 0.3 dB better: a window that straddles a phase jump loses energy, so the
   best instant is the symbol end, filter delays included). A re-choice by up to two
   candidates (¼ symbol) keeps the symbol count; a larger jump restarts the framing.
 * **Squelch.** Symbols whose amplitude is below `min_level` are not decided (the framing
@@ -54,8 +56,10 @@ from .core import ReceiverOutputs
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
 TIMING_CANDIDATES = 8
 TIMING_AVERAGE = 1.0 / 16.0         # weight of a new |Z|² in a candidate's running mean
-TIMING_SWITCH = 10 ** 0.1           # another candidate must be 1 dB better
+TIMING_SWITCH = 10 ** 0.03          # another candidate must be 0.3 dB better (a ¼-symbol error costs ~1 dB)
 TIMING_DRIFT = 2                    # a re-choice by up to this many candidates keeps the symbol count
+LEVEL_FAST, LEVEL_SLOW = 1.0 / 8.0, 1.0 / 32.0   # level averages over about one and four symbols
+LEVEL_JUMP = 4.0                    # their ratio beyond this: a new signal, search the timing afresh
 CHANNELS = 3
 _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
@@ -89,6 +93,7 @@ class SymbolClock:
         self.next_instant = TIMING_CANDIDATES                      # first instant with a full window
         self.metric = [0.0] * TIMING_CANDIDATES
         self.observed = 0
+        self.level_fast = self.level_slow = 0.0
         self.chosen = 0
         self.last_taken = -TIMING_CANDIDATES
 
@@ -112,12 +117,20 @@ class SymbolClock:
             power = z.real * z.real + z.imag * z.imag
             c = instant % TIMING_CANDIDATES
             metric = self.metric
-            if self.observed < TIMING_CANDIDATES:          # the first symbol sets every candidate
-                metric[c] = power
-                self.observed += 1
-            else:
-                # an impulse must not steer the timing: one observation counts at most twice the best mean
-                metric[c] += TIMING_AVERAGE * (min(power, 2.0 * max(metric)) - metric[c])
+            # the signal level over about one symbol, and over four: a jump (a joint: the next
+            # track circuit's code, 10× weaker and on another symbol clock) restarts the search
+            self.level_fast += LEVEL_FAST * (power - self.level_fast)
+            self.level_slow += LEVEL_SLOW * (power - self.level_slow)
+            if not 1.0 / LEVEL_JUMP < self.level_fast / max(self.level_slow, 1e-30) < LEVEL_JUMP:
+                self.level_slow = self.level_fast
+                self.observed = 0
+            # candidates compare relative powers, each capped at twice the level, so neither a
+            # level change nor an impulse can steer the choice
+            relative = min(power / max(self.level_fast, 1e-30), 2.0)
+            # a plain mean over the first symbols after a (re)start, a running mean after that
+            weight = max(TIMING_AVERAGE, TIMING_CANDIDATES / (TIMING_CANDIDATES + self.observed))
+            metric[c] += weight * (relative - metric[c])
+            self.observed += 1
             # a small re-choice of timing keeps the symbol count: an instant less than ¾ symbol
             # after the last one taken belongs to the same symbol
             if c == self.chosen and instant - self.last_taken >= TIMING_CANDIDATES - TIMING_DRIFT:
@@ -129,7 +142,7 @@ class SymbolClock:
             return _NO_SYMBOLS, ends, False
         self.next_instant = instant
         best = max(range(TIMING_CANDIDATES), key=self.metric.__getitem__)
-        if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen]:
+        if self.metric[best] > TIMING_SWITCH * self.metric[self.chosen] or self.observed <= 2 * TIMING_CANDIDATES:
             step = (best - self.chosen) % TIMING_CANDIDATES
             retimed = min(step, TIMING_CANDIDATES - step) > TIMING_DRIFT   # a jump, not a drift
             self.chosen = best

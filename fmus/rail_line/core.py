@@ -70,6 +70,8 @@ class RailSettings:
     relay_drop_out: float = 0.5
     relay_pick_up_delay_s: float = 1.0
     relay_drop_out_delay_s: float = 0.2
+    carrier_hz: float = 0.0               # 0: each section's carrier from the line file (ALSN); else this
+                                          # one (a digital system's 174.38 / 175 Hz) for the phasors
 
 
 @dataclass
@@ -78,6 +80,7 @@ class RailOutputs:
     occupied: np.ndarray
     i_axle: np.ndarray
     off_line: np.ndarray
+    coil_section: np.ndarray      # (M,) 1-based section under each train's coil at the frame end, 0 none
 
 
 @dataclass
@@ -103,6 +106,8 @@ class RailLineCore:
                             ("traction_time_constant", s.traction_time_constant_s)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
+        if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz / 4:
+            raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz (0: the line file's; else up to fs/4)")
         if not 0 < s.relay_drop_out < s.relay_pick_up <= 1.0:
             raise FmuInputError("parameter relay_drop_out: must be positive and below relay_pick_up (≤ 1)")
         if len(s.train_length_m) != trains or min(s.train_length_m) <= 0:
@@ -121,7 +126,7 @@ class RailLineCore:
         self.ends = np.array([sec.end_m for sec in line.sections])
         self._ends_ext = np.append(self.ends, -np.inf)
         self._starts_list = self.starts.tolist()
-        self.carriers = np.array([sec.carrier_hz for sec in line.sections])
+        self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
         self.ac = line.electrification == "AC25000"
         self.dc = line.electrification == "DC3000"
         rng = np.random.default_rng(s.seed)
@@ -154,7 +159,7 @@ class RailLineCore:
         self._sensing = np.zeros(trains, dtype=bool)
         self._anchor = [(None, 0.0, 0.0)] * trains             # (x_k, v_k, t_k) of the last position update
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
-                               np.zeros(trains), np.zeros(trains, dtype=bool))
+                               np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
     # ---- models -----------------------------------------------------------------------------
     def _fault_of(self, k: int) -> Faults:
@@ -309,6 +314,7 @@ class RailLineCore:
         self.states = (self._phi_stack @ self.states[..., None])[..., 0] + (self._psi_stack @ u[..., None])[..., 0]
         self._update_relays(n * self.dt)
         for j in range(self.trains):
+            out.coil_section[j] = self._section_at(float(heads[j][-1]) + s.coil_offset_m) + 1
             if heads[j][-1] + s.coil_offset_m + s.coil_length_m < 0.0 or heads[j][0] > self.line.length_m:
                 out.off_line[j] = True                   # no coil over the line: nothing to sense
                 out.e_coil[j, :n] = 0.0

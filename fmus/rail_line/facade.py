@@ -19,6 +19,8 @@ class RailLine(FrameSlave):
         return [
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
             Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0, description=f"sample rate; step = {n}/fs"),
+            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+                 description="0: each section's carrier from the line file; else this one (digital: 174.38 / 175 Hz)"),
             Port("train_length", "parameter", unit="m", start=400.0, shape=(m,), min=1.0),
             Port("coil_offset", "parameter", unit="m", start=s.coil_offset_m, description="coils ahead of the first wheelset"),
             Port("coil_gain", "parameter", unit="H", start=s.coil_gain_h, min=0.0, description="EMF = gain · d(i)/dt"),
@@ -53,6 +55,8 @@ class RailLine(FrameSlave):
             Port("occupied", "output", "Boolean", start=False, shape=(k,)),
             Port("i_axle", "output", unit="A", shape=(m,), description="rms code current under the first wheelset"),
             Port("off_line", "output", "Boolean", start=True, shape=(m,)),
+            Port("coil_section", "output", "Integer", start=0, shape=(m,),
+                 description="section (1-based) under each train's coil at the frame end, 0 none"),
         ]
 
     def make_default_experiment(self):
@@ -71,7 +75,8 @@ class RailLine(FrameSlave):
             asymmetry_range=(p("asymmetry_min"), p("asymmetry_max")), seed=p("seed"),
             traction_time_constant_s=p("traction_time_constant"),
             relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
-            relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"))
+            relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"),
+            carrier_hz=p("carrier"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
@@ -89,3 +94,4 @@ class RailLine(FrameSlave):
         io["occupied"][...] = out.occupied
         io["i_axle"][...] = out.i_axle
         io["off_line"][...] = out.off_line
+        io["coil_section"][...] = out.coil_section
