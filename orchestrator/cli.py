@@ -83,6 +83,7 @@ def cmd_run(args) -> int:
         param_sets=args.param_set or [], output_interval=args.output_interval,
         captures=args.capture or [], algorithm=args.algorithm, in_process=args.in_process,
         fmu_dirs=[_build_dir()], record=args.record, scenario=args.scenario,
+        default_scenario=not args.no_scenario,
         progress=sys.stderr.isatty())
     result = run_system(system, options)
     summary = result.summary
@@ -112,6 +113,14 @@ def _collapse(names: List[str]) -> List[str]:
             shown.append(base)
         seen[base] = tuple(max(a, b) for a, b in zip(seen.get(base, index), index))
     return [f"{n}[{','.join(map(str, seen[n]))}]" if n in seen else n for n in shown]
+
+
+def cmd_report(args) -> int:
+    from .report import make_report
+
+    for path in make_report(Path(args.run_dir), Path(args.output) if args.output else None, args.at):
+        print(f"wrote {path}")
+    return 0
 
 
 def cmd_inspect(args) -> int:
@@ -212,8 +221,16 @@ def make_parser() -> argparse.ArgumentParser:
     run.add_argument("--in-process", action="store_true",
                      help="run the facades in this interpreter without FMI (reference, debugging)")
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
-    run.add_argument("--scenario", metavar="FILE", help="timed events (JSON, OSP-like; docs/scenarios.md)")
+    run.add_argument("--scenario", metavar="FILE",
+                     help="timed events (JSON, OSP-like; docs/scenarios.md); default: the system's scenario.json")
+    run.add_argument("--no-scenario", action="store_true", help="ignore the system's own scenario.json")
     run.set_defaults(func=cmd_run)
+
+    report = sub.add_parser("report", help="pictures and the verdict table of a finished run")
+    report.add_argument("run_dir", help="a run's output folder (results.csv, summary.json, metadata.json)")
+    report.add_argument("--output", help="folder for the PNGs (default: the run folder)")
+    report.add_argument("--at", type=float, help="time (s) to centre the coil-EMF picture on")
+    report.set_defaults(func=cmd_report)
 
     inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")
     inspect.add_argument("target")

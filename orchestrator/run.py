@@ -23,6 +23,7 @@ from .verdict import ReceiverVerdict, TrainVerdict
 
 
 DEFAULT_OUTPUT_INTERVAL_S = 0.1
+DEFAULT_SCENARIO = "scenario.json"           # a shipped system's own timed events
 
 
 @dataclass
@@ -40,6 +41,7 @@ class RunOptions:
     progress: bool = False
     manipulators: Sequence[object] = ()
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
+    default_scenario: bool = True             # use the system's scenario.json when no scenario is given
 
 
 @dataclass
@@ -61,10 +63,14 @@ def run_system(system_path, options: RunOptions) -> RunResult:
     try:
         extra = [v for name in options.param_sets for v in load_parameter_set(system, name)]
         graph = build_graph(system, options.overrides, extra)
+        _resolve_data_files(system, graph)
         manipulators = list(options.manipulators)
         scenario = None
-        if options.scenario is not None:
-            scenario = ScenarioManipulator(load_scenario(options.scenario), graph)
+        scenario_file = options.scenario
+        if scenario_file is None and options.default_scenario and (system.folder / DEFAULT_SCENARIO).is_file():
+            scenario_file = system.folder / DEFAULT_SCENARIO       # the system's own events
+        if scenario_file is not None:
+            scenario = ScenarioManipulator(load_scenario(scenario_file), graph)
             manipulators.append(scenario)
         stop = options.stop_time if options.stop_time is not None else \
             (scenario.scenario.end_s if scenario is not None and scenario.scenario.end_s else system.stop_time)
@@ -144,6 +150,19 @@ def run_system(system_path, options: RunOptions) -> RunResult:
     finally:
         remove_workdir(workdir)
         system.close()
+
+
+def _resolve_data_files(system, graph: SystemGraph) -> None:
+    """A relative ``*_file`` parameter names a file of the system (DESIGN §5): its resources/
+    folder, or the system folder; anything else is left for the FMU (its own resources)."""
+    for node in graph.nodes.values():
+        for name, value in list(node.parameters.items()):
+            if not name.endswith("_file") or not isinstance(value, str) or not value or Path(value).is_absolute():
+                continue
+            for folder in (system.folder / "resources", system.folder):
+                if (folder / value).is_file():
+                    node.parameters[name] = str((folder / value).resolve())
+                    break
 
 
 def _recorded(graph: SystemGraph, record) -> List[tuple]:

@@ -5,11 +5,21 @@ FMUs' ports. ``python -m orchestrator.systems`` rewrites them; the files are com
   timetable, with the ALSN chain: wayside coder → rail line → locomotive receiver → ATP.
 * ``ato_only`` — the same train and ATO without the signal chain (ATP on line limits): the
   fast system for timetable and energy studies.
+* ``following`` — two trains six minutes apart (the follower does not stop at B); the leader stops in block section 7 for
+  three minutes (its scenario.json); the follower runs on green, yellow, red-yellow, stops
+  before the red signal and resumes.
+* ``faults`` — the free run with a transmitter failure, a broken rail and an open feed
+  injected and repaired by its scenario.json.
+* ``joints_at_speed`` — 160 km/h through a station throat of short block sections.
+* ``freight_ac`` — a heavy freight train, AC 25 kV, ALSN 25 Hz.
+* ``als_en``, ``fire_dqpsk``, ``als_en_following``, ``fire_dqpsk_following`` — ``free_run``
+  and ``following`` with the digital systems.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
-from typing import Dict, List, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 from .sspgen import ComponentSpec, ConnectionSpec, write_ssd
 
@@ -35,35 +45,54 @@ def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict
     return components, connections
 
 
-SIGNAL_STEP_S = 0.01        # one 40-sample frame at 4 kHz
+SIGNAL_FS_HZ = 4000.0
+CHAIN_PORTS = ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")
 
 
-def alsn_chain(sections: int = 8, frame: int = 40, fmu_folder: str = "resources", train: str = "train",
-               ato: str = "ato", train_slot: int = 1):
-    """Coder → rail line → receiver → ATO of one train, and the train back into the rail line."""
+def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sections: int = 8, frame: int = 40,
+                 fmu_folder: str = "resources", coder: Dict[str, object] = None, rail: Dict[str, object] = None,
+                 receiver: Dict[str, object] = None):
+    """Coder → rail line → one receiver per train (``rx``, or ``rx1``, ``rx2`` … for several) →
+    its ATO, and each train's position back into the rail line (train j on slot j)."""
+    step = frame / SIGNAL_FS_HZ                  # a signal FMU steps one frame
     components = [
-        ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", SIGNAL_STEP_S),
-        ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", SIGNAL_STEP_S),
-        ComponentSpec("rx", f"{fmu_folder}/LocoReceiver.fmu", SIGNAL_STEP_S),
+        ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", step, dict(coder or {})),
+        ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", step, dict(rail or {})),
     ]
-    j = train_slot
     connections = [ConnectionSpec(f"coder.u_tx[{k},{n}]", f"rail.u_tx[{k},{n}]")
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
     connections += [ConnectionSpec(f"rail.occupied[{k}]", f"coder.occupied[{k}]") for k in range(1, sections + 1)]
-    connections += [ConnectionSpec(f"rail.e_coil[{j},{n}]", f"rx.e_coil[{n}]") for n in range(1, frame + 1)]
-    # linear: the train publishes its state at the end of its 0.5 s step; the rail line needs
-    # the position at each 10 ms frame, not half a second ahead (the master interpolates)
-    connections += [ConnectionSpec(f"{train}.{a}", f"rail.{b}[{j}]", transition="linear")
-                    for a, b in (("x", "x_head"), ("v", "v"), ("i_traction", "i_traction"))]
-    connections += [ConnectionSpec(f"rx.{port}", f"{ato}.{port}")
-                    for port in ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")]
+    for j, (train, ato) in enumerate(trains, start=1):
+        rx = "rx" if len(trains) == 1 else f"rx{j}"
+        components.append(ComponentSpec(rx, f"{fmu_folder}/LocoReceiver.fmu", step, dict(receiver or {})))
+        connections += [ConnectionSpec(f"rail.e_coil[{j},{n}]", f"{rx}.e_coil[{n}]") for n in range(1, frame + 1)]
+        # linear: the train publishes its state at the end of its 0.5 s step; the rail line needs
+        # the position at each 10 ms frame, not half a second ahead (the master interpolates)
+        connections += [ConnectionSpec(f"{train}.{a}", f"rail.{b}[{j}]", transition="linear")
+                        for a, b in (("x", "x_head"), ("v", "v"), ("i_traction", "i_traction"))]
+        connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in CHAIN_PORTS]
     return components, connections
 
 
-def write_free_run(root: Path = SSP_ROOT) -> Path:
-    components, connections = train_and_ato(ato_parameters={"cab_signal": "ALSN"})
-    chain, links = alsn_chain()
-    return write_ssd(root / "free_run", "free_run", chain + components, connections + links, stop_time=1100.0)
+# ---- the digital systems' settings ----------------------------------------------------------------
+def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
+    """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
+    if system == "ALSN":
+        return {}, {}, {}, {"cab_signal": "ALSN"}
+    from fmus.common import cab_systems, digital
+
+    digital_system = cab_systems.digital_system(system)
+    carrier = digital_system.carrier_hz
+    latency = digital.stated_latency_s(digital_system.message_s(carrier))
+    return ({"system": system}, {"carrier": carrier}, {"system": system},
+            {"cab_signal": "digital", "decoding_latency": round(latency, 3)})
+
+
+def write_free_run(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "free_run") -> Path:
+    coder, rail, receiver, ato = cab_settings(system)
+    components, connections = train_and_ato(ato_parameters=ato)
+    chain, links = signal_chain(coder=coder, rail=rail, receiver=receiver)
+    return write_ssd(root / name, name, chain + components, connections + links, stop_time=1100.0)
 
 
 def write_ato_only(root: Path = SSP_ROOT) -> Path:
@@ -71,8 +100,146 @@ def write_ato_only(root: Path = SSP_ROOT) -> Path:
     return write_ssd(root / "ato_only", "ato_only", components, connections, stop_time=1100.0)
 
 
+# following: the leader stops in block section 7 (15.2-17.6 km) for three minutes (the system's
+# scenario.json); the follower, six minutes behind and not stopping at B, runs up to it
+FOLLOWER_TIMETABLE = {"train": "passenger 103 (following)",
+                      "stops": [{"station": "A", "departure_s": 430},
+                                {"station": "C", "arrival_s": 1380}]}
+LEADER_HALT_S = (810.0, 810.0 + 50.0 + 180.0)   # full service brake from (≈15.5 km, 100 km/h) → released at
+
+
+def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "following") -> Path:
+    coder, rail, receiver, ato = cab_settings(system)
+    leader, leader_links = train_and_ato("leader", "leader_ato", ato_parameters=ato)
+    follower, follower_links = train_and_ato("follower", "follower_ato",
+                                             ato_parameters={**ato, "timetable_file": "follower_timetable.json"})
+    chain, links = signal_chain((("leader", "leader_ato"), ("follower", "follower_ato")),
+                                coder=coder, rail=rail, receiver=receiver)
+    folder = root / name
+    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links, stop_time=1600.0)
+    resources = folder / "resources"
+    resources.mkdir(exist_ok=True)
+    _write_json(resources / "follower_timetable.json", FOLLOWER_TIMETABLE)
+    halt, release = LEADER_HALT_S
+    scenario = {
+        "description": "The leader stops in block section 7 (15.2-17.6 km) for three minutes: its ATO's command is "
+                       "overridden by a full service brake, then released. The follower, six minutes behind and not "
+                       "stopping at B, "
+                       "receives green, yellow, red-yellow, stops before the red signal at 15.2 km "
+                       "and resumes when the line clears.",
+        "events": [
+            {"time": halt, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
+            {"time": release, "model": "leader", "variable": "command", "action": "reset"},
+        ]}
+    _write_json(folder / "scenario.json", scenario)
+    return path
+
+
+def _write_json(path: Path, document: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=1, ensure_ascii=False) + "\n")
+
+
+# faults: three faults on the free run, each followed by its recovery
+FAULT_EVENTS = [
+    (100.0, "rail", "feed_open[1]", "set", True),       # the feed of section 1 fails under the train: code lost
+    (130.0, "rail", "feed_open[1]", "reset", None),
+    (160.0, "coder", "fault_main", "set", True),        # main transmitter fails: the reserve takes over
+    (170.0, "coder", "fault_reserve", "set", True),     # the reserve fails too: no code anywhere
+    (230.0, "coder", "fault_reserve", "reset", None),
+    (230.0, "coder", "fault_main", "reset", None),
+    (300.0, "rail", "broken_rail_at", "set", 9000.0),  # broken rail in section 4: signal 5 (7.8 km) red
+    (540.0, "rail", "broken_rail_at", "reset", None),
+]
+
+
+def write_faults(root: Path = SSP_ROOT) -> Path:
+    path = write_free_run(root, name="faults")
+    scenario = {
+        "description": "Faults on the free run, each followed by its repair: the feed of section 1 fails under "
+                       "the train (code lost, 100-130 s); the main then the reserve code transmitter fail (no code "
+                       "anywhere, 170-230 s); a broken rail in section 4 turns signal 5 red ahead of the train, which "
+                       "stops before it (300-540 s). Each must end in a restrictive state within the decoding "
+                       "latency, never a wrong-side failure.",
+        "events": [{"time": t, "model": m, "variable": v, "action": a, **({} if value is None else {"value": value})}
+                   for t, m, v, a, value in FAULT_EVENTS]}
+    _write_json(path.parent / "scenario.json", scenario)
+    return path
+
+
+# joints_at_speed: 160 km/h through a station throat of five short block sections
+THROAT_LINE = {
+    "name": "station throat at speed",
+    "description": "12 km, DC 3 kV, ALSN 50 Hz; block sections of 400-500 m between 4.8 and 6.6 km (a station "
+                   "throat: joints every 400-500 m) on a 160 km/h line; railcosim's joints_at_speed system",
+    "length_m": 12000,
+    "electrification": {"system": "DC3000", "nominal_voltage_v": 3000},
+    "block_sections": [
+        {"name": str(k + 1), "start_m": a, "end_m": b, "signal": sig, "transmitter": tx, "carrier_hz": 50,
+         "ballast_ohm_km": 1.0}
+        for k, (a, b, sig, tx) in enumerate([
+            (0, 2600, "Ч1", "KPT-5"), (2600, 4800, "3", "KPT-7"), (4800, 5300, "НМ1", "KPT-5"),
+            (5300, 5700, "М3", "KPT-7"), (5700, 6100, "М5", "KPT-5"), (6100, 6600, "ЧМ2", "KPT-7"),
+            (6600, 9000, "Ч2", "KPT-5"), (9000, 12000, "Н3", "KPT-7")])],
+    "insulated_joints": [{"position_m": x, "impedance_bond": True, "bond_lead_offset_m": 1.0}
+                         for x in (0, 2600, 4800, 5300, 5700, 6100, 6600, 9000, 12000)],
+    "stations": [{"name": "A", "stop_m": 400, "platform_length_m": 400},
+                 {"name": "B", "stop_m": 11600, "platform_length_m": 400}],
+    "gradients": [{"start_m": 0, "permille": 0.0}],
+    "curves": [],
+    "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90}],
+}
+THROAT_TIMETABLE = {"train": "passenger 105 (through the throat)",
+                    "stops": [{"station": "A", "departure_s": 30}, {"station": "B", "arrival_s": 420}]}
+
+
+def write_joints_at_speed(root: Path = SSP_ROOT) -> Path:
+    files = {"line_file": "throat_line.json"}
+    coder, rail, receiver, ato = cab_settings("ALSN")
+    components, connections = train_and_ato(
+        train_parameters=files, ato_parameters={**ato, **files, "timetable_file": "throat_timetable.json",
+                                                "strategy": "flat_out"})
+    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
+    folder = root / "joints_at_speed"
+    path = write_ssd(folder, "joints_at_speed", chain + components, connections + links, stop_time=480.0)
+    _write_json(folder / "resources" / "throat_line.json", THROAT_LINE)
+    _write_json(folder / "resources" / "throat_timetable.json", THROAT_TIMETABLE)
+    return path
+
+
+# freight_ac: a heavy freight train on the AC 25 kV variant of the default line, ALSN 25 Hz
+FREIGHT_TIMETABLE = {"train": "freight 2001", "stops": [
+    {"station": "A", "departure_s": 60}, {"station": "B", "arrival_s": 900, "departure_s": 960},
+    {"station": "C", "arrival_s": 1800}]}
+FREIGHT_LENGTH_M = 1000.0
+
+
+def write_freight_ac(root: Path = SSP_ROOT) -> Path:
+    from fmus.common.data import DATA
+
+    folder = root / "freight_ac"
+    files = {"line_file": "default_line_ac.json"}
+    stock = {"rolling_stock_file": "freight_vl80.json"}
+    coder, rail, receiver, ato = cab_settings("ALSN")
+    components, connections = train_and_ato(
+        train_parameters={**files, **stock},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "freight_timetable.json"})
+    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files, "train_length[1]": FREIGHT_LENGTH_M},
+                                receiver={**receiver, "train_category": "freight", "carrier": 25.0})
+    path = write_ssd(folder, "freight_ac", chain + components, connections + links, stop_time=1900.0)
+    for name in ("default_line_ac.json", "freight_vl80.json"):
+        _write_json(folder / "resources" / name, json.loads((DATA / name).read_text()))
+    _write_json(folder / "resources" / "freight_timetable.json", FREIGHT_TIMETABLE)
+    return path
+
+
 def write_shipped(root: Path = SSP_ROOT) -> List[Path]:
-    return [write_free_run(root), write_ato_only(root)]
+    written = [write_free_run(root), write_ato_only(root), write_following(root), write_faults(root),
+               write_joints_at_speed(root), write_freight_ac(root)]
+    for system, prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
+        written.append(write_free_run(root, system, prefix))
+        written.append(write_following(root, system, f"{prefix}_following"))
+    return written
 
 
 if __name__ == "__main__":

@@ -180,8 +180,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
         if system is None:
-            cycle = max(tx.cycle_s for tx in alsn.load_transmitters().values())
-            latency = 2 * cycle + 0.5
+            latency = alsn.STATED_LATENCY_S
         else:
             carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
             latency = digital.stated_latency_s(system.message_s(carrier))

@@ -16,6 +16,7 @@ from typing import List
 
 import numpy as np
 
+from ..common import alsn
 from ..common import signalling as sig
 from ..common.data import Line, RollingStock, TimetableStop
 from ..common.slave import FmuInputError
@@ -51,7 +52,7 @@ class AtoSettings:
     min_dwell_s: float = 20.0
     stop_window_m: float = 5.0            # standing at most this far short of the stop point is an arrival
     hold_brake: float = 0.3               # brake share held while standing
-    decoding_latency_s: float = 2 * 1.86 + 0.5   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
+    decoding_latency_s: float = alsn.STATED_LATENCY_S   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
     speed_gain: float = 0.2               # 1/s, speed-holding loop
     hysteresis_mps: float = 1.0 * KMH     # coast → traction again only this far below the set speed
     brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)

@@ -3,6 +3,7 @@ from pythonfmu.default_experiment import DefaultExperiment
 
 from ..common.data import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
                            load_rolling_stock, load_timetable)
+from ..common import alsn
 from ..common.slave import FrameSlave, Port
 from .core import AtoCore, AtoSettings
 
@@ -41,7 +42,7 @@ class AtoController(FrameSlave):
             Port("min_dwell", "parameter", unit="s", start=20.0, min=0.0),
             Port("stop_window", "parameter", unit="m", start=5.0, min=0.0,
                  description="standing at most this far short of the stop point counts as arrived"),
-            Port("decoding_latency", "parameter", unit="s", start=2 * 1.86 + 0.5, min=0.0,
+            Port("decoding_latency", "parameter", unit="s", start=alsn.STATED_LATENCY_S, min=0.0,
                  description="receiver latency the ATP allows after passing a signal"),
             Port("x", "input", unit="m", start=0.0, description="head position"),
             Port("v", "input", unit="m/s", start=0.0),

@@ -28,6 +28,9 @@ LONG_INTERVAL_MAX_S = 1.0     # the longest code interval is 0.86 s (KPT-7 Ж) +
 KPT5_WINDOW_S = (1.47, 1.73)
 KPT7_WINDOW_S = (1.73, 1.99)
 CODE_TIMEOUT_S = 2.0
+# the stated decoding latency (DESIGN §8): two code cycles of the slower transmitter (KPT-7,
+# 1.86 s) + 0.5 s; the ATP's allowance and the wrong-side judgement use it
+STATED_LATENCY_S = 2 * 1.86 + 0.5
 # plausibility of the parts of a cycle (our addition, docs/loco_receiver.md): the shortest code
 # pulse is 0.22 s and the longest 0.44 s, the short intervals 0.12 s, all ±5 % drift, plus the
 # smearing of the receiver filters

@@ -1,0 +1,135 @@
+"""Acceptance of the shipped systems (issue 8; docs/scenarios.md): no signal passed at danger,
+no wrong-side failure, timetables kept, the following and fault scenarios end where they must.
+The long runs are shortened where the behaviour under test is over, and run in process (the
+same facades without FMI; the FMI path is exercised by the shorter runs in test_ato.py,
+test_alsn.py and test_digital.py). The full runs: benchmarks/bench_systems.py."""
+import json
+
+import numpy as np
+import pytest
+
+from fmus.common import signalling as sig
+from fmus.common.alsn import STATED_LATENCY_S
+from helpers import read_csv
+from orchestrator.cli import SSP_ROOT
+from orchestrator.run import RunOptions, run_system
+
+
+def _run(tmp_path, product_fmus, system, stop_time, record=None):
+    out = tmp_path / system
+    result = run_system(SSP_ROOT / system, RunOptions(stop_time=stop_time, output_dir=out, in_process=True,
+                                                      fmu_dirs=[product_fmus], record=record))
+    header, data = read_csv(out / "results.csv")
+    return result.summary, {name: data[:, i] for i, name in enumerate(header)}
+
+
+def _no_danger(summary, emergency_allowed=False):
+    for train in summary["trains"]:
+        assert train["signals_passed_at_danger"] == 0, train["name"]
+        assert emergency_allowed or train["emergency_brakings"] == 0, train["name"]
+    assert summary["receivers"], "no receiver judged"
+    for receiver in summary["receivers"]:
+        assert receiver["wrong_side_failures"] == 0, receiver
+
+
+def _on_time(train, stations):
+    stops = {s["station"]: s for s in train["stops"]}
+    for station in stations:
+        assert abs(stops[station]["arrival_deviation_s"]) <= 15.0, stops[station]
+        assert abs(stops[station]["stop_error_m"]) <= 0.5, stops[station]
+
+
+def test_free_run_keeps_the_timetable_to_15_s_and_stops_to_half_a_metre(tmp_path, product_fmus):
+    summary, _ = _run(tmp_path, product_fmus, "free_run", 1100.0, ["train.x"])
+    _no_danger(summary)
+    _on_time(summary["trains"][0], ("B", "C"))
+    assert summary["realtime_factor"] > 0
+
+
+def test_following_the_follower_gets_green_yellow_red_yellow_and_stops_before_the_red_signal(tmp_path, product_fmus):
+    summary, col = _run(tmp_path, product_fmus, "following", 1200.0,
+                        ["leader.x", "follower.x", "follower.v", "follower_ato.atp_aspect"])
+    _no_danger(summary)
+    assert [e["t"] for e in summary["scenario"]["events_applied"]] == [810.0, 1040.0]
+    follower = next(t for t in summary["trains"] if t["name"] == "follower")
+    approach = [a["aspect"] for a in follower["aspects"] if 8000.0 < a["x"] < 15200.0]
+    assert approach[-3:] == ["green", "yellow", "red-yellow"], approach
+    # it stops before signal 9 (15.2 km) while the leader's tail is still in section 7 ...
+    signal_m = 15200.0
+    standing = np.flatnonzero((col["follower.v"] < 0.01) & (col["follower.x"] > 12800.0))
+    assert standing.size
+    assert col["follower.x"][standing].max() < signal_m
+    assert col["leader.x"][standing[0]] - 400.0 < 17600.0
+    # ... and goes again once the line clears, on a yellow
+    assert col["follower.x"][-1] > signal_m
+    assert col["follower_ato.atp_aspect"][standing[-1] + 1] == sig.YELLOW
+
+
+def test_faults_each_end_in_a_restrictive_state_within_the_latency(tmp_path, product_fmus):
+    summary, col = _run(tmp_path, product_fmus, "faults", 580.0,
+                        ["rx.aspect", "rx.code_valid", "train.x", "train.v", "coder.status", "rail.occupied[4]",
+                         "rail.coil_section[1]"])
+    # a code lost at more than 40 + 7.5 km/h brings the no-code ceiling (40 km/h) at once: the
+    # ATP's emergency brake, fail-safe (docs/scenarios.md)
+    _no_danger(summary, emergency_allowed=True)
+    t = col["time"]
+
+    def restrictive(fault_s, repaired_s, allowed):
+        window = (t >= fault_s + STATED_LATENCY_S) & (t < repaired_s)
+        assert window.any() and np.isin(col["rx.aspect"][window], allowed).all(), \
+            (fault_s, np.unique(col["rx.aspect"][window]))
+
+    # the feed of section 1 fails under the train (100 s): code lost → white
+    assert (col["rail.coil_section[1]"][(t > 100) & (t < 130)] == 1).all()
+    restrictive(100.0, 130.0, [sig.WHITE, sig.RED])
+    # the main transmitter fails (160 s): the reserve carries on; then the reserve (170 s): no code
+    assert col["coder.status"][(t > 161) & (t < 169)].min() == 1 and col["coder.status"][(t > 171) & (t < 229)].min() == 2
+    assert (col["rx.aspect"][(t > 161) & (t < 170)] == sig.GREEN).all()
+    restrictive(170.0, 230.0, [sig.WHITE, sig.RED])
+    # a broken rail in section 4 (300 s): its relay drops, signal 5 (7.8 km) turns red; the train
+    # runs on yellow then red-yellow and stops before the signal until the rail is repaired
+    assert col["rail.occupied[4]"][(t > 301.0) & (t < 540.0)].min() == 1
+    restrictive(300.0 + 0.2, 540.0, [sig.YELLOW, sig.RED_YELLOW, sig.WHITE, sig.RED])
+    stopped = (t > 300.0) & (t < 540.0) & (col["train.v"] < 0.01)
+    assert stopped.any() and col["train.x"][stopped].max() < 7800.0
+    assert col["train.x"][-1] > 7800.0                                  # on again after the repair
+    assert len(summary["scenario"]["events_applied"]) == 8
+
+
+def test_joints_at_speed_no_aspect_artefact_through_the_station_throat(tmp_path, product_fmus):
+    summary, col = _run(tmp_path, product_fmus, "joints_at_speed", 300.0,
+                        ["train.x", "train.v", "rx.aspect", "ato.atp_aspect"])
+    _no_danger(summary)
+    throat = (col["train.x"] > 4700.0) & (col["train.x"] < 6700.0)
+    assert col["train.v"][throat].min() * 3.6 > 150.0                   # through the throat at speed
+    # every section carries З: the ATP acts on green throughout, the receiver never shows
+    # another code (at most a short white while it resynchronises after a joint)
+    assert [a["aspect"] for a in summary["trains"][0]["aspects"]] == ["white", "green"]
+    assert set(np.unique(col["rx.aspect"][col["time"] > 6.0])) <= {sig.GREEN, sig.WHITE}
+
+
+@pytest.mark.parametrize("system", ["als_en", "fire_dqpsk"])
+def test_digital_free_run_reaches_b_on_time_without_danger(tmp_path, product_fmus, system):
+    summary, col = _run(tmp_path, product_fmus, system, 560.0, ["rx.aspect", "rx.code_valid", "ato.atp_aspect"])
+    _no_danger(summary)
+    _on_time(summary["trains"][0], ("B",))
+    settled = col["time"] > 10.0
+    assert set(np.unique(col["ato.atp_aspect"][settled])) == {sig.GREEN}
+    assert summary["receivers"][0]["system"] == {"als_en": "ALS-EN", "fire_dqpsk": "FIRE_DQPSK"}[system]
+
+
+def test_freight_ac_reaches_b_on_time(tmp_path, product_fmus):
+    summary, _ = _run(tmp_path, product_fmus, "freight_ac", 930.0, ["train.x"])
+    _no_danger(summary)
+    stops = {s["station"]: s for s in summary["trains"][0]["stops"]}
+    assert abs(stops["B"]["arrival_deviation_s"]) <= 15.0 and abs(stops["B"]["stop_error_m"]) <= 10.0
+
+
+def test_every_shipped_system_is_written_and_packed(product_fmus):
+    names = {p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()}
+    assert {"free_run", "ato_only", "following", "faults", "joints_at_speed", "freight_ac", "als_en", "fire_dqpsk",
+            "als_en_following", "fire_dqpsk_following"} <= names
+    for name in names:
+        assert (product_fmus.parent / f"{name}.ssp").is_file(), name
+    scenario = json.loads((SSP_ROOT / "faults" / "scenario.json").read_text())
+    assert {e["variable"] for e in scenario["events"]} == {"feed_open[1]", "fault_main", "fault_reserve", "broken_rail_at"}
