@@ -10,7 +10,8 @@ FMUs' ports. ``python -m orchestrator.systems`` rewrites them; the files are com
   before the red signal and resumes.
 * ``faults`` — the free run with a transmitter failure, a broken rail and an open feed
   injected and repaired by its scenario.json.
-* ``joints_at_speed`` — 160 km/h through a station throat of short block sections.
+* ``joints_at_speed`` — 160 km/h through a station throat: three short track circuits inside one
+  block (joints without signals).
 * ``freight_ac`` — a heavy freight train, AC 25 kV, ALSN 25 Hz.
 * ``als_en``, ``fire_dqpsk``, ``als_en_following``, ``fire_dqpsk_following`` — ``free_run``
   and ``following`` with the digital systems.
@@ -167,30 +168,31 @@ def write_faults(root: Path = SSP_ROOT) -> Path:
     return path
 
 
-# joints_at_speed: 160 km/h through a station throat of five short block sections
+# joints_at_speed: 160 km/h through a station throat of three short track circuits in one block
 THROAT_LINE = {
     "name": "station throat at speed",
-    "description": "12 km, DC 3 kV, ALSN 50 Hz; block sections of 400-500 m between 4.8 and 6.6 km (a station "
-                   "throat: joints every 400-500 m) on a 160 km/h line; railcosim's joints_at_speed system",
-    "length_m": 12000,
+    "description": "14 km, DC 3 kV, ALSN 50 Hz, 160 km/h: a station throat of three 600 m track circuits "
+                   "between 7.6 and 9.4 km inside one block (no signals at the joints within it); railcosim's "
+                   "joints_at_speed system",
+    "length_m": 14000,
     "electrification": {"system": "DC3000", "nominal_voltage_v": 3000},
     "block_sections": [
         {"name": str(k + 1), "start_m": a, "end_m": b, "signal": sig, "transmitter": tx, "carrier_hz": 50,
          "ballast_ohm_km": 1.0}
         for k, (a, b, sig, tx) in enumerate([
-            (0, 2600, "Ч1", "KPT-5"), (2600, 4800, "3", "KPT-7"), (4800, 5300, "НМ1", "KPT-5"),
-            (5300, 5700, "М3", "KPT-7"), (5700, 6100, "М5", "KPT-5"), (6100, 6600, "ЧМ2", "KPT-7"),
-            (6600, 9000, "Ч2", "KPT-5"), (9000, 12000, "Н3", "KPT-7")])],
+            (0, 2600, "Ч1", "KPT-5"), (2600, 5200, "3", "KPT-7"), (5200, 7600, "НМ", "KPT-5"),
+            (7600, 8200, "", "KPT-7"), (8200, 8800, "", "KPT-5"), (8800, 9400, "ЧМ", "KPT-7"),
+            (9400, 11700, "5", "KPT-5"), (11700, 14000, "Н3", "KPT-7")])],
     "insulated_joints": [{"position_m": x, "impedance_bond": True, "bond_lead_offset_m": 1.0}
-                         for x in (0, 2600, 4800, 5300, 5700, 6100, 6600, 9000, 12000)],
+                         for x in (0, 2600, 5200, 7600, 8200, 8800, 9400, 11700, 14000)],
     "stations": [{"name": "A", "stop_m": 400, "platform_length_m": 400},
-                 {"name": "B", "stop_m": 11600, "platform_length_m": 400}],
+                 {"name": "B", "stop_m": 13600, "platform_length_m": 400}],
     "gradients": [{"start_m": 0, "permille": 0.0}],
     "curves": [],
     "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90}],
 }
 THROAT_TIMETABLE = {"train": "passenger 105 (through the throat)",
-                    "stops": [{"station": "A", "departure_s": 30}, {"station": "B", "arrival_s": 420}]}
+                    "stops": [{"station": "A", "departure_s": 30}, {"station": "B", "arrival_s": 465}]}
 
 
 def write_joints_at_speed(root: Path = SSP_ROOT) -> Path:
@@ -201,7 +203,7 @@ def write_joints_at_speed(root: Path = SSP_ROOT) -> Path:
                                                 "strategy": "flat_out"})
     chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
     folder = root / "joints_at_speed"
-    path = write_ssd(folder, "joints_at_speed", chain + components, connections + links, stop_time=480.0)
+    path = write_ssd(folder, "joints_at_speed", chain + components, connections + links, stop_time=520.0)
     _write_json(folder / "resources" / "throat_line.json", THROAT_LINE)
     _write_json(folder / "resources" / "throat_timetable.json", THROAT_TIMETABLE)
     return path

@@ -100,8 +100,10 @@ class Atp:
         self.mode = cab_signal
         self.decel = supervision_decel_mps2
         self.latency_s = decoding_latency_s
-        self.section_starts = [s.start_m for s in line.sections]
-        self.section_ends = [s.end_m for s in line.sections]
+        # "sections" here are blocks, signal to signal (a track circuit without a signal at its
+        # exit, e.g. in a station throat, is no signal to pass)
+        self.section_starts = [start for start, _ in line.block_bounds]
+        self.section_ends = [end for _, end in line.block_bounds]
         self.limit_starts = list(line.limit_starts)
         self.limits = list(line.limits_mps[category])
         self.section: Optional[int] = None

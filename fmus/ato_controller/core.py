@@ -283,6 +283,10 @@ class AtoCore:
             position, speed, station = self.braking_target
             if v <= speed + 0.05 and not station:
                 self.braking_target = None          # target speed reached: hold it
+            elif not station and not any(abs(p - position) < 1.0 and sp <= speed + 0.01 for p, sp, _ in targets):
+                # the target was lifted (a better code, or the ATP's assumption after passing a
+                # signal expired once the new section was decoded): release the brake
+                self.braking_target = None
         if need >= 0.97 * self.a_plan and target is not None:
             self.braking_target = target
         if self.braking_target is not None:

@@ -95,6 +95,18 @@ class Line:
         self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
         self.joints = document.get("insulated_joints", [])
         self._check(document)
+        # blocks: a block ends at a section with a signal at its exit; a section with no signal
+        # ("signal": "") is a track circuit inside a block (a station throat) — the line end
+        # always closes the last block
+        self.has_signal = [bool(sec.signal) or k == len(self.sections) - 1 for k, sec in enumerate(self.sections)]
+        self.block_of_section = []
+        block = 0
+        for has_signal in self.has_signal:
+            self.block_of_section.append(block)
+            block += has_signal
+        self.block_bounds = [(min(s.start_m for s, b in zip(self.sections, self.block_of_section) if b == k),
+                              max(s.end_m for s, b in zip(self.sections, self.block_of_section) if b == k))
+                             for k in range(block)]
         grads = sorted(document["gradients"], key=lambda g: g["start_m"])
         self.gradient_starts = [float(g["start_m"]) for g in grads]
         self.gradient_permille = [float(g["permille"]) for g in grads]

@@ -55,6 +55,8 @@ UNAMBIGUOUS_OFF_S = 0.2
 # a cycle whose pulses differ in level by more than this straddles an insulated joint (the
 # feed end of one section against the entry end of the next, ≈ 10× apart, seed 002)
 LEVEL_SPREAD = 2.5
+# a pulse whose relay input peaked below this × pick-up was marginal: its cycle is not decoded
+RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
 CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
@@ -132,11 +134,13 @@ class LocoReceiverCore:
         self._short = 0
         self._implausible = False
         self._pulse_peak = 0.0
+        self._pulse_drive = 0.0                          # peak of the relay's own (gain-controlled) input
         self._cycle_peaks = []
         self._after_gap = False
         self._boundary_peak: Optional[float] = None
         self._pending = None                             # (code, decide at, lowest, highest level)
         self._previous_cycle = alsn.NO_CODE
+        self._previous_level = 0.0                       # pulse level of the previous valid cycle
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
         self._started_s: Optional[float] = None
@@ -198,19 +202,23 @@ class LocoReceiverCore:
         if relay[0] != self._relay or relay[-1] != self._relay or not (relay[0] == relay).all():
             changes = np.flatnonzero(relay != np.concatenate([[self._relay], relay[:-1]]))
             first = round(t * s.fs_hz)
-            peaks = np.maximum.reduceat(level, np.concatenate([[0], changes])) if changes[0] > 0 \
-                else np.maximum.reduceat(level, changes)
+            starts = np.concatenate([[0], changes]) if changes[0] > 0 else changes
+            peaks = np.maximum.reduceat(level, starts)
+            drives = np.maximum.reduceat(envelope, starts)
             segment = 0 if changes[0] > 0 else -1            # peaks[segment] = the stretch before an edge
             for n in changes:
                 if segment >= 0 and self._relay:
                     self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
+                    self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
                 self._edge((first + n) * self.dt, bool(relay[n]))
                 self._relay = bool(relay[n])
                 segment += 1
             if self._relay:
                 self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
+                self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
         elif self._relay:
             self._pulse_peak = max(self._pulse_peak, float(level.max()))
+            self._pulse_drive = max(self._pulse_drive, float(envelope.max()))
         if self._pending is not None:
             self._settle_pending(t + x.size * self.dt)
         self._watchdog(t + x.size * self.dt)
@@ -228,6 +236,12 @@ class LocoReceiverCore:
             self._pulse_peak = 0.0
             if self._last_rise_s is not None and not (alsn.PULSE_S[0] <= time_s - self._last_rise_s <= alsn.PULSE_S[1]):
                 self._implausible = True          # a pulse split by noise, or carrier without keying
+            if self._pulse_drive < RELAY_MARGIN * self.settings.pick_up_v:
+                # the pulse barely moved the relay (the gain still reduced after a strong feed
+                # end, or a fading code): its neighbours may have been lost, so the cycle may
+                # under-count — never decode it (seen at 113 km/h past a joint: З read as КЖ)
+                self._implausible = True
+            self._pulse_drive = 0.0
             return
         if self._last_fall_s is None and self._started_s is not None \
                 and time_s - self._started_s > UNAMBIGUOUS_OFF_S:
@@ -270,6 +284,7 @@ class LocoReceiverCore:
             return
         out.decoded_codes += 1
         transmitter = 5 if kind == "KPT-5" else 7
+        previous_transmitter = out.transmitter
         if out.transmitter and transmitter != out.transmitter:
             out.joints += 1
         out.transmitter = transmitter
@@ -280,7 +295,14 @@ class LocoReceiverCore:
         peaks = self._cycle_peaks
         levels = peaks + ([self._boundary_peak] if self._boundary_peak is not None else [])
         clean = bool(peaks) and max(levels) <= LEVEL_SPREAD * max(min(levels), 1e-12) and not self._after_gap
-        confirmed = code == self._previous_cycle
+        # two identical cycles confirm each other only from the same track circuit: the same
+        # transmitter type and levels within the spread (at 113 km/h a З cut by a joint read as
+        # КЖ, and the next section's first, partly missed З read as КЖ too)
+        level = max(peaks) if peaks else 0.0
+        same_circuit = transmitter == previous_transmitter and self._previous_level > 0 and \
+            max(level, self._previous_level) <= LEVEL_SPREAD * max(min(level, self._previous_level), 1e-12)
+        confirmed = code == self._previous_cycle and same_circuit
+        self._previous_level = level
         self._pending = None
         if confirmed:
             self._show(code)

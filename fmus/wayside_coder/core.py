@@ -101,10 +101,18 @@ class CodingSwitch:
         return t - self.occupied_since >= s.switch_on_delay_s - 1e-12
 
 
-def sections_to_occupied(occupied: np.ndarray, count: int) -> np.ndarray:
-    """For each section, how many sections ahead the first occupied one lies (1: the next);
-    beyond the last modelled section the line is taken as free (a large number)."""
-    occ = np.concatenate([np.asarray(occupied[:count], dtype=bool), [False]])
+def sections_to_occupied(occupied: np.ndarray, count: int, block_of: Optional[np.ndarray] = None) -> np.ndarray:
+    """For each section, how many blocks ahead of its own block the first occupied one lies (1:
+    the next); a block is occupied when any of its track circuits is (``block_of``: block of
+    each section; None: one section per block). Beyond the last modelled section the line is
+    taken as free (a large number)."""
+    occ = np.asarray(occupied[:count], dtype=bool)
+    if block_of is not None:
+        blocks = int(block_of[-1]) + 1
+        per_block = np.zeros(blocks, dtype=bool)
+        np.logical_or.at(per_block, block_of, occ)
+        return sections_to_occupied(per_block, blocks)[block_of]
+    occ = np.concatenate([occ, [False]])
     index = np.where(occ, np.arange(count + 1), count + 10)
     next_occupied = np.minimum.accumulate(index[::-1])[::-1]
     return next_occupied[1:] - np.arange(count)
@@ -155,6 +163,8 @@ class WaysideCoderCore:
         self.codes = np.zeros(k, dtype=np.int64)
         self.signals = np.zeros(k, dtype=np.int64)
         self.switch = CodingSwitch(k, s)
+        self.block_of = np.array(line.block_of_section)
+        self.has_signal = np.array(line.has_signal)
         if s.relay_time_constant_s > 0:
             a = np.exp(-1.0 / (s.fs_hz * s.relay_time_constant_s))
             self._relay = (np.array([1.0 - a]), np.array([1.0, -a]))
@@ -167,7 +177,8 @@ class WaysideCoderCore:
 
     # ---- block logic --------------------------------------------------------------------------
     def block_signals(self, occupied: np.ndarray) -> np.ndarray:
-        return block_signals(sections_to_occupied(occupied, self.count), self.settings.block_aspects)
+        """Aspect of the signal closing each section's block (the code the section carries)."""
+        return block_signals(sections_to_occupied(occupied, self.count, self.block_of), self.settings.block_aspects)
 
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False) -> CoderOutputs:
         s = self.settings
@@ -190,5 +201,5 @@ class WaysideCoderCore:
             envelope, self._relay_state = lfilter(*self._relay, envelope, axis=1, zi=self._relay_state)
         out.u_tx[:k] = s.amplitude_v * envelope * np.sin(self.omega[:, None] * times[None, :])
         out.code_tx[:k] = codes
-        out.signal[:k] = signals
+        out.signal[:k] = np.where(self.has_signal, signals, SIGNAL_DARK)
         return out

@@ -34,7 +34,8 @@ from ..common.data import Line
 from ..common.digital import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
 from ..common.filter_design import chebyshev_band_pass
 from ..common.slave import FmuInputError
-from .core import CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings, sections_to_occupied
+from .core import (SIGNAL_DARK, CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings,
+                   sections_to_occupied)
 
 GENERATOR_PROTOTYPE_ORDER = 2      # 4th-order band-pass (seed 000 §9.3: two biquads)
 SQUARE_FUNDAMENTAL = 4.0 / np.pi   # amplitude of a ±1 square wave's fundamental
@@ -67,7 +68,9 @@ class DigitalCoderCore:
         self.symbols_per_sample = self.baud / s.fs_hz
         self.omega_per_sample = 2 * np.pi * self.carrier_hz / s.fs_hz
         length = system.message_symbols
-        self.blocks = np.arange(k) % 2
+        self.block_of = np.array(line.block_of_section)
+        self.has_signal = np.array(line.has_signal)
+        self.blocks = self.block_of % 2                       # block parity sent in every message
         # modulated message per section: cumulative phase table, start symbol and phase
         initial = [self._message(system.command_for(0), b) for b in self.blocks]
         self.current: List[Message] = initial
@@ -123,14 +126,14 @@ class DigitalCoderCore:
                   int(wrong_command_reserve))
         if inputs != self._inputs:         # the decision changes only with its inputs
             self._inputs = inputs
-            ahead = sections_to_occupied(occ, k)
+            ahead = sections_to_occupied(occ, k, self.block_of)
             commands, out.status = self._decide(ahead - 1, *inputs[1:])
             self._sending = np.array([c is not None for c in commands])
             for index, command in enumerate(commands):
                 if command is not None and command != self.pending[index].command:
                     self.pending[index] = self._message(command, self.blocks[index])
             self._changing = np.flatnonzero([p != c for p, c in zip(self.pending, self.current)])
-            out.signal[:k] = block_signals(ahead, s.block_aspects)
+            out.signal[:k] = np.where(self.has_signal, block_signals(ahead, s.block_aspects), SIGNAL_DARK)
         self.live = coded & self._sending
         if not self._started:              # nothing modulated yet: start with the commands of now
             self._started = True
