@@ -26,7 +26,7 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
 3. **A steady unmodulated tone at the carrier and the adjacent track's signal alone** (the other
    track parity) must never give a command.
 
-    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--plots]
+    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--systems ALSN,ALS-EN,FIRE_DQPSK]
 """
 from __future__ import annotations
 
@@ -257,35 +257,40 @@ def main():
     parser.add_argument("--messages", type=int, default=100000, help="digital messages per condition")
     parser.add_argument("--alsn-cycles", type=int, default=2000, help="ALSN code cycles per condition")
     parser.add_argument("--ber-symbols", type=int, default=200000)
+    parser.add_argument("--systems", default="ALSN,ALS-EN,FIRE_DQPSK",
+                        help="which systems to (re)compute; the others are kept from an existing --output")
     parser.add_argument("--output", default=str(DOCS / "figures" / "noise_immunity.json"))
     args = parser.parse_args()
-    results = {"ber": {}, "white": {}, "impulse": {}, "tone": {}, "adjacent": {}}
+    chosen = set(args.systems.split(","))
+    digital = [name for name in ("FIRE_DQPSK", "ALS-EN") if name in chosen]
+    output = Path(args.output)
+    results = json.loads(output.read_text()) if output.is_file() else {}
+    for key in ("ber", "white", "impulse", "tone", "adjacent"):
+        results.setdefault(key, {})
     began = time.perf_counter()
-    for name in ("FIRE_DQPSK", "ALS-EN"):
+    for name in digital:
         results["ber"][name] = {str(e): ber(name, e, args.ber_symbols, 11 + int(e)) for e in (2, 4, 6, 8, 10)}
     results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
     print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
-    for snr in SNRS_DB:
-        row = {}
-        for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
-            row[name] = run_digital(name, args.messages, white(snr, np.random.default_rng(100 + seed)), 7 + seed)
-        row["ALSN"] = alsn_chain(args.alsn_cycles, white(snr, np.random.default_rng(99)), 5)
-        results["white"][str(snr)] = row
-        print("white", snr, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
-    for rate in IMPULSE_RATES:
-        row = {}
-        for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
-            row[name] = run_digital(name, args.messages, impulses(rate, np.random.default_rng(200 + seed)), 17 + seed)
-        row["ALSN"] = alsn_chain(args.alsn_cycles, impulses(rate, np.random.default_rng(199)), 5)
-        results["impulse"][str(rate)] = row
-        print("impulse", rate, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
-    for name in ("FIRE_DQPSK", "ALS-EN"):
+    for kind, conditions, noise_of, seeds in (("white", SNRS_DB, white, (100, 99)),
+                                              ("impulse", IMPULSE_RATES, impulses, (200, 199))):
+        for condition in conditions:
+            row = results[kind].setdefault(str(condition), {})
+            for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
+                if name in digital:
+                    row[name] = run_digital(name, args.messages, noise_of(condition, np.random.default_rng(seeds[0] + seed)),
+                                            (7 if kind == "white" else 17) + seed)
+            if "ALSN" in chosen:
+                row["ALSN"] = alsn_chain(args.alsn_cycles, noise_of(condition, np.random.default_rng(seeds[1])), 5)
+            print(kind, condition, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
+            output.write_text(json.dumps(results, indent=1) + "\n")
+    for name in digital:
         results["tone"][name] = run_digital(name, max(args.messages // 10, 100), None, 3, tone=True)
         results["adjacent"][name] = run_digital(name, args.messages, None, 4, track_parity=0)
         print("tone/adjacent", name, json.dumps(results["tone"][name]), json.dumps(results["adjacent"][name]),
               f"{time.perf_counter() - began:.0f} s", flush=True)
-    Path(args.output).write_text(json.dumps(results, indent=1) + "\n")
-    print(f"written {args.output} in {time.perf_counter() - began:.0f} s")
+    output.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"written {output} in {time.perf_counter() - began:.0f} s")
 
 
 if __name__ == "__main__":

@@ -26,8 +26,8 @@ def _receive(samples, track=1, carrier=als_en.CARRIER_HZ, baud=BAUD):
     accepted = []
     for k, z in enumerate(dqpsk.correlate(samples, FS, carrier, baud)):
         now = (k + 1) / baud
-        for _, message in framer.push(np.array([z])):
-            acceptor.push(now, message)
+        for _, message, quality in framer.push(np.array([z])):
+            acceptor.push(now, message, quality)
         acceptor.expire(now)
         accepted.append(acceptor.command)
     return acceptor, accepted

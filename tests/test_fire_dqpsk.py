@@ -23,8 +23,8 @@ class _Receiver:
     def push(self, symbol):
         self.symbols += 1
         now = self.symbols / fd.BAUD
-        for _, message in self.framer.push(np.array([symbol])):
-            self.acceptor.push(now, message)
+        for _, message, quality in self.framer.push(np.array([symbol])):
+            self.acceptor.push(now, message, quality)
         self.acceptor.expire(now)
         return self.acceptor.command
 
@@ -97,7 +97,7 @@ def test_noise_never_yields_a_wrong_command(snr_db):
 def test_words_carry_the_track_and_block_parity():
     framer = fd.FireFramer()
     symbols = dqpsk.correlate(fd.transmit([9] * 4, FS, track=0, block=1), FS, fd.CARRIER_HZ, fd.BAUD)
-    messages = [m for _, m in framer.push(symbols)]
+    messages = [m for _, m, _ in framer.push(symbols)]
     assert messages and all(m.command == 9 and m.track == 0 and m.block == 1 for m in messages)
 
 

@@ -41,6 +41,7 @@ blocks (≤ 6), 200 km/h. Reported `code`: the KLUB register number (domain-fact
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import List, Optional, Tuple
 
 import numpy as np
@@ -114,6 +115,12 @@ def message_increments(message: Message) -> np.ndarray:
     return np.array(increments)
 
 
+def margins_of(symbols: np.ndarray) -> np.ndarray:
+    """Decision margin of each phase difference: 1 on a multiple of π/2, 0 half-way between."""
+    difference = np.angle(symbols[1:] * np.conj(symbols[:-1]))
+    return 1.0 - np.abs(np.mod(difference + np.pi / 4, np.pi / 2) - np.pi / 4) / (np.pi / 4)
+
+
 def dibits_of(symbols: np.ndarray) -> np.ndarray:
     """Dibit of each phase difference of consecutive symbols (nearest multiple of π/2)."""
     difference = np.angle(symbols[1:] * np.conj(symbols[:-1]))
@@ -134,6 +141,7 @@ class AlsEnFramer(Framer):
         self.locked = False
         self.boundary = 0                           # bit count mod 8 at which words end
         self.last: Optional[Tuple[int, int]] = None  # (indication or speed, sync info) of the last word
+        self.margins = deque(maxlen=MESSAGE_SYMBOLS)  # decision margins of the last message's symbols
 
     def push(self, symbols: np.ndarray) -> List[Decoded]:
         first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
@@ -144,17 +152,21 @@ class AlsEnFramer(Framer):
             return []
         self.previous = symbols[-1]
         messages: List[Decoded] = []
-        for index, dibit in enumerate(dibits_of(symbols).tolist(), start=first):
+        margins = margins_of(symbols).tolist()
+        for index, (dibit, margin) in enumerate(zip(dibits_of(symbols).tolist(), margins), start=first):
             self.register_1 = (self.register_1 << 1 | dibit >> 1) & 0xFFFF
             self.register_2 = (self.register_2 << 1 | dibit & 1) & 0xFFFF
+            self.margins.append(margin)
             self.bits += 1
             if self.locked:
                 if self.bits % WORD_BITS == self.boundary:
-                    messages += [(index, m) for m in self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)]
+                    messages += [(index, m, min(self.margins)) for m in self._word(self.register_1 & 0xFF,
+                                                                                   self.register_2 & 0xFF)]
             elif self.bits >= 2 * WORD_BITS and self._aligned():
                 self.locked, self.boundary = True, self.bits % WORD_BITS
                 self.last = (decode_word(self.register_1 >> 8, 1), decode_word(self.register_2 >> 8, 2))
-                messages += [(index, m) for m in self._word(self.register_1 & 0xFF, self.register_2 & 0xFF)]
+                messages += [(index, m, min(self.margins)) for m in self._word(self.register_1 & 0xFF,
+                                                                               self.register_2 & 0xFF)]
         return messages
 
     def _aligned(self) -> bool:

@@ -134,6 +134,7 @@ class FireFramer(Framer):
         self.leading_sync = False                 # locked: the sync opening this frame was seen
         self.misses = 0
         self.data: List[int] = []
+        self.quality = 1.0
 
     def push(self, symbols: np.ndarray) -> List[Decoded]:
         first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
@@ -146,10 +147,15 @@ class FireFramer(Framer):
         difference = np.abs(np.angle(symbols[1:] * np.conj(symbols[:-1])))
         syncs = (difference < SYNC_TOLERANCE_RAD).tolist()
         dibits = dqpsk.decide(symbols).tolist()
+        # decision margins, 0 on a boundary … 1 on the point: a sync against ±π/8, data
+        # (odd multiples of π/4) against the nearest multiple of π/2
+        sync_margin = (1.0 - difference / SYNC_TOLERANCE_RAD).tolist()
+        data_margin = (np.abs(np.mod(difference, np.pi / 2) - np.pi / 4) / (np.pi / 4))
+        data_margin = (1.0 - data_margin).tolist()
         messages: List[Decoded] = []
         for index, (sync, dibit) in enumerate(zip(syncs, dibits), start=first):
             if self.locked:
-                self._locked(index, sync, dibit, messages)
+                self._locked(index, sync, dibit, messages, sync_margin[index - first], data_margin[index - first])
             elif sync:
                 if self.since_sync == FRAME_SYMBOLS:      # two syncs a frame apart: locked
                     self.locked, self.position, self.leading_sync, self.misses = True, 0, True, 0
@@ -159,26 +165,29 @@ class FireFramer(Framer):
                 self.since_sync += 1
         return messages
 
-    def _locked(self, index: int, sync: bool, dibit: int, messages: List[Decoded]) -> None:
+    def _locked(self, index: int, sync: bool, dibit: int, messages: List[Decoded], sync_margin: float,
+                data_margin: float) -> None:
         """Flywheel: data positions are decided as data whatever they look like; a word is
         decoded only between two syncs both seen where expected, so a slip, which puts data
         where a sync is due, can never yield a rotated word."""
         self.position += 1
         if self.position < FRAME_SYMBOLS:
             self.data.append(dibit)
+            self.quality = min(self.quality, data_margin)
             return
         self.position = 0
         if sync:
             if self.leading_sync and len(self.data) == DATA_SYMBOLS:
-                messages.append((index, self._word(self.data)))
+                messages.append((index, self._word(self.data), min(self.quality, sync_margin)))
             self.leading_sync, self.misses = True, 0
         else:
-            messages.append((index, None))            # no sync where due: this word is lost
+            messages.append((index, None, 0.0))       # no sync where due: this word is lost
             self.leading_sync = False
             self.misses += 1
             if self.misses >= LOCK_MISSES:
                 self.locked, self.since_sync = False, None
         self.data = []
+        self.quality = sync_margin                    # the word's margins start with its leading sync
 
     @staticmethod
     def _word(dibits: List[int]) -> Optional[Message]:

@@ -210,10 +210,10 @@ class DigitalReceiverCore:
                 self.framer.reset()                      # squelched: no decisions on noise
                 keep = np.flatnonzero(amplitude < s.min_level_v)[-1] + 1
                 symbols, ends = symbols[keep:], ends[keep:]
-            for index, message in self.framer.push(symbols):
+            for index, message, quality in self.framer.push(symbols):
                 decided_s = (ends[index] + 1) / s.fs_hz   # when its last symbol was integrated
                 self.acceptor.expire(decided_s)
-                self.acceptor.push(decided_s, message)
+                self.acceptor.push(decided_s, message, quality)
         if retimed:
             self.framer.reset()
         self.acceptor.expire((first + x.size) / s.fs_hz)
