@@ -105,6 +105,9 @@ class CaptureRequest:
                  and interface.variables[n].causality == "output"]
         if not names:
             raise UserError(f"--capture {self.component}.{self.port}: no such frame output")
+        if any("," in n[len(prefix):-1] for n in names):
+            raise UserError(f"--capture {self.component}.{self.port}: a frame array with rows; name the row, "
+                            f"e.g. {self.component}.{self.port}[1]")
         return sorted(names, key=lambda n: int(n[len(prefix):-1]))
 
 

@@ -123,11 +123,7 @@ def _speed_distance(output: Path, results, trains, components) -> Path:
     ax.set_xlabel("distance (km)")
     ax.grid(alpha=0.3)
     fig.suptitle("Speed over distance: ATP permitted speed, aspect acted on (band), signals, stations, gradient")
-    fig.tight_layout()
-    path = output / "speed_distance.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, output / "speed_distance.png")
 
 
 def _time_distance(output: Path, results, trains, components) -> Path:
@@ -157,11 +153,7 @@ def _time_distance(output: Path, results, trains, components) -> Path:
     ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title("Time–distance: trains (lines) against their timetables (circles: scheduled arrival / departure)")
-    fig.tight_layout()
-    path = output / "time_distance.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, output / "time_distance.png")
 
 
 def _energy(output: Path, results, trains) -> Path:
@@ -174,11 +166,7 @@ def _energy(output: Path, results, trains) -> Path:
     ax.set_ylabel("energy (kWh)")
     ax.grid(alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    path = output / "energy.png"
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, output / "energy.png")
 
 
 def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]) -> Optional[Path]:
@@ -209,8 +197,13 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title(f"Coil EMF and filter output around t = {centre:.2f} s")
+    return _save(fig, output / "coil_emf.png")
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
-    path = output / "coil_emf.png"
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

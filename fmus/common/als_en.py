@@ -144,13 +144,10 @@ class AlsEnFramer(Framer):
         self.margins = deque(maxlen=MESSAGE_SYMBOLS)  # decision margins of the last message's symbols
 
     def push(self, symbols: np.ndarray) -> List[Decoded]:
-        first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
-        if self.previous is not None:
-            symbols = np.concatenate([[self.previous], symbols])
-        if symbols.size < 2:
-            self.previous = symbols[-1] if symbols.size else self.previous
+        joined = self._joined(symbols)
+        if joined is None:
             return []
-        self.previous = symbols[-1]
+        symbols, first = joined
         messages: List[Decoded] = []
         margins = margins_of(symbols).tolist()
         for index, (dibit, margin) in enumerate(zip(dibits_of(symbols).tolist(), margins), start=first):

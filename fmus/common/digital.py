@@ -71,6 +71,18 @@ class Framer(ABC):
     def reset(self) -> None:
         """Forget the symbol history (the symbol timing was re-chosen)."""
 
+    previous: Optional[complex] = None
+
+    def _joined(self, symbols: np.ndarray):
+        """(the last symbol of the previous push followed by these, pushed index of the symbol
+        ending the first phase difference), or None when there is no difference yet."""
+        first = 0 if self.previous is not None else 1
+        if self.previous is not None:
+            symbols = np.concatenate([[self.previous], symbols])
+        if symbols.size:
+            self.previous = symbols[-1]
+        return (symbols, first) if symbols.size >= 2 else None
+
 
 class DigitalSystem(ABC):
     name: str

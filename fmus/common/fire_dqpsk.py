@@ -137,13 +137,10 @@ class FireFramer(Framer):
         self.quality = 1.0
 
     def push(self, symbols: np.ndarray) -> List[Decoded]:
-        first = 0 if self.previous is not None else 1     # pushed index of the first difference's symbol
-        if self.previous is not None:
-            symbols = np.concatenate([[self.previous], symbols])
-        if symbols.size < 2:
-            self.previous = symbols[-1] if symbols.size else self.previous
+        joined = self._joined(symbols)
+        if joined is None:
             return []
-        self.previous = symbols[-1]
+        symbols, first = joined
         difference = np.abs(np.angle(symbols[1:] * np.conj(symbols[:-1])))
         syncs = (difference < SYNC_TOLERANCE_RAD).tolist()
         dibits = dqpsk.decide(symbols).tolist()
