@@ -84,9 +84,9 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
 
     digital_system = cab_systems.digital_system(system)
     carrier = digital_system.carrier_hz
-    latency = digital.stated_latency_s(digital_system.message_s(carrier))
+    allowance = digital.atp_allowance_s(digital_system.message_s(carrier))
     return ({"system": system}, {"carrier": carrier}, {"system": system},
-            {"cab_signal": "digital", "decoding_latency": round(latency, 3)})
+            {"cab_signal": "digital", "decoding_latency": round(allowance, 3)})
 
 
 def write_free_run(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "free_run") -> Path:
@@ -150,7 +150,7 @@ FAULT_EVENTS = [
     (230.0, "coder", "fault_reserve", "reset", None),
     (230.0, "coder", "fault_main", "reset", None),
     (300.0, "rail", "broken_rail_at", "set", 9000.0),  # broken rail in section 4: signal 5 (7.8 km) red
-    (540.0, "rail", "broken_rail_at", "reset", None),
+    (600.0, "rail", "broken_rail_at", "reset", None),
 ]
 
 
@@ -160,7 +160,7 @@ def write_faults(root: Path = SSP_ROOT) -> Path:
         "description": "Faults on the free run, each followed by its repair: the feed of section 1 fails under "
                        "the train (code lost, 100-130 s); the main then the reserve code transmitter fail (no code "
                        "anywhere, 170-230 s); a broken rail in section 4 turns signal 5 red ahead of the train, which "
-                       "stops before it (300-540 s). Each must end in a restrictive state within the decoding "
+                       "stops before it (300-600 s). Each must end in a restrictive state within the decoding "
                        "latency, never a wrong-side failure.",
         "events": [{"time": t, "model": m, "variable": v, "action": a, **({} if value is None else {"value": value})}
                    for t, m, v, a, value in FAULT_EVENTS]}

@@ -67,7 +67,7 @@ def test_following_the_follower_gets_green_yellow_red_yellow_and_stops_before_th
 
 
 def test_faults_each_end_in_a_restrictive_state_within_the_latency(tmp_path, product_fmus):
-    summary, col = _run(tmp_path, product_fmus, "faults", 580.0,
+    summary, col = _run(tmp_path, product_fmus, "faults", 650.0,
                         ["rx.aspect", "rx.code_valid", "train.x", "train.v", "coder.status", "rail.occupied[4]",
                          "rail.coil_section[1]"])
     # a code lost at more than 40 + 7.5 km/h brings the no-code ceiling (40 km/h) at once: the
@@ -89,9 +89,9 @@ def test_faults_each_end_in_a_restrictive_state_within_the_latency(tmp_path, pro
     restrictive(170.0, 230.0, [sig.WHITE, sig.RED])
     # a broken rail in section 4 (300 s): its relay drops, signal 5 (7.8 km) turns red; the train
     # runs on yellow then red-yellow and stops before the signal until the rail is repaired
-    assert col["rail.occupied[4]"][(t > 301.0) & (t < 540.0)].min() == 1
-    restrictive(300.0 + 0.2, 540.0, [sig.YELLOW, sig.RED_YELLOW, sig.WHITE, sig.RED])
-    stopped = (t > 300.0) & (t < 540.0) & (col["train.v"] < 0.01)
+    assert col["rail.occupied[4]"][(t > 301.0) & (t < 600.0)].min() == 1
+    restrictive(300.0 + 0.2, 600.0, [sig.YELLOW, sig.RED_YELLOW, sig.WHITE, sig.RED])
+    stopped = (t > 300.0) & (t < 600.0) & (col["train.v"] < 0.01)
     assert stopped.any() and col["train.x"][stopped].max() < 7800.0
     assert col["train.x"][-1] > 7800.0                                  # on again after the repair
     assert len(summary["scenario"]["events_applied"]) == 8
@@ -127,11 +127,17 @@ def test_freight_ac_reaches_b_on_time(tmp_path, product_fmus):
     assert abs(stops["B"]["arrival_deviation_s"]) <= 15.0 and abs(stops["B"]["stop_error_m"]) <= 10.0
 
 
-def test_every_shipped_system_is_written_and_packed(product_fmus):
+def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
+    import zipfile
+
+    from orchestrator.packing import pack_systems
+
     names = {p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()}
     assert {"free_run", "ato_only", "following", "faults", "joints_at_speed", "freight_ac", "als_en", "fire_dqpsk",
             "als_en_following", "fire_dqpsk_following"} <= names
-    for name in names:
-        assert (product_fmus.parent / f"{name}.ssp").is_file(), name
+    packed = {p.stem: p for p in pack_systems(SSP_ROOT, product_fmus, tmp_path)}
+    assert set(packed) == names
+    with zipfile.ZipFile(packed["following"]) as archive:      # the archive carries its scenario and data
+        assert {"scenario.json", "resources/follower_timetable.json", "resources/RailLine.fmu"} <= set(archive.namelist())
     scenario = json.loads((SSP_ROOT / "faults" / "scenario.json").read_text())
     assert {e["variable"] for e in scenario["events"]} == {"feed_open[1]", "fault_main", "fault_reserve", "broken_rail_at"}

@@ -6,6 +6,8 @@ Codes are named by the aspect they give on the locomotive and carry its enumerat
 """
 from __future__ import annotations
 
+import math
+
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +38,15 @@ STATED_LATENCY_S = 2 * 1.86 + 0.5
 # smearing of the receiver filters
 PULSE_S = (0.17, 0.50)
 SHORT_INTERVAL_MIN_S = 0.06
+SHORT_INTERVAL_S = 0.12        # the code's short interval (KPT-5 and KPT-7)
+
+
+def short_interval_min_s(envelope_corner_hz: float) -> float:
+    """Shortest relay gap still taken for a code interval: 0.06 s, less where the envelope
+    filter is slow (at 25 Hz its 8 Hz corner shrinks a 0.12 s gap to ≈ 0.055 s; the relay
+    needs about two envelope time constants to drop and two to pick up again)."""
+    tau = 1.0 / (2.0 * math.pi * envelope_corner_hz)
+    return min(SHORT_INTERVAL_MIN_S, SHORT_INTERVAL_S - 4.0 * tau)
 
 
 @dataclass(frozen=True)

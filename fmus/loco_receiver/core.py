@@ -115,6 +115,7 @@ class LocoReceiverCore:
         self.dt = 1.0 / s.fs_hz
         self.band_pass = filters.band_pass(s.carrier_hz, bandwidth, s.filter_order, s.fs_hz)
         self.envelope_lp = filters.envelope_low_pass(filters.default_envelope_corner(s.carrier_hz), s.fs_hz)
+        self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(s.carrier_hz))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
         self._gain_db = 0.0
@@ -270,7 +271,7 @@ class LocoReceiverCore:
                 self._after_gap = interval > alsn.LONG_INTERVAL_MAX_S
             else:
                 self._short += 1
-                if interval < alsn.SHORT_INTERVAL_MIN_S:
+                if interval < self._short_min_s:
                     self._implausible = True      # a dropout inside a pulse, not a code interval
         self._last_rise_s = time_s
 
