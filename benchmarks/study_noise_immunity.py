@@ -127,8 +127,8 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
     events = []                                              # (time, decoded message or None, command in force)
     original = acceptor.push
 
-    def spy(time_s, message):
-        original(time_s, message)
+    def spy(time_s, message, quality=1.0):
+        original(time_s, message, quality)
         events.append((time_s, message, acceptor.command, acceptor.confirmed_s))
     acceptor.push = spy
     length = system.message_symbols
