@@ -55,7 +55,8 @@ UNAMBIGUOUS_OFF_S = 0.2
 # a cycle whose pulses differ in level by more than this straddles an insulated joint (the
 # feed end of one section against the entry end of the next, ≈ 10× apart, seed 002)
 LEVEL_SPREAD = 2.5
-# a pulse whose relay input peaked below this × pick-up was marginal: its cycle is not decoded
+# a pulse whose relay input peaked below this × pick-up while the code itself (input-referred)
+# was above it was marginal through the reduced gain: its cycle is not decoded
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
@@ -234,14 +235,16 @@ class LocoReceiverCore:
         if not rising:
             self._last_fall_s = time_s
             self._cycle_peaks.append(self._pulse_peak)
+            marginal = RELAY_MARGIN * self.settings.pick_up_v
+            if self._pulse_drive < marginal <= self._pulse_peak:
+                # the code is strong enough but the gain, still reduced after a strong feed end,
+                # left the relay only just moving: its neighbours may have been lost, so the
+                # cycle may under-count — never decode it (113 km/h past a joint: З read as КЖ).
+                # A code that is itself weak is the relay's ordinary business.
+                self._implausible = True
             self._pulse_peak = 0.0
             if self._last_rise_s is not None and not (alsn.PULSE_S[0] <= time_s - self._last_rise_s <= alsn.PULSE_S[1]):
                 self._implausible = True          # a pulse split by noise, or carrier without keying
-            if self._pulse_drive < RELAY_MARGIN * self.settings.pick_up_v:
-                # the pulse barely moved the relay (the gain still reduced after a strong feed
-                # end, or a fading code): its neighbours may have been lost, so the cycle may
-                # under-count — never decode it (seen at 113 km/h past a joint: З read as КЖ)
-                self._implausible = True
             self._pulse_drive = 0.0
             return
         if self._last_fall_s is None and self._started_s is not None \
