@@ -159,7 +159,9 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
         elif message.track == 1:
             undetected += 1
     # what is shown, on a 10 ms grid, against what was sent within the latency before
-    ranks = {c: r for r, c in enumerate(sorted(system.commands(), key=system.rank))}
+    # dense ranks: commands that mean the same to the train (КЖ with any speed field) share one
+    levels = sorted({system.rank(c) for c in system.commands()})
+    ranks = {c: levels.index(system.rank(c)) for c in system.commands()}
     grid = int(tx.samples / FS / GRID_S)
     shown = np.full(grid, -1, dtype=np.int16)
     for k, (time_s, _, command, confirmed_s) in enumerate(events):
