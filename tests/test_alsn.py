@@ -186,6 +186,22 @@ def test_block_logic_three_and_four_aspects():
     assert out.code_tx[:5].tolist() == [sig.GREEN] * 3 + [sig.YELLOW, sig.RED_YELLOW]
 
 
+def test_track_circuits_without_signals_are_coded_as_one_block():
+    """A station throat: sections 4-6 of the joints_at_speed line form one block (signals only
+    at its ends). Occupancy anywhere in it closes the signal before it; its track circuits carry
+    the code of the block's exit signal and show no signal of their own."""
+    from orchestrator.systems import SSP_ROOT
+
+    line = load_line(SSP_ROOT / "joints_at_speed" / "resources" / "throat_line.json")
+    assert line.block_of_section == [0, 1, 2, 3, 3, 3, 4, 5]
+    coder = WaysideCoderCore(line, 8, N, CoderSettings())
+    occ = np.zeros(8, dtype=bool)
+    occ[4] = True                                              # the middle circuit of the throat
+    out = coder.step(0.0, occ)
+    assert out.code_tx[:6].tolist() == [sig.GREEN, sig.YELLOW, sig.RED_YELLOW, sig.GREEN, sig.GREEN, sig.GREEN]
+    assert out.signal[3:6].tolist() == [0, 0, SIGNAL_GREEN]    # dark inside the throat
+
+
 def test_coding_on_occupation_after_the_switch_on_delay():
     coder = WaysideCoderCore(load_line(), 8, N, CoderSettings(coding="on_occupation", switch_on_delay_s=0.5))
     assert coder.step(0.0, _occupied(2)).code_tx[2] == alsn.NO_CODE
