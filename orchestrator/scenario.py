@@ -121,16 +121,16 @@ class ScenarioManipulator:
 
     # ---- what the master must bind ----------------------------------------------------------
     def inputs_needed(self) -> Dict[str, List[str]]:
-        needed: Dict[str, List[str]] = {}
-        for (component, variable), kind in self.kinds.items():
-            if kind == "free":
-                needed.setdefault(component, []).append(variable)
-        return needed
+        """Unconnected inputs the events drive: the master binds them into the input buffers."""
+        return self._variables_of_kind("free")
 
     def outputs_needed(self) -> Dict[str, List[str]]:
+        return self._variables_of_kind("output")
+
+    def _variables_of_kind(self, wanted: str) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
         for (component, variable), kind in self.kinds.items():
-            if kind == "output":
+            if kind == wanted:
                 needed.setdefault(component, []).append(variable)
         return needed
 

@@ -272,17 +272,6 @@ class ReceiverVerdict:
 
 
 def transmitted_indication(system, code: int, category: str):
-    """What a coder's raw ``code_tx`` means (the most permissive reading where the raw id is
-    ambiguous: ALS-EN's KLUB register 15 is 'five or more' free blocks); None for no code."""
-    from fmus.common import als_en
-
-    if code <= 0:
-        return None
-    if system.name == "FIRE_DQPSK":
-        return system.indication(code, category)
-    if code == 9:
-        return system.indication(als_en.command_id(als_en.RED, len(als_en.SPEEDS_KMH) - 1), category)
-    if code == 5:
-        return system.indication(als_en.command_id(als_en.WHITE_FLASHING, len(als_en.SPEEDS_KMH) - 1), category)
-    free = 0 if code == 10 else (6 if code == 15 else code - 10)
-    return system.indication(system.command_for(free), category)
+    """What a coder's raw ``code_tx`` means; None for no code (the system's reading)."""
+    command = system.command_of_code(code)
+    return None if command is None else system.indication(command, category)

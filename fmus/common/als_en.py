@@ -216,6 +216,17 @@ class AlsEn(DigitalSystem):
     def commands(self) -> Tuple[int, ...]:
         return tuple(command_id(i, s) for i in range(LAST_INDICATION + 1) for s in range(16))
 
+    def command_of_code(self, code: int) -> Optional[int]:
+        """KLUB register → command; register 15 is "five or more" free blocks, read as six."""
+        if code <= 0:
+            return None
+        top = len(SPEEDS_KMH) - 1
+        if code == 9:
+            return command_id(RED, top)
+        if code == 5:
+            return command_id(WHITE_FLASHING, top)
+        return self.command_for(0 if code == 10 else (6 if code == 15 else code - 10))
+
     def indication(self, command: int, category: str) -> Indication:
         indication, speed = command_fields(command)
         ceiling = CATEGORY_MAX_KMH[category]

@@ -122,6 +122,11 @@ class DigitalSystem(ABC):
     def framer(self, track_parity: int) -> Framer:
         ...
 
+    def command_of_code(self, code: int) -> Optional[int]:
+        """The command a raw code id (the coder's ``code_tx``) stands for, None for no code;
+        where the id is ambiguous, the most permissive reading."""
+        return code if code > 0 else None
+
     def rank(self, command: int) -> tuple:
         """Higher is more permissive: aspect, then free blocks, then the speeds."""
         ind = self.indication(command, "passenger")

@@ -110,16 +110,6 @@ def transmit(commands: List[int], fs_hz: float, amplitude: float = 1.0, start_ph
     return dqpsk.modulate_increments(increments, fs_hz, carrier_hz, baud, amplitude, start_phase)
 
 
-SYNC = -1
-
-
-def classify(symbols: np.ndarray) -> np.ndarray:
-    """Per phase difference of consecutive symbols: SYNC (−1) or the data dibit (0…3)."""
-    difference = np.angle(symbols[1:] * np.conj(symbols[:-1]))
-    data = dqpsk.decide(symbols)
-    return np.where(np.abs(difference) < SYNC_TOLERANCE_RAD, SYNC, data)
-
-
 class FireFramer(Framer):
     """Frame synchronisation on the sync symbol, then the Fire check (module docstring)."""
 
