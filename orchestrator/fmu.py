@@ -358,16 +358,26 @@ class InProcessSlave:
     def bind(self, inputs, outputs) -> None:
         self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
         slave = self._slave
-        self._setters = [(getattr(slave, f"set_{b.type.lower()}"), b) for b in self.inputs.values()]
-        self._getters = [(getattr(slave, f"get_{b.type.lower()}"), b) for b in self.outputs.values()]
+        # numeric ports move straight between the master's buffers and the facade's value
+        # store (slots resolved once); strings keep the facade's setters and getters
+        self._writes = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.inputs.values()
+                        if b.type != "String"]
+        self._reads = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.outputs.values()
+                       if b.type != "String"]
+        self._string_inputs = [b for b in self.inputs.values() if b.type == "String"]
+        self._string_outputs = [b for b in self.outputs.values() if b.type == "String"]
 
     def write_inputs(self) -> None:
-        for setter, buffer in self._setters:
-            setter(buffer.vr_array, buffer.values)
+        for store, slots, values in self._writes:
+            store[slots] = values
+        for buffer in self._string_inputs:
+            self._slave.set_string(buffer.vr_array, buffer.values)
 
     def read_outputs(self) -> None:
-        for getter, buffer in self._getters:
-            buffer.values[:] = getter(buffer.vr_array)
+        for store, slots, values in self._reads:
+            values[:] = store[slots]
+        for buffer in self._string_outputs:
+            buffer.values[:] = self._slave.get_string(buffer.vr_array)
 
     def do_step(self, time_s: float, step_s: float) -> None:
         ok = self._slave.do_step(time_s, step_s)

@@ -207,6 +207,11 @@ class FrameSlave(Fmi2Slave):
             raise TypeError(f"value reference(s) {vr_array[slots < 0].tolist()} are not {type_name}")
         return slots
 
+    def value_view(self, type_name: str, vrs) -> Tuple[np.ndarray, np.ndarray]:
+        """(store, slots): the flat value store of a numeric type and the slots of ``vrs`` in it,
+        for a host in this interpreter that moves values without FMI (the in-process runner)."""
+        return self._stores[type_name].values, self._slots(type_name, vrs)
+
     def set_string(self, vrs, values):
         for vr, value in zip(vrs, values):
             slot = self._slots("String", [vr])[0]
