@@ -35,16 +35,16 @@ errors.
 from __future__ import annotations
 
 import bisect
+import math
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..common.data import Line
 from ..common.slave import FmuInputError
-from .network import discretise
+from .network import ShuntFamily, discretise
 from .track_circuit import CircuitParameters, Faults, TrackCircuit
 
 CONFIG_TICK_S = 0.01
@@ -87,9 +87,29 @@ class RailOutputs:
 class _Model:
     phi_n: np.ndarray       # (nx, nx) state after a frame
     psi: np.ndarray         # (nx, N) input → state after a frame
-    out_o: np.ndarray       # (N·2, nx) state → outputs per sample (shunt current, entry current)
-    out_t: np.ndarray       # (N·2, N) inputs → outputs per sample
+    shunt_o: np.ndarray     # (N, nx) state at the frame start → shunt current per sample
+    shunt_t: np.ndarray     # (N, N) inputs of the frame → shunt current per sample
+    entry_o: np.ndarray     # (N, nx) the same for the entry-end current
+    entry_t: np.ndarray     # (N, N)
     relay_level: float      # relay-end voltage relative to the free circuit at the design ballast
+
+
+class _FrameCurrents:
+    """A frame's per-sample shunt and entry-end currents of a section, computed only for the
+    sections a coil sees (from the states at the frame start and the frame's code input)."""
+
+    __slots__ = ("core", "states", "u")
+
+    def __init__(self, core: "RailLineCore", states: np.ndarray, u: np.ndarray):
+        self.core, self.states, self.u = core, states, u
+
+    def shunt(self, k: int) -> np.ndarray:
+        model = self.core._active[k][1]
+        return model.shunt_o @ self.states[k, :model.shunt_o.shape[1]] + model.shunt_t @ self.u[k]
+
+    def entry(self, k: int) -> np.ndarray:
+        model = self.core._active[k][1]
+        return model.entry_o @ self.states[k, :model.entry_o.shape[1]] + model.entry_t @ self.u[k]
 
 
 class RailLineCore:
@@ -134,15 +154,32 @@ class RailLineCore:
         self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
         self._feed_m = np.array([c.feed_m for c in self.circuits])
         margin = s.coil_length_m
-        self._joint_band = [(lo - margin, hi + margin) for lo, _, hi in self.joint_zones] + \
-            [(c.feed_m - margin, c.end_m + margin) for c in self.circuits]
+        bands = sorted([(lo - margin, hi + margin) for lo, _, hi in self.joint_zones] +
+                       [(c.feed_m - margin, c.end_m + margin) for c in self.circuits])
+        merged: List[List[float]] = []
+        for lo, hi in bands:                    # touching or overlapping bands merged: disjoint, sorted
+            if merged and lo <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        self._band_lo = [lo for lo, _ in merged]
+        self._band_hi = [hi for _, hi in merged]
+        self._ends_list = self.ends.tolist()
+        self._feed_list = self._feed_m.tolist()
+        self._spacing_list = [float(c.nodes_m[1] - c.nodes_m[0]) for c in self.circuits]
+        self._segments_list = [c.segments for c in self.circuits]
+        self._train_lengths = [float(length) for length in s.train_length_m]
+        self._fault_inputs = None
+        self._relay_levels = np.ones(self.count)
+        self._relays_settled = False
         self.faults = [Faults() for _ in range(self.count)]
         self.broken_rail_m = -1.0
         self._refresh_faults()
         self._models: List[OrderedDict] = [OrderedDict() for _ in range(self.count)]
-        self._amplitude: Dict[Tuple[int, Faults], np.ndarray] = {}
+        self._families: Dict[Tuple[int, Faults], Tuple[ShuntFamily, Dict[str, int]]] = {}
+        self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray]] = {}
         self._log_amplitude: Dict[Tuple[int, Faults], np.ndarray] = {}
-        self._relay_ref = np.array([self._relay_voltage(k, None, Faults(), reference=True) for k in range(self.count)])
+        self._relay_ref = np.array([self._reference_relay_voltage(k) for k in range(self.count)])
         size = max(self._model(k, None).phi_n.shape[0] for k in range(self.count))
         self.states = np.zeros((self.count, size))
         self._phi_stack = np.zeros((self.count, size, size))
@@ -152,12 +189,18 @@ class RailLineCore:
         self._index = np.arange(frame)
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
         lag = np.exp(-self.dt / s.traction_time_constant_s)
-        self._lag_b, self._lag_a = np.array([1.0 - lag]), np.array([1.0, -lag])
-        self._traction_state = np.zeros((trains, 1))
+        self._lag_powers = lag ** np.arange(1, frame + 1)
+        self._traction_last = np.zeros(trains)                 # smoothed current at the last sample
+        self._traction_on = np.zeros(trains, dtype=bool)
         self._i_traction = np.zeros((trains, frame))
+        self._ripple_times = None                              # the frame's ripple waveform, once computed
+        self._ripple = np.zeros(frame)
+        self._emf_gain = s.fs_hz * s.coil_gain_h
         self._last_current = np.zeros(trains)
         self._sensing = np.zeros(trains, dtype=bool)
-        self._anchor = [(None, 0.0, 0.0)] * trains             # (x_k, v_k, t_k) of the last position update
+        # (x_k, v_k, t_k) of each train's last position update
+        self._anchored = np.zeros(trains, dtype=bool)
+        self._anchor_x, self._anchor_v, self._anchor_t = np.zeros(trains), np.zeros(trains), np.zeros(trains)
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
@@ -170,6 +213,7 @@ class RailLineCore:
             Faults(f.ballast_ohm_km, self.broken_rail_m if self.starts[k] <= self.broken_rail_m < self.ends[k] else -1.0,
                    f.feed_open) for k, f in enumerate(self.faults)]
         self._active = [None] * self.count          # models and relay levels follow the new faults
+        self._nodes = [-2] * self.count             # (−1 is "no shunt"): every section re-activates
 
     def _model(self, k: int, node: Optional[int]) -> _Model:
         faults = self._fault_of(k)
@@ -178,9 +222,12 @@ class RailLineCore:
         if key in cache:
             cache.move_to_end(key)
             return cache[key]
-        circuit = self.circuits[k]
-        net = circuit.network(node, faults, self.settings.transformer_ratio)
-        system = net.state_space()
+        family_key = (k, faults)
+        if family_key not in self._families:
+            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio)
+            self._families[family_key] = (ShuntFamily(net, 1.0 / self.settings.circuit.shunt_r_ohm), net.node_index)
+        family, node_index = self._families[family_key]
+        system = family.state_space(None if node is None else node_index[f"n{node}"])
         phi, gamma = discretise(system, self.dt)
         n = self.frame
         nx = phi.shape[0]
@@ -188,7 +235,7 @@ class RailLineCore:
         rows = np.zeros((2, nx))
         direct = np.zeros(2)
         if node is not None:
-            index = net.node_index[f"n{node}"]
+            index = node_index[f"n{node}"]
             g_sh = 1.0 / self.settings.circuit.shunt_r_ohm
             rows[0] = system.node_from_state[index] * g_sh
             direct[0] = system.node_from_input[index, 0] * g_sh
@@ -209,28 +256,41 @@ class RailLineCore:
         for m in range(n - 1, -1, -1):
             psi[:, m] = column
             column = phi @ column
-        # outputs of all samples at once: (N·2, nx) and (N·2, N) matrices
-        model = _Model(np.linalg.matrix_power(phi, n), psi, out_o.reshape(n * 2, nx), out_t.reshape(n * 2, n),
-                       self._relay_voltage(k, node, faults))
+        # outputs of all samples at once: (N, nx) and (N, N) matrices per output
+        model = _Model(np.linalg.matrix_power(phi, n), psi, np.ascontiguousarray(out_o[:, 0]),
+                       np.ascontiguousarray(out_t[:, 0]), np.ascontiguousarray(out_o[:, 1]),
+                       np.ascontiguousarray(out_t[:, 1]), self._relay_voltage(k, node))
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
         return model
 
+    def _reference_relay_voltage(self, k: int) -> float:
+        """|relay-end voltage| of the free circuit at the design ballast, unit feed."""
+        net = self.circuits[k].network(None, Faults(), 1.0)
+        v, _ = net.phasor(2 * np.pi * self.carriers[k], [1.0])
+        return abs(v[net.node_index["n0"]])
+
+    def _phasor_table(self, k: int, faults: Optional[Faults] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """For a wheelset shunt at each node of section k (the current faults unless given; unit
+        feed, phasor at the carrier): |shunt current| and |relay-end voltage|; the last relay
+        entry is the circuit without a shunt."""
+        faults = self._fault_of(k) if faults is None else faults
+        key = (k, faults)
+        if key not in self._phasors:
+            circuit, g_sh = self.circuits[k], 1.0 / self.settings.circuit.shunt_r_ohm
+            net = circuit.network(None, faults, 1.0)
+            nodes = [net.node_index[f"n{node}"] for node in range(circuit.segments + 1)]
+            at_node, at_relay, free_relay = net.phasor_with_shunt(2 * np.pi * self.carriers[k], [1.0], g_sh,
+                                                                  net.node_index["n0"])
+            amplitude = np.maximum(np.abs(at_node[nodes]) * g_sh, 1e-12)
+            relay = np.append(np.abs(at_relay[nodes]), abs(free_relay))    # last: no shunt
+            self._phasors[key] = (amplitude, relay)
+        return self._phasors[key]
+
     def _amplitudes(self, k: int) -> np.ndarray:
         """|shunt current| for a shunt at each node (unit feed, phasor at the carrier)."""
-        faults = self._fault_of(k)
-        key = (k, faults)
-        if key not in self._amplitude:
-            circuit = self.circuits[k]
-            omega = 2 * np.pi * self.carriers[k]
-            values = []
-            for node in range(circuit.segments + 1):
-                net = circuit.network(node, faults, 1.0)
-                v, _ = net.phasor(omega, [1.0])
-                values.append(abs(v[net.node_index[f"n{node}"]]) / self.settings.circuit.shunt_r_ohm)
-            self._amplitude[key] = np.maximum(np.array(values), 1e-12)
-        return self._amplitude[key]
+        return self._phasor_table(k)[0]
 
     def _log_amplitudes(self, k: int) -> np.ndarray:
         key = (k, self._fault_of(k))
@@ -238,15 +298,18 @@ class RailLineCore:
             self._log_amplitude[key] = np.log(self._amplitudes(k))
         return self._log_amplitude[key]
 
-    def _relay_voltage(self, k: int, node: Optional[int], faults: Faults, reference: bool = False) -> float:
-        circuit = self.circuits[k]
-        net = circuit.network(node, faults, 1.0)
-        v, _ = net.phasor(2 * np.pi * self.carriers[k], [1.0])
-        value = abs(v[net.node_index["n0"]])
-        return value if reference else value / self._relay_ref[k]
+    def _relay_voltage(self, k: int, node: Optional[int], faults: Optional[Faults] = None) -> float:
+        """Relay-end voltage (the current faults unless given), relative to the free circuit at
+        the design ballast."""
+        relay = self._phasor_table(k, faults)[1]
+        return float(relay[-1 if node is None else node]) / self._relay_ref[k]
 
     # ---- step -------------------------------------------------------------------------------
     def set_faults(self, broken_rail_m: float, ballast_override: np.ndarray, feed_open: np.ndarray) -> None:
+        raw = (float(broken_rail_m), ballast_override[:self.count].tobytes(), feed_open[:self.count].tobytes())
+        if raw == self._fault_inputs:                # the usual frame: nothing changed
+            return
+        self._fault_inputs = raw
         faults = [Faults(float(max(ballast_override[k], 0.0)), -1.0, bool(feed_open[k])) for k in range(self.count)]
         if faults != self.faults or float(broken_rail_m) != self.broken_rail_m:
             self.faults, self.broken_rail_m = faults, float(broken_rail_m)
@@ -254,9 +317,9 @@ class RailLineCore:
 
     def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
         """A new position update starts x(t) = x_k + v_k·(t − t_k) (DESIGN §3)."""
-        anchor = self._anchor[j]
-        if anchor[0] is None or x != anchor[0] or v != anchor[1]:
-            self._anchor[j] = (x, v, t)
+        if not self._anchored[j] or x != self._anchor_x[j] or v != self._anchor_v[j]:
+            self._anchored[j] = True
+            self._anchor_x[j], self._anchor_v[j], self._anchor_t[j] = x, v, t
 
     def section_of(self, x):
         k = np.searchsorted(self.starts, x, side="right") - 1
@@ -264,7 +327,34 @@ class RailLineCore:
 
     def _section_at(self, x: float) -> int:
         k = bisect.bisect_right(self._starts_list, x) - 1
-        return k if k >= 0 and x < self.ends[k] else -1
+        return k if k >= 0 and x < self._ends_list[k] else -1
+
+    def _shunt_nodes(self, at_tick: np.ndarray) -> List[int]:
+        """Network node of the front-most wheelset in each section at the configuration tick
+        (−1: no train in the section)."""
+        front = [-math.inf] * self.count
+        for head, length in zip(at_tick.tolist(), self._train_lengths):
+            # sections with start ≤ head and end > head − length (sorted, disjoint)
+            last = bisect.bisect_right(self._starts_list, head) - 1
+            for k in range(bisect.bisect_right(self._ends_list, head - length), last + 1):
+                front[k] = max(front[k], min(head, self._feed_list[k]))
+        return [-1 if f == -math.inf else
+                min(max(round((f - self._starts_list[k]) / self._spacing_list[k]), 0), self._segments_list[k])
+                for k, f in enumerate(front)]
+
+    def _activate(self, k: int, node: Optional[int]) -> None:
+        model = self._model(k, node)
+        log_amplitude = self._log_amplitudes(k)
+        # (node, model, log amplitude at the nodes, at the model's node): see _scale
+        self._active[k] = (node, model, log_amplitude, log_amplitude[node if node is not None else 0])
+        size = model.phi_n.shape[0]
+        self._phi_stack[k] = 0.0                             # sections padded to one size:
+        self._psi_stack[k] = 0.0                             # one product advances them all
+        self._phi_stack[k, :size, :size] = model.phi_n
+        self._psi_stack[k, :size] = model.psi
+        self.states[k, size:] = 0.0       # a branch the new network lacks (feed opened) carries nothing
+        self._relay_levels[k] = model.relay_level
+        self._relays_settled = False
 
     def step(self, t: float, u_tx: np.ndarray, x_head: np.ndarray, v: np.ndarray, i_traction: np.ndarray) -> RailOutputs:
         s, out = self.settings, self.out
@@ -272,64 +362,61 @@ class RailLineCore:
         first = round(t * s.fs_hz)
         times = (first + self._index[:n]) * self.dt
         tick = np.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
-        heads, at_tick = [], []
         for j in range(self.trains):
             self._update_anchor(j, t, float(x_head[j]), float(v[j]))
-            x_k, v_k, t_k = self._anchor[j]
-            heads.append(x_k + v_k * (times - t_k))          # per sample from the anchor: same for any frame
-            at_tick.append(x_k + v_k * (tick - t_k))
+        # per sample from the anchor: the same positions for any frame length
+        heads = self._anchor_x[:, None] + self._anchor_v[:, None] * (times[None, :] - self._anchor_t[:, None])
+        at_tick = self._anchor_x + self._anchor_v * (tick - self._anchor_t)
         self._smooth_traction(i_traction, n)
         # the front-most wheelset of each train in each section shunts it
-        front = np.full(self.count, -np.inf)
-        for j in range(self.trains):
-            head = at_tick[j]
-            inside = (head >= self.starts) & (head - s.train_length_m[j] < self.ends)
-            if inside.any():
-                front = np.where(inside, np.maximum(front, np.minimum(head, self._feed_m)), front)
-        configs = [None if front[k] == -np.inf else self.circuits[k].nearest_node(front[k]) for k in range(self.count)]
-        # sections whose currents a coil needs this frame
-        coil_sections = set()
-        for j in range(self.trains):
-            k_axle = self._section_at(float(heads[j][0]))
-            k_coil = self._section_at(float(heads[j][-1]) + s.coil_offset_m + s.coil_length_m)
-            coil_sections.update(k for k in (k_axle, k_coil) if k >= 0)
-            if 0 <= k_axle < self.count - 1:
-                coil_sections.add(k_axle + 1)
-        for k in range(self.count):
-            active = self._active[k]
-            if active is None or active[0] != configs[k]:
-                model = self._model(k, configs[k])
-                self._active[k] = (configs[k], model)
-                size = model.phi_n.shape[0]
-                self._phi_stack[k] = 0.0                             # sections padded to one size:
-                self._psi_stack[k] = 0.0                             # one product advances them all
-                self._phi_stack[k, :size, :size] = model.phi_n
-                self._psi_stack[k, :size] = model.psi
-                self.states[k, size:] = 0.0       # a branch the new network lacks (feed opened) carries nothing
+        nodes = self._shunt_nodes(at_tick)
+        if nodes != self._nodes:
+            for k, (node, was) in enumerate(zip(nodes, self._nodes)):
+                if node != was:
+                    self._activate(k, None if node < 0 else node)
+            self._nodes = nodes
         u = u_tx[:self.count]
-        currents = {}
-        for k in coil_sections:
-            model, x0 = self._active[k][1], self.states[k, :self._active[k][1].phi_n.shape[0]]
-            currents[k] = (model.out_o @ x0 + model.out_t @ u[k]).reshape(n, 2)
-        self.states = (self._phi_stack @ self.states[..., None])[..., 0] + (self._psi_stack @ u[..., None])[..., 0]
-        self._update_relays(n * self.dt)
+        before = self.states               # the frame's currents start from these (computed lazily)
+        self.states = (self._phi_stack @ before[..., None])[..., 0] + (self._psi_stack @ u[..., None])[..., 0]
+        if not self._relays_settled:
+            self._update_relays(n * self.dt)
+        currents = _FrameCurrents(self, before, u)
+        ends = self._ends_list
         for j in range(self.trains):
-            out.coil_section[j] = self._section_at(float(heads[j][-1]) + s.coil_offset_m) + 1
-            if heads[j][-1] + s.coil_offset_m + s.coil_length_m < 0.0 or heads[j][0] > self.line.length_m:
+            head_first, head_last = float(heads[j, 0]), float(heads[j, -1])
+            out.coil_section[j] = self._section_at(head_last + s.coil_offset_m) + 1
+            if head_last + s.coil_offset_m + s.coil_length_m < 0.0 or head_first > self.line.length_m:
                 out.off_line[j] = True                   # no coil over the line: nothing to sense
                 out.e_coil[j, :n] = 0.0
                 out.i_axle[j] = 0.0
                 self._sensing[j] = False
                 continue
-            self._coil(j, times, heads[j], currents, configs)
+            out.off_line[j] = head_last < 0 or head_last > self.line.length_m
+            k = self._section_at(head_first)
+            first_coil = head_first + s.coil_offset_m + self._coil_spread[0]
+            last_coil = head_last + s.coil_offset_m + self._coil_spread[-1]
+            if (k >= 0 and head_last < ends[k] and last_coil <= self._feed_list[k]
+                    and not self._near_joint(first_coil, last_coil)):
+                # the usual frame: wheelset and whole coil over the same section, clear of joints
+                shunt_current = currents.shunt(k) * self._scale(k, heads[j])
+                current = shunt_current + self.asymmetry[k] * self._traction_wave(j, times)
+                i_axle = shunt_current
+            else:
+                current, i_axle = self._coil_general(j, times, heads[j], currents)
+            self._emf(j, current, n)
+            out.i_axle[j] = math.sqrt(float(np.dot(i_axle, i_axle)) / n)
         out.occupied[:self.count] = ~self.relay_up
         return out
 
     def _update_relays(self, step_s: float) -> None:
         s = self.settings
-        levels = np.array([active[1].relay_level for active in self._active])
+        levels = self._relay_levels
         wants_up = np.where(self.relay_up, levels > s.relay_drop_out, levels >= s.relay_pick_up)
         changing = wants_up != self.relay_up
+        if not changing.any():
+            self._relay_timer[:] = 0.0
+            self._relays_settled = True              # nothing to do until a level changes
+            return
         self._relay_timer = np.where(changing, self._relay_timer + step_s, 0.0)
         delay = np.where(wants_up, s.relay_pick_up_delay_s, s.relay_drop_out_delay_s)
         done = changing & (self._relay_timer >= delay - 1e-12)
@@ -337,39 +424,27 @@ class RailLineCore:
             self.relay_up = np.where(done, wants_up, self.relay_up)
             self._relay_timer[done] = 0.0
 
-    def _coil(self, j: int, times: np.ndarray, head: np.ndarray, currents, configs) -> None:
-        s, out = self.settings, self.out
-        n = times.size
-        out.off_line[j] = bool(head[-1] < 0 or head[-1] > self.line.length_m)
-        first_coil = head[0] + s.coil_offset_m + self._coil_spread[0]
-        last_coil = head[-1] + s.coil_offset_m + self._coil_spread[-1]
-        k = self._section_at(float(head[0]))
-        circuit = self.circuits[k] if k >= 0 else None
-        if (circuit is not None and k in currents and head[-1] < self.ends[k]
-                and last_coil <= circuit.feed_m and not self._near_joint(first_coil, last_coil)):
-            # the usual frame: wheelset and whole coil over the same section, clear of joints
-            shunt_current = currents[k][:, 0] * self._scale(k, head, configs[k])
-            current = shunt_current + self.asymmetry[k] * self._traction_wave(j, times)
-            i_axle = shunt_current
-        else:
-            current, i_axle = self._coil_general(j, times, head, currents, configs)
+    def _emf(self, j: int, current: np.ndarray, n: int) -> None:
+        """EMF = M·di/dt on the sampled current, continuing from the previous frame's last sample."""
+        emf = self.out.e_coil[j]
         previous = self._last_current[j] if self._sensing[j] else current[0]   # no step at the first sample
-        emf = np.diff(np.concatenate([[previous], current])) * (s.fs_hz * s.coil_gain_h)
+        emf[0] = current[0] - previous
+        np.subtract(current[1:], current[:-1], out=emf[1:n])
+        emf[:n] *= self._emf_gain
         self._last_current[j] = current[-1]
         self._sensing[j] = True
-        out.e_coil[j, :n] = emf
-        out.i_axle[j] = float(np.sqrt(np.mean(i_axle ** 2)))
 
     def _near_joint(self, lo: float, hi: float) -> bool:
-        return any(z_lo <= hi and lo < z_hi for z_lo, z_hi in self._joint_band)
+        """Does [lo, hi] touch a joint band (bands merged, sorted, disjoint)?"""
+        i = bisect.bisect_right(self._band_hi, lo)         # first band ending after lo
+        return i < len(self._band_lo) and self._band_lo[i] <= hi
 
-    def _scale(self, k: int, head: np.ndarray, node: Optional[int]) -> np.ndarray:
+    def _scale(self, k: int, head: np.ndarray) -> np.ndarray:
         """Code-current amplitude at the exact wheelset position over the one at the model's node."""
-        log_amplitude = self._log_amplitudes(k)
-        node = node if node is not None else 0
-        return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - log_amplitude[node])
+        _, _, log_amplitude, at_node = self._active[k]
+        return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
 
-    def _coil_general(self, j: int, times: np.ndarray, head: np.ndarray, currents, configs):
+    def _coil_general(self, j: int, times: np.ndarray, head: np.ndarray, currents: _FrameCurrents):
         """Sample by sample, the share of the coil's sensitivity window over each stretch of
         rail: its own section up to the feed leads (shunt current), the dead end from the leads to
         the joint (nothing), the next section's entry end (its unshunted current)."""
@@ -386,14 +461,14 @@ class RailLineCore:
         seen = np.zeros(n)
         i_axle = np.zeros(n)
         for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
-            if k not in currents:
-                continue
             own = axle_section == k
-            shunt_current = currents[k][:, 0] * self._scale(k, head, configs[k])
+            shunt_current = currents.shunt(k) * self._scale(k, head)
             i_axle = np.where(own, shunt_current, i_axle)
             view = share(-np.inf, self.circuits[k].feed_m) * shunt_current
-            if k + 1 in currents:
-                view = view + share(self.ends[k], np.inf) * currents[k + 1][:, 1]
+            if k + 1 < self.count:
+                beyond = share(self.ends[k], np.inf)
+                if beyond.any():
+                    view = view + beyond * currents.entry(k + 1)
             seen = np.where(own, view, seen)
         coil = centre[None, :] + self._coil_spread[:, None]
         return seen + self._traction(j, times, coil), i_axle
@@ -402,23 +477,32 @@ class RailLineCore:
         """The traction current reaches the rails through the traction circuit's inductance
         (smoothing reactor, motors): a first-order lag of ``traction_time_constant`` [U]. It
         also turns the steps of a slowly sampled traction FMU into ramps, which the coils would
-        otherwise see as EMF spikes of tens of volts."""
-        held = np.repeat(np.asarray(i_traction[:self.trains], dtype=float)[:, None], n, axis=1)
-        self._i_traction, self._traction_state = lfilter(self._lag_b, self._lag_a, held, axis=1,
-                                                          zi=self._traction_state)
+        otherwise see as EMF spikes of tens of volts. The input is held over the frame, so the
+        lag's response is closed-form: y[i] = c + (y[−1] − c)·λ^(i+1)."""
+        held = np.asarray(i_traction[:self.trains], dtype=float)
+        self._i_traction = held[:, None] + (self._traction_last - held)[:, None] * self._lag_powers[None, :n]
+        self._traction_last = self._i_traction[:, n - 1].copy()
+        self._traction_on = (self._i_traction[:, 0] != 0.0) | (held != 0.0)
 
     def _traction_wave(self, j: int, times: np.ndarray) -> np.ndarray:
         """Traction return current i_tr(t) of train j (DC with rectifier ripple, or AC 50 Hz)."""
-        s = self.settings
-        i_tr = self._i_traction[j]            # smoothed per sample (see _smooth_traction)
-        if not (self.ac or self.dc) or not i_tr.any():
+        if not (self.ac or self.dc) or not self._traction_on[j]:
             return np.zeros(times.size)
+        if self._ripple_times is not times:   # the waveform is the same for every train: once a frame
+            self._ripple = self._ripple_wave(times)
+            self._ripple_times = times
+        return self._i_traction[j] * self._ripple     # smoothed per sample (see _smooth_traction)
+
+    def _ripple_wave(self, times: np.ndarray) -> np.ndarray:
+        """Waveform of a unit traction current: DC with 300/600 Hz rectifier ripple, AC 50 Hz
+        with odd harmonics (rms 1)."""
+        s = self.settings
         if self.dc:
             r300, r600 = s.dc_ripple
-            return i_tr * (1.0 + r300 * np.sin(2 * np.pi * 300 * times) + r600 * np.sin(2 * np.pi * 600 * times))
+            return 1.0 + r300 * np.sin(2 * np.pi * 300 * times) + r600 * np.sin(2 * np.pi * 600 * times)
         h3, h5 = s.ac_harmonics
         w = 2 * np.pi * 50 * times
-        return i_tr * np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w))
+        return np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w))
 
     def _traction(self, j: int, times: np.ndarray, coil: np.ndarray) -> np.ndarray:
         """Asymmetric part of the traction return current under the coil, a(x)·i_tr(t)."""

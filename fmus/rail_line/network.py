@@ -26,7 +26,7 @@ Ground is the node named ``"0"``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 from scipy.linalg import expm
@@ -138,12 +138,49 @@ class Network:
         v = np.linalg.solve(y, p @ np.asarray(u, dtype=complex))
         return v, (q.T @ v) / z
 
+    def phasor_with_shunt(self, omega: float, u: np.ndarray, g: float, observe: int):
+        """Node voltages when a conductance ``g`` to ground is added at one node, for every node
+        in turn: (v_i with the shunt at node i, v_observe with the shunt at node i) as two
+        arrays over i, and v_observe without any shunt. One inverse of the nodal admittance
+        matrix and a rank-one (Sherman–Morrison) update per node, instead of a solve per node."""
+        g_matrix, p, q, r, l = self.matrices()
+        z = r + 1j * omega * l
+        impedance = np.linalg.inv(g_matrix + (q / z) @ q.T)       # Z = Y⁻¹
+        free = impedance @ (p @ np.asarray(u, dtype=complex))     # v without a shunt
+        at_node = free / (1.0 + g * np.diagonal(impedance))
+        at_observe = free[observe] - g * impedance[observe] * at_node
+        return at_node, at_observe, free[observe]
+
     def state_space(self) -> StateSpace:
         g, p, q, r, l = self.matrices()
         g_inv_q = np.linalg.solve(g, q)
         g_inv_p = np.linalg.solve(g, p)
         a = -(q.T @ g_inv_q + np.diag(r)) / l[:, None]
         b = (q.T @ g_inv_p) / l[:, None]
+        return StateSpace(a, b, -g_inv_q, g_inv_p)
+
+
+class ShuntFamily:
+    """State-space models of one network with a conductance ``g`` to ground added at any one
+    node (a wheelset at each position): the free network's G⁻¹ once, then a rank-one
+    (Sherman–Morrison) update per node instead of assembling and solving a new network."""
+
+    def __init__(self, net: Network, g: float):
+        self.g = g
+        g_matrix, p, self.q, self.r, self.l = net.matrices()
+        self.g_inv = np.linalg.inv(g_matrix)
+        self.g_inv_q = self.g_inv @ self.q
+        self.g_inv_p = self.g_inv @ p
+
+    def state_space(self, node: Optional[int]) -> StateSpace:
+        """The model with the shunt at node index ``node`` (None: no shunt)."""
+        g_inv_q, g_inv_p = self.g_inv_q, self.g_inv_p
+        if node is not None:
+            column = self.g_inv[:, node] * (self.g / (1.0 + self.g * self.g_inv[node, node]))
+            g_inv_q = g_inv_q - np.outer(column, g_inv_q[node])
+            g_inv_p = g_inv_p - np.outer(column, g_inv_p[node])
+        a = -(self.q.T @ g_inv_q + np.diag(self.r)) / self.l[:, None]
+        b = (self.q.T @ g_inv_p) / self.l[:, None]
         return StateSpace(a, b, -g_inv_q, g_inv_p)
 
 
