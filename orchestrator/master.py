@@ -47,6 +47,8 @@ class Link:
         self.previous_t: Optional[float] = None
         self.sum = np.zeros(n)
         self.count = 0
+        self.slope = np.zeros(n)
+        self.slope_t: Optional[float] = None
 
     def source_updated(self, values: np.ndarray, time_s: float) -> None:
         if self.transition == "linear":
@@ -60,10 +62,14 @@ class Link:
         if self.transition == "hold":
             value = np.take(source_values, self.source_index, out=self.scratch)
         elif self.transition == "linear":
-            value = self.current.copy()
             if self.previous_t is not None and self.current_t > self.previous_t:
-                slope = (self.current - self.previous) / (self.current_t - self.previous_t)
-                value += slope * (time_s - self.current_t)
+                if self.slope_t != self.current_t:       # once per source step
+                    self.slope = (self.current - self.previous) / (self.current_t - self.previous_t)
+                    self.slope_t = self.current_t
+                value = np.multiply(self.slope, time_s - self.current_t, out=self.scratch)
+                value += self.current
+            else:
+                value = self.current
         else:
             if self.count:
                 value = self.sum / self.count
@@ -199,12 +205,18 @@ class Master:
                     adjust_in.setdefault(name, []).append(manipulator.adjust_inputs)
                 for name in outs:
                     adjust_out.setdefault(name, []).append(manipulator.adjust_outputs)
+        # the components due at a tick that is not a multiple of every step: those stepping at
+        # the base step (the signal chain), the same list every time
+        every_tick = [entry for entry in schedule if entry[1] == base]
+        slowest = int(np.lcm.reduce([step for _, step, _ in schedule])) if schedule else 1
+        if any(step not in (base, slowest) for _, step, _ in schedule):
+            slowest = 1                    # a general multi-rate layout: evaluate every tick
         tick = self.time_ticks
         while tick < stop_ticks:
             for manipulator in manipulators:
                 manipulator.before_tick(self, tick)
             time_s = tick / TICKS_PER_SECOND
-            due = [(name, step, slave) for name, step, slave in schedule if tick % step == 0]
+            due = every_tick if tick % slowest else [entry for entry in schedule if tick % entry[1] == 0]
             if gauss_seidel:
                 for name, step, slave in due:
                     self._gather(name, time_s)

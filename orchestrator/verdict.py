@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
+from fmus.common import signalling as sig
+
 from .graph import TICKS_PER_SECOND, SystemGraph
 
 TRAIN_MODEL = "Traction"
@@ -84,9 +86,10 @@ class TrainVerdict:
         return buffer.values[index]
 
     def after_tick(self, master, tick: int, due) -> None:
+        stepped = {name for name, _, _ in due}
         for train in self.trains:
-            if not train.ato:
-                continue
+            if not train.ato or (due and train.ato not in stepped):
+                continue                       # its outputs change only when it steps
             stop_index = int(self._value(train.ato, "stop_index"))
             if stop_index != train.last_stop_index:
                 train.last_stop_index = stop_index
@@ -212,6 +215,12 @@ class ReceiverVerdict:
         for component, variables in self.outputs_needed().items():
             for var in variables:
                 self._slots[(component, var)] = master.output_slot(component, var)
+        # looked up once: the checks run every signal frame
+        self._coil_section = {r.name: self._slots[(r.rail, f"coil_section[{r.slot}]")] for r in self.receivers}
+        self._code_tx = {}
+        for r in self.receivers:
+            count = sum(1 for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx["))
+            self._code_tx[r.name] = [self._slots[(r.coder, f"code_tx[{k}]")] for k in range(1, count + 1)]
 
     def _value(self, component: str, var: str):
         buffer, index = self._slots[(component, var)]
@@ -223,11 +232,13 @@ class ReceiverVerdict:
         for r in self.receivers:
             if r.name not in stepped:
                 continue
-            section = int(self._value(r.rail, f"coil_section[{r.slot}]"))
+            buffer, index = self._coil_section[r.name]
+            section = int(buffer.values[index])
             if section <= 0:
                 r.episode_start_s = None
                 continue
-            sent = int(self._value(r.coder, f"code_tx[{section}]"))
+            buffer, index = self._code_tx[r.name][section - 1]
+            sent = int(buffer.values[index])
             if self._more_permissive(r, sent):
                 if r.episode_start_s is None:
                     r.episode_start_s, r.counted = now, False
@@ -242,8 +253,6 @@ class ReceiverVerdict:
             r.last_check_s = now
 
     def _more_permissive(self, r: _Receiver, sent: int) -> bool:
-        from fmus.common import signalling as sig
-
         aspect = int(self._value(r.name, "aspect"))
         if r.system is None:                       # ALSN: code_tx is in the aspect enumeration
             return sig.restrictiveness(aspect) > sig.restrictiveness(sent if sent else sig.WHITE)

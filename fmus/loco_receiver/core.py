@@ -126,7 +126,6 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
-        self._all_on, self._all_off = np.ones(frame, dtype=bool), np.zeros(frame, dtype=bool)
         self.v_max = s.v_max_mps if s.v_max_mps > 0 else CATEGORY_MAX_KMH[s.train_category] / 3.6
         # decoder state
         self._last_edge_s: Optional[float] = None
@@ -177,17 +176,20 @@ class LocoReceiverCore:
         self._held = d ** (n - 1) * max(self._held * d, float(np.max(input_envelope * self._level_growth[:n])))
         return self._held
 
-    def _relay_states(self, envelope: np.ndarray) -> np.ndarray:
+    def _relay_states(self, envelope: np.ndarray):
+        """(relay state per sample or None when it stays as it is for the whole frame, the
+        envelope's maximum)."""
         s = self.settings
         low, high = float(envelope.min()), float(envelope.max())
-        if low > s.pick_up_v or (self._relay and low >= s.drop_out_v):
-            return self._all_on[:envelope.size]
-        if high < s.drop_out_v or (not self._relay and high <= s.pick_up_v):
-            return self._all_off[:envelope.size]
+        if self._relay:
+            if low >= s.drop_out_v:
+                return None, high
+        elif high <= s.pick_up_v:
+            return None, high
         decided = np.where(envelope > s.pick_up_v, 1, np.where(envelope < s.drop_out_v, 0, -1))
         where = np.where(decided >= 0, self._index[:envelope.size], -1)
         last = np.maximum.accumulate(where)
-        return np.where(last >= 0, decided[np.maximum(last, 0)] == 1, self._relay)
+        return np.where(last >= 0, decided[np.maximum(last, 0)] == 1, self._relay), high
 
     def step(self, t: float, e_coil: np.ndarray) -> ReceiverOutputs:
         s = self.settings
@@ -199,9 +201,10 @@ class LocoReceiverCore:
         envelope, self._env_state = lfilter(self.envelope_lp.b, self.envelope_lp.a, np.abs(scaled), zi=self._env_state)
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
-        relay = self._relay_states(envelope)
-        level = envelope / gain                              # input-referred: comparable across gains
-        if relay[0] != self._relay or relay[-1] != self._relay or not (relay[0] == relay).all():
+        relay, drive_max = self._relay_states(envelope)
+        constant_gain = isinstance(gain, float)
+        level = envelope / gain if not constant_gain else envelope   # input-referred: comparable across gains
+        if relay is not None and (relay[0] != self._relay or not (relay[0] == relay).all()):
             changes = np.flatnonzero(relay != np.concatenate([[self._relay], relay[:-1]]))
             first = round(t * s.fs_hz)
             starts = np.concatenate([[0], changes]) if changes[0] > 0 else changes
@@ -219,8 +222,8 @@ class LocoReceiverCore:
                 self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
                 self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
         elif self._relay:
-            self._pulse_peak = max(self._pulse_peak, float(level.max()))
-            self._pulse_drive = max(self._pulse_drive, float(envelope.max()))
+            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else float(level.max()))
+            self._pulse_drive = max(self._pulse_drive, drive_max)
         if self._pending is not None:
             self._settle_pending(t + x.size * self.dt)
         self._watchdog(t + x.size * self.dt)

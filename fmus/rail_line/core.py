@@ -169,6 +169,11 @@ class RailLineCore:
         self._spacing_list = [float(c.nodes_m[1] - c.nodes_m[0]) for c in self.circuits]
         self._segments_list = [c.segments for c in self.circuits]
         self._train_lengths = [float(length) for length in s.train_length_m]
+        # positions where a train's shunt configuration may change, whatever its own section
+        self._config_edges = {length: sorted(set(self._starts_list + self._ends_list + self._feed_list +
+                                                 [end + length for end in self._ends_list]))
+                              for length in self._train_lengths}
+        self._node_bounds = [(0.0, 0.0)] * trains
         self._fault_inputs = None
         self._relay_levels = np.ones(self.count)
         self._relays_settled = False
@@ -182,6 +187,8 @@ class RailLineCore:
         self._relay_ref = np.array([self._reference_relay_voltage(k) for k in range(self.count)])
         size = max(self._model(k, None).phi_n.shape[0] for k in range(self.count))
         self.states = np.zeros((self.count, size))
+        self._spare_states = np.zeros((self.count, size))       # the two alternate frame by frame
+        self._input_response = np.zeros((self.count, size, 1))
         self._phi_stack = np.zeros((self.count, size, size))
         self._psi_stack = np.zeros((self.count, size, frame))
         self.relay_up = np.ones(self.count, dtype=bool)
@@ -214,6 +221,7 @@ class RailLineCore:
                    f.feed_open) for k, f in enumerate(self.faults)]
         self._active = [None] * self.count          # models and relay levels follow the new faults
         self._nodes = [-2] * self.count             # (−1 is "no shunt"): every section re-activates
+        self._node_bounds = [(0.0, 0.0)] * self.trains
 
     def _model(self, k: int, node: Optional[int]) -> _Model:
         faults = self._fault_of(k)
@@ -331,16 +339,36 @@ class RailLineCore:
 
     def _shunt_nodes(self, at_tick: np.ndarray) -> List[int]:
         """Network node of the front-most wheelset in each section at the configuration tick
-        (−1: no train in the section)."""
+        (−1: no train in the section). Unchanged while every train stays strictly inside the
+        interval, found with the last evaluation, over which its own contribution is constant."""
+        heads = at_tick.tolist()
+        if all(lo < head < hi for head, (lo, hi) in zip(heads, self._node_bounds)):
+            return self._nodes
         front = [-math.inf] * self.count
-        for head, length in zip(at_tick.tolist(), self._train_lengths):
+        bounds = []
+        for head, length in zip(heads, self._train_lengths):
             # sections with start ≤ head and end > head − length (sorted, disjoint)
             last = bisect.bisect_right(self._starts_list, head) - 1
             for k in range(bisect.bisect_right(self._ends_list, head - length), last + 1):
                 front[k] = max(front[k], min(head, self._feed_list[k]))
+            bounds.append(self._node_interval(head, length, last))
+        self._node_bounds = bounds
         return [-1 if f == -math.inf else
                 min(max(round((f - self._starts_list[k]) / self._spacing_list[k]), 0), self._segments_list[k])
                 for k, f in enumerate(front)]
+
+    def _node_interval(self, head: float, length: float, k: int) -> Tuple[float, float]:
+        """Open interval of head positions around ``head`` over which a train's shunt nodes do
+        not change: no section start, section end + length, feed end or node-rounding boundary
+        of its own section in between."""
+        edges = self._config_edges[length]
+        i = bisect.bisect_right(edges, head)
+        lo, hi = (edges[i - 1] if i > 0 else -math.inf), (edges[i] if i < len(edges) else math.inf)
+        if 0 <= k and head < self._feed_list[k]:
+            start, spacing = self._starts_list[k], self._spacing_list[k]
+            middle = round((head - start) / spacing)
+            lo, hi = max(lo, start + (middle - 0.5) * spacing), min(hi, start + (middle + 0.5) * spacing)
+        return lo, hi
 
     def _activate(self, k: int, node: Optional[int]) -> None:
         model = self._model(k, node)
@@ -377,7 +405,9 @@ class RailLineCore:
             self._nodes = nodes
         u = u_tx[:self.count]
         before = self.states               # the frame's currents start from these (computed lazily)
-        self.states = (self._phi_stack @ before[..., None])[..., 0] + (self._psi_stack @ u[..., None])[..., 0]
+        self.states, self._spare_states = self._spare_states, before
+        np.matmul(self._phi_stack, before[..., None], out=self.states[..., None])
+        self.states += np.matmul(self._psi_stack, u[..., None], out=self._input_response)[..., 0]
         if not self._relays_settled:
             self._update_relays(n * self.dt)
         currents = _FrameCurrents(self, before, u)

@@ -92,13 +92,17 @@ class CodingSwitch:
     def __init__(self, count: int, settings: CoderSettings):
         self.settings = settings
         self.occupied_since = np.full(count, np.inf)
+        self.always = settings.coding == "always"
+        self._all = np.ones(count, dtype=bool)
+        self.waiting = False        # a section is occupied but not yet switched on: time alone changes it
 
     def coded(self, t: float, occupied: np.ndarray) -> np.ndarray:
-        s = self.settings
+        if self.always:
+            return self._all
         self.occupied_since = np.where(occupied, np.minimum(self.occupied_since, t), np.inf)
-        if s.coding == "always":
-            return np.ones(occupied.size, dtype=bool)
-        return t - self.occupied_since >= s.switch_on_delay_s - 1e-12
+        coded = t - self.occupied_since >= self.settings.switch_on_delay_s - 1e-12
+        self.waiting = bool((occupied & ~coded).any())
+        return coded
 
 
 def sections_to_occupied(occupied: np.ndarray, count: int, block_of: Optional[np.ndarray] = None) -> np.ndarray:
@@ -172,6 +176,8 @@ class WaysideCoderCore:
             self._relay = None
         self._relay_state = np.zeros((k, 1))
         self._index = np.arange(frame)
+        self._omega_column = self.omega[:, None]
+        self._logic_state = None
         self.out = CoderOutputs(np.zeros((sections, frame)), np.zeros(sections, dtype=np.int64),
                                 np.zeros(sections, dtype=np.int64))
 
@@ -183,23 +189,30 @@ class WaysideCoderCore:
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False) -> CoderOutputs:
         s = self.settings
         k, out = self.count, self.out
+        state = (occupied[:k].tobytes(), fault_main, fault_reserve)
+        if state != self._logic_state or self.switch.waiting:     # block logic only when its inputs change
+            self._logic_state = state
+            self._block_logic(t, np.asarray(occupied[:k], dtype=bool), fault_main, fault_reserve)
+        # sample times from the integer sample index: no drift over long runs
+        first = round(t * s.fs_hz)
+        times = (first + self._index) / s.fs_hz
+        phase = np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None])[:, :, None]
+        key = ((phase >= self._pulse_on) & (phase < self._pulse_off)).any(-1)
+        if self._relay is not None:
+            key, self._relay_state = lfilter(*self._relay, key.astype(float), axis=1, zi=self._relay_state)
+        np.multiply(key, np.sin(self._omega_column * times) * s.amplitude_v, out=out.u_tx[:k])
+        return out
+
+    def _block_logic(self, t: float, occupied: np.ndarray, fault_main: bool, fault_reserve: bool) -> None:
+        """Signals, codes, transmitter status and the cam contacts the codes select."""
+        k, out = self.count, self.out
         signals = self.block_signals(occupied)
-        codes = np.where(self.switch.coded(t, np.asarray(occupied[:k], dtype=bool)), _CODE_OF_SIGNAL[signals],
-                         alsn.NO_CODE)
+        codes = np.where(self.switch.coded(t, occupied), _CODE_OF_SIGNAL[signals], alsn.NO_CODE)
         out.status = STATUS_FAILED if (fault_main and fault_reserve) else (STATUS_PARTIAL if fault_main or fault_reserve else STATUS_OK)
         if out.status == STATUS_FAILED:
             codes = np.zeros(k, dtype=np.int64)
         self.codes, self.signals = codes, signals
-        # sample times from the integer sample index: no drift over long runs
-        first = round(t * s.fs_hz)
-        times = (first + self._index) / s.fs_hz
-        phase = np.mod(times[None, :] + self.cam_offset_s[:, None], self.cycle_s[:, None])
         pulses = self.pulses[np.arange(k), codes]                       # (K, P, 2)
-        key = ((phase[:, :, None] >= pulses[:, None, :, 0]) & (phase[:, :, None] < pulses[:, None, :, 1])).any(-1)
-        envelope = key.astype(float)
-        if self._relay is not None:
-            envelope, self._relay_state = lfilter(*self._relay, envelope, axis=1, zi=self._relay_state)
-        out.u_tx[:k] = s.amplitude_v * envelope * np.sin(self.omega[:, None] * times[None, :])
+        self._pulse_on, self._pulse_off = pulses[:, None, :, 0], pulses[:, None, :, 1]
         out.code_tx[:k] = codes
         out.signal[:k] = np.where(self.has_signal, signals, SIGNAL_DARK)
-        return out
