@@ -25,6 +25,7 @@ any length N give the same samples (DESIGN §3).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -38,6 +39,7 @@ from ..common.slave import FmuInputError
 
 SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
 STATUS_OK, STATUS_PARTIAL, STATUS_FAILED = 0, 1, 2
+_WAVE_MAX_SAMPLES = 1 << 16     # longest repeating output kept as a table, per section and code
 _CODE_OF_SIGNAL = np.array([alsn.NO_CODE, sig.RED_YELLOW, sig.YELLOW, sig.GREEN, sig.GREEN])
 
 
@@ -178,6 +180,11 @@ class WaysideCoderCore:
         self._index = np.arange(frame)
         self._omega_column = self.omega[:, None]
         self._logic_state = None
+        self._period = self._wave_periods() if self._relay is None else None
+        self._waves = {}                                  # (section, code) → one period of u_tx
+        if self._period is not None:
+            self._row_offset = np.arange(k)[:, None] * int(self._period.max())
+            self._wave_rows = np.zeros(k * int(self._period.max()))
         self.out = CoderOutputs(np.zeros((sections, frame)), np.zeros(sections, dtype=np.int64),
                                 np.zeros(sections, dtype=np.int64))
 
@@ -195,6 +202,10 @@ class WaysideCoderCore:
             self._block_logic(t, np.asarray(occupied[:k], dtype=bool), fault_main, fault_reserve)
         # sample times from the integer sample index: no drift over long runs
         first = round(t * s.fs_hz)
+        if self._period is not None:          # the periodic waveform of each section, from its table
+            index = np.remainder(self._index + (first % self._period)[:, None], self._period[:, None])
+            np.take(self._wave_rows, index + self._row_offset, out=out.u_tx[:k])
+            return out
         times = (first + self._index) / s.fs_hz
         phase = np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None])[:, :, None]
         key = ((phase >= self._pulse_on) & (phase < self._pulse_off)).any(-1)
@@ -216,3 +227,39 @@ class WaysideCoderCore:
         self._pulse_on, self._pulse_off = pulses[:, None, :, 0], pulses[:, None, :, 1]
         out.code_tx[:k] = codes
         out.signal[:k] = np.where(self.has_signal, signals, SIGNAL_DARK)
+        if self._period is not None:
+            width = int(self._period.max())
+            for section, code in enumerate(codes.tolist()):
+                wave = self._wave(section, code)
+                self._wave_rows[section * width:section * width + wave.size] = wave
+
+    def _wave_periods(self) -> Optional[np.ndarray]:
+        """Samples after which each section's output repeats (the cam cycle and the carrier both
+        a whole number of samples), or None when they do not within _WAVE_MAX_SAMPLES: then the
+        output is computed from the sample times every frame."""
+        fs = self.settings.fs_hz
+        periods = []
+        for cycle_s, omega in zip(self.cycle_s, self.omega):
+            cam = cycle_s * fs
+            carrier = next((m * fs * 2 * np.pi / omega for m in range(1, 65)
+                            if abs(m * fs * 2 * np.pi / omega - round(m * fs * 2 * np.pi / omega)) < 1e-6), None)
+            if abs(cam - round(cam)) > 1e-6 or carrier is None:
+                return None
+            period = math.lcm(round(cam), round(carrier))
+            if period > _WAVE_MAX_SAMPLES:
+                return None
+            periods.append(period)
+        return np.array(periods, dtype=np.int64)
+
+    def _wave(self, section: int, code: int) -> np.ndarray:
+        """One period of section ``section``'s output for ``code`` (samples 0 … period − 1: the
+        output at sample n is entry n mod period)."""
+        key = (section, code)
+        if key not in self._waves:
+            s = self.settings
+            times = np.arange(self._period[section]) / s.fs_hz
+            phase = np.mod(times + self.cam_offset_s[section], self.cycle_s[section])[:, None]
+            pulses = self.pulses[section, code]
+            keyed = ((phase >= pulses[:, 0]) & (phase < pulses[:, 1])).any(-1)
+            self._waves[key] = keyed * (np.sin(self.omega[section] * times) * s.amplitude_v)
+        return self._waves[key]
