@@ -212,12 +212,20 @@ class FmuSlave:
 
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
         self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
-        self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b) for b in self.inputs.values()]
+        # last written values (NaN: nothing written yet); strings are always written
+        self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b,
+                          None if b.type == "String" else np.full(b.count, np.nan)) for b in self.inputs.values()]
         self._getters = [(getattr(self._fmu, f"fmi2Get{b.type}"), b) for b in self.outputs.values()]
 
     def write_inputs(self) -> None:
         component = self._component
-        for setter, buffer in self._setters:
+        for setter, buffer, last in self._setters:
+            # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
+            # buffer (occupancy, faults, commands between events) costs no call
+            if last is not None:
+                if np.array_equal(last, buffer.values):
+                    continue
+                last[:] = buffer.values
             setter(component, buffer.vr, buffer.count, buffer.raw)
 
     def read_outputs(self) -> None:

@@ -114,6 +114,7 @@ class FrameSlave(Fmi2Slave):
         self.build = BuildConfig(**self.build_config)
         self.ports: List[Port] = list(self.declare_ports(self.build))
         self.io: Dict[str, np.ndarray] = {}
+        self._slot_cache: Dict[tuple, Tuple[list, np.ndarray]] = {}
         self._allocate(self.ports)
         self.core = None
         self.default_experiment = self.make_default_experiment()
@@ -198,6 +199,19 @@ class FrameSlave(Fmi2Slave):
                    getter=lambda: values[slot], setter=None)
 
     def _slots(self, type_name: str, vrs) -> np.ndarray:
+        # an FMI host (pythonfmu's C layer passes lists) sends the same value-reference lists
+        # every step: resolve each list once
+        if not isinstance(vrs, list) or not vrs:
+            return self._resolve_slots(type_name, vrs)
+        key = (type_name, len(vrs), vrs[0], vrs[-1])
+        cached = self._slot_cache.get(key)
+        if cached is not None and cached[0] == vrs:
+            return cached[1]
+        slots = self._resolve_slots(type_name, vrs)
+        self._slot_cache[key] = (list(vrs), slots)
+        return slots
+
+    def _resolve_slots(self, type_name: str, vrs) -> np.ndarray:
         store = self._stores[type_name]
         vr_array = np.asarray(vrs, dtype=np.int64)
         if vr_array.size and (vr_array.max() >= store.slot_of_vr.size or vr_array.min() < 0):
