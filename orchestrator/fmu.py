@@ -228,9 +228,12 @@ class FmuSlave:
                 last[:] = buffer.values
             setter(component, buffer.vr, buffer.count, buffer.raw)
 
-    def read_outputs(self) -> None:
+    def read_outputs(self, types=None) -> None:
+        """Read the output buffers (all, or only those of the given FMI types)."""
         component = self._component
         for getter, buffer in self._getters:
+            if types is not None and buffer.type not in types:
+                continue
             getter(component, buffer.vr, buffer.count, buffer.raw)
             if buffer.type == "String":
                 buffer.values[:] = [s.decode() if s else "" for s in buffer.raw[:buffer.count]]
@@ -370,7 +373,7 @@ class InProcessSlave:
         # store (slots resolved once); strings keep the facade's setters and getters
         self._writes = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.inputs.values()
                         if b.type != "String"]
-        self._reads = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.outputs.values()
+        self._reads = [(b.type, *slave.value_view(b.type, b.vr_array), b.values) for b in self.outputs.values()
                        if b.type != "String"]
         self._string_inputs = [b for b in self.inputs.values() if b.type == "String"]
         self._string_outputs = [b for b in self.outputs.values() if b.type == "String"]
@@ -381,11 +384,14 @@ class InProcessSlave:
         for buffer in self._string_inputs:
             self._slave.set_string(buffer.vr_array, buffer.values)
 
-    def read_outputs(self) -> None:
-        for store, slots, values in self._reads:
-            values[:] = store[slots]
-        for buffer in self._string_outputs:
-            buffer.values[:] = self._slave.get_string(buffer.vr_array)
+    def read_outputs(self, types=None) -> None:
+        """Read the output buffers (all, or only those of the given FMI types)."""
+        for type_name, store, slots, values in self._reads:
+            if types is None or type_name in types:
+                values[:] = store[slots]
+        if types is None or "String" in types:
+            for buffer in self._string_outputs:
+                buffer.values[:] = self._slave.get_string(buffer.vr_array)
 
     def do_step(self, time_s: float, step_s: float) -> None:
         ok = self._slave.do_step(time_s, step_s)

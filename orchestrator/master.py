@@ -144,8 +144,28 @@ class Master:
         self.links_from = {n: [l for l in self.links if l.source == n and l.transition != "hold"]
                            for n in self.graph.nodes}
 
+    def fresh(self, component: str, type_name: Optional[str] = None) -> None:
+        """Make a component's output buffers (or those of one FMI type) current. Outputs are
+        read from a slave when something needs them, not after every step: an FMI get is a
+        call into the FMU per type, and most outputs of the signal chain are looked at only
+        at the recorder's or a verdict's interval."""
+        stale = self._stale[component]
+        if not stale:
+            return
+        if type_name is None:
+            self.slaves[component].read_outputs(tuple(stale))
+            stale.clear()
+        elif type_name in stale:
+            self.slaves[component].read_outputs((type_name,))
+            stale.discard(type_name)
+
+    def fresh_all(self) -> None:
+        for name in self.graph.order:
+            self.fresh(name)
+
     def output_slot(self, component: str, variable: str):
-        """(buffer, index) where the latest value of an output lives after each step."""
+        """(buffer, index) where the latest value of an output lives; call :meth:`fresh`
+        for the component before reading it."""
         var = self.graph.nodes[component].interface.variables[variable]
         buffer = self.slaves[component].outputs[var.type]
         return buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0])
@@ -160,6 +180,13 @@ class Master:
             slave.setup_experiment(start_time_s, stop_time_s)
             if self.graph.nodes[name].parameters:
                 slave.set_values(self.graph.nodes[name].parameters)
+        self._output_types = {name: set(self.slaves[name].outputs) for name in order}
+        self._stale = {name: set() for name in order}
+        self._eager_types = {name: tuple({link.type for link in self.links_from[name]}) for name in order}
+        for manipulator in self.manipulators:
+            if hasattr(manipulator, "components"):
+                for name in manipulator.components()[1]:
+                    self._eager_types[name] = None          # adjusted outputs: read them all at once
         for name in order:
             self.slaves[name].enter_initialization()
         for name in order:  # initial exchange along the data flow
@@ -179,9 +206,24 @@ class Master:
 
     def _gather(self, name: str, time_s: float) -> None:
         slave = self.slaves[name]
+        stale = self._stale
         for link in self.links_into[name]:
+            if link.type in stale[link.source]:
+                self.fresh(link.source, link.type)
             link.gather(self.slaves[link.source].outputs[link.type].values,
                         slave.inputs[link.type].values, time_s)
+
+    def _stepped(self, name: str, slave) -> None:
+        """After a step: read what is needed at once (links that interpolate or average the
+        source, manipulators that adjust the outputs); the rest is read on demand."""
+        eager = self._eager_types[name]
+        if eager is None:
+            slave.read_outputs()
+        else:
+            self._stale[name].update(self._output_types[name])
+            if eager:
+                slave.read_outputs(eager)
+                self._stale[name].difference_update(eager)
 
     def _source_updated(self, name: str, time_s: float) -> None:
         for link in self.links_from[name]:
@@ -224,7 +266,7 @@ class Master:
                         adjust(name)
                     slave.write_inputs()
                     slave.do_step(time_s, step / TICKS_PER_SECOND)
-                    slave.read_outputs()
+                    self._stepped(name, slave)
                     for adjust in adjust_out.get(name, ()):
                         adjust(name)
                     steps_taken[name] += 1
@@ -239,7 +281,7 @@ class Master:
                     slave.do_step(time_s, step / TICKS_PER_SECOND)
                     steps_taken[name] += 1
                 for name, step, slave in due:
-                    slave.read_outputs()
+                    self._stepped(name, slave)
                     for adjust in adjust_out.get(name, ()):
                         adjust(name)
                     self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
@@ -247,6 +289,7 @@ class Master:
             self.time_ticks = tick
             for observer in observers:
                 observer.after_tick(self, tick, due)
+        self.fresh_all()           # the final state, for summaries and whoever reads it next
 
     def shutdown(self) -> List[str]:
         """Terminate and free every slave, whatever happened; returns the problems met."""

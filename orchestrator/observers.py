@@ -1,4 +1,5 @@
-"""Observers: what a run records. They read the master's output buffers after each tick.
+"""Observers: what a run records. They read the master's output buffers after each tick
+(``master.fresh(component)`` first: outputs are read from the slaves on demand).
 
 * Recorder: chosen scalar outputs at a fixed output interval → results.csv (rows are written
   and flushed as the run goes, so a failed run keeps everything computed before it failed).
@@ -49,16 +50,19 @@ class Recorder:
 
     def started(self, master, tick: int) -> None:
         self._slots = [master.output_slot(c, v) for c, v in self.variables]
+        self._components = sorted({c for c, _ in self.variables})
         self._file = open(self.path, "w", newline="")
         self._writer = csv.writer(self._file)
         self._writer.writerow(["time"] + [f"{c}.{v}" for c, v in self.variables])
-        self._write(tick)
+        self._write(master, tick)
 
     def after_tick(self, master, tick: int, due) -> None:
         if tick % self.interval_ticks == 0:
-            self._write(tick)
+            self._write(master, tick)
 
-    def _write(self, tick: int) -> None:
+    def _write(self, master, tick: int) -> None:
+        for component in self._components:
+            master.fresh(component)
         row = [repr(tick / TICKS_PER_SECOND)]
         for buffer, index in self._slots:
             value = buffer.values[index]
@@ -133,6 +137,7 @@ class WaveformCapture:
         step_start = start_ticks / TICKS_PER_SECOND
         if step_start + self._step_ticks / TICKS_PER_SECOND <= self.request.t0 or step_start >= self.request.t1:
             return
+        master.fresh(self.request.component)
         n = len(self._index)
         # exact sample instants: (start·N + k·h) / (N·1e9), integers until the one division
         times = (start_ticks * n + np.arange(n) * self._step_ticks) / (n * TICKS_PER_SECOND)

@@ -90,6 +90,8 @@ class TrainVerdict:
         for train in self.trains:
             if not train.ato or (due and train.ato not in stepped):
                 continue                       # its outputs change only when it steps
+            master.fresh(train.ato)
+            master.fresh(train.name)
             stop_index = int(self._value(train.ato, "stop_index"))
             if stop_index != train.last_stop_index:
                 train.last_stop_index = stop_index
@@ -191,6 +193,9 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
     return found
 
 
+CHECK_INTERVAL_S = 0.1
+
+
 class ReceiverVerdict:
     """Observer: judges every receiver against the code transmitted into the section under its
     train's coils (the rail line's ``coil_section``, the coder's ``code_tx``). More permissive
@@ -215,7 +220,13 @@ class ReceiverVerdict:
         for component, variables in self.outputs_needed().items():
             for var in variables:
                 self._slots[(component, var)] = master.output_slot(component, var)
-        # looked up once: the checks run every signal frame
+        # checked at the first multiple of the receiver's step from CHECK_INTERVAL_S on: an
+        # episode is timed to that, against stated latencies of 1.1 s (FIRE) to 4.2 s (ALSN)
+        self._check_ticks = {}
+        for r in self.receivers:
+            step = master.graph.nodes[r.name].step_ticks
+            self._check_ticks[r.name] = step * max(1, -(-round(CHECK_INTERVAL_S * TICKS_PER_SECOND) // step))
+        # looked up once: the checks run often
         self._coil_section = {r.name: self._slots[(r.rail, f"coil_section[{r.slot}]")] for r in self.receivers}
         self._code_tx = {}
         for r in self.receivers:
@@ -230,8 +241,10 @@ class ReceiverVerdict:
         now = tick / TICKS_PER_SECOND
         stepped = {name for name, _, _ in due}
         for r in self.receivers:
-            if r.name not in stepped:
+            if r.name not in stepped or tick % self._check_ticks[r.name]:
                 continue
+            for component in (r.name, r.rail, r.coder):
+                master.fresh(component)
             buffer, index = self._coil_section[r.name]
             section = int(buffer.values[index])
             if section <= 0:
