@@ -38,7 +38,7 @@ class NullSlave:
     def enter_initialization(self): pass
     def exit_initialization(self): pass
     def write_inputs(self): pass
-    def read_outputs(self): pass
+    def read_outputs(self, types=None): pass
     def do_step(self, t, h): pass
     def terminate(self): pass
     def free(self): pass

@@ -219,6 +219,28 @@ def test_transmitter_faults_reserve_then_no_code():
     assert out.status == STATUS_FAILED and not out.code_tx.any() and not out.u_tx.any()
 
 
+@pytest.mark.parametrize("t0", [0.0, 9999.99, 123456.78])
+def test_the_transmitted_code_is_the_keyed_carrier_after_long_runs(t0):
+    # the coder reads a section's periodic output from a table: it must stay the code table's
+    # keyed carrier at any time, every section, every code
+    line = load_line()
+    coder = WaysideCoderCore(line, 8, N, CoderSettings())
+    transmitters = alsn.load_transmitters()
+    for occupied in (_occupied(), _occupied(3), _occupied(5, 6)):
+        for frame in range(60):
+            t = t0 + frame * N / FS
+            out = coder.step(t, occupied)
+            times = (round(t * FS) + np.arange(N)) / FS
+            for k, section in enumerate(line.sections):
+                tx = transmitters[section.transmitter]
+                phase = np.mod(times + coder.cam_offset_s[k], tx.cycle_s)
+                pulses = tx.pulses.get(int(out.code_tx[k]), np.zeros((0, 2)))
+                keyed = ((phase[:, None] >= pulses[:, 0]) & (phase[:, None] < pulses[:, 1])).any(axis=1)
+                near_edge = (np.abs(phase[:, None] - pulses.ravel()) < 1e-6).any(axis=1)
+                expected = 4.0 * keyed * np.sin(2 * np.pi * section.carrier_hz * times)
+                np.testing.assert_allclose(out.u_tx[k][~near_edge], expected[~near_edge], atol=1e-6)
+
+
 def test_unsynchronised_transmitters_have_different_cam_phases():
     coder = WaysideCoderCore(load_line(), 8, N, CoderSettings(seed=7))
     assert np.unique(np.round(coder.cam_offset_s / coder.cycle_s, 6)).size == 8

@@ -50,6 +50,20 @@ def test_set_bias_and_reset_on_a_linked_and_an_unconnected_input(tmp_path, test_
     assert [(e["t"], e["action"]) for e in applied] == [(1.0, "bias"), (1.5, "set"), (2.0, "set"), (2.5, "reset")]
 
 
+@pytest.mark.parametrize("in_process", [False, True])
+def test_an_input_set_back_to_an_earlier_value_reaches_the_fmu(tmp_path, test_fmus, in_process):
+    # the master skips writing an input buffer that has not changed: A → B → A must still arrive
+    events = [{"time": 1.0, "model": "a", "variable": "u", "action": "set", "value": 7.0},
+              {"time": 1.5, "model": "a", "variable": "u", "action": "reset"},
+              {"time": 2.0, "model": "a", "variable": "u", "action": "set", "value": 7.0}]
+    out = tmp_path / "out"
+    run_system(_system(tmp_path, test_fmus), RunOptions(output_dir=out, output_interval=0.1, in_process=in_process,
+                                                        scenario=_scenario(tmp_path, events)))
+    header, data = read_csv(out / "results.csv")
+    seen = {round(row[0], 3): dict(zip(header, row))["a.u_seen"] for row in data}
+    assert [seen[t] for t in (1.0, 1.1, 1.4, 1.5, 1.6, 1.9, 2.0, 2.1, 3.0)] == [0, 7, 7, 7, 0, 0, 0, 7, 7]
+
+
 def test_an_event_on_an_output_is_what_every_consumer_and_the_recorder_see(tmp_path, test_fmus):
     _, rows = _run(tmp_path, test_fmus, [{"time": 2.0, "model": "a", "variable": "t_end", "action": "set", "value": 42}])
     assert rows[2.0]["a.t_end"] == pytest.approx(2.0)
