@@ -44,12 +44,14 @@ import numpy as np
 
 from ..common.data import Line
 from ..common.slave import FmuInputError
+from ..common.periodic import period_samples
 from .network import ShuntFamily, discretise
 from .track_circuit import CircuitParameters, Faults, TrackCircuit
 
 CONFIG_TICK_S = 0.01
 _COIL_POINTS = 5
 _CACHE_SIZE = 64
+_RIPPLE_MAX_SAMPLES = 1 << 14    # traction ripple kept as a table when it repeats within this
 
 
 @dataclass
@@ -197,17 +199,19 @@ class RailLineCore:
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
         lag = np.exp(-self.dt / s.traction_time_constant_s)
         self._lag_powers = lag ** np.arange(1, frame + 1)
-        self._traction_last = np.zeros(trains)                 # smoothed current at the last sample
-        self._traction_on = np.zeros(trains, dtype=bool)
+        self._traction_last = [0.0] * trains                   # smoothed current at the last sample
+        self._traction_on = [False] * trains
         self._i_traction = np.zeros((trains, frame))
-        self._ripple_times = None                              # the frame's ripple waveform, once computed
+        self._ripple_first = None                              # the frame's ripple waveform, once computed
         self._ripple = np.zeros(frame)
+        ripple_hz = (300.0, 600.0) if self.dc else (50.0, 150.0, 250.0)
+        self._ripple_period = period_samples([1.0 / f for f in ripple_hz], s.fs_hz, _RIPPLE_MAX_SAMPLES)
+        if self._ripple_period is not None and (self.dc or self.ac):
+            self._ripple_table = self._ripple_wave(np.arange(self._ripple_period) * self.dt)
         self._emf_gain = s.fs_hz * s.coil_gain_h
         self._last_current = np.zeros(trains)
         self._sensing = np.zeros(trains, dtype=bool)
-        # (x_k, v_k, t_k) of each train's last position update
-        self._anchored = np.zeros(trains, dtype=bool)
-        self._anchor_x, self._anchor_v, self._anchor_t = np.zeros(trains), np.zeros(trains), np.zeros(trains)
+        self._anchors: List[Optional[Tuple[float, float, float]]] = [None] * trains   # (x_k, v_k, t_k)
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
@@ -323,11 +327,12 @@ class RailLineCore:
             self.faults, self.broken_rail_m = faults, float(broken_rail_m)
             self._refresh_faults()
 
-    def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
+    def _update_anchor(self, j: int, t: float, x: float, v: float) -> Tuple[float, float, float]:
         """A new position update starts x(t) = x_k + v_k·(t − t_k) (DESIGN §3)."""
-        if not self._anchored[j] or x != self._anchor_x[j] or v != self._anchor_v[j]:
-            self._anchored[j] = True
-            self._anchor_x[j], self._anchor_v[j], self._anchor_t[j] = x, v, t
+        anchor = self._anchors[j]
+        if anchor is None or x != anchor[0] or v != anchor[1]:
+            anchor = self._anchors[j] = (x, v, t)
+        return anchor
 
     def section_of(self, x):
         k = np.searchsorted(self.starts, x, side="right") - 1
@@ -337,11 +342,11 @@ class RailLineCore:
         k = bisect.bisect_right(self._starts_list, x) - 1
         return k if k >= 0 and x < self._ends_list[k] else -1
 
-    def _shunt_nodes(self, at_tick: np.ndarray) -> List[int]:
+    def _shunt_nodes(self, at_tick: List[float]) -> List[int]:
         """Network node of the front-most wheelset in each section at the configuration tick
         (−1: no train in the section). Unchanged while every train stays strictly inside the
         interval, found with the last evaluation, over which its own contribution is constant."""
-        heads = at_tick.tolist()
+        heads = at_tick
         if all(lo < head < hi for head, (lo, hi) in zip(heads, self._node_bounds)):
             return self._nodes
         front = [-math.inf] * self.count
@@ -389,13 +394,14 @@ class RailLineCore:
         n = u_tx.shape[1] if u_tx.ndim == 2 else self.frame
         first = round(t * s.fs_hz)
         times = (first + self._index[:n]) * self.dt
-        tick = np.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
+        first_s, last_s = float(times[0]), float(times[-1])
+        tick = math.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
+        at_tick = []
         for j in range(self.trains):
-            self._update_anchor(j, t, float(x_head[j]), float(v[j]))
-        # per sample from the anchor: the same positions for any frame length
-        heads = self._anchor_x[:, None] + self._anchor_v[:, None] * (times[None, :] - self._anchor_t[:, None])
-        at_tick = self._anchor_x + self._anchor_v * (tick - self._anchor_t)
+            x_k, v_k, t_k = self._update_anchor(j, t, float(x_head[j]), float(v[j]))
+            at_tick.append(x_k + v_k * (tick - t_k))
         self._smooth_traction(i_traction, n)
+        self._ripple_first = None
         # the front-most wheelset of each train in each section shunts it
         nodes = self._shunt_nodes(at_tick)
         if nodes != self._nodes:
@@ -413,26 +419,30 @@ class RailLineCore:
         currents = _FrameCurrents(self, before, u)
         ends = self._ends_list
         for j in range(self.trains):
-            head_first, head_last = float(heads[j, 0]), float(heads[j, -1])
+            # per sample from the anchor: the same positions for any frame length
+            x_k, v_k, t_k = self._anchors[j]
+            head_first, head_last = x_k + v_k * (first_s - t_k), x_k + v_k * (last_s - t_k)
             out.coil_section[j] = self._section_at(head_last + s.coil_offset_m) + 1
             if head_last + s.coil_offset_m + s.coil_length_m < 0.0 or head_first > self.line.length_m:
                 out.off_line[j] = True                   # no coil over the line: nothing to sense
-                out.e_coil[j, :n] = 0.0
-                out.i_axle[j] = 0.0
-                self._sensing[j] = False
+                if self._sensing[j]:
+                    out.e_coil[j, :n] = 0.0
+                    out.i_axle[j] = 0.0
+                    self._sensing[j] = False
                 continue
             out.off_line[j] = head_last < 0 or head_last > self.line.length_m
+            head = x_k + v_k * (times - t_k)
             k = self._section_at(head_first)
             first_coil = head_first + s.coil_offset_m + self._coil_spread[0]
             last_coil = head_last + s.coil_offset_m + self._coil_spread[-1]
             if (k >= 0 and head_last < ends[k] and last_coil <= self._feed_list[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
-                shunt_current = currents.shunt(k) * self._scale(k, heads[j])
-                current = shunt_current + self.asymmetry[k] * self._traction_wave(j, times)
+                shunt_current = currents.shunt(k) * self._scale(k, head)
+                current = shunt_current + self.asymmetry[k] * self._traction_wave(j, first, times)
                 i_axle = shunt_current
             else:
-                current, i_axle = self._coil_general(j, times, heads[j], currents)
+                current, i_axle = self._coil_general(j, first, times, head, currents)
             self._emf(j, current, n)
             out.i_axle[j] = math.sqrt(float(np.dot(i_axle, i_axle)) / n)
         out.occupied[:self.count] = ~self.relay_up
@@ -474,7 +484,7 @@ class RailLineCore:
         _, _, log_amplitude, at_node = self._active[k]
         return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
 
-    def _coil_general(self, j: int, times: np.ndarray, head: np.ndarray, currents: _FrameCurrents):
+    def _coil_general(self, j: int, first: int, times: np.ndarray, head: np.ndarray, currents: _FrameCurrents):
         """Sample by sample, the share of the coil's sensitivity window over each stretch of
         rail: its own section up to the feed leads (shunt current), the dead end from the leads to
         the joint (nothing), the next section's entry end (its unshunted current)."""
@@ -501,7 +511,7 @@ class RailLineCore:
                     view = view + beyond * currents.entry(k + 1)
             seen = np.where(own, view, seen)
         coil = centre[None, :] + self._coil_spread[:, None]
-        return seen + self._traction(j, times, coil), i_axle
+        return seen + self._traction(j, first, times, coil), i_axle
 
     def _smooth_traction(self, i_traction: np.ndarray, n: int) -> None:
         """The traction current reaches the rails through the traction circuit's inductance
@@ -509,19 +519,31 @@ class RailLineCore:
         also turns the steps of a slowly sampled traction FMU into ramps, which the coils would
         otherwise see as EMF spikes of tens of volts. The input is held over the frame, so the
         lag's response is closed-form: y[i] = c + (y[−1] − c)·λ^(i+1)."""
-        held = np.asarray(i_traction[:self.trains], dtype=float)
-        self._i_traction = held[:, None] + (self._traction_last - held)[:, None] * self._lag_powers[None, :n]
-        self._traction_last = self._i_traction[:, n - 1].copy()
-        self._traction_on = (self._i_traction[:, 0] != 0.0) | (held != 0.0)
+        for j in range(self.trains):
+            held, last = float(i_traction[j]), self._traction_last[j]
+            row = self._i_traction[j, :n]
+            if held == last == 0.0:
+                if self._traction_on[j]:
+                    row[:] = 0.0
+                    self._traction_on[j] = False
+                continue
+            np.multiply(self._lag_powers[:n], last - held, out=row)
+            row += held
+            self._traction_last[j] = float(row[-1])
+            self._traction_on[j] = True
 
-    def _traction_wave(self, j: int, times: np.ndarray) -> np.ndarray:
-        """Traction return current i_tr(t) of train j (DC with rectifier ripple, or AC 50 Hz)."""
+    def _traction_wave(self, j: int, first: int, times: np.ndarray) -> np.ndarray:
+        """Traction return current i_tr(t) of train j (DC with rectifier ripple, or AC 50 Hz);
+        ``first`` is the frame's first sample index, ``times`` its sample times."""
         if not (self.ac or self.dc) or not self._traction_on[j]:
             return np.zeros(times.size)
-        if self._ripple_times is not times:   # the waveform is the same for every train: once a frame
-            self._ripple = self._ripple_wave(times)
-            self._ripple_times = times
-        return self._i_traction[j] * self._ripple     # smoothed per sample (see _smooth_traction)
+        if self._ripple_first != first:       # the waveform is the same for every train: once a frame
+            if self._ripple_period is not None:
+                self._ripple = self._ripple_table.take((first + self._index[:times.size]) % self._ripple_period)
+            else:
+                self._ripple = self._ripple_wave(times)
+            self._ripple_first = first
+        return self._i_traction[j, :times.size] * self._ripple     # smoothed per sample (_smooth_traction)
 
     def _ripple_wave(self, times: np.ndarray) -> np.ndarray:
         """Waveform of a unit traction current: DC with 300/600 Hz rectifier ripple, AC 50 Hz
@@ -534,7 +556,7 @@ class RailLineCore:
         w = 2 * np.pi * 50 * times
         return np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w))
 
-    def _traction(self, j: int, times: np.ndarray, coil: np.ndarray) -> np.ndarray:
+    def _traction(self, j: int, first: int, times: np.ndarray, coil: np.ndarray) -> np.ndarray:
         """Asymmetric part of the traction return current under the coil, a(x)·i_tr(t)."""
         section = self.section_of(coil)
         a = np.where(section >= 0, self.asymmetry[np.clip(section, 0, self.count - 1)], 0.0)
@@ -542,7 +564,7 @@ class RailLineCore:
             # between the bond leads the centre-tap jumper evens the rails out: the asymmetric
             # part falls linearly to zero at the joint and rises again beyond it
             a = np.where((coil >= lo) & (coil < hi), a * np.abs(coil - joint) / (joint - lo), a)
-        return a.mean(axis=0) * self._traction_wave(j, times)
+        return a.mean(axis=0) * self._traction_wave(j, first, times)
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:

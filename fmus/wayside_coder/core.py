@@ -25,7 +25,6 @@ any length N give the same samples (DESIGN §3).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -35,6 +34,7 @@ from scipy.signal import lfilter
 from ..common import alsn
 from ..common import signalling as sig
 from ..common.data import Line
+from ..common.periodic import period_samples
 from ..common.slave import FmuInputError
 
 SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
@@ -234,22 +234,12 @@ class WaysideCoderCore:
                 self._wave_rows[section * width:section * width + wave.size] = wave
 
     def _wave_periods(self) -> Optional[np.ndarray]:
-        """Samples after which each section's output repeats (the cam cycle and the carrier both
-        a whole number of samples), or None when they do not within _WAVE_MAX_SAMPLES: then the
-        output is computed from the sample times every frame."""
-        fs = self.settings.fs_hz
-        periods = []
-        for cycle_s, omega in zip(self.cycle_s, self.omega):
-            cam = cycle_s * fs
-            carrier = next((m * fs * 2 * np.pi / omega for m in range(1, 65)
-                            if abs(m * fs * 2 * np.pi / omega - round(m * fs * 2 * np.pi / omega)) < 1e-6), None)
-            if abs(cam - round(cam)) > 1e-6 or carrier is None:
-                return None
-            period = math.lcm(round(cam), round(carrier))
-            if period > _WAVE_MAX_SAMPLES:
-                return None
-            periods.append(period)
-        return np.array(periods, dtype=np.int64)
+        """Samples after which each section's output repeats (its cam cycle and carrier period
+        together), or None when a section's does not within _WAVE_MAX_SAMPLES: then the output
+        is computed from the sample times every frame."""
+        periods = [period_samples((cycle_s, 2 * np.pi / omega), self.settings.fs_hz, _WAVE_MAX_SAMPLES)
+                   for cycle_s, omega in zip(self.cycle_s, self.omega)]
+        return None if None in periods else np.array(periods, dtype=np.int64)
 
     def _wave(self, section: int, code: int) -> np.ndarray:
         """One period of section ``section``'s output for ``code`` (samples 0 … period − 1: the
