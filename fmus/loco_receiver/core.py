@@ -4,7 +4,7 @@ relay → decoder (no FMI here).
 Signal chain, vectorised over the frame with carried state (so any frame length gives the
 same result, DESIGN §3):
 
-1. **Band-pass** at the carrier (filters.py), scipy.signal.lfilter with state.
+1. **Band-pass** at the carrier (filters.py), lfilter's routine with carried state.
 2. **Gain control** on the in-band signal (seed 002: the receiver is overloaded up to 10× by
    the code current at the feed end of a section and recovers in 0.6–1.5 s after the joint; an
    out-of-band interferer must not desensitise it, so the level is taken after the band-pass).
@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from scipy.signal import lfilter
+from ..common.filter_design import filter_frame
 
 from ..common import alsn
 from ..common import signalling as sig
@@ -196,9 +196,10 @@ class LocoReceiverCore:
         if self._started_s is None:
             self._started_s = t
         x = np.asarray(e_coil, dtype=float)
-        band, self._bp_state = lfilter(self.band_pass.b, self.band_pass.a, x, zi=self._bp_state)
+        band, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
         scaled, gain = self._gain_control(band)
-        envelope, self._env_state = lfilter(self.envelope_lp.b, self.envelope_lp.a, np.abs(scaled), zi=self._env_state)
+        envelope, self._env_state = filter_frame(self.envelope_lp.b, self.envelope_lp.a, np.abs(scaled),
+                                                  self._env_state)
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
         relay, drive_max = self._relay_states(envelope)

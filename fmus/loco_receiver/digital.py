@@ -43,12 +43,11 @@ import cmath
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 from ..common import redundancy
 from ..common import signalling as sig
 from ..common.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
-from ..common.filter_design import chebyshev_low_pass
+from ..common.filter_design import chebyshev_low_pass, filter_frame
 from ..common.slave import FmuInputError
 from . import filters
 from .core import ReceiverOutputs
@@ -200,8 +199,8 @@ class DigitalReceiverCore:
         x = np.asarray(e_coil, dtype=float)
         if s.limiter_v > 0:
             x = np.clip(x, -s.limiter_v, s.limiter_v)
-        x, self._aa_state = lfilter(self.anti_alias.b, self.anti_alias.a, x, zi=self._aa_state)
-        x, self._bp_state = lfilter(self.band_pass.b, self.band_pass.a, x, zi=self._bp_state)
+        x, self._aa_state = filter_frame(self.anti_alias.b, self.anti_alias.a, x, self._aa_state)
+        x, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
         symbols, ends, retimed = self.clock.push(x, first)
         if symbols.size:
             amplitude = self.clock.amplitude(symbols)

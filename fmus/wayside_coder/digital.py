@@ -27,7 +27,7 @@ from __future__ import annotations
 from typing import List, Optional, Tuple
 
 import numpy as np
-from scipy.signal import lfilter
+from ..common.filter_design import filter_frame
 
 from ..common import redundancy
 from ..common.data import Line
@@ -163,7 +163,7 @@ class DigitalCoderCore:
         carrier = self.omega_per_sample * samples
         square = np.where(np.cos(carrier[None, :] + phase) >= 0.0, 1.0, -1.0)
         square *= self.live[:, None]
-        shaped, self._filter_state = lfilter(self.shaping.b, self.shaping.a, square, axis=1, zi=self._filter_state)
+        shaped, self._filter_state = filter_frame(self.shaping.b, self.shaping.a, square, self._filter_state, axis=1)
         return self.scale * shaped
 
     def _phase(self, symbol: np.ndarray, rows=None) -> np.ndarray:

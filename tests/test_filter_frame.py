@@ -1,0 +1,25 @@
+"""The cores' frame filter call gives lfilter's samples and state, frame after frame."""
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from fmus.common.filter_design import chebyshev_band_pass, filter_frame
+from fmus.loco_receiver import filters
+
+
+@pytest.mark.parametrize("design", [filters.band_pass(50.0, 20.0, 3, 4000.0), filters.envelope_low_pass(12.0, 4000.0),
+                                    chebyshev_band_pass(175.0, 58.3, 2, 0.5, 4000.0)],
+                         ids=["alsn-band-pass", "envelope", "chebyshev"])
+@pytest.mark.parametrize("rows", [0, 3])
+def test_frame_by_frame_equals_lfilter_over_the_whole_signal(design, rows):
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((rows, 4000) if rows else 4000)
+    order = design.a.size - 1
+    state = np.zeros((rows, order) if rows else order)
+    pieces = []
+    for start in range(0, 4000, 40):
+        y, state = filter_frame(design.b, design.a, x[..., start:start + 40], state)
+        pieces.append(y)
+    whole, final = lfilter(design.b, design.a, x, axis=-1, zi=np.zeros_like(state))
+    np.testing.assert_array_equal(np.concatenate(pieces, axis=-1), whole)
+    np.testing.assert_array_equal(state, final)
