@@ -2,7 +2,7 @@
 no wrong-side failure, timetables kept, the following and fault scenarios end where they must.
 The long runs are shortened where the behaviour under test is over, and run in process (the
 same facades without FMI; the FMI path is exercised by the shorter runs in test_ato.py,
-test_alsn.py and test_digital.py). The full runs: benchmarks/bench_systems.py."""
+test_alsn.py and test_digital.py). The full runs: python benchmarks/bench_systems.py."""
 import json
 
 import numpy as np
@@ -46,8 +46,10 @@ def test_free_run_keeps_the_timetable_to_15_s_and_stops_to_half_a_metre(tmp_path
     assert summary["realtime_factor"] > 0
 
 
-def test_following_the_follower_gets_green_yellow_red_yellow_and_stops_before_the_red_signal(tmp_path, product_fmus):
-    summary, col = _run(tmp_path, product_fmus, "following", 1200.0,
+@pytest.mark.parametrize("system", ["following", "als_en_following", "fire_dqpsk_following"])
+def test_following_the_follower_gets_green_yellow_red_yellow_and_stops_before_the_red_signal(tmp_path, product_fmus,
+                                                                                          system):
+    summary, col = _run(tmp_path, product_fmus, system, 1200.0,
                         ["leader.x", "follower.x", "follower.v", "follower_ato.atp_aspect"])
     _no_danger(summary)
     assert [e["t"] for e in summary["scenario"]["events_applied"]] == [810.0, 1040.0]
