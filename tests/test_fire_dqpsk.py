@@ -46,7 +46,7 @@ def test_every_command_round_trips_after_two_identical_words(command):
 @pytest.mark.parametrize("command", [3, 9, 14])
 @pytest.mark.parametrize("slip_symbols", [-2, -1, 1, 2])
 def test_a_slip_of_whole_symbols_never_yields_another_command(command, slip_symbols):
-    samples = fd.transmit([command] * 12, FS)
+    samples = fd.transmit([command] * 16, FS)     # after the slip: relock, then two identical words
     per_symbol = FS / fd.BAUD
     cut = int(round(5.3 * fd.FRAME_SYMBOLS * per_symbol))
     if slip_symbols > 0:                                      # symbols lost
