@@ -23,7 +23,9 @@ same result, DESIGN §3):
    pulses split by noise into a more permissive count): every pulse must last 0.17–0.50 s and
    every short interval at least 0.06 s, else the cycle is invalid. No relay edge for 2 s, or no valid cycle
    for 2 s (kpt.h's later "incorrect after 2000 ms") → no code: white, or red if the last code
-   shown was КЖ. Valid cycles come at most every 1.99 s, so a steady code never times out,
+   shown was КЖ; and no cycle of the code shown or a more permissive one for 2 s → the same
+   (valid cycles of a more restrictive code that cannot be shown yet must not keep the old
+   code alive). Valid cycles come at most every 1.99 s, so a steady code never times out,
    and an old code can outlive a change of the code sent by at most one cycle + 2 s, within
    the stated latency.
 
@@ -144,6 +146,7 @@ class LocoReceiverCore:
         self._previous_level = 0.0                       # pulse level of the previous valid cycle
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
+        self._supported_s: Optional[float] = None   # last cycle no more restrictive than the code shown
         self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
         self._publish_speeds()
@@ -297,6 +300,8 @@ class LocoReceiverCore:
             out.joints += 1
         out.transmitter = transmitter
         self._last_valid_s = time_s
+        if out.code_valid and sig.restrictiveness(code) >= sig.restrictiveness(out.aspect):
+            self._supported_s = time_s        # a cycle no more restrictive than the code shown
         # compare with what is shown, or after a loss of code with the last code shown (as the
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
@@ -323,6 +328,8 @@ class LocoReceiverCore:
 
     def _show(self, code: int) -> None:
         out = self.out
+        if not (out.code_valid and out.aspect == code):
+            self._supported_s = self._last_valid_s
         out.aspect = code
         out.code_valid = True
         self._last_shown = code
@@ -341,6 +348,15 @@ class LocoReceiverCore:
         out = self.out
         quiet = now_s - (self._last_edge_s if self._last_edge_s is not None else self._started_s)
         stale = now_s - (self._last_valid_s if self._last_valid_s is not None else self._started_s)
+        # cycles of a more restrictive code that cannot be shown yet (not clean, not confirmed)
+        # do not keep the code shown alive: without this an impulse-noise study run showed З
+        # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
+        unsupported = out.code_valid and self._supported_s is not None and \
+            now_s - self._supported_s > alsn.CODE_TIMEOUT_S
+        if unsupported and not (quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S):
+            out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
+            out.code_valid = False
+            self._publish_speeds()
         if quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S:
             self._pending = None
             if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
