@@ -81,6 +81,37 @@ def test_code_loss_gives_white_or_red_after_red_yellow_after_two_seconds(code, a
     assert np.all(rows[(rows[:, 0] > 8.0) & (rows[:, 0] < 8.0 + alsn.CODE_TIMEOUT_S - 0.8), 1] == code)
 
 
+def test_an_unconfirmed_more_restrictive_code_does_not_keep_the_old_code_shown():
+    # З (KPT-5), then from 10 s КЖ whose pulses alternate 0.5 / 0.18 V (impulse-hit levels): its
+    # cycles decode but are neither clean nor confirmed, so КЖ is not shown — and they must not
+    # keep З alive: З goes within one cycle + 2 s of the change (it stayed for good before)
+    tx = alsn.load_transmitters()["KPT-5"]
+    t = np.arange(int(20.0 * FS)) / FS
+    key = np.zeros(t.size)
+    level = np.zeros(t.size)
+    change_s = 10.0
+    for code, begin, end in ((sig.GREEN, 0.0, change_s), (sig.RED_YELLOW, change_s, 20.0)):
+        cycle = tx.cycle_s / (2 if code == sig.RED_YELLOW else 1)
+        pulses = tx.pulses[code][:1] if code == sig.RED_YELLOW else tx.pulses[code]
+        for index, start in enumerate(np.arange(begin, end, cycle)):
+            for on, off in pulses:
+                inside = (t >= start + on) & (t < min(start + off, end))
+                key[inside] = 1.0
+                level[inside] = 0.5 if code == sig.GREEN or index % 2 == 0 else 0.18
+    emf = level * key * np.sin(2 * np.pi * 50.0 * t)
+    receiver = LocoReceiverCore(N, ReceiverSettings())
+    shown = []
+    for first in range(0, t.size, N):
+        out = receiver.step(first / FS, emf[first:first + N])
+        shown.append((t[first] + N / FS, out.aspect))
+    shown = np.array(shown)
+    assert np.all(shown[(shown[:, 0] > 7.0) & (shown[:, 0] <= change_s), 1] == sig.GREEN)
+    assert receiver.out.decoded_codes > 10
+    late = shown[shown[:, 0] > change_s + tx.cycle_s + alsn.CODE_TIMEOUT_S + 0.3]
+    assert late.size and not np.any(late[:, 1] == sig.GREEN)
+    assert alsn.STATED_LATENCY_S > tx.cycle_s + alsn.CODE_TIMEOUT_S + 0.3
+
+
 # ---- noise immunity -----------------------------------------------------------------------------
 def _wrong_side_seconds(rows, latency_s):
     """Time the receiver showed a more permissive aspect than sent, beyond the decoding latency
