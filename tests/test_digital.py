@@ -198,6 +198,28 @@ def test_a_leaking_code_of_the_other_block_parity_cannot_show_more_than_the_own(
 
 
 @pytest.mark.parametrize("name", SYSTEMS)
+def test_after_a_loss_of_code_one_message_is_not_enough(name):
+    # the code sent may have turned more restrictive while messages were lost: a lone word "no
+    # more permissive than the last command" (noise passes the code check now and then) must
+    # not be shown at once — the impulse-noise study found exactly that wrong-side
+    system = cab_systems.digital_system(name)
+    acceptor = Acceptor(system, 1, 0.5)
+    open_line, one_free = Message(system.command_for(6), 1, 0), Message(system.command_for(1), 1, 0)
+    acceptor.push(0.0, open_line)
+    acceptor.push(0.5, open_line)
+    assert acceptor.command == open_line.command
+    acceptor.expire(0.5 + acceptor.timeout_s + 0.01)             # messages lost: no code
+    assert acceptor.command is None
+    acceptor.push(2.0, one_free)
+    assert acceptor.command is None                               # one word is not enough ...
+    acceptor.push(2.5, one_free)
+    assert acceptor.command == one_free.command                   # ... two identical ones are
+    # while a command is in force, a more restrictive word is taken at once, whatever its quality
+    acceptor.push(3.0, Message(system.command_for(0), 1, 0), quality=0.05)
+    assert acceptor.command == system.command_for(0)
+
+
+@pytest.mark.parametrize("name", SYSTEMS)
 @pytest.mark.parametrize("level", [0.25, 0.5])
 def test_a_superposed_signal_of_the_next_section_never_shows_more_than_the_own_code(name, level):
     leak_coder = DigitalCoderCore(cab_systems.digital_system(name), LINE, 8, N,
