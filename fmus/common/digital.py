@@ -186,7 +186,10 @@ class Acceptor:
       messages of the new section are taken at once, which is what a joint usually brings.)
     * only a *clear* message (every symbol decided at least a quarter of its decision margin
       away from a boundary: ``quality`` ≥ 0.25) may accept a more permissive command or
-      confirm the command in force; a restrictive one is taken whatever its quality. Noise
+      confirm the command in force; a restrictive one is taken whatever its quality, but an
+      unclear one keeps the replaced command's confirmation time (the impulse-noise study found
+      a noise word, restrictive against the command in force but more permissive than the
+      code just sent, restarting the timeout and shown past the stated latency). Noise
       passes the code check now and then (1 in 64 random words is a Fire word); the noise
       study found such words confirming an old command, or pairing into a permissive one, a
       few times per 10⁵ messages at −16 dB before this rule;
@@ -229,7 +232,9 @@ class Acceptor:
             if clear:
                 self.confirmed_s = time_s
         elif not permissive:
-            self._take(message, time_s)
+            # taken at once; an unclear word (possibly noise) does not restart the timeout: it
+            # cannot keep anything shown longer than the command it replaces would have been
+            self._take(message, time_s if clear else self.confirmed_s)
         elif clear and self.candidate == message and (self.command is None or message.block == self.block):
             self._take(message, time_s)
         self.candidate = message if clear else None
