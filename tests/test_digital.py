@@ -215,8 +215,12 @@ def test_after_a_loss_of_code_one_message_is_not_enough(name):
     acceptor.push(2.5, one_free)
     assert acceptor.command == one_free.command                   # ... two identical ones are
     # while a command is in force, a more restrictive word is taken at once, whatever its quality
+    # — but an unclear one (possibly noise) does not restart the timeout: it expires when the
+    # command it replaced would have
     acceptor.push(3.0, Message(system.command_for(0), 1, 0), quality=0.05)
     assert acceptor.command == system.command_for(0)
+    acceptor.expire(2.5 + acceptor.timeout_s + 0.01)
+    assert acceptor.command is None
 
 
 @pytest.mark.parametrize("name", SYSTEMS)
