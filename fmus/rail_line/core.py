@@ -175,7 +175,6 @@ class RailLineCore:
         self._config_edges = {length: sorted(set(self._starts_list + self._ends_list + self._feed_list +
                                                  [end + length for end in self._ends_list]))
                               for length in self._train_lengths}
-        self._node_bounds = [(0.0, 0.0)] * trains
         self._fault_inputs = None
         self._relay_levels = np.ones(self.count)
         self._relays_settled = False
