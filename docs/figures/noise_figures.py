@@ -5,7 +5,7 @@
 
 1. noise_ber.png — bit error rate of both modems against Eb/N0 and the theory of
    differentially detected 4-phase DPSK; the generator's spectrum beside it.
-2. noise_message_errors.png — message error rate and availability against wideband SNR, and
+2. noise_message_errors.png — message error rate against wideband SNR, and
    against the rate of impulse noise, for ALSN, ALS-EN and FIRE_DQPSK.
 """
 import json
