@@ -183,9 +183,9 @@ class RailLineCore:
         self._refresh_faults()
         self._models: List[OrderedDict] = [OrderedDict() for _ in range(self.count)]
         self._families: Dict[Tuple[int, Faults], Tuple[ShuntFamily, Dict[str, int]]] = {}
-        self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray]] = {}
-        self._log_amplitude: Dict[Tuple[int, Faults], np.ndarray] = {}
-        self._relay_ref = np.array([self._reference_relay_voltage(k) for k in range(self.count)])
+        self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        # |relay-end voltage| of the free circuit at the design ballast, unit feed
+        self._relay_ref = np.array([self._phasor_table(k, Faults())[2][-1] for k in range(self.count)])
         size = max(self._model(k, None).phi_n.shape[0] for k in range(self.count))
         self.states = np.zeros((self.count, size))
         self._spare_states = np.zeros((self.count, size))       # the two alternate frame by frame
@@ -276,16 +276,10 @@ class RailLineCore:
             cache.popitem(last=False)
         return model
 
-    def _reference_relay_voltage(self, k: int) -> float:
-        """|relay-end voltage| of the free circuit at the design ballast, unit feed."""
-        net = self.circuits[k].network(None, Faults(), 1.0)
-        v, _ = net.phasor(2 * np.pi * self.carriers[k], [1.0])
-        return abs(v[net.node_index["n0"]])
-
-    def _phasor_table(self, k: int, faults: Optional[Faults] = None) -> Tuple[np.ndarray, np.ndarray]:
+    def _phasor_table(self, k: int, faults: Optional[Faults] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For a wheelset shunt at each node of section k (the current faults unless given; unit
-        feed, phasor at the carrier): |shunt current| and |relay-end voltage|; the last relay
-        entry is the circuit without a shunt."""
+        feed, phasor at the carrier): |shunt current|, its log, and |relay-end voltage|; the last
+        relay entry is the circuit without a shunt."""
         faults = self._fault_of(k) if faults is None else faults
         key = (k, faults)
         if key not in self._phasors:
@@ -296,23 +290,17 @@ class RailLineCore:
                                                                   net.node_index["n0"])
             amplitude = np.maximum(np.abs(at_node[nodes]) * g_sh, 1e-12)
             relay = np.append(np.abs(at_relay[nodes]), abs(free_relay))    # last: no shunt
-            self._phasors[key] = (amplitude, relay)
+            self._phasors[key] = (amplitude, np.log(amplitude), relay)
         return self._phasors[key]
 
     def _amplitudes(self, k: int) -> np.ndarray:
         """|shunt current| for a shunt at each node (unit feed, phasor at the carrier)."""
         return self._phasor_table(k)[0]
 
-    def _log_amplitudes(self, k: int) -> np.ndarray:
-        key = (k, self._fault_of(k))
-        if key not in self._log_amplitude:
-            self._log_amplitude[key] = np.log(self._amplitudes(k))
-        return self._log_amplitude[key]
-
     def _relay_voltage(self, k: int, node: Optional[int], faults: Optional[Faults] = None) -> float:
         """Relay-end voltage (the current faults unless given), relative to the free circuit at
         the design ballast."""
-        relay = self._phasor_table(k, faults)[1]
+        relay = self._phasor_table(k, faults)[2]
         return float(relay[-1 if node is None else node]) / self._relay_ref[k]
 
     # ---- step -------------------------------------------------------------------------------
@@ -376,7 +364,7 @@ class RailLineCore:
 
     def _activate(self, k: int, node: Optional[int]) -> None:
         model = self._model(k, node)
-        log_amplitude = self._log_amplitudes(k)
+        log_amplitude = self._phasor_table(k)[1]
         # (node, model, log amplitude at the nodes, at the model's node): see _scale
         self._active[k] = (node, model, log_amplitude, log_amplitude[node if node is not None else 0])
         size = model.phi_n.shape[0]

@@ -130,11 +130,15 @@ class Network:
         l = np.array([b[3] for b in self.branches])
         return g, p, q, r, l
 
-    def phasor(self, omega: float, u: np.ndarray):
-        """Node voltages and branch currents (complex) for inputs u at angular frequency ω."""
+    def _admittance(self, omega: float):
+        """(nodal admittance matrix Y at ω, injection P·u matrix P, Q, branch impedances z)."""
         g, p, q, r, l = self.matrices()
         z = r + 1j * omega * l
-        y = g + (q / z) @ q.T
+        return g + (q / z) @ q.T, p, q, z
+
+    def phasor(self, omega: float, u: np.ndarray):
+        """Node voltages and branch currents (complex) for inputs u at angular frequency ω."""
+        y, p, q, z = self._admittance(omega)
         v = np.linalg.solve(y, p @ np.asarray(u, dtype=complex))
         return v, (q.T @ v) / z
 
@@ -143,9 +147,8 @@ class Network:
         in turn: (v_i with the shunt at node i, v_observe with the shunt at node i) as two
         arrays over i, and v_observe without any shunt. One inverse of the nodal admittance
         matrix and a rank-one (Sherman–Morrison) update per node, instead of a solve per node."""
-        g_matrix, p, q, r, l = self.matrices()
-        z = r + 1j * omega * l
-        impedance = np.linalg.inv(g_matrix + (q / z) @ q.T)       # Z = Y⁻¹
+        y, p, _, _ = self._admittance(omega)
+        impedance = np.linalg.inv(y)                              # Z = Y⁻¹
         free = impedance @ (p @ np.asarray(u, dtype=complex))     # v without a shunt
         at_node = free / (1.0 + g * np.diagonal(impedance))
         at_observe = free[observe] - g * impedance[observe] * at_node
@@ -153,11 +156,14 @@ class Network:
 
     def state_space(self) -> StateSpace:
         g, p, q, r, l = self.matrices()
-        g_inv_q = np.linalg.solve(g, q)
-        g_inv_p = np.linalg.solve(g, p)
-        a = -(q.T @ g_inv_q + np.diag(r)) / l[:, None]
-        b = (q.T @ g_inv_p) / l[:, None]
-        return StateSpace(a, b, -g_inv_q, g_inv_p)
+        return _state_space(q, r, l, np.linalg.solve(g, q), np.linalg.solve(g, p))
+
+
+def _state_space(q, r, l, g_inv_q, g_inv_p) -> StateSpace:
+    """di/dt = A·i + B·u and the node voltages, from G⁻¹Q and G⁻¹P (module docstring)."""
+    a = -(q.T @ g_inv_q + np.diag(r)) / l[:, None]
+    b = (q.T @ g_inv_p) / l[:, None]
+    return StateSpace(a, b, -g_inv_q, g_inv_p)
 
 
 class ShuntFamily:
@@ -179,9 +185,7 @@ class ShuntFamily:
             column = self.g_inv[:, node] * (self.g / (1.0 + self.g * self.g_inv[node, node]))
             g_inv_q = g_inv_q - np.outer(column, g_inv_q[node])
             g_inv_p = g_inv_p - np.outer(column, g_inv_p[node])
-        a = -(self.q.T @ g_inv_q + np.diag(self.r)) / self.l[:, None]
-        b = (self.q.T @ g_inv_p) / self.l[:, None]
-        return StateSpace(a, b, -g_inv_q, g_inv_p)
+        return _state_space(self.q, self.r, self.l, g_inv_q, g_inv_p)
 
 
 def discretise(system: StateSpace, step_s: float):
