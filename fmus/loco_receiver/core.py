@@ -353,19 +353,18 @@ class LocoReceiverCore:
         # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
         unsupported = out.code_valid and self._supported_s is not None and \
             now_s - self._supported_s > alsn.CODE_TIMEOUT_S
-        if unsupported and not (quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S):
-            out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
-            out.code_valid = False
-            self._publish_speeds()
-        if quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S:
+        lost = quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S
+        if lost:
             self._pending = None
-            if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
-                out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
-            out.code_valid = False
             if quiet > alsn.CODE_TIMEOUT_S:
                 self._cycle_start_s = None
                 self._short = 0
             self._previous_cycle = alsn.NO_CODE
+        if lost or unsupported:
+            # no code: white, or red after red-yellow
+            if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
+                out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
+            out.code_valid = False
             self._publish_speeds()
 
     def _publish_speeds(self) -> None:

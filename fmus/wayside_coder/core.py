@@ -88,6 +88,13 @@ def check_settings(line: Line, sections: int, s: CoderSettings) -> None:
         raise FmuInputError(f"parameter track_parity: {s.track_parity} (0 even track, 1 odd track)")
 
 
+def keyed(phase_s: np.ndarray, pulses: np.ndarray) -> np.ndarray:
+    """Whether each cam phase lies inside one of the pulses (``pulses``: … × P × 2, on / off in
+    seconds of the cam cycle, broadcast against ``phase_s``)."""
+    phase = phase_s[..., None]
+    return ((phase >= pulses[..., 0]) & (phase < pulses[..., 1])).any(-1)
+
+
 class CodingSwitch:
     """`coding = on_occupation`: a section is coded once occupied for the switch-on delay."""
 
@@ -207,8 +214,7 @@ class WaysideCoderCore:
             np.take(self._wave_rows, index + self._row_offset, out=out.u_tx[:k])
             return out
         times = (first + self._index) / s.fs_hz
-        phase = np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None])[:, :, None]
-        key = ((phase >= self._pulse_on) & (phase < self._pulse_off)).any(-1)
+        key = keyed(np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None]), self._pulses)
         if self._relay is not None:
             key, self._relay_state = lfilter(*self._relay, key.astype(float), axis=1, zi=self._relay_state)
         np.multiply(key, np.sin(self._omega_column * times) * s.amplitude_v, out=out.u_tx[:k])
@@ -223,8 +229,7 @@ class WaysideCoderCore:
         if out.status == STATUS_FAILED:
             codes = np.zeros(k, dtype=np.int64)
         self.codes, self.signals = codes, signals
-        pulses = self.pulses[np.arange(k), codes]                       # (K, P, 2)
-        self._pulse_on, self._pulse_off = pulses[:, None, :, 0], pulses[:, None, :, 1]
+        self._pulses = self.pulses[np.arange(k), codes][:, None]       # (K, 1, P, 2): against (K, N) phases
         out.code_tx[:k] = codes
         out.signal[:k] = np.where(self.has_signal, signals, SIGNAL_DARK)
         if self._period is not None:
@@ -248,8 +253,6 @@ class WaysideCoderCore:
         if key not in self._waves:
             s = self.settings
             times = np.arange(self._period[section]) / s.fs_hz
-            phase = np.mod(times + self.cam_offset_s[section], self.cycle_s[section])[:, None]
-            pulses = self.pulses[section, code]
-            keyed = ((phase >= pulses[:, 0]) & (phase < pulses[:, 1])).any(-1)
-            self._waves[key] = keyed * (np.sin(self.omega[section] * times) * s.amplitude_v)
+            key_on = keyed(np.mod(times + self.cam_offset_s[section], self.cycle_s[section]), self.pulses[section, code])
+            self._waves[key] = key_on * (np.sin(self.omega[section] * times) * s.amplitude_v)
         return self._waves[key]
