@@ -155,6 +155,8 @@ class FmuSlave:
                               modelIdentifier=interface.model_identifier, instanceName=name)
         self._component = None
         self._fatal = False
+        _claim_library(self.unzip_dir)
+        self._holds_library = True
         self.messages: List[str] = []
         self.inputs: Dict[str, ValueBuffer] = {}
         self.outputs: Dict[str, ValueBuffer] = {}
@@ -258,19 +260,27 @@ class FmuSlave:
         pythonfmu 0.7.0 keeps a global ``std::shared_ptr<PyState>`` and resets it from a
         library destructor that runs at process exit *after* the C++ runtime destroyed that
         global: the reset then reads and writes freed heap memory, which corrupts malloc's
-        free lists and aborts the process (exit 134) later in exit. Calling the library's
-        exported ``finalizePythonInterpreter`` ourselves, once no instance is alive, empties
-        the global first, so the destructor at exit has nothing to release. After fmi2Fatal
-        nothing may be called (FMI 2.0 §2.1.3), and pythonfmu would release its references
-        twice, so a fatal instance is left alone.
+        free lists and, now and then, aborts the process (SIGABRT) later in exit. Calling the
+        library's exported ``finalizePythonInterpreter`` ourselves, once no instance of that
+        library is alive, empties the global first, so the destructors at exit have nothing
+        to release. This holds for a fatal instance too (valgrind showed the freed read at
+        exit after a data file was rejected in exitInitializationMode): its global is emptied
+        all the same, but the instance itself is neither freed nor its library unloaded —
+        after fmi2Fatal nothing may be called on it (FMI 2.0 §2.1.3), and pythonfmu would
+        release its Python references twice.
         """
-        if self._component is None or self._fatal:
-            return
         component, self._component = self._component, None
-        self._fmu.fmi2FreeInstance(component)
+        if component is not None and not self._fatal:
+            self._fmu.fmi2FreeInstance(component)
+        if not self._holds_library:
+            return
+        self._holds_library = False
+        # also after a failed fmi2Instantiate: pythonfmu creates the state before the instance
         finalize = getattr(self._fmu.dll, "finalizePythonInterpreter", None)
         if finalize is not None and _release_library(self.unzip_dir):
             finalize()
+        if component is not None and self._fatal:
+            return
         try:
             self._fmu.freeLibrary()
         except Exception:
@@ -411,9 +421,7 @@ class InProcessSlave:
 def make_slave(name: str, fmu_path: Path, interface: Interface, workdir: Path, in_process: bool):
     if in_process:
         return InProcessSlave(name, fmu_path, interface, workdir)
-    slave = FmuSlave(name, fmu_path, interface, workdir)
-    _claim_library(slave.unzip_dir)
-    return slave
+    return FmuSlave(name, fmu_path, interface, workdir)
 
 
 def new_workdir() -> Path:
