@@ -23,6 +23,7 @@ from ..common.slave import FmuInputError
 from .atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
 from .driving import STRATEGIES, Controllers, make_strategy
 from .planner import InfeasibleStage, StagePlanner
+from .stopping import BrakePipeline, StopApproach
 from .train_model import NominalTrain
 
 KMH = 1.0 / 3.6
@@ -131,6 +132,8 @@ class AtoCore:
             stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
         # a driver releases the train brake before the departure time: its delay + build-down
         self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
+        self.brake_pipeline = BrakePipeline(self.train)
+        self.stop_approach = StopApproach(self.train, self.brake_pipeline, MIN_BRAKE_SHARE)
         self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
 
@@ -196,6 +199,7 @@ class AtoCore:
             dt = t - self._t_prev
             self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
         self._t_prev, self._v_prev = t, v
+        self.brake_pipeline.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         command, mode = self._drive(t, x, v, atp)
         if atp.intervention == SERVICE_INTERVENTION:
@@ -210,6 +214,7 @@ class AtoCore:
         out.command = command
         out.mode = mode
         out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
+        self.brake_pipeline.command(t, command, out.emergency_brake)
         out.v_permitted_mps = min(atp.permitted_mps, 1e3)
         out.aspect = atp.aspect
         out.atp_intervention = atp.intervention
@@ -295,6 +300,9 @@ class AtoCore:
             if station and v <= 1e-3 and x < stop.stop_m - s.stop_window_m:
                 self.braking_target = None            # stopped short of the window: creep on
                 self.creeping = True
+            elif station:
+                # the stop point: the brake share whose predicted stopping point it is
+                return -self.stop_approach.share(t, x, v, position), MODE_BRAKE
             else:
                 # the brake stays applied until the target is reached (no release/re-apply)
                 return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE

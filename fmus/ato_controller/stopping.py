@@ -1,0 +1,175 @@
+"""Precise stopping with a slow train brake: where will the train stop for each brake command?
+
+A freight train's pneumatic brake answers a new demand only after its application delay
+(ВЛ80 + 62 wagons: 8 s) and builds up or releases with a time constant (25 s), and the
+locomotive's electric brake fades below 10 km/h. A controller that maps the distance left to
+a deceleration now (``AtoCore._decel_to``) then keeps braking on the force it asked for
+20–30 s earlier and stops metres short. The ATO instead keeps its own copy of the brake
+pipeline (the demands it sent, their delay and the build-up, from the nominal stock data:
+the traction unit's model, DESIGN §4) and, while braking for a station stop, simulates the
+nominal train forward for a set of constant brake commands at once, choosing the one whose
+predicted stopping point is the stop point (receding horizon: chosen again every 0.5 s from
+the measured position and speed, so model errors are corrected as the train closes in).
+Book §S.5.2 (seed 003, НИИ УВМ predictive stopping): the stopping point is predicted, not the
+deceleration. docs/ato.md has the figures.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from .train_model import NominalTrain
+
+CANDIDATES = 21           # brake shares tried at once, MIN_SHARE … 1 (interpolated between)
+HORIZON_S = 180.0         # longer than any stop from the final approach
+PATH_GRID_M = 5.0         # gradient table resolution ahead of the train
+NO_EFFECT_M = 0.01        # a command moving the stopping point less than this cannot act in time
+REPLAN_S = 0.5            # the share is chosen again this often (held in between, as predicted)
+
+
+class BrakePipeline:
+    """The ATO's nominal copy of the traction unit's pneumatic brake (specific force, m/s²)."""
+
+    def __init__(self, train: NominalTrain):
+        stock = train.stock
+        self.train = train
+        self.delay_s = stock.brake_delay_s
+        self.tau_s = stock.brake_time_constant_s
+        self.events: deque = deque()     # (time the pneumatic brake acts on it, demand m/s²)
+        self.delayed = 0.0               # demand the pneumatic brake acts on now
+        self.demand_now = 0.0            # demand as last commanded (the electric brake acts at once)
+        self.emergency = False
+        self.force = 0.0                 # pneumatic brake, m/s²
+        self.time_s = None
+        self._last_requested = 0.0
+
+    def command(self, t: float, command: float, emergency: bool) -> None:
+        """The command sent to the train at ``t`` (the traction unit's convention)."""
+        stock = self.train.stock
+        self.emergency = emergency
+        self.demand_now = max(-command, 0.0) * stock.service_decel
+        demand = stock.emergency_decel if emergency else self.demand_now
+        if demand != self._last_requested:
+            self.events.append((t + self.delay_s, demand))
+            self._last_requested = demand
+        self.time_s = t
+
+    def _electric(self, v: float) -> float:
+        if self.emergency:
+            return 0.0
+        return min(self.demand_now, float(self.train.electric_brake(v)))
+
+    def advance(self, t: float, v: float) -> None:
+        """Bring the pneumatic force up to ``t`` (speed taken as ``v`` over the interval)."""
+        if self.time_s is None:
+            self.time_s = t
+        if t <= self.time_s:
+            return
+        now = self.time_s
+        electric = self._electric(v)
+        while now < t:
+            while self.events and self.events[0][0] <= now + 1e-9:
+                self.delayed = self.events.popleft()[1]
+            until = min(self.events[0][0], t) if self.events else t
+            self.force = self._relax(self.force, max(self.delayed - electric, 0.0), until - now)
+            now = until
+        self.time_s = t
+
+    def _relax(self, force, target, dt: float):
+        if self.tau_s <= 0.0:
+            return target
+        return target + (force - target) * math.exp(-dt / self.tau_s)
+
+    def stopping_points(self, x: float, v: float, shares: np.ndarray, stop_m: float, path_accel,
+                        dt_s: float) -> np.ndarray:
+        """Predicted head position at standstill [m] for each constant brake share in ``shares``,
+        starting now from (x, v) with the pipeline's current state. ``path_accel(x)`` is the
+        gradient + curve retardation [m/s²] (vectorised). A candidate still moving past
+        ``stop_m`` is not followed further: its point is extrapolated at its deceleration there
+        (it only has to be known to lie beyond the stop point)."""
+        train = self.train
+        demand = shares * train.stock.service_decel
+        x_k = np.full(shares.size, float(x))
+        v_k = np.full(shares.size, float(v))
+        force = np.full(shares.size, self.force)
+        delayed = np.full(shares.size, self.delayed)
+        pending = list(self.events)
+        # a command sent now reaches the pneumatic brake after the delay, after all that is queued
+        effective = self.time_s + self.delay_s
+        decay = math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 0.0
+        half_decay = math.exp(-0.5 * dt_s / self.tau_s) if self.tau_s > 0.0 else 0.0
+        t = self.time_s
+        moving = v_k > 0.0
+        for _ in range(int(HORIZON_S / dt_s)):
+            # a demand takes effect from the step boundary nearest its time (unbiased timing)
+            t_mid = t + 0.5 * dt_s
+            while pending and pending[0][0] <= t_mid:
+                delayed = np.full(shares.size, pending.pop(0)[1])
+            if t_mid >= effective:
+                delayed = demand
+            t += dt_s
+            electric = np.minimum(demand, train.electric_brake(v_k))
+            target = np.maximum(delayed - electric, 0.0)
+            force_end = target + (force - target) * decay
+            # midpoint rule (second order: a 0.5 s step is then as good as the plant's RK4 to
+            # centimetres over a stop); the brake force at mid-step from its exponential
+            force_mid = target + (force - target) * half_decay
+            decel = electric + force_mid + train.resistance(v_k) + path_accel(x_k)
+            v_mid = np.maximum(v_k - 0.5 * dt_s * decel, 0.0)
+            decel = np.maximum(np.minimum(demand, train.electric_brake(v_mid)) + force_mid
+                               + train.resistance(v_mid) + path_accel(x_k + 0.5 * dt_s * v_mid), 1e-6)
+            force = force_end
+            v_next = v_k - decel * dt_s
+            stopping = moving & (v_next <= 0.0)
+            passed = moving & ~stopping & (x_k > stop_m)
+            # standstill inside the step, or past the stop point: the distance still to run at
+            # this deceleration
+            ending = stopping | passed
+            travelled = np.where(ending, v_k * v_k / (2.0 * decel), v_mid * dt_s)
+            x_k = np.where(moving, x_k + travelled, x_k)
+            v_k = np.where(moving & ~ending, v_next, 0.0)
+            moving = v_k > 0.0
+            if not moving.any():
+                break
+        return x_k
+
+
+class StopApproach:
+    """Chooses the brake share that stops the head at the stop point (see the module doc)."""
+
+    def __init__(self, train: NominalTrain, pipeline: BrakePipeline, min_share: float):
+        self.train = train
+        self.pipeline = pipeline
+        self.shares = np.linspace(min_share, 1.0, CANDIDATES)
+        self.dt_s = max(0.1, min(0.5, 0.25 * max(train.stock.brake_time_constant_s, 0.4)))
+        self._path = None
+        self._last = (-math.inf, None, 0.0)    # (time, stop point, share) of the last choice
+
+    def _path_table(self, x: float, stop_m: float):
+        if self._path is None or not (self._path[0][0] <= x and stop_m + 50.0 <= self._path[0][-1]):
+            grid = np.arange(x - PATH_GRID_M, stop_m + 200.0, PATH_GRID_M)
+            self._path = (grid, self.train.path_accel(grid))
+        grid, values = self._path
+        return lambda position: np.interp(position, grid, values)
+
+    def share(self, t: float, x: float, v: float, stop_m: float) -> float:
+        """Brake share (0–1) whose predicted stopping point is ``stop_m``."""
+        planned_at, planned_for, planned_share = self._last
+        if planned_for == stop_m and t < planned_at + REPLAN_S - 1e-9:
+            return planned_share
+        points = self.pipeline.stopping_points(x, v, self.shares, stop_m, self._path_table(x, stop_m), self.dt_s)
+        # more brake, shorter stop: the points fall with the share
+        if points[0] - points[-1] < NO_EFFECT_M and planned_for == stop_m:
+            share = planned_share      # the train stops before any new command acts: keep it
+        elif points[0] <= stop_m:
+            share = float(self.shares[0])
+        elif points[-1] >= stop_m:
+            share = 1.0
+        else:
+            k = int(np.argmax(points <= stop_m))
+            s0, s1, p0, p1 = self.shares[k - 1], self.shares[k], points[k - 1], points[k]
+            share = float(s0 + (s1 - s0) * (p0 - stop_m) / (p0 - p1)) if p0 != p1 else float(s1)
+        self._last = (t, stop_m, share)
+        return share
