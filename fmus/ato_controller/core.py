@@ -36,6 +36,9 @@ WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finish
 ACCEL_FILTER_S = 1.0
 MIN_BRAKE_SHARE = 0.02
 CREEP_SPEED_MPS = 5.0 * KMH      # to close up to the stop point after stopping short of the window
+# two-stage stop (book §S.5.3, ATOMIC): the planned deceleration down to this speed, then the
+# brake share whose predicted stopping point is the stop point (stopping.py)
+FINAL_APPROACH_MPS = 30.0 * KMH
 
 
 @dataclass
@@ -300,7 +303,7 @@ class AtoCore:
             if station and v <= 1e-3 and x < stop.stop_m - s.stop_window_m:
                 self.braking_target = None            # stopped short of the window: creep on
                 self.creeping = True
-            elif station:
+            elif station and v <= FINAL_APPROACH_MPS:
                 # the stop point: the brake share whose predicted stopping point it is
                 return -self.stop_approach.share(t, x, v, position), MODE_BRAKE
             else:
