@@ -300,8 +300,8 @@ def test_the_atos_predicted_stopping_point_is_where_the_train_stops(stock_file, 
     """The ATO's copy of the brake pipeline (delay, build-up, electric brake first and fading)
     predicts where the traction unit stops for a constant brake command, while a brake demand
     sent earlier is still on its way to the pneumatic brake: to 0.3 m over up to 890 m of
-    braking, with the coarsest prediction step the ATO uses (0.5 s)."""
-    from fmus.ato_controller.stopping import BrakePipeline
+    braking, with the ATO's own prediction step for each brake (0.375–1 s)."""
+    from fmus.ato_controller.stopping import BrakePipeline, StopApproach
     from fmus.common.data import DATA
     from fmus.traction.core import TractionCore
 
@@ -317,8 +317,9 @@ def test_the_atos_predicted_stopping_point_is_where_the_train_stops(stock_file, 
         t += step
     pipeline.advance(t, plant.out.v_mps)
     shares = np.array([0.2, 0.5, 1.0])
+    dt_s = StopApproach(train, pipeline, 0.02).dt_s        # the ATO's own step for this brake
     predicted = pipeline.stopping_points(plant.out.x_m, plant.out.v_mps, shares, math.inf,
-                                         lambda x: np.interp(x, *_path_table(train, 3000.0)), 0.5)
+                                         lambda x: np.interp(x, *_path_table(train, 3000.0)), dt_s)
     for share, point in zip(shares, predicted):     # 55–890 m of braking
         run = copy.deepcopy(plant)
         clock = t

@@ -26,7 +26,10 @@ CANDIDATES = 21           # brake shares tried at once, MIN_SHARE … 1 (interpo
 HORIZON_S = 180.0         # longer than any stop from the final approach
 PATH_GRID_M = 5.0         # gradient table resolution ahead of the train
 NO_EFFECT_M = 0.01        # a command moving the stopping point less than this cannot act in time
-REPLAN_S = 0.5            # the share is chosen again this often (held in between, as predicted)
+# the share is chosen again every tenth of the brake's lead (delay + half the build-up), within
+# these bounds, and held in between as the prediction assumes: a freight brake (lead 20.5 s)
+# cannot act on a new choice sooner than 8 s anyway
+REPLAN_MIN_S, REPLAN_MAX_S = 0.5, 2.0
 
 
 class BrakePipeline:
@@ -95,42 +98,43 @@ class BrakePipeline:
         v_k = np.full(shares.size, float(v))
         force = np.full(shares.size, self.force)
         delayed = np.full(shares.size, self.delayed)
-        pending = list(self.events)
-        # a command sent now reaches the pneumatic brake after the delay, after all that is queued
-        effective = self.time_s + self.delay_s
-        decay = math.exp(-dt_s / self.tau_s) if self.tau_s > 0.0 else 0.0
-        half_decay = math.exp(-0.5 * dt_s / self.tau_s) if self.tau_s > 0.0 else 0.0
+        # the times at which the pneumatic brake's demand changes: what is queued, then the
+        # command sent now, after the delay (integration steps end exactly there)
+        changes = [(when, np.full(shares.size, value)) for when, value in self.events]
+        changes.append((self.time_s + self.delay_s, demand))
+        tau = self.tau_s
         t = self.time_s
+        end = t + HORIZON_S
         moving = v_k > 0.0
-        for _ in range(int(HORIZON_S / dt_s)):
-            # a demand takes effect from the step boundary nearest its time (unbiased timing)
-            t_mid = t + 0.5 * dt_s
-            while pending and pending[0][0] <= t_mid:
-                delayed = np.full(shares.size, pending.pop(0)[1])
-            if t_mid >= effective:
-                delayed = demand
-            t += dt_s
+        while t < end:
+            while changes and changes[0][0] <= t + 1e-9:
+                delayed = changes.pop(0)[1]
+            h = min(dt_s, changes[0][0] - t) if changes else dt_s
             electric = np.minimum(demand, train.electric_brake(v_k))
             target = np.maximum(delayed - electric, 0.0)
-            force_end = target + (force - target) * decay
-            # midpoint rule (second order: a 0.5 s step is then as good as the plant's RK4 to
-            # centimetres over a stop); the brake force at mid-step from its exponential
-            force_mid = target + (force - target) * half_decay
+            # midpoint rule (second order: a 1 s step is then as good as the plant's RK4 to a
+            # decimetre over a stop); the brake force at mid-step from its exponential
+            if tau > 0.0:
+                force_mid = target + (force - target) * math.exp(-0.5 * h / tau)
+                force_end = target + (force - target) * math.exp(-h / tau)
+            else:
+                force_mid = force_end = target
             decel = electric + force_mid + train.resistance(v_k) + path_accel(x_k)
-            v_mid = np.maximum(v_k - 0.5 * dt_s * decel, 0.0)
+            v_mid = np.maximum(v_k - 0.5 * h * decel, 0.0)
             decel = np.maximum(np.minimum(demand, train.electric_brake(v_mid)) + force_mid
-                               + train.resistance(v_mid) + path_accel(x_k + 0.5 * dt_s * v_mid), 1e-6)
+                               + train.resistance(v_mid) + path_accel(x_k + 0.5 * h * v_mid), 1e-6)
             force = force_end
-            v_next = v_k - decel * dt_s
+            v_next = v_k - decel * h
             stopping = moving & (v_next <= 0.0)
             passed = moving & ~stopping & (x_k > stop_m)
             # standstill inside the step, or past the stop point: the distance still to run at
             # this deceleration
             ending = stopping | passed
-            travelled = np.where(ending, v_k * v_k / (2.0 * decel), v_mid * dt_s)
+            travelled = np.where(ending, v_k * v_k / (2.0 * decel), v_mid * h)
             x_k = np.where(moving, x_k + travelled, x_k)
             v_k = np.where(moving & ~ending, v_next, 0.0)
             moving = v_k > 0.0
+            t += h
             if not moving.any():
                 break
         return x_k
@@ -143,7 +147,12 @@ class StopApproach:
         self.train = train
         self.pipeline = pipeline
         self.shares = np.linspace(min_share, 1.0, CANDIDATES)
-        self.dt_s = max(0.1, min(0.5, 0.25 * max(train.stock.brake_time_constant_s, 0.4)))
+        stock = train.stock
+        # integration step: a quarter of the build-up time constant, 0.1–1 s (midpoint rule: the
+        # ВЛ80's stop predicted to 0.1 m at 1 s, test_ato.py)
+        self.dt_s = max(0.1, min(1.0, 0.25 * max(stock.brake_time_constant_s, 0.4)))
+        lead = stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
+        self.replan_s = max(REPLAN_MIN_S, min(REPLAN_MAX_S, 0.1 * lead))
         self._path = None
         self._last = (-math.inf, None, 0.0)    # (time, stop point, share) of the last choice
 
@@ -157,7 +166,7 @@ class StopApproach:
     def share(self, t: float, x: float, v: float, stop_m: float) -> float:
         """Brake share (0–1) whose predicted stopping point is ``stop_m``."""
         planned_at, planned_for, planned_share = self._last
-        if planned_for == stop_m and t < planned_at + REPLAN_S - 1e-9:
+        if planned_for == stop_m and t < planned_at + self.replan_s - 1e-9:
             return planned_share
         points = self.pipeline.stopping_points(x, v, self.shares, stop_m, self._path_table(x, stop_m), self.dt_s)
         # more brake, shorter stop: the points fall with the share
