@@ -139,9 +139,10 @@ class AtoCore:
             stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
         # a driver releases the train brake before the departure time: its delay + build-down
         self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
-        self.predictive_stop = self.brake_lead_s > s.predictive_stop_lead_s
-        self.brake_pipeline = BrakePipeline(self.train)
-        self.stop_approach = StopApproach(self.train, self.brake_pipeline, MIN_BRAKE_SHARE)
+        # a slow brake: the ATO follows its pipeline every step and predicts the stopping point
+        self.brake_pipeline = BrakePipeline(self.train) if self.brake_lead_s > s.predictive_stop_lead_s else None
+        self.stop_approach = StopApproach(self.train, self.brake_pipeline, MIN_BRAKE_SHARE) \
+            if self.brake_pipeline is not None else None
         self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
 
@@ -207,7 +208,8 @@ class AtoCore:
             dt = t - self._t_prev
             self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
         self._t_prev, self._v_prev = t, v
-        self.brake_pipeline.advance(t, v)
+        if self.brake_pipeline is not None:
+            self.brake_pipeline.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         command, mode = self._drive(t, x, v, atp)
         if atp.intervention == SERVICE_INTERVENTION:
@@ -222,7 +224,8 @@ class AtoCore:
         out.command = command
         out.mode = mode
         out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
-        self.brake_pipeline.command(t, command, out.emergency_brake)
+        if self.brake_pipeline is not None:
+            self.brake_pipeline.command(t, command, out.emergency_brake)
         out.v_permitted_mps = min(atp.permitted_mps, 1e3)
         out.aspect = atp.aspect
         out.atp_intervention = atp.intervention
@@ -308,7 +311,7 @@ class AtoCore:
             if station and v <= 1e-3 and x < stop.stop_m - s.stop_window_m:
                 self.braking_target = None            # stopped short of the window: creep on
                 self.creeping = True
-            elif station and self.predictive_stop and v <= FINAL_APPROACH_MPS:
+            elif station and self.stop_approach is not None and v <= FINAL_APPROACH_MPS:
                 # the stop point: the brake share whose predicted stopping point it is
                 return -self.stop_approach.share(t, x, v, position), MODE_BRAKE
             else:
