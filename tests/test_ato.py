@@ -317,7 +317,7 @@ def test_the_atos_predicted_stopping_point_is_where_the_train_stops(stock_file, 
         t += step
     pipeline.advance(t, plant.out.v_mps)
     shares = np.array([0.2, 0.5, 1.0])
-    dt_s = StopApproach(train, pipeline, 0.02).dt_s        # the ATO's own step for this brake
+    dt_s = StopApproach(train, 0.02).dt_s                  # the ATO's own step for this brake
     predicted = pipeline.stopping_points(plant.out.x_m, plant.out.v_mps, shares, math.inf,
                                          lambda x: np.interp(x, *_path_table(train, 3000.0)), dt_s)
     for share, point in zip(shares, predicted):     # 55–890 m of braking

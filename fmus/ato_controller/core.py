@@ -23,7 +23,7 @@ from ..common.slave import FmuInputError
 from .atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
 from .driving import STRATEGIES, Controllers, make_strategy
 from .planner import InfeasibleStage, StagePlanner
-from .stopping import BrakePipeline, StopApproach
+from .stopping import StopApproach, brake_lead_s
 from .train_model import NominalTrain
 
 KMH = 1.0 / 3.6
@@ -135,14 +135,12 @@ class AtoCore:
         self.creeping = False
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
-        self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else \
-            stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
+        self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
         # a driver releases the train brake before the departure time: its delay + build-down
         self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
         # a slow brake: the ATO follows its pipeline every step and predicts the stopping point
-        self.brake_pipeline = BrakePipeline(self.train) if self.brake_lead_s > s.predictive_stop_lead_s else None
-        self.stop_approach = StopApproach(self.train, self.brake_pipeline, MIN_BRAKE_SHARE) \
-            if self.brake_pipeline is not None else None
+        self.stop_approach = StopApproach(self.train, MIN_BRAKE_SHARE) \
+            if self.brake_lead_s > s.predictive_stop_lead_s else None
         self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
 
@@ -208,8 +206,8 @@ class AtoCore:
             dt = t - self._t_prev
             self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
         self._t_prev, self._v_prev = t, v
-        if self.brake_pipeline is not None:
-            self.brake_pipeline.advance(t, v)
+        if self.stop_approach is not None:
+            self.stop_approach.pipeline.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         command, mode = self._drive(t, x, v, atp)
         if atp.intervention == SERVICE_INTERVENTION:
@@ -224,8 +222,8 @@ class AtoCore:
         out.command = command
         out.mode = mode
         out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
-        if self.brake_pipeline is not None:
-            self.brake_pipeline.command(t, command, out.emergency_brake)
+        if self.stop_approach is not None:
+            self.stop_approach.pipeline.command(t, command, out.emergency_brake)
         out.v_permitted_mps = min(atp.permitted_mps, 1e3)
         out.aspect = atp.aspect
         out.atp_intervention = atp.intervention

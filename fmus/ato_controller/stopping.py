@@ -33,6 +33,12 @@ NO_EFFECT_M = 0.01        # a command moving the stopping point less than this c
 REPLAN_MIN_S, REPLAN_MAX_S = 0.5, 2.0
 
 
+def brake_lead_s(stock) -> float:
+    """How long a brake demand takes to act, to first order: the application delay plus half
+    the build-up time constant (ЧС7's EP brake 2.5 s, ВЛ80 + 62 wagons 20.5 s)."""
+    return stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
+
+
 class BrakePipeline:
     """The ATO's nominal copy of the traction unit's pneumatic brake (specific force, m/s²)."""
 
@@ -103,7 +109,6 @@ class BrakePipeline:
         # command sent now, after the delay (integration steps end exactly there)
         changes = [(when, np.full(shares.size, value)) for when, value in self.events]
         changes.append((self.time_s + self.delay_s, demand))
-        tau = self.tau_s
         t = self.time_s
         end = t + HORIZON_S
         moving = v_k > 0.0
@@ -115,11 +120,8 @@ class BrakePipeline:
             target = np.maximum(delayed - electric, 0.0)
             # midpoint rule (second order: a 1 s step is then as good as the plant's RK4 to a
             # decimetre over a stop); the brake force at mid-step from its exponential
-            if tau > 0.0:
-                force_mid = target + (force - target) * math.exp(-0.5 * h / tau)
-                force_end = target + (force - target) * math.exp(-h / tau)
-            else:
-                force_mid = force_end = target
+            force_mid = self._relax(force, target, 0.5 * h)
+            force_end = self._relax(force, target, h)
             decel = electric + force_mid + train.resistance(v_k) + path_accel(x_k)
             v_mid = np.maximum(v_k - 0.5 * h * decel, 0.0)
             decel = np.maximum(np.minimum(demand, train.electric_brake(v_mid)) + force_mid
@@ -144,16 +146,15 @@ class BrakePipeline:
 class StopApproach:
     """Chooses the brake share that stops the head at the stop point (see the module doc)."""
 
-    def __init__(self, train: NominalTrain, pipeline: BrakePipeline, min_share: float):
+    def __init__(self, train: NominalTrain, min_share: float):
         self.train = train
-        self.pipeline = pipeline
+        self.pipeline = BrakePipeline(train)      # the ATO feeds it every step (AtoCore.step)
         self.shares = np.linspace(min_share, 1.0, CANDIDATES)
         stock = train.stock
         # integration step: a quarter of the build-up time constant, 0.1–1 s (midpoint rule: the
         # ВЛ80's stop predicted to 0.1 m at 1 s, test_ato.py)
         self.dt_s = max(0.1, min(1.0, 0.25 * max(stock.brake_time_constant_s, 0.4)))
-        lead = stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
-        self.replan_s = max(REPLAN_MIN_S, min(REPLAN_MAX_S, 0.1 * lead))
+        self.replan_s = max(REPLAN_MIN_S, min(REPLAN_MAX_S, 0.1 * brake_lead_s(stock)))
         self._path = None
         self._last = (-math.inf, None, 0.0)    # (time, stop point, share) of the last choice
 
