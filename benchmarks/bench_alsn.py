@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fmus.common.data import DATA, load_line
+from fmus.data.loader import DATA, load_line
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 

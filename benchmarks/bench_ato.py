@@ -18,8 +18,8 @@ import time
 import numpy as np
 
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from fmus.common import signalling as sig
-from fmus.common.data import DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.signalling import aspects as sig
+from fmus.data.loader import DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.traction.core import TractionCore
 
 

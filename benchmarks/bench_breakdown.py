@@ -16,6 +16,7 @@ from pathlib import Path
 
 from orchestrator import fmu, master
 from orchestrator.cli import SSP_ROOT, _build_dir
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 FRAME_S = 0.01
@@ -48,7 +49,7 @@ def breakdown(system: str, stop_time: float, in_process: bool):
     master.Master.run_until = run_until
     try:
         with tempfile.TemporaryDirectory() as folder:
-            options = RunOptions(stop_time=stop_time, output_dir=Path(folder), in_process=in_process,
+            options = RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=Path(folder), in_process=in_process,
                                  fmu_dirs=[_build_dir()], record=["train.x"])
             run_system(SSP_ROOT / system, options)
     finally:

@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from bench_alsn import one_section_line
-from fmus.common import cab_systems
-from fmus.common.data import load_line
+from fmus.signalling import cab_systems
+from fmus.data.loader import load_line
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
 from fmus.wayside_coder.digital import DigitalCoderCore

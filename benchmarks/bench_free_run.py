@@ -16,12 +16,13 @@ import time
 from pathlib import Path
 
 from orchestrator.cli import SSP_ROOT, _build_dir
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
 def run_once(stop_time: float, in_process: bool) -> float:
     with tempfile.TemporaryDirectory() as folder:
-        options = RunOptions(stop_time=stop_time, output_dir=Path(folder), in_process=in_process,
+        options = RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=Path(folder), in_process=in_process,
                              fmu_dirs=[_build_dir()], record=["train.x", "train.v", "rx.aspect"])
         began = time.perf_counter()
         result = run_system(SSP_ROOT / "free_run", options)

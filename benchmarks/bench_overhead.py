@@ -20,6 +20,7 @@ from pathlib import Path
 from _systems import build_test_fmus, trivial_system
 import orchestrator.run
 from orchestrator.fmu import _make_buffers
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
@@ -56,7 +57,7 @@ def run_null(folder: Path) -> float:
 def run_master(folder: Path, in_process: bool) -> float:
     with tempfile.TemporaryDirectory() as out:
         began = time.perf_counter()
-        result = run_system(folder, RunOptions(output_dir=Path(out), in_process=in_process,
+        result = run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=Path(out), in_process=in_process,
                                                record=[], output_interval=1.0))
         return (time.perf_counter() - began), sum(result.steps_taken.values())
 

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from fmus.common.data import load_line
+from fmus.data.loader import load_line
 from fmus.rail_line.core import RailLineCore, RailSettings
 
 FS, N = 4000.0, 40

@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 
 from orchestrator.cli import SSP_ROOT, _build_dir
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
@@ -26,7 +27,7 @@ def main():
     for item in names:
         name, _, mode = item.partition(":")
         with tempfile.TemporaryDirectory() as folder:
-            options = RunOptions(output_dir=Path(folder), in_process=mode != "fmi", fmu_dirs=[_build_dir()])
+            options = RunOptions(summaries=railway_verdicts, output_dir=Path(folder), in_process=mode != "fmi", fmu_dirs=[_build_dir()])
             summary = run_system(SSP_ROOT / name, options).summary
         wrong_side = sum(r["wrong_side_failures"] for r in summary["receivers"])
         print(f"{name}{' through FMI' if mode == 'fmi' else ''}: {summary['sim_time_s']:.0f} s simulated in "

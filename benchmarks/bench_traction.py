@@ -10,7 +10,7 @@ import argparse
 import statistics
 import time
 
-from fmus.common.data import load_line, load_rolling_stock
+from fmus.data.loader import load_line, load_rolling_stock
 from fmus.traction.core import TractionCore
 
 

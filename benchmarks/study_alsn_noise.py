@@ -15,11 +15,14 @@ each transmitter type (KPT-5 section 1, KPT-7 section 2) for ``--seconds`` of si
     python benchmarks/study_alsn_noise.py [--seconds 60]
 """
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
-from fmus.common import signalling as sig
-from fmus.loco_receiver.channel import CodeChannel, white_noise_and_hum
+from fmus.signalling import aspects as sig
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
+from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
 
 HARMONICS = {100.0: 0.8, 150.0: 0.8, 300.0: 2.0}
 CODES = {"З": (sig.GREEN, ()), "Ж": (sig.YELLOW, (2,)), "КЖ": (sig.RED_YELLOW, (1,))}

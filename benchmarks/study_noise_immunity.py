@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -39,10 +40,10 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.signal import lfilter
 
-from fmus.common import als_en, cab_systems, dqpsk
-from fmus.common import signalling as sig
-from fmus.common.data import load_line
-from fmus.common.digital import Message, stated_latency_s
+from fmus.signalling import als_en, cab_systems, dqpsk
+from fmus.signalling import aspects as sig
+from fmus.data.loader import load_line
+from fmus.signalling.digital import Message, stated_latency_s
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
 from fmus.wayside_coder.digital import DigitalCoderCore
@@ -193,7 +194,8 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
 def alsn_chain(cycles: int, noise, seed: int) -> dict:
     """ALSN through coder → receiver in 10 ms frames (the coder keys per frame); a message is a
     code cycle."""
-    from fmus.loco_receiver.channel import CodeChannel
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
+    from benchmarks.harness.channel import CodeChannel
     rng = np.random.default_rng(seed)
     codes = [sig.RED_YELLOW, sig.YELLOW, sig.GREEN]
     ahead = {sig.RED_YELLOW: [1], sig.YELLOW: [2], sig.GREEN: []}

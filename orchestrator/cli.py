@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from .errors import UserError
+from orchestrator.errors import UserError
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SSP_ROOT = REPO_ROOT / "ssp"
@@ -24,7 +24,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _build_dir() -> Path:
-    from fmus.common.build import default_build_dir
+    from orchestrator.build.builder import default_build_dir
 
     return default_build_dir(REPO_ROOT)
 
@@ -45,9 +45,9 @@ def _system_path(name: Optional[str]) -> Path:
 
 
 def cmd_build(args) -> int:
-    from fmus.common.build import build_all
-    from fmus.common.slave import BuildConfig
-    from .packing import pack_systems
+    from orchestrator.build.builder import build_all
+    from fmus.sizes import BuildConfig
+    from orchestrator.build.packing import pack_systems
 
     for label, value in (("--sections", args.sections), ("--trains", args.trains), ("--frame", args.frame)):
         if value < 1:
@@ -65,7 +65,8 @@ def cmd_build(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from .run import RunOptions, run_system
+    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.run import RunOptions, run_system
 
     system = _system_path(args.system)
     overrides = {}
@@ -75,7 +76,7 @@ def cmd_run(args) -> int:
             raise UserError(f"--set {item}: expected COMPONENT.VARIABLE=VALUE")
         overrides[key.strip()] = value.strip()
     if not args.no_build:
-        from fmus.common.build import build_all
+        from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
     options = RunOptions(
@@ -83,7 +84,7 @@ def cmd_run(args) -> int:
         param_sets=args.param_set or [], output_interval=args.output_interval,
         captures=args.capture or [], algorithm=args.algorithm, in_process=args.in_process,
         fmu_dirs=[_build_dir()], record=args.record, scenario=args.scenario,
-        default_scenario=not args.no_scenario,
+        default_scenario=not args.no_scenario, summaries=railway_verdicts,
         progress=sys.stderr.isatty())
     result = run_system(system, options)
     summary = result.summary
@@ -116,7 +117,7 @@ def _collapse(names: List[str]) -> List[str]:
 
 
 def cmd_report(args) -> int:
-    from .report import make_report
+    from orchestrator.analysis.report import make_report
 
     for path in make_report(Path(args.run_dir), Path(args.output) if args.output else None, args.at):
         print(f"wrote {path}")
@@ -124,7 +125,7 @@ def cmd_report(args) -> int:
 
 
 def cmd_inspect(args) -> int:
-    from .fmu import read_interface
+    from orchestrator.fmu import read_interface
 
     path = Path(args.target)
     if path.suffix == ".fmu":
@@ -138,8 +139,8 @@ def cmd_inspect(args) -> int:
             var = by_base[label.partition("[")[0]][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
-    from .graph import TICKS_PER_SECOND, build_graph
-    from .ssp import open_system
+    from orchestrator.graph import TICKS_PER_SECOND, build_graph
+    from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
@@ -165,7 +166,7 @@ def cmd_validate(args) -> int:
     path = Path(args.target)
     if path.suffix == ".fmu":
         from fmpy.validation import validate_fmu
-        from .fmu import read_interface
+        from orchestrator.fmu import read_interface
 
         read_interface(path)
         problems = validate_fmu(str(path))
@@ -173,8 +174,8 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
-    from .graph import build_graph
-    from .ssp import open_system
+    from orchestrator.graph import build_graph
+    from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
@@ -186,7 +187,7 @@ def cmd_validate(args) -> int:
 
 
 def cmd_fmu_env(args) -> int:
-    from .hostenv import host_environment
+    from orchestrator.hostenv import host_environment
 
     for key, value in host_environment().items():
         print(f'export {key}="{value}"')

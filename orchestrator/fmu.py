@@ -18,8 +18,8 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .errors import SimulationError, UserError
-from .ssp import UnitDef, safe_extract
+from orchestrator.errors import SimulationError, UserError
+from orchestrator.ssp import UnitDef, safe_extract
 
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
 _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}

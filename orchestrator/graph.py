@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 from functools import reduce
 from typing import Dict, List, Tuple
 
-from .errors import UserError
-from .fmu import Interface, Variable, read_interface
-from .ssp import Connection, SystemDescription, convert_unit
+from orchestrator.errors import UserError
+from orchestrator.fmu import Interface, Variable, read_interface
+from orchestrator.ssp import Connection, SystemDescription, convert_unit
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
 

@@ -19,7 +19,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 
 ALGORITHMS = ("gauss-seidel", "jacobi")
 

@@ -19,8 +19,8 @@ from typing import List, Sequence, Tuple
 
 import numpy as np
 
-from .errors import UserError
-from .graph import TICKS_PER_SECOND
+from orchestrator.errors import UserError
+from orchestrator.graph import TICKS_PER_SECOND
 
 _ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
 

@@ -10,18 +10,17 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
 from threadpoolctl import threadpool_limits
 
-from .errors import UserError
-from .fmu import make_slave, new_workdir, remove_workdir
-from .graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from .master import ALGORITHMS, Master
-from .observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
-from .scenario import ScenarioManipulator, load_scenario
-from .ssp import load_parameter_set, open_system
-from .verdict import ReceiverVerdict, TrainVerdict
+from orchestrator.errors import UserError
+from orchestrator.fmu import make_slave, new_workdir, remove_workdir
+from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
+from orchestrator.master import ALGORITHMS, Master
+from orchestrator.observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
+from orchestrator.scenario import ScenarioManipulator, load_scenario
+from orchestrator.ssp import load_parameter_set, open_system
 
 
 DEFAULT_OUTPUT_INTERVAL_S = 0.1
@@ -45,6 +44,9 @@ class RunOptions:
     manipulators: Sequence[object] = ()
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
+    #: observers that judge the run and contribute sections to summary.json, made from the
+    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts)
+    summaries: Optional[Callable[[SystemGraph], Sequence[object]]] = None
 
 
 @dataclass
@@ -116,8 +118,8 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             extra_outputs.setdefault(comp, []).append(var)
         for request, elements in captures:
             extra_outputs.setdefault(request.component, []).extend(elements)
-        verdict, receivers = TrainVerdict(graph), ReceiverVerdict(graph)
-        for judge in (verdict, receivers):
+        judges = list(options.summaries(graph)) if options.summaries is not None else []
+        for judge in judges:
             observers.append(judge)
             for name, variables in judge.outputs_needed().items():
                 extra_outputs.setdefault(name, []).extend(variables)
@@ -141,8 +143,8 @@ def run_system(system_path, options: RunOptions) -> RunResult:
             problems = master.shutdown()
         sim_time = master.time_s - system.start_time
         summary = _summary(graph, sim_time, wall, failure)
-        summary["trains"] = verdict.summary()
-        summary["receivers"] = receivers.summary()
+        for judge in judges:
+            summary.update(judge.summary_section())
         if scenario is not None:
             summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
                                    "events_applied": scenario.applied}
@@ -194,8 +196,6 @@ def _summary(graph: SystemGraph, sim_time: float, wall: float, failure) -> dict:
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else None,
         "completed": failure is None,
-        "trains": [],
-        "receivers": [],
     }
     if failure is not None:
         summary["error"] = str(failure) or type(failure).__name__

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
-from .errors import UserError
-from .graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.errors import UserError
+from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 
 ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
 

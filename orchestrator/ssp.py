@@ -21,7 +21,7 @@ from typing import Dict, List, Optional, Tuple
 
 from lxml import etree
 
-from .errors import UserError, where
+from orchestrator.errors import UserError, where
 
 NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",

@@ -12,7 +12,7 @@ from typing import Dict, List, Optional, Sequence
 
 from lxml import etree
 
-from .ssp import NS, OSP_ANNOTATION, OSP_NS, RCS_ANNOTATION, RCS_NS
+from orchestrator.ssp import NS, OSP_ANNOTATION, OSP_NS, RCS_ANNOTATION, RCS_NS
 
 SSD = "{%s}" % NS["ssd"]
 SSC = "{%s}" % NS["ssc"]

@@ -6,9 +6,9 @@ import itertools
 import numpy as np
 import pytest
 
-from fmus.common import als_en, bauer_code, dqpsk
-from fmus.common import signalling as sig
-from fmus.common.digital import Acceptor, Message
+from fmus.signalling import als_en, bauer_code, dqpsk
+from fmus.signalling import aspects as sig
+from fmus.signalling.digital import Acceptor, Message
 
 FS = 4000.0
 BAUD = als_en.SYSTEM.baud(als_en.CARRIER_HZ)

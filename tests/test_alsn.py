@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from fmus.common import alsn
-from fmus.common import signalling as sig
-from fmus.common.data import DATA, load_line
-from fmus.common.slave import FmuInputError
-from fmus.loco_receiver.channel import CodeChannel, white_noise_and_hum
+from fmus.signalling import alsn
+from fmus.signalling import aspects as sig
+from fmus.data.loader import DATA, load_line
+from fmus.errors import FmuInputError
+from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.wayside_coder.core import (SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, STATUS_FAILED,
                                      STATUS_PARTIAL, CoderSettings, WaysideCoderCore)
@@ -221,7 +221,7 @@ def test_track_circuits_without_signals_are_coded_as_one_block():
     """A station throat: sections 4-6 of the joints_at_speed line form one block (signals only
     at its ends). Occupancy anywhere in it closes the signal before it; its track circuits carry
     the code of the block's exit signal and show no signal of their own."""
-    from orchestrator.systems import SSP_ROOT
+    from orchestrator.analysis.systems import SSP_ROOT
 
     line = load_line(SSP_ROOT / "joints_at_speed" / "resources" / "throat_line.json")
     assert line.block_of_section == [0, 1, 2, 3, 3, 3, 4, 5]

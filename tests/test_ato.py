@@ -1,6 +1,6 @@
 """ATP + ATO controller: planner, ATP supervision, driving to the timetable, the FMU.
 
-Most checks run the ATO and traction cores in one closed loop (fmus/ato_controller/loop.py);
+Most checks run the ATO and traction cores in one closed loop (benchmarks/harness/closed_loop.py);
 the FMU checks run the shipped system through the orchestrator.
 """
 import copy
@@ -12,12 +12,12 @@ import pytest
 
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from fmus.ato_controller.loop import red_signal_ahead, run_closed_loop
+from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
-from fmus.common import signalling as sig
-from fmus.common.data import load_line, load_rolling_stock, load_timetable
-from fmus.common.slave import FmuInputError
+from fmus.signalling import aspects as sig
+from fmus.data.loader import load_line, load_rolling_stock, load_timetable
+from fmus.errors import FmuInputError
 from helpers import railcosim, read_csv
 
 KMH = 1 / 3.6
@@ -275,7 +275,7 @@ def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_toler
     """ВЛ80 + 62 wagons (5152 t), pneumatic brake with 8 s delay and 25 s build-up: the brake is
     released ahead of departure, the train is held back when running away downhill, and the stop
     meets the book's ±10 m for loco-hauled trains (seed 003 §S.5.4)."""
-    from fmus.common.data import DATA
+    from fmus.data.loader import DATA
 
     timetable = tmp_path / "freight.json"
     timetable.write_text(json.dumps({"train": "freight", "stops": [
@@ -302,7 +302,7 @@ def test_the_atos_predicted_stopping_point_is_where_the_train_stops(stock_file, 
     sent earlier is still on its way to the pneumatic brake: to 0.3 m over up to 890 m of
     braking, with the ATO's own prediction step for each brake (0.375–1 s)."""
     from fmus.ato_controller.stopping import BrakePipeline, StopApproach
-    from fmus.common.data import DATA
+    from fmus.data.loader import DATA
     from fmus.traction.core import TractionCore
 
     line, stock = load_line(DATA / line_file), load_rolling_stock(DATA / stock_file)

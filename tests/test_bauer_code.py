@@ -3,7 +3,7 @@ import itertools
 
 import numpy as np
 
-from fmus.common import bauer_code as bc
+from fmus.signalling import bauer_code as bc
 
 
 def test_sixteen_words_with_minimum_distance_four():

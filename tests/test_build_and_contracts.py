@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from conftest import FIXTURE_PACKAGE, TEST_UNITS
-from fmus.common.build import UnitSpec, build_unit, discover_units, validate_built
-from fmus.common.contract import diff, manifest_of, read_manifest
-from fmus.common.slave import BuildConfig
+from orchestrator.build.builder import UnitSpec, build_unit, discover_units, validate_built
+from orchestrator.build.contract import diff, manifest_of, read_manifest
+from fmus.sizes import BuildConfig
 
 REPO = Path(__file__).resolve().parent.parent
 CONTRACTS = Path(__file__).resolve().parent / "fixture_fmus" / "contracts"

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fmus.common import cab_systems, signalling as sig
-from fmus.common.data import DEFAULT_LINE, load_line
-from fmus.common.digital import Acceptor, Message, stated_latency_s
-from fmus.common.slave import FmuInputError
+from fmus.signalling import cab_systems, aspects as sig
+from fmus.data.loader import DEFAULT_LINE, load_line
+from fmus.signalling.digital import Acceptor, Message, stated_latency_s
+from fmus.errors import FmuInputError
 from fmus.loco_receiver import digital as rxd
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings

@@ -3,7 +3,7 @@ white noise against differential-detection theory (issue 7 groundwork)."""
 import numpy as np
 import pytest
 
-from fmus.common import dqpsk
+from fmus.signalling import dqpsk
 
 FS, FC, BAUD = 4000.0, 175.0, 15.0
 

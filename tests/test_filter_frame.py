@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from fmus.common.filter_design import chebyshev_band_pass, filter_frame
+from fmus.dsp.filter_design import chebyshev_band_pass, filter_frame
 from fmus.loco_receiver import filters
 
 

@@ -4,7 +4,7 @@ import itertools
 import numpy as np
 import pytest
 
-from fmus.common import fire_code as fc
+from fmus.signalling import fire_code as fc
 
 
 def _weight(word: int) -> int:

@@ -4,9 +4,9 @@ yield another command, a steady tone never yields one, noise never yields a wron
 import numpy as np
 import pytest
 
-from fmus.common import dqpsk
-from fmus.common import fire_dqpsk as fd
-from fmus.common.digital import Acceptor
+from fmus.signalling import dqpsk
+from fmus.signalling import fire_dqpsk as fd
+from fmus.signalling.digital import Acceptor
 
 FS = 4000.0
 FRAME_S = fd.FRAME_SYMBOLS / fd.BAUD
@@ -61,7 +61,7 @@ def test_a_slip_of_whole_symbols_never_yields_another_command(command, slip_symb
 
 def test_without_the_sync_a_one_symbol_slip_reads_a_rotated_valid_word():
     """The reason for the sync symbol: framing by code validity alone decodes another command."""
-    from fmus.common import fire_code
+    from fmus.signalling import fire_code
 
     word = fire_code.encode(11)
     rotated = ((word << 2) | (word >> 10)) & 0xFFF

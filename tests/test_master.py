@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from helpers import ComponentSpec, ConnectionSpec, frame_connections, read_csv, write_ssd
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
@@ -12,7 +13,7 @@ def test_multirate_exactness_over_one_hour(tmp_path, test_fmus):
         ComponentSpec("fast", str(test_fmus / "TestCounter.fmu"), 0.01),
         ComponentSpec("slow", str(test_fmus / "TestCounter.fmu"), 1.0),
     ], [ConnectionSpec("slow.t_end", "fast.u")], stop_time=3600.0)
-    result = run_system(system, RunOptions(output_dir=tmp_path / "out", output_interval=60.0))
+    result = run_system(system, RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out", output_interval=60.0))
     assert result.steps_taken == {"fast": 360_000, "slow": 3_600}
     assert result.end_time_s == 3600.0
     header, data = read_csv(tmp_path / "out" / "results.csv")
@@ -38,7 +39,7 @@ def _chain(tmp_path, fmus, frame, alpha=0.0, name="chain"):
 
 def _capture(tmp_path, system, algorithm, tag):
     out = tmp_path / tag
-    run_system(system, RunOptions(output_dir=out, algorithm=algorithm, record=[],
+    run_system(system, RunOptions(summaries=railway_verdicts, output_dir=out, algorithm=algorithm, record=[],
                                   captures=["source.y@0:0.1", "stage2.y@0:0.1"]))
     _, source = read_csv(out / "capture_source_y.csv")
     _, final = read_csv(out / "capture_stage2_y.csv")
@@ -73,7 +74,7 @@ def test_frame_size_invariance(tmp_path, test_fmus_by_frame):
 def test_in_process_reference_gives_the_same_results(tmp_path, test_fmus, in_process):
     system = _chain(tmp_path, test_fmus, 4, alpha=0.5)
     out = tmp_path / f"ip{in_process}"
-    run_system(system, RunOptions(output_dir=out, in_process=in_process, record=[],
+    run_system(system, RunOptions(summaries=railway_verdicts, output_dir=out, in_process=in_process, record=[],
                                   captures=["stage2.y@0:0.1"]))
     _, final = read_csv(out / "capture_stage2_y.csv")
     expected = np.arange(400, dtype=float)

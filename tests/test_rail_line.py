@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.signal import hilbert
 
-from fmus.common.data import load_line
-from fmus.common.slave import FmuInputError
+from fmus.data.loader import load_line
+from fmus.errors import FmuInputError
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit, two_port
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
@@ -255,7 +255,7 @@ def test_faults_injected_as_inputs_drop_the_relay_and_the_code():
 
 def test_ac_traction_adds_50_hz_and_odd_harmonics_at_the_coil():
     import json
-    from fmus.common.data import DATA
+    from fmus.data.loader import DATA
 
     line = load_line(DATA / "default_line_ac.json")
     core = RailLineCore(line, 8, 2, N, RailSettings())

@@ -1,8 +1,8 @@
 """2-out-of-2 wayside comparison and 2-out-of-3 receiver voting (issue 7 groundwork)."""
 import pytest
 
-from fmus.common.fire_dqpsk import COMMANDS
-from fmus.common.redundancy import STATUS_FAILED, STATUS_OK, STATUS_PARTIAL, vote_2oo3, wayside_2oo2
+from fmus.signalling.fire_dqpsk import COMMANDS
+from fmus.signalling.redundancy import STATUS_FAILED, STATUS_OK, STATUS_PARTIAL, vote_2oo3, wayside_2oo2
 
 
 def rank(command):

@@ -5,6 +5,7 @@ import json
 import pytest
 
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
@@ -25,7 +26,7 @@ def _scenario(tmp_path, events, **extra):
 
 def _run(tmp_path, fmus, events, **extra):
     out = tmp_path / "out"
-    result = run_system(_system(tmp_path, fmus), RunOptions(output_dir=out, output_interval=0.1,
+    result = run_system(_system(tmp_path, fmus), RunOptions(summaries=railway_verdicts, output_dir=out, output_interval=0.1,
                                                             scenario=_scenario(tmp_path, events, **extra)))
     header, data = read_csv(out / "results.csv")
     rows = {round(row[0], 3): dict(zip(header, row)) for row in data}
@@ -57,7 +58,7 @@ def test_an_input_set_back_to_an_earlier_value_reaches_the_fmu(tmp_path, test_fm
               {"time": 1.5, "model": "a", "variable": "u", "action": "reset"},
               {"time": 2.0, "model": "a", "variable": "u", "action": "set", "value": 7.0}]
     out = tmp_path / "out"
-    run_system(_system(tmp_path, test_fmus), RunOptions(output_dir=out, output_interval=0.1, in_process=in_process,
+    run_system(_system(tmp_path, test_fmus), RunOptions(summaries=railway_verdicts, output_dir=out, output_interval=0.1, in_process=in_process,
                                                         scenario=_scenario(tmp_path, events)))
     header, data = read_csv(out / "results.csv")
     seen = {round(row[0], 3): dict(zip(header, row))["a.u_seen"] for row in data}

@@ -3,6 +3,7 @@ connector units, named parameter sets and command-line overrides — values chec
 from lxml import etree
 
 from helpers import ComponentSpec, ConnectionSpec, read_csv, write_ssd
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 from orchestrator.sspgen import write_ssv
 
@@ -47,7 +48,7 @@ def test_bindings_mapping_and_linear_transformation(tmp_path, test_fmus):
                                   "parameters": {"bias": 0.5}},
             connection_factor=3.0, connection_offset=1.0)
     out = tmp_path / "out"
-    result = run_system(folder, RunOptions(output_dir=out, output_interval=0.5))
+    result = run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=out, output_interval=0.5))
     params = result.graph.nodes["gain"].parameters
     assert params["k"] == 2.5 and params["mode"] == 7 and params["bias"] == 0.5
     assert params["label"] == "external" and params["enabled"] is True
@@ -73,7 +74,7 @@ def test_connector_units_are_converted(tmp_path, test_fmus):
     tree.write(str(ssd))
     write_ssv(folder / "speeds.ssv", "speeds", {"gain.bias": 36.0}, units={"gain.bias": "km/h"})
     out = tmp_path / "out"
-    result = run_system(folder, RunOptions(output_dir=out, param_sets=["speeds"],
+    result = run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=out, param_sets=["speeds"],
                                            overrides={"gain.k": "0"}, output_interval=0.5))
     # 36 km/h → 10 m/s
     assert abs(result.graph.nodes["gain"].parameters["bias"] - 10.0) < 1e-12

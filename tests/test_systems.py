@@ -8,16 +8,17 @@ import json
 import numpy as np
 import pytest
 
-from fmus.common import signalling as sig
-from fmus.common.alsn import STATED_LATENCY_S
+from fmus.signalling import aspects as sig
+from fmus.signalling.alsn import STATED_LATENCY_S
 from helpers import read_csv
 from orchestrator.cli import SSP_ROOT
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 
 def _run(tmp_path, product_fmus, system, stop_time, record=None):
     out = tmp_path / system
-    result = run_system(SSP_ROOT / system, RunOptions(stop_time=stop_time, output_dir=out, in_process=True,
+    result = run_system(SSP_ROOT / system, RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=out, in_process=True,
                                                       fmu_dirs=[product_fmus], record=record))
     header, data = read_csv(out / "results.csv")
     return result.summary, {name: data[:, i] for i, name in enumerate(header)}
@@ -132,7 +133,7 @@ def test_freight_ac_reaches_b_on_time(tmp_path, product_fmus):
 def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
     import zipfile
 
-    from orchestrator.packing import pack_systems
+    from orchestrator.build.packing import pack_systems
 
     names = {p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()}
     assert {"free_run", "ato_only", "following", "faults", "joints_at_speed", "freight_ac", "als_en", "fire_dqpsk",

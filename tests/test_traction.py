@@ -6,8 +6,8 @@ import json
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmus.common.data import DATA, DEFAULT_LINE, load_line, load_rolling_stock, load_timetable
-from fmus.common.slave import FmuInputError
+from fmus.data.loader import DATA, DEFAULT_LINE, load_line, load_rolling_stock, load_timetable
+from fmus.errors import FmuInputError
 from fmus.traction.core import TractionCore
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
 
@@ -211,12 +211,13 @@ def _traction_system(tmp_path, product_fmus, test_fmus, step, params=None, name=
 
 
 def test_step_size_robustness_through_the_orchestrator(tmp_path, product_fmus, test_fmus):
+    from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     finals = {}
     for step in (0.1, 1.0):
         out = tmp_path / f"out{step}"
         run_system(_traction_system(tmp_path, product_fmus, test_fmus, step),
-                   RunOptions(output_dir=out, output_interval=1.0, record=["train.x", "train.stop_time", "train.v", "train.energy"]))
+                   RunOptions(summaries=railway_verdicts, output_dir=out, output_interval=1.0, record=["train.x", "train.stop_time", "train.v", "train.energy"]))
         header, data = read_csv(out / "results.csv")
         finals[step] = dict(zip(header, data[-1]))
     summary = json.loads((tmp_path / "out1.0" / "summary.json").read_text())
@@ -240,21 +241,23 @@ def test_a_rejected_data_file_still_releases_the_fmu_library(tmp_path, product_f
     in CI; valgrind shows the read of freed memory in the library's destructor)."""
     from orchestrator import fmu
     from orchestrator.errors import UserError
+    from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     monkeypatch.setattr(fmu, "_LIVE_LIBRARIES", {})
     bad = _write(tmp_path, "bad_stock.json", {"name": "x"})
     folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"rolling_stock_file": str(bad)})
     with pytest.raises(UserError):
-        run_system(folder, RunOptions(output_dir=tmp_path / "o", output_interval=1.0))
+        run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "o", output_interval=1.0))
     assert len(fmu._LIVE_LIBRARIES) == 2 and set(fmu._LIVE_LIBRARIES.values()) == {0}
 
 
 def test_relative_data_file_resolves_against_the_system_folder(tmp_path, product_fmus, test_fmus):
+    from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"rolling_stock_file": "resources/emu.json"})
     (folder / "resources").mkdir()
     (folder / "resources" / "emu.json").write_text((DATA / "emu_er2.json").read_text())
-    result = run_system(folder, RunOptions(output_dir=tmp_path / "o", output_interval=1.0, stop_time=30.0))
+    result = run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "o", output_interval=1.0, stop_time=30.0))
     resolved = result.graph.nodes["train"].parameters["rolling_stock_file"]
     assert resolved == str((folder / "resources" / "emu.json").resolve())
     header, data = read_csv(tmp_path / "o" / "results.csv")

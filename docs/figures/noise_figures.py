@@ -18,8 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
-from fmus.common import cab_systems, dqpsk  # noqa: E402
-from fmus.common.data import load_line  # noqa: E402
+from fmus.signalling import cab_systems, dqpsk  # noqa: E402
+from fmus.data.loader import load_line  # noqa: E402
 from fmus.wayside_coder.core import CoderSettings  # noqa: E402
 from fmus.wayside_coder.digital import DigitalCoderCore  # noqa: E402
 

@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 from test_rail_line import _analytic_shunt_current, _run  # noqa: E402
 
-from fmus.common.data import load_line  # noqa: E402
+from fmus.data.loader import load_line  # noqa: E402
 from fmus.rail_line.core import RailLineCore, RailSettings  # noqa: E402
 from fmus.rail_line.track_circuit import CircuitParameters  # noqa: E402
 

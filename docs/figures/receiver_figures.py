@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.signal import lfilter  # noqa: E402
 
-from fmus.common.data import load_line  # noqa: E402
+from fmus.data.loader import load_line  # noqa: E402
 from fmus.loco_receiver import filters  # noqa: E402
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings  # noqa: E402
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore  # noqa: E402

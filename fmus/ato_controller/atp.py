@@ -5,11 +5,11 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
 * the line's static limit for the train category, held until the tail clears a lower limit,
   and each lower limit ahead as a target;
 * the cab signal. ``cab_signal="ALSN"``: the aspect, through the table in
-  fmus/common/signalling.py (ceiling, and the speed to reach at the exit signal of the
+  fmus/signalling/aspects.py (ceiling, and the speed to reach at the exit signal of the
   current block section: 60 km/h on yellow, a stop on red-yellow). ``"digital"``:
   ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
   and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
-  (the section after the free ones is occupied; fmus/common/digital.py).
+  (the section after the free ones is occupied; fmus/signalling/digital.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -34,10 +34,10 @@ import math
 from dataclasses import dataclass, field
 from typing import List, Optional
 
-from ..common import signalling as sig
-from ..common.data import Line
-from ..common.digital import FREE_BLOCKS_OPEN
-from ..common.slave import FmuInputError
+from fmus.signalling import aspects as sig
+from fmus.data.loader import Line
+from fmus.signalling.digital import FREE_BLOCKS_OPEN
+from fmus.errors import FmuInputError
 
 KMH = 1.0 / 3.6
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")

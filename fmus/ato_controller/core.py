@@ -16,15 +16,15 @@ from typing import List
 
 import numpy as np
 
-from ..common import alsn
-from ..common import signalling as sig
-from ..common.data import Line, RollingStock, TimetableStop
-from ..common.slave import FmuInputError
-from .atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
-from .driving import STRATEGIES, Controllers, make_strategy
-from .planner import InfeasibleStage, StagePlanner
-from .stopping import StopApproach, brake_lead_s
-from .train_model import NominalTrain
+from fmus.signalling import alsn
+from fmus.signalling import aspects as sig
+from fmus.data.loader import Line, RollingStock, TimetableStop
+from fmus.errors import FmuInputError
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
+from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
+from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
+from fmus.ato_controller.stopping import StopApproach, brake_lead_s
+from fmus.ato_controller.train_model import NominalTrain
 
 KMH = 1.0 / 3.6
 _INF = math.inf

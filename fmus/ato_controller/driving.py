@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .planner import REGIME_TRACTION, StagePlan
-from .train_model import NominalTrain
+from fmus.ato_controller.planner import REGIME_TRACTION, StagePlan
+from fmus.ato_controller.train_model import NominalTrain
 
 STRATEGIES = ("programme", "predictive", "flat_out")
 _INF = math.inf

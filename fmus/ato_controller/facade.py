@@ -1,11 +1,10 @@
 """AtoController FMU facade: ports ↔ AtoCore. No logic here (see core.py, atp.py, driving.py)."""
 from pythonfmu.default_experiment import DefaultExperiment
 
-from ..common.data import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
-                           load_rolling_stock, load_timetable)
-from ..common import alsn
-from ..common.slave import FrameSlave, Port
-from .core import AtoCore, AtoSettings
+from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.signalling import alsn
+from fmus.fmi.slave import FrameSlave, Port
+from fmus.ato_controller.core import AtoCore, AtoSettings
 
 
 class AtoController(FrameSlave):

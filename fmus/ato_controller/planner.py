@@ -30,8 +30,8 @@ from typing import Optional
 
 import numpy as np
 
-from ..common.data import Line
-from .train_model import NominalTrain
+from fmus.data.loader import Line
+from fmus.ato_controller.train_model import NominalTrain
 
 PLAN_STEP_M = 10.0            # distance grid of the programmes
 REGIME_TRACTION, REGIME_COAST, REGIME_BRAKE = 1, 0, -1

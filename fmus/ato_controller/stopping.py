@@ -21,7 +21,7 @@ from collections import deque
 
 import numpy as np
 
-from .train_model import NominalTrain
+from fmus.ato_controller.train_model import NominalTrain
 
 CANDIDATES = 21           # brake shares tried at once, MIN_SHARE … 1 (interpolated between)
 HORIZON_S = 180.0         # longer than any stop from the final approach

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..common.data import Line, RollingStock
-from ..traction.core import TractionCore
+from fmus.data.loader import Line, RollingStock
+from fmus.traction.core import TractionCore
 
 SPEED_STEP_MPS = 0.05
 

@@ -44,12 +44,12 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from ..common.filter_design import filter_frame
+from fmus.dsp.filter_design import filter_frame
 
-from ..common import alsn
-from ..common import signalling as sig
-from ..common.slave import FmuInputError
-from . import filters
+from fmus.signalling import alsn
+from fmus.signalling import aspects as sig
+from fmus.errors import FmuInputError
+from fmus.loco_receiver import filters
 
 LEVEL_RELEASE_S = 1.0
 # longer than any short interval (0.12 s + 5 % drift + filter smearing), shorter than any long one

@@ -44,13 +44,13 @@ import math
 
 import numpy as np
 
-from ..common import redundancy
-from ..common import signalling as sig
-from ..common.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
-from ..common.filter_design import chebyshev_low_pass, filter_frame
-from ..common.slave import FmuInputError
-from . import filters
-from .core import ReceiverOutputs
+from fmus.signalling import redundancy
+from fmus.signalling import aspects as sig
+from fmus.signalling.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
+from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
+from fmus.errors import FmuInputError
+from fmus.loco_receiver import filters
+from fmus.loco_receiver.core import ReceiverOutputs
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
 TIMING_CANDIDATES = 8

@@ -1,9 +1,9 @@
 """LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
 FIRE_DQPSK). No logic here (see core.py, digital.py)."""
-from ..common import cab_systems
-from ..common.slave import FrameSlave, Port
-from .core import LocoReceiverCore, ReceiverSettings
-from .digital import CHANNELS, DigitalReceiverCore, DigitalReceiverSettings
+from fmus.signalling import cab_systems
+from fmus.fmi.slave import FrameSlave, Port
+from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
+from fmus.loco_receiver.digital import CHANNELS, DigitalReceiverCore, DigitalReceiverSettings
 
 ALSN_DEFAULT_CARRIER_HZ = 50.0
 

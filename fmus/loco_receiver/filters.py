@@ -17,7 +17,7 @@ import control
 import numpy as np
 from scipy import signal
 
-from ..common.filter_design import DiscreteFilter, discretise
+from fmus.dsp.filter_design import DiscreteFilter, discretise
 
 
 def band_pass(carrier_hz: float, bandwidth_hz: float, order: int, fs_hz: float) -> DiscreteFilter:

@@ -42,11 +42,11 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from ..common.data import Line
-from ..common.slave import FmuInputError
-from ..common.periodic import period_samples
-from .network import ShuntFamily, discretise
-from .track_circuit import CircuitParameters, Faults, TrackCircuit
+from fmus.data.loader import Line
+from fmus.errors import FmuInputError
+from fmus.dsp.periodic import period_samples
+from fmus.rail_line.network import ShuntFamily, discretise
+from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit
 
 CONFIG_TICK_S = 0.01
 _COIL_POINTS = 5

@@ -1,8 +1,8 @@
 """RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
-from ..common.data import DEFAULT_LINE, load_line
-from ..common.slave import FrameSlave, Port
-from .core import RailLineCore, RailSettings
-from .track_circuit import CircuitParameters
+from fmus.data.loader import DEFAULT_LINE, load_line
+from fmus.fmi.slave import FrameSlave, Port
+from fmus.rail_line.core import RailLineCore, RailSettings
+from fmus.rail_line.track_circuit import CircuitParameters
 
 DEFAULT_FS_HZ = 4000.0
 OFF_LINE_M = -1000.0

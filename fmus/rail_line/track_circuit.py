@@ -28,7 +28,7 @@ from typing import Optional
 
 import numpy as np
 
-from .network import Conductance, Network, NortonSource, RLBranch
+from fmus.rail_line.network import Conductance, Network, NortonSource, RLBranch
 
 OPEN_OHM = 1e9
 

@@ -28,8 +28,8 @@ import math
 from dataclasses import dataclass
 from typing import List, Tuple
 
-from ..common.data import G, Line, RollingStock
-from ..common.slave import FmuInputError
+from fmus.data.loader import G, Line, RollingStock
+from fmus.errors import FmuInputError
 
 KMH = 3.6
 

@@ -1,9 +1,9 @@
 """Traction FMU facade: ports ↔ TractionCore. No physics here (see core.py)."""
 from pythonfmu.default_experiment import DefaultExperiment
 
-from ..common.data import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
-from ..common.slave import FrameSlave, Port
-from .core import TractionCore
+from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
+from fmus.fmi.slave import FrameSlave, Port
+from fmus.traction.core import TractionCore
 
 
 class Traction(FrameSlave):

@@ -31,11 +31,11 @@ from typing import Optional
 import numpy as np
 from scipy.signal import lfilter
 
-from ..common import alsn
-from ..common import signalling as sig
-from ..common.data import Line
-from ..common.periodic import period_samples
-from ..common.slave import FmuInputError
+from fmus.signalling import alsn
+from fmus.signalling import aspects as sig
+from fmus.data.loader import Line
+from fmus.dsp.periodic import period_samples
+from fmus.errors import FmuInputError
 
 SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
 STATUS_OK, STATUS_PARTIAL, STATUS_FAILED = 0, 1, 2

@@ -27,15 +27,14 @@ from __future__ import annotations
 from typing import List, Optional, Tuple
 
 import numpy as np
-from ..common.filter_design import filter_frame
+from fmus.dsp.filter_design import filter_frame
 
-from ..common import redundancy
-from ..common.data import Line
-from ..common.digital import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
-from ..common.filter_design import chebyshev_band_pass
-from ..common.slave import FmuInputError
-from .core import (SIGNAL_DARK, CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings,
-                   sections_to_occupied)
+from fmus.signalling import redundancy
+from fmus.data.loader import Line
+from fmus.signalling.digital import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
+from fmus.dsp.filter_design import chebyshev_band_pass
+from fmus.errors import FmuInputError
+from fmus.wayside_coder.core import SIGNAL_DARK, CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings, sections_to_occupied
 
 GENERATOR_PROTOTYPE_ORDER = 2      # 4th-order band-pass (seed 000 §9.3: two biquads)
 SQUARE_FUNDAMENTAL = 4.0 / np.pi   # amplitude of a ±1 square wave's fundamental

@@ -1,10 +1,10 @@
 """WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN) or DigitalCoderCore (ALS-EN,
 FIRE_DQPSK). No logic here (see core.py, digital.py)."""
-from ..common import alsn, cab_systems
-from ..common.data import DEFAULT_LINE, load_line
-from ..common.slave import FrameSlave, Port
-from .core import CoderSettings, WaysideCoderCore
-from .digital import DigitalCoderCore
+from fmus.signalling import alsn, cab_systems
+from fmus.data.loader import DEFAULT_LINE, load_line
+from fmus.fmi.slave import FrameSlave, Port
+from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
+from fmus.wayside_coder.digital import DigitalCoderCore
 
 DEFAULT_FS_HZ = 4000.0
 

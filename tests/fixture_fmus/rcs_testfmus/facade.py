@@ -8,7 +8,7 @@ from scipy.signal import lfilter
 
 from pythonfmu.default_experiment import DefaultExperiment
 
-from fmus.common.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port
 
 
 class TestCounter(FrameSlave):

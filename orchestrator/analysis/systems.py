@@ -22,7 +22,7 @@ import json
 from pathlib import Path
 from typing import Dict, List, Sequence, Tuple
 
-from .sspgen import ComponentSpec, ConnectionSpec, write_ssd
+from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
 
 SSP_ROOT = Path(__file__).resolve().parent.parent / "ssp"
 TRAIN_STEP_S = 0.5
@@ -80,7 +80,7 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
     if system == "ALSN":
         return {}, {}, {}, {"cab_signal": "ALSN"}
-    from fmus.common import cab_systems, digital
+    from fmus.signalling import cab_systems, digital
 
     digital_system = cab_systems.digital_system(system)
     carrier = digital_system.carrier_hz
@@ -217,7 +217,7 @@ FREIGHT_LENGTH_M = 1000.0
 
 
 def write_freight_ac(root: Path = SSP_ROOT) -> Path:
-    from fmus.common.data import DATA
+    from fmus.data.loader import DATA
 
     folder = root / "freight_ac"
     files = {"line_file": "default_line_ac.json"}

@@ -24,8 +24,8 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from . import signalling as sig
-from .slave import FmuInputError
+from fmus.signalling import aspects as sig
+from fmus.errors import FmuInputError
 
 FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
 CATEGORIES = ("passenger", "freight", "high_speed")

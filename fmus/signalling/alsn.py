@@ -1,4 +1,4 @@
-"""ALSN numeric codes: the KPT-5/KPT-7 timing tables (fmus/common/data/alsn_codes.json) and the
+"""ALSN numeric codes: the KPT-5/KPT-7 timing tables (fmus/signalling/alsn_codes.json) and the
 decoder's classification windows, shared by the wayside coder and the locomotive receiver.
 
 Codes are named by the aspect they give on the locomotive and carry its enumeration (DESIGN §4):
@@ -15,10 +15,10 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from . import signalling as sig
-from .slave import FmuInputError
+from fmus.signalling import aspects as sig
+from fmus.errors import FmuInputError
 
-CODES_FILE = Path(__file__).resolve().parent / "data" / "alsn_codes.json"
+CODES_FILE = Path(__file__).resolve().parent / "alsn_codes.json"
 CODE_NAMES = {"Z": sig.GREEN, "Zh": sig.YELLOW, "KZh": sig.RED_YELLOW}
 NO_CODE = 0
 SUPPORTED_CARRIERS_HZ = (25.0, 50.0, 75.0)

@@ -10,9 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional
 
-from fmus.common import signalling as sig
+from fmus.signalling import aspects as sig
 
-from .graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 
 TRAIN_MODEL = "Traction"
 ATO_MODEL = "AtoController"
@@ -46,8 +46,8 @@ def trains_of(graph: SystemGraph) -> List[_Train]:
 
 def _timetable(graph: SystemGraph, ato: str) -> list:
     """The ATO's timetable as it will read it (same files, same defaults)."""
-    from fmus.common.data import DEFAULT_LINE, DEFAULT_TIMETABLE, load_line, load_timetable
-    from fmus.common.slave import FmuInputError
+    from fmus.data.loader import DEFAULT_LINE, DEFAULT_TIMETABLE, load_line, load_timetable
+    from fmus.errors import FmuInputError
 
     params = graph.nodes[ato].parameters
     try:
@@ -112,10 +112,13 @@ class TrainVerdict:
         train.stops.append(entry)
 
     def _record_aspect(self, train: _Train, tick: int, aspect: int) -> None:
-        from fmus.common.signalling import ASPECT_NAMES
+        from fmus.signalling.aspects import ASPECT_NAMES
 
         train.aspects.append({"t": tick / TICKS_PER_SECOND, "x": float(self._value(train.name, "x")),
                               "aspect": ASPECT_NAMES.get(aspect, str(aspect))})
+
+    def summary_section(self) -> Dict[str, list]:
+        return {"trains": self.summary()}
 
     def summary(self) -> List[dict]:
         if not hasattr(self, "_slots"):      # the run failed before it started
@@ -161,8 +164,8 @@ class _Receiver:
 
 def receivers_of(graph: SystemGraph) -> List[_Receiver]:
     """Receivers fed by a rail line whose train and coder are known; others are not judged."""
-    from fmus.common import alsn, cab_systems, digital
-    from fmus.common.slave import FmuInputError
+    from fmus.signalling import alsn, cab_systems, digital
+    from fmus.errors import FmuInputError
 
     found = []
     for name in graph.order:
@@ -280,6 +283,9 @@ class ReceiverVerdict:
                 or shown[2] > meant.target_kmh + SPEED_TOLERANCE_KMH
                 or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH)
 
+    def summary_section(self) -> Dict[str, list]:
+        return {"receivers": self.summary()}
+
     def summary(self) -> List[dict]:
         entries = []
         for r in self.receivers:
@@ -297,3 +303,9 @@ def transmitted_indication(system, code: int, category: str):
     """What a coder's raw ``code_tx`` means; None for no code (the system's reading)."""
     command = system.command_of_code(code)
     return None if command is None else system.indication(command, category)
+
+
+def railway_verdicts(graph: SystemGraph) -> list:
+    """The summary observers of a railway run: per train (arrivals, stops, energy, ATP) and
+    per receiver (codes, errors, wrong-side failures). Pass as ``RunOptions.summaries``."""
+    return [TrainVerdict(graph), ReceiverVerdict(graph)]

@@ -10,10 +10,10 @@ from typing import Callable, Optional, Tuple
 
 import numpy as np
 
-from ..common import signalling as sig
-from ..common.data import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
-from ..traction.core import TractionCore
-from .core import AtoCore, AtoSettings
+from fmus.signalling import aspects as sig
+from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.traction.core import TractionCore
+from fmus.ato_controller.core import AtoCore, AtoSettings
 
 CabSignal = Callable[[float, float], Tuple[int, bool]]
 

@@ -7,9 +7,9 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..common.data import Line, load_line
-from ..wayside_coder.core import CoderSettings, WaysideCoderCore
-from .core import LocoReceiverCore, ReceiverSettings
+from fmus.data.loader import Line, load_line
+from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
+from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 
 Disturbance = Callable[[np.ndarray, np.ndarray], np.ndarray]   # (sample times, clean EMF) → EMF
 COLUMNS = ("t_end", "aspect", "code_valid", "code_sent")

@@ -7,7 +7,7 @@ from typing import List
 
 from lxml import etree
 
-from .ssp import NS
+from orchestrator.ssp import NS
 
 
 def pack_system(folder: Path, fmu_dir: Path, dest: Path) -> Path:

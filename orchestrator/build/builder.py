@@ -19,9 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, Iterable, List, Optional
 
-from .slave import BuildConfig
+from fmus.sizes import BuildConfig
 
-FMUS_ROOT = Path(__file__).resolve().parent.parent
+import fmus
+
+FMUS_ROOT = Path(fmus.__file__).resolve().parent
 BUILD_INFO_MEMBER = "resources/railcosim_build.json"
 _BUNDLED_SUFFIXES = {".py", ".json", ".csv"}
 
@@ -46,7 +48,7 @@ def discover_units(root: Path = FMUS_ROOT) -> List[UnitSpec]:
     """Units whose folder holds a facade (a unit without a real model has no folder content)."""
     units = []
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        if folder.name == "common" or not (folder / "facade.py").is_file():
+        if not (folder / "facade.py").is_file():
             continue
         module = importlib.import_module(f"fmus.{folder.name}")
         units.append(UnitSpec(folder.name, f"fmus.{folder.name}.facade", module.MODEL_IDENTIFIER))

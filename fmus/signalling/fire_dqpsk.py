@@ -41,9 +41,9 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from . import dqpsk, fire_code
-from . import signalling as sig
-from .digital import Decoded, DigitalSystem, Framer, Indication, Message
+from fmus.signalling import dqpsk, fire_code
+from fmus.signalling import aspects as sig
+from fmus.signalling.digital import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 175.0
 BAUD = 15.0

@@ -1,5 +1,5 @@
 """Line, rolling-stock and timetable files: JSON validated against the schemas in
-fmus/common/schemas, then checked for what a schema cannot say (order, overlaps, ranges
+fmus/data/schemas, then checked for what a schema cannot say (order, overlaps, ranges
 along the line). Every error is an FmuInputError naming the file and the field.
 
 Everything is converted to SI on loading; the cores never see km/h or kN.
@@ -13,11 +13,11 @@ from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Tuple
 
-from .slave import FmuInputError
+from fmus.errors import FmuInputError
 
 HERE = Path(__file__).resolve().parent
 SCHEMAS = HERE / "schemas"
-DATA = HERE / "data"
+DATA = HERE / "shipped"
 DEFAULT_LINE = DATA / "default_line.json"
 DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
 DEFAULT_TIMETABLE = DATA / "default_timetable.json"

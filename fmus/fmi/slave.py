@@ -29,26 +29,12 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 from pythonfmu.variables import Boolean, Integer, Real, String
 
-from .units import unit_definition
+from fmus.errors import FmuInputError
+from fmus.fmi.units import unit_definition
+from fmus.sizes import BuildConfig
 
 _TYPE_CLASSES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 _NUMPY_DTYPES = {"Real": np.float64, "Integer": np.int64, "Boolean": np.bool_}
-
-
-class FmuInputError(ValueError):
-    """A parameter or data file given to an FMU is invalid; the message names what and where."""
-
-
-@dataclass(frozen=True)
-class BuildConfig:
-    """Sizes fixed when an FMU is built (DESIGN §3, §4)."""
-
-    sections: int = 8   # K block sections
-    trains: int = 2     # M trains
-    frame: int = 40     # N samples per waveform frame
-
-    def as_dict(self) -> Dict[str, int]:
-        return {"sections": self.sections, "trains": self.trains, "frame": self.frame}
 
 
 @dataclass(frozen=True)

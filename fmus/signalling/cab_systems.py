@@ -3,9 +3,9 @@ from __future__ import annotations
 
 from typing import Optional
 
-from . import als_en, fire_dqpsk
-from .digital import DigitalSystem
-from .slave import FmuInputError
+from fmus.signalling import als_en, fire_dqpsk
+from fmus.signalling.digital import DigitalSystem
+from fmus.errors import FmuInputError
 
 ALSN = "ALSN"
 DIGITAL = {als_en.SYSTEM.name: als_en.SYSTEM, fire_dqpsk.SYSTEM.name: fire_dqpsk.SYSTEM}

@@ -24,7 +24,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from .errors import UserError
+from orchestrator.errors import UserError
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
@@ -80,7 +80,7 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
 
 
 def _line_of(components: Dict[str, dict], ato: Optional[str]):
-    from fmus.common.data import DEFAULT_LINE, load_line
+    from fmus.data.loader import DEFAULT_LINE, load_line
 
     params = components.get(ato, {}).get("parameters", {}) if ato else {}
     return load_line(params.get("line_file") or DEFAULT_LINE)
@@ -128,7 +128,7 @@ def _speed_distance(output: Path, results, trains, components) -> Path:
 
 def _time_distance(output: Path, results, trains, components) -> Path:
     import matplotlib.pyplot as plt
-    from fmus.common.data import DEFAULT_TIMETABLE, load_timetable
+    from fmus.data.loader import DEFAULT_TIMETABLE, load_timetable
 
     fig, ax = plt.subplots(figsize=(11, 5))
     t = results["time"]
@@ -219,7 +219,7 @@ def read_results_file(path: Path):
 
 def _receiver_band_pass(params: dict):
     """The band-pass the receiver FMU designs from these parameters (same functions)."""
-    from fmus.common import cab_systems
+    from fmus.signalling import cab_systems
     from fmus.loco_receiver import filters
 
     system = cab_systems.DIGITAL.get(str(params.get("system", "ALSN")))

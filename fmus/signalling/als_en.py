@@ -46,9 +46,9 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from . import bauer_code
-from . import signalling as sig
-from .digital import Decoded, DigitalSystem, Framer, Indication, Message
+from fmus.signalling import bauer_code
+from fmus.signalling import aspects as sig
+from fmus.signalling.digital import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 174.38
 CYCLES_PER_SYMBOL = 16

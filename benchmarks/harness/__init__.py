@@ -1,0 +1,3 @@
+"""Harnesses that couple model cores without FMI, for studies, tests, benchmarks and the
+figures in docs/: the ATO and traction cores in closed loop, a coder section straight
+into a receiver."""

@@ -1,0 +1,127 @@
+"""The package walls of docs/architecture.md, checked on the source: who may import what,
+and that the model cores, the data layer, the signalling library and the railway analysis
+import with pythonfmu unavailable (a core runs in process without any FMI library)."""
+import ast
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+UNITS = ("wayside_coder", "rail_line", "loco_receiver", "traction", "ato_controller")
+FMI_LIBRARIES = ("pythonfmu", "fmpy")
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path):
+    """Every module a file imports (relative imports resolved), with its line."""
+    module = _module_name(path)
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                name = ".".join(base + ([node.module] if node.module else []))
+            else:
+                name = node.module
+            yield name, node.lineno
+            for alias in node.names:          # "from fmus import fmi" imports fmus.fmi
+                yield f"{name}.{alias.name}", node.lineno
+
+
+def _within(name: str, prefixes) -> bool:
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
+
+
+def _forbidden_for(module: str):
+    """What a module may not import, by where it lives (docs/architecture.md, 'Import rules')."""
+    parts = module.split(".")
+    if module in ("fmus.errors", "fmus.sizes", "fmus.units"):
+        return ("fmus", "orchestrator", "benchmarks", "numpy", "scipy", "control", *FMI_LIBRARIES), \
+            {"fmus.errors", "fmus.sizes", "fmus.units"}
+    if parts[0] == "fmus":
+        if len(parts) > 1 and parts[1] == "fmi":
+            return ("orchestrator", "benchmarks", "fmpy", *(f"fmus.{u}" for u in UNITS)), set()
+        if len(parts) > 2 and parts[1] in UNITS and parts[2] == "facade":
+            return ("orchestrator", "benchmarks", "fmpy"), set()
+        if len(parts) > 1 and parts[1] in ("data", "signalling", "dsp"):
+            return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
+                    *(f"fmus.{u}" for u in UNITS)), set()
+        # a unit's core and its parts, the package roots
+        return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
+                *(f"fmus.{u}.facade" for u in UNITS)), set()
+    if parts[0] == "orchestrator":
+        if len(parts) > 1 and parts[1] == "analysis":
+            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.build", "orchestrator.cli"), set()
+        if len(parts) > 1 and parts[1] in ("build", "cli", "__main__"):
+            return ("benchmarks",), set()
+        # the engine: FMU-agnostic, knows no railway
+        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.build",
+                "orchestrator.cli"), set()
+    return (), set()
+
+
+def _product_files():
+    for package in ("fmus", "orchestrator"):
+        yield from sorted((REPO / package).rglob("*.py"))
+
+
+def test_every_product_module_keeps_its_import_rules():
+    broken = []
+    for path in _product_files():
+        module = _module_name(path)
+        forbidden, allowed = _forbidden_for(module)
+        for name, line in _imports(path):
+            if name in allowed or name == module:
+                continue
+            if _within(name, forbidden):
+                broken.append(f"{path.relative_to(REPO)}:{line} imports {name}")
+    assert not broken, "import rules (docs/architecture.md) broken:\n" + "\n".join(broken)
+
+
+def test_the_bundled_package_holds_no_build_tooling_or_harness():
+    names = {p.stem for p in (REPO / "fmus").rglob("*.py")}
+    assert not names & {"build", "builder", "contract", "loop", "closed_loop", "channel"}
+
+
+def test_cores_data_signalling_and_analysis_import_without_any_fmi_library():
+    modules = [f"fmus.{unit}.core" for unit in UNITS]
+    modules += [_module_name(p) for p in _product_files()
+                if _module_name(p).startswith(("fmus.data", "fmus.signalling", "fmus.dsp",
+                                               "orchestrator.analysis"))
+                or (p.parent.name in UNITS and p.name not in ("facade.py",))]
+    script = textwrap.dedent(f"""
+        import importlib, importlib.abc, sys
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split('.')[0] == 'pythonfmu':
+                    raise ImportError('pythonfmu is blocked in this test')
+        sys.meta_path.insert(0, Block())
+        for module in {sorted(set(modules))!r}:
+            importlib.import_module(module)
+        loaded = sorted(m for m in sys.modules if m.split('.')[0] == 'pythonfmu')
+        assert not loaded, loaded
+        print(len({sorted(set(modules))!r}))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert int(done.stdout.strip()) > 20
+
+
+@pytest.mark.parametrize("unit", UNITS)
+def test_a_core_runs_its_unit_without_fmi(unit):
+    # the facade is the only module of a unit that may need pythonfmu
+    facades = [p for p in (REPO / "fmus" / unit).glob("*.py")
+               if any(_within(n, ("pythonfmu", "fmus.fmi")) for n, _ in _imports(p))]
+    assert [p.name for p in facades] == ["facade.py"]
