@@ -38,8 +38,8 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
+from fmus.units import MPS_PER_KMH
 
-KMH = 1.0 / 3.6
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 _INF = math.inf
@@ -49,8 +49,8 @@ def dv_ebi_mps(v_mps: float) -> float:
     """Emergency-brake intervention margin (ETCS dV_ebi, domain-facts §3.3)."""
     v_kmh = v_mps * 3.6
     if v_kmh <= 110.0:
-        return 7.5 * KMH
-    return min(7.5 + 7.5 * (v_kmh - 110.0) / 100.0, 15.0) * KMH
+        return 7.5 * MPS_PER_KMH
+    return min(7.5 + 7.5 * (v_kmh - 110.0) / 100.0, 15.0) * MPS_PER_KMH
 
 
 def dv_sbi_mps(v_mps: float) -> float:
@@ -58,8 +58,8 @@ def dv_sbi_mps(v_mps: float) -> float:
     210 km/h (ETCS national-value defaults as commonly quoted [U])."""
     v_kmh = v_mps * 3.6
     if v_kmh <= 110.0:
-        return 5.5 * KMH
-    return min(5.5 + 4.5 * (v_kmh - 110.0) / 100.0, 10.0) * KMH
+        return 5.5 * MPS_PER_KMH
+    return min(5.5 + 4.5 * (v_kmh - 110.0) / 100.0, 10.0) * MPS_PER_KMH
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,8 @@ from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach, brake_lead_s
 from fmus.ato_controller.train_model import NominalTrain
+from fmus.units import MPS_PER_KMH
 
-KMH = 1.0 / 3.6
 _INF = math.inf
 
 # mode output (Integer)
@@ -35,10 +35,10 @@ MODE_NAMES = ("standstill", "traction", "coast", "brake", "ATP service brake", "
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
 ACCEL_FILTER_S = 1.0
 MIN_BRAKE_SHARE = 0.02
-CREEP_SPEED_MPS = 5.0 * KMH      # to close up to the stop point after stopping short of the window
+CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
 # two-stage stop with a slow brake (book §S.5.3, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
-FINAL_APPROACH_MPS = 30.0 * KMH
+FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
 
 
 @dataclass
@@ -47,7 +47,7 @@ class AtoSettings:
     cab_signal: str = "ALSN"
     braking_decel_mps2: float = 0.0       # 0: min(0.5, 0.6 × service deceleration)
     atp_decel_mps2: float = 0.0           # 0: 0.7 × service deceleration
-    speed_margin_mps: float = 2.0 * KMH   # ATO drives this far below every limit
+    speed_margin_mps: float = 2.0 * MPS_PER_KMH   # ATO drives this far below every limit
     stop_margin_m: float = 30.0           # stop this far before a signal at danger
     k1: float = 0.1                       # m/s of cruise speed per s ahead
     k2: float = 1.0                       # s of extra traction per s late
@@ -58,7 +58,7 @@ class AtoSettings:
     hold_brake: float = 0.3               # brake share held while standing
     decoding_latency_s: float = alsn.STATED_LATENCY_S   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
     speed_gain: float = 0.2               # 1/s, speed-holding loop
-    hysteresis_mps: float = 1.0 * KMH     # coast → traction again only this far below the set speed
+    hysteresis_mps: float = 1.0 * MPS_PER_KMH     # coast → traction again only this far below the set speed
     brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)
     # stop by predicting the stopping point (stopping.py) when the brake lead is longer than this:
     # a freight pneumatic brake (20.5 s); an EP brake (1.75–2.5 s) stops within 0.2 m without it,

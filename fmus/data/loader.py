@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import List, Optional, Tuple
 
 from fmus.errors import FmuInputError
+from fmus.units import MPS_PER_KMH
 
 HERE = Path(__file__).resolve().parent
 SCHEMAS = HERE / "schemas"
@@ -21,8 +22,6 @@ DATA = HERE / "shipped"
 DEFAULT_LINE = DATA / "default_line.json"
 DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
 DEFAULT_TIMETABLE = DATA / "default_timetable.json"
-KMH = 1.0 / 3.6
-G = 9.81
 
 
 @lru_cache(maxsize=None)
@@ -114,9 +113,9 @@ class Line:
         limits = sorted(document["speed_limits"], key=lambda s: s["start_m"])
         self.limit_starts = [float(s["start_m"]) for s in limits]
         self.limits_mps = {
-            "passenger": [s["passenger_kmh"] * KMH for s in limits],
-            "freight": [s["freight_kmh"] * KMH for s in limits],
-            "high_speed": [s.get("high_speed_kmh", s["passenger_kmh"]) * KMH for s in limits],
+            "passenger": [s["passenger_kmh"] * MPS_PER_KMH for s in limits],
+            "freight": [s["freight_kmh"] * MPS_PER_KMH for s in limits],
+            "high_speed": [s.get("high_speed_kmh", s["passenger_kmh"]) * MPS_PER_KMH for s in limits],
         }
         self._build_profile()
 
@@ -214,7 +213,7 @@ def load_line(path=DEFAULT_LINE) -> Line:
 
 # ---- rolling stock -----------------------------------------------------------------------------
 def _curve(points, path, field: str, monotonic: bool = True) -> Tuple[List[float], List[float]]:
-    speeds = [p[0] * KMH for p in points]
+    speeds = [p[0] * MPS_PER_KMH for p in points]
     forces = [p[1] * 1000.0 for p in points]
     for k in range(1, len(speeds)):
         if speeds[k] <= speeds[k - 1]:
@@ -289,7 +288,7 @@ def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
     electrical = doc["electrical"]
     return RollingStock(
         name=doc["name"], category=doc["category"], length_m=float(doc["length_m"]),
-        max_speed_mps=doc["max_speed_kmh"] * KMH, gamma=float(doc["rotating_mass_factor"]),
+        max_speed_mps=doc["max_speed_kmh"] * MPS_PER_KMH, gamma=float(doc["rotating_mass_factor"]),
         mass_kg=total, powered_mass_kg=powered, resistance_terms=terms,
         effort_speeds=speeds, effort_forces=forces, notches=int(doc["traction"].get("notches", 1)),
         efficiency=float(doc["traction"]["efficiency"]), auxiliary_w=doc["traction"]["auxiliary_kw"] * 1000.0,

@@ -28,10 +28,10 @@ import math
 from dataclasses import dataclass
 from typing import List, Tuple
 
-from fmus.data.loader import G, Line, RollingStock
+from fmus.data.loader import Line, RollingStock
+from fmus.units import KMH_PER_MPS, STANDARD_GRAVITY_MPS2
 from fmus.errors import FmuInputError
 
-KMH = 3.6
 
 
 def _interp(xs: List[float], ys: List[float], x: float) -> float:
@@ -82,7 +82,7 @@ class TractionCore:
         self.mass_kg = stock.mass_kg * mass_scale
         self.powered_mass_kg = stock.powered_mass_kg * mass_scale
         self.m_eff = self.mass_kg * (1.0 + stock.gamma)
-        self.weight_kn = self.mass_kg * G / 1000.0    # N per (N/kN)
+        self.weight_kn = self.mass_kg * STANDARD_GRAVITY_MPS2 / 1000.0    # N per (N/kN)
         self.resistance_poly = tuple(
             sum(share * coef for share, *coefs in stock.resistance_terms for coef in [coefs[k]]) * resistance_scale
             for k in range(3))
@@ -108,9 +108,9 @@ class TractionCore:
         stock = self.stock
         if v >= stock.max_speed_mps:
             return 0.0
-        vk = v * KMH
+        vk = v * KMH_PER_MPS
         p0, p1, p2, p3, p4 = stock.adhesion
-        adhesion = (p0 + p1 / (p2 + p3 * vk) + p4 * vk) * self.powered_mass_kg * G
+        adhesion = (p0 + p1 / (p2 + p3 * vk) + p4 * vk) * self.powered_mass_kg * STANDARD_GRAVITY_MPS2
         return min(_interp(stock.effort_speeds, stock.effort_forces, v), adhesion)
 
     def electric_brake_force(self, v: float) -> float:
@@ -120,7 +120,7 @@ class TractionCore:
 
     def main_resistance(self, v: float) -> float:
         a, b, c = self.resistance_poly
-        vk = v * KMH
+        vk = v * KMH_PER_MPS
         return (a + b * vk + c * vk * vk) * self.weight_kn
 
     def path_resistance(self, x: float) -> float:

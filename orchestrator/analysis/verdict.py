@@ -12,11 +12,11 @@ from typing import Dict, List, Optional
 
 from fmus.signalling import aspects as sig
 
+from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 
 TRAIN_MODEL = "Traction"
 ATO_MODEL = "AtoController"
-J_PER_KWH = 3.6e6
 TRAIN_OUTPUTS = ("energy", "x")
 ATO_OUTPUTS = ("stop_index", "arrival_time", "stop_error", "atp_aspect", "max_overspeed", "atp_interventions",
                "emergency_brakings", "signals_passed_at_danger")
