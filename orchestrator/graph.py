@@ -56,9 +56,6 @@ class SystemGraph:
     base_ticks: int
     cycles: List[List[str]]
 
-    def step_seconds(self, name: str) -> float:
-        return self.nodes[name].step_ticks / TICKS_PER_SECOND
-
 
 def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
                 extra_parameters=()) -> SystemGraph:

@@ -31,7 +31,3 @@ def unit_definition(unit: str) -> Element:
     node = Element("Unit", name=unit)
     SubElement(node, "BaseUnit", {k: str(v) for k, v in _BASE_UNITS[unit].items()})
     return node
-
-
-def known_units():
-    return sorted(_BASE_UNITS)

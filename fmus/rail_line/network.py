@@ -19,7 +19,7 @@ so the node voltages are algebraic (there is a conductance to ground at every no
 
     di/dt = A·i + B·u,  A = −L⁻¹(Qᵀ G⁻¹ Q + R),  B = L⁻¹ Qᵀ G⁻¹ P,  v = G⁻¹(P·u − Q·i).
 
-``phasor`` solves the same equations at one frequency; ``discretise`` gives the exact
+``phasor_with_shunt`` solves the same equations at one frequency; ``discretise`` gives the exact
 zero-order-hold model at the sample rate (scipy.linalg.expm of the augmented matrix).
 Ground is the node named ``"0"``.
 """
@@ -135,12 +135,6 @@ class Network:
         g, p, q, r, l = self.matrices()
         z = r + 1j * omega * l
         return g + (q / z) @ q.T, p, q, z
-
-    def phasor(self, omega: float, u: np.ndarray):
-        """Node voltages and branch currents (complex) for inputs u at angular frequency ω."""
-        y, p, q, z = self._admittance(omega)
-        v = np.linalg.solve(y, p @ np.asarray(u, dtype=complex))
-        return v, (q.T @ v) / z
 
     def phasor_with_shunt(self, omega: float, u: np.ndarray, g: float, observe: int):
         """Node voltages when a conductance ``g`` to ground is added at one node, for every node

@@ -96,6 +96,3 @@ class TrackCircuit:
         if shunt_node is not None:
             net.add(Conductance(f"n{shunt_node}", "0", 1.0 / p.shunt_r_ohm))
         return net
-
-    def nearest_node(self, x_m: float) -> int:
-        return int(np.clip(np.rint((x_m - self.start_m) / (self.nodes_m[1] - self.nodes_m[0])), 0, self.segments))

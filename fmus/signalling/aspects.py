@@ -22,21 +22,10 @@ railway's rules.
 """
 from __future__ import annotations
 
-from enum import IntEnum
 from typing import Dict, Optional, Tuple
 
 WHITE, RED, RED_YELLOW, YELLOW, GREEN = 0, 1, 2, 3, 4
 
-
-class Aspect(IntEnum):
-    WHITE = WHITE
-    RED = RED
-    RED_YELLOW = RED_YELLOW
-    YELLOW = YELLOW
-    GREEN = GREEN
-
-
-ASPECT_LABELS = {WHITE: "Б", RED: "К", RED_YELLOW: "КЖ", YELLOW: "Ж", GREEN: "З"}
 ASPECT_NAMES = {WHITE: "white", RED: "red", RED_YELLOW: "red-yellow", YELLOW: "yellow", GREEN: "green"}
 
 # category → aspect → (ceiling km/h or None for the line limit, speed at the exit signal km/h or None)

@@ -53,10 +53,3 @@ def decode(words) -> np.ndarray:
 
 def to_bits(word: int, bits: int = N_BITS) -> np.ndarray:
     return np.array([(word >> (bits - 1 - k)) & 1 for k in range(bits)], dtype=np.int8)
-
-
-def from_bits(bits) -> int:
-    value = 0
-    for b in bits:
-        value = value << 1 | int(b)
-    return value

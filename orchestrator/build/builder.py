@@ -17,7 +17,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, Iterable, List, Optional
+from typing import Iterable, List, Optional
 
 from fmus.sizes import BuildConfig
 
@@ -177,7 +177,3 @@ def build_all(dest: Path, config: BuildConfig = BuildConfig(), units: Optional[I
 def default_build_dir(repo_root: Optional[Path] = None) -> Path:
     root = repo_root if repo_root is not None else FMUS_ROOT.parent
     return root / "build" / "fmus"
-
-
-def model_identifiers() -> Dict[str, str]:
-    return {spec.unit: spec.model_identifier for spec in discover_units()}
