@@ -301,13 +301,13 @@ def test_the_atos_predicted_stopping_point_is_where_the_train_stops(stock_file, 
     predicts where the traction unit stops for a constant brake command, while a brake demand
     sent earlier is still on its way to the pneumatic brake: to 0.3 m over up to 890 m of
     braking, with the ATO's own prediction step for each brake (0.375–1 s)."""
-    from fmus.ato_controller.stopping import BrakePipeline, StopApproach
+    from fmus.ato_controller.stopping import NominalBrake, StopApproach
     from fmus.data.loader import DATA
     from fmus.traction.core import TractionCore
 
     line, stock = load_line(DATA / line_file), load_rolling_stock(DATA / stock_file)
     train = NominalTrain(stock, line)
-    pipeline = BrakePipeline(train)
+    pipeline = NominalBrake(train)
     plant = TractionCore(stock, line, x0_m=3000.0, v0_mps=v0_kmh * KMH)
     t, step = 0.0, 0.5
     for command in (0.0, -0.4, -0.4):      # a demand in flight when the prediction is made

@@ -23,15 +23,15 @@ from fmus.errors import FmuInputError
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
-from fmus.ato_controller.stopping import StopApproach, brake_lead_s
+from fmus.ato_controller.stopping import StopApproach
 from fmus.ato_controller.train_model import NominalTrain
+from fmus.traction.brake_pipeline import brake_lead_s
 from fmus.units import MPS_PER_KMH
 
 _INF = math.inf
 
 # mode output (Integer)
 MODE_STANDSTILL, MODE_TRACTION, MODE_COAST, MODE_BRAKE, MODE_ATP_SERVICE, MODE_ATP_EMERGENCY = range(6)
-MODE_NAMES = ("standstill", "traction", "coast", "brake", "ATP service brake", "ATP emergency brake")
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
 ACCEL_FILTER_S = 1.0
 MIN_BRAKE_SHARE = 0.02
@@ -207,7 +207,7 @@ class AtoCore:
             self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
         self._t_prev, self._v_prev = t, v
         if self.stop_approach is not None:
-            self.stop_approach.pipeline.advance(t, v)
+            self.stop_approach.brake.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         command, mode = self._drive(t, x, v, atp)
         if atp.intervention == SERVICE_INTERVENTION:
@@ -223,7 +223,7 @@ class AtoCore:
         out.mode = mode
         out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
         if self.stop_approach is not None:
-            self.stop_approach.pipeline.command(t, command, out.emergency_brake)
+            self.stop_approach.brake.command(t, command, out.emergency_brake)
         out.v_permitted_mps = min(atp.permitted_mps, 1e3)
         out.aspect = atp.aspect
         out.atp_intervention = atp.intervention

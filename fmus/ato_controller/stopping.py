@@ -6,7 +6,7 @@ locomotive's electric brake fades below 10 km/h. A controller that maps the dist
 a deceleration now (``AtoCore._decel_to``) then keeps braking on the force it asked for
 20–30 s earlier and stops metres short. The ATO instead keeps its own copy of the brake
 pipeline (the demands it sent, their delay and the build-up, from the nominal stock data:
-the traction unit's model, DESIGN §4) and, braking for a station stop below 30 km/h,
+the traction unit's model, fmus/traction/brake_pipeline.py, DESIGN §4) and, braking for a station stop below 30 km/h,
 simulates the nominal train forward for a set of constant brake commands at once, choosing
 the one whose predicted stopping point is the stop point (receding horizon: chosen again
 every tenth of the brake's lead from the measured position and speed, so model errors are
@@ -17,11 +17,11 @@ stopping point is predicted, not the deceleration. Used for brakes slower than
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 
 from fmus.ato_controller.train_model import NominalTrain
+from fmus.traction.brake_pipeline import BrakePipeline, brake_lead_s
 
 CANDIDATES = 21           # brake shares tried at once, MIN_SHARE … 1 (interpolated between)
 HORIZON_S = 180.0         # longer than any stop from the final approach
@@ -33,43 +33,23 @@ NO_EFFECT_M = 0.01        # a command moving the stopping point less than this c
 REPLAN_MIN_S, REPLAN_MAX_S = 0.5, 2.0
 
 
-def brake_lead_s(stock) -> float:
-    """How long a brake demand takes to act, to first order: the application delay plus half
-    the build-up time constant (ЧС7's EP brake 2.5 s, ВЛ80 + 62 wagons 20.5 s)."""
-    return stock.brake_delay_s + 0.5 * stock.brake_time_constant_s
-
-
-class BrakePipeline:
-    """The ATO's nominal copy of the traction unit's pneumatic brake (specific force, m/s²)."""
+class NominalBrake:
+    """The ATO's nominal copy of the traction unit's pneumatic brake: the shared pipeline
+    (per effective mass, m/s²) fed with the commands the ATO sent, its force in closed form."""
 
     def __init__(self, train: NominalTrain):
         stock = train.stock
         self.train = train
-        self.delay_s = stock.brake_delay_s
-        self.tau_s = stock.brake_time_constant_s
-        self.events: deque = deque()     # (time the pneumatic brake acts on it, demand m/s²)
-        self.delayed = 0.0               # demand the pneumatic brake acts on now
-        self.demand_now = 0.0            # demand as last commanded (the electric brake acts at once)
-        self.emergency = False
+        # the ATO's clock runs on whole communication steps: a demand is due from 1e-9 s before
+        self.pipeline = BrakePipeline(stock.brake_delay_s, stock.brake_time_constant_s, stock.emergency_decel,
+                                      lambda v_mps: float(train.electric_brake(v_mps)), due_tolerance_s=1e-9)
         self.force = 0.0                 # pneumatic brake, m/s²
         self.time_s = None
-        self._last_requested = 0.0
 
     def command(self, t: float, command: float, emergency: bool) -> None:
         """The command sent to the train at ``t`` (the traction unit's convention)."""
-        stock = self.train.stock
-        self.emergency = emergency
-        self.demand_now = max(-command, 0.0) * stock.service_decel
-        demand = stock.emergency_decel if emergency else self.demand_now
-        if demand != self._last_requested:
-            self.events.append((t + self.delay_s, demand))
-            self._last_requested = demand
+        self.pipeline.command(t, max(-command, 0.0) * self.train.stock.service_decel, emergency)
         self.time_s = t
-
-    def _electric(self, v: float) -> float:
-        if self.emergency:
-            return 0.0
-        return min(self.demand_now, float(self.train.electric_brake(v)))
 
     def advance(self, t: float, v: float) -> None:
         """Bring the pneumatic force up to ``t`` (speed taken as ``v`` over the interval)."""
@@ -77,20 +57,15 @@ class BrakePipeline:
             self.time_s = t
         if t <= self.time_s:
             return
+        pipeline = self.pipeline
         now = self.time_s
-        electric = self._electric(v)
+        electric = pipeline.electric(v)
         while now < t:
-            while self.events and self.events[0][0] <= now + 1e-9:
-                self.delayed = self.events.popleft()[1]
-            until = min(self.events[0][0], t) if self.events else t
-            self.force = self._relax(self.force, max(self.delayed - electric, 0.0), until - now)
+            pipeline.take_due(now)
+            until = min(pipeline.next_change_s(), t)
+            self.force = pipeline.relax(self.force, pipeline.pneumatic_target(electric), until - now)
             now = until
         self.time_s = t
-
-    def _relax(self, force, target, dt: float):
-        if self.tau_s <= 0.0:
-            return target
-        return target + (force - target) * math.exp(-dt / self.tau_s)
 
     def stopping_points(self, x: float, v: float, shares: np.ndarray, stop_m: float, path_accel,
                         dt_s: float) -> np.ndarray:
@@ -99,29 +74,29 @@ class BrakePipeline:
         gradient + curve retardation [m/s²] (vectorised). A candidate still moving past
         ``stop_m`` is not followed further: its point is extrapolated at its deceleration there
         (it only has to be known to lie beyond the stop point)."""
-        train = self.train
+        train, pipeline = self.train, self.pipeline
         demand = shares * train.stock.service_decel
         x_k = np.full(shares.size, float(x))
         v_k = np.full(shares.size, float(v))
         force = np.full(shares.size, self.force)
-        delayed = np.full(shares.size, self.delayed)
+        delayed = np.full(shares.size, pipeline.delayed)
         # the times at which the pneumatic brake's demand changes: what is queued, then the
         # command sent now, after the delay (integration steps end exactly there)
-        changes = [(when, np.full(shares.size, value)) for when, value in self.events]
-        changes.append((self.time_s + self.delay_s, demand))
+        changes = [(when, np.full(shares.size, value)) for when, value in pipeline.events]
+        changes.append((self.time_s + pipeline.delay_s, demand))
         t = self.time_s
         end = t + HORIZON_S
         moving = v_k > 0.0
         while t < end:
-            while changes and changes[0][0] <= t + 1e-9:
+            while changes and changes[0][0] <= t + pipeline.due_tolerance_s:
                 delayed = changes.pop(0)[1]
             h = min(dt_s, changes[0][0] - t) if changes else dt_s
             electric = np.minimum(demand, train.electric_brake(v_k))
             target = np.maximum(delayed - electric, 0.0)
             # midpoint rule (second order: a 1 s step is then as good as the plant's RK4 to a
             # decimetre over a stop); the brake force at mid-step from its exponential
-            force_mid = self._relax(force, target, 0.5 * h)
-            force_end = self._relax(force, target, h)
+            force_mid = pipeline.relax(force, target, 0.5 * h)
+            force_end = pipeline.relax(force, target, h)
             decel = electric + force_mid + train.resistance(v_k) + path_accel(x_k)
             v_mid = np.maximum(v_k - 0.5 * h * decel, 0.0)
             decel = np.maximum(np.minimum(demand, train.electric_brake(v_mid)) + force_mid
@@ -148,7 +123,7 @@ class StopApproach:
 
     def __init__(self, train: NominalTrain, min_share: float):
         self.train = train
-        self.pipeline = BrakePipeline(train)      # the ATO feeds it every step (AtoCore.step)
+        self.brake = NominalBrake(train)          # the ATO feeds it every step (AtoCore.step)
         self.shares = np.linspace(min_share, 1.0, CANDIDATES)
         stock = train.stock
         # integration step: a quarter of the build-up time constant, 0.1–1 s (midpoint rule: the
@@ -170,7 +145,7 @@ class StopApproach:
         planned_at, planned_for, planned_share = self._last
         if planned_for == stop_m and t < planned_at + self.replan_s - 1e-9:
             return planned_share
-        points = self.pipeline.stopping_points(x, v, self.shares, stop_m, self._path_table(x, stop_m), self.dt_s)
+        points = self.brake.stopping_points(x, v, self.shares, stop_m, self._path_table(x, stop_m), self.dt_s)
         # more brake, shorter stop: the points fall with the share
         if points[0] - points[-1] < NO_EFFECT_M and planned_for == stop_m:
             share = planned_share      # the train stops before any new command acts: keep it

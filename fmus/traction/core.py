@@ -8,7 +8,8 @@ Equation of motion (ПТР form, SI):
   vehicle's maximum speed.
 * F_e: electric brake (rheostatic or regenerative), immediate, covers the brake demand first.
 * F_p: pneumatic brake, a state: it follows (brake demand delayed by the application
-  delay − electric brake force) with a first-order build-up, dF_p/dt = (target − F_p)/T.
+  delay − electric brake force) with a first-order build-up, dF_p/dt = (target − F_p)/T
+  (brake_pipeline.py, shared with the ATO's nominal copy).
 * W(v): main resistance Σ share_k·(a + bV + cV²)·m·g/1000 (V in km/h, coefficients in N/kN),
   starting resistance 28/(q0+7) N/kN only as a breakaway threshold at standstill.
 * i + w_r: gradient (‰) and curve resistance 700/R (N/kN), averaged over the train length.
@@ -26,12 +27,12 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from typing import List, Tuple
+from typing import List
 
 from fmus.data.loader import Line, RollingStock
 from fmus.units import KMH_PER_MPS, STANDARD_GRAVITY_MPS2
 from fmus.errors import FmuInputError
-
+from fmus.traction.brake_pipeline import BrakePipeline
 
 
 def _interp(xs: List[float], ys: List[float], x: float) -> float:
@@ -96,12 +97,12 @@ class TractionCore:
         self.energy_drawn = 0.0
         self.energy_returned = 0.0
         self.brake_force = 0.0                                # pneumatic, N
-        self._demand_events: List[Tuple[float, float]] = []   # (effective time, brake demand N)
-        self._demand_delayed = 0.0      # demand the pneumatic brake currently acts on
-        self._demand_now = 0.0          # demand as commanded (the electric brake acts at once)
-        self._last_requested_demand = 0.0
+        # brake demands in N; the sub-steps end on the demands' times, so only rounding separates them
+        self.brake_pipeline = BrakePipeline(stock.brake_delay_s, stock.brake_time_constant_s,
+                                            self.m_eff * stock.emergency_decel, self.electric_brake_force,
+                                            due_tolerance_s=1e-12)
         self.out = TractionOutputs(x_m=self.x, v_mps=self.v, stop_time_s=0.0 if self.v == 0 else -1.0)
-        self._share_t, self._emergency = 0.0, False
+        self._share_t = 0.0
 
     # ---- forces ---------------------------------------------------------------------------
     def max_traction_force(self, v: float) -> float:
@@ -127,23 +128,13 @@ class TractionCore:
         """Gradient + curve force [N], positive against the running direction."""
         return self.line.mean_path_resistance(x, self.stock.length_m) * self.weight_kn
 
-    def _electric_force(self, v: float) -> float:
-        """Electric brake force [N]: takes the current brake demand first, up to its curve."""
-        if self._emergency or self._demand_now <= 0.0:
-            return 0.0
-        return min(self._demand_now, self.electric_brake_force(v))
-
-    def _pneumatic_target(self, v: float) -> float:
-        """What the pneumatic brake is asked for: the delayed demand less the electric brake."""
-        return max(self._demand_delayed - self._electric_force(v), 0.0)
-
     def _derivatives(self, x: float, v: float, f_p: float):
         """(dv/dt, dF_p/dt, power drawn W, power returned W) while moving."""
+        brakes = self.brake_pipeline
         f_t = self._share_t * self.max_traction_force(v)
-        f_e = self._electric_force(v)
+        f_e = brakes.electric(v)
         net = f_t - f_e - f_p - self.main_resistance(v) - self.path_resistance(x)
-        tau = self.stock.brake_time_constant_s
-        df_p = (self._pneumatic_target(v) - f_p) / tau if tau > 0.0 else 0.0
+        df_p = brakes.build_up_rate(f_p, brakes.pneumatic_target(f_e))
         drawn = f_t * v / self.stock.efficiency + self.stock.auxiliary_w
         returned = f_e * v * self.stock.ebrake_efficiency if self.stock.ebrake_kind == "regenerative" else 0.0
         return net / self.m_eff, df_p, drawn, returned
@@ -157,15 +148,9 @@ class TractionCore:
         elif command > 1.0 or command < -1.0:
             command = max(-1.0, min(1.0, command))
             out.commands_clamped += 1
-        self._emergency = bool(emergency)
         self._share_t = command if command > 0.0 and not emergency else 0.0
         share_b = -command if command < 0.0 else 0.0
-        self._demand_now = share_b * self.m_eff * self.stock.service_decel
-        demand = self.m_eff * self.stock.emergency_decel if emergency else self._demand_now
-        if demand != self._last_requested_demand:
-            # the pneumatic brake acts after its application (or release) delay
-            self._demand_events.append((time_s + self.stock.brake_delay_s, demand))
-            self._last_requested_demand = demand
+        self.brake_pipeline.command(time_s, share_b * self.m_eff * self.stock.service_decel, bool(emergency))
         out.notch = math.ceil(self._share_t * self.stock.notches - 1e-9) if self._share_t > 0 else 0
         out.brake_step = (self.stock.brake_steps + 1 if emergency else
                           math.ceil(share_b * self.stock.brake_steps - 1e-9) if share_b > 0 else 0)
@@ -174,11 +159,10 @@ class TractionCore:
         self.set_command(time_s, command, emergency)
         end = time_s + step_s
         t = time_s
-        events = self._demand_events
+        brakes = self.brake_pipeline
         while t < end - 1e-12:
-            while events and events[0][0] <= t + 1e-12:
-                self._demand_delayed = events.pop(0)[1]
-            limit = events[0][0] if events and events[0][0] < end else end
+            brakes.take_due(t)
+            limit = min(brakes.next_change_s(), end)
             n = max(1, math.ceil((limit - t) / self.max_substep_s - 1e-9))
             dt = (limit - t) / n
             for _ in range(n):
@@ -204,7 +188,8 @@ class TractionCore:
 
     def _substep(self, t: float, dt: float) -> None:
         if self.stock.brake_time_constant_s <= 0.0:
-            self.brake_force = self._pneumatic_target(self.v)
+            brakes = self.brake_pipeline
+            self.brake_force = brakes.pneumatic_target(brakes.electric(self.v))
         if self.v <= 0.0:
             self._standstill(dt)
             return
@@ -237,10 +222,10 @@ class TractionCore:
 
     def _standstill(self, dt: float) -> None:
         """At v = 0: start only when the driving force beats everything that holds the train."""
-        target = self._pneumatic_target(0.0)
-        tau = self.stock.brake_time_constant_s
+        brakes = self.brake_pipeline
+        target = brakes.pneumatic_target(brakes.electric(0.0))
         f0 = self.brake_force
-        f_end = target + (f0 - target) * math.exp(-dt / tau) if tau > 0.0 else target
+        f_end = brakes.relax(f0, target, dt)
         length = self.stock.length_m
         gradient = self.line.mean_gradient(self.x, length)
         curve = self.line.mean_curve_resistance(self.x, length)
@@ -262,7 +247,7 @@ class TractionCore:
         out = self.out
         v = self.v
         out.x_m, out.v_mps = self.x, v
-        f_e = self._electric_force(v) if v > 0 else 0.0
+        f_e = self.brake_pipeline.electric(v) if v > 0 else 0.0
         out.force_traction_n = self._share_t * self.max_traction_force(v) if v > 0 or self._share_t > 0 else 0.0
         out.force_brake_n = f_e + self.brake_force
         if v > 0:
