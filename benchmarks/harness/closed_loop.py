@@ -14,6 +14,7 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.traction.core import TractionCore
 from fmus.ato_controller.core import AtoCore, AtoSettings
+from fmus.units import J_PER_KWH
 
 CabSignal = Callable[[float, float], Tuple[int, bool]]
 
@@ -32,10 +33,10 @@ class LoopResult:
 
     @property
     def energy_kwh(self) -> float:
-        return self.train.out.energy_j / 3.6e6
+        return self.train.out.energy_j / J_PER_KWH
 
     def energy_at_kwh(self, t: float) -> float:
-        return float(np.interp(t, self.column("t"), self.column("energy"))) / 3.6e6
+        return float(np.interp(t, self.column("t"), self.column("energy"))) / J_PER_KWH
 
 
 def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[AtoSettings] = None,

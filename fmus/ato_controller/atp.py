@@ -38,7 +38,7 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
-from fmus.units import MPS_PER_KMH
+from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
@@ -47,7 +47,7 @@ _INF = math.inf
 
 def dv_ebi_mps(v_mps: float) -> float:
     """Emergency-brake intervention margin (ETCS dV_ebi, domain-facts §3.3)."""
-    v_kmh = v_mps * 3.6
+    v_kmh = v_mps * KMH_PER_MPS
     if v_kmh <= 110.0:
         return 7.5 * MPS_PER_KMH
     return min(7.5 + 7.5 * (v_kmh - 110.0) / 100.0, 15.0) * MPS_PER_KMH
@@ -56,7 +56,7 @@ def dv_ebi_mps(v_mps: float) -> float:
 def dv_sbi_mps(v_mps: float) -> float:
     """Service-brake intervention margin: 5.5 km/h up to 110 km/h, rising to 10 km/h at
     210 km/h (ETCS national-value defaults as commonly quoted [U])."""
-    v_kmh = v_mps * 3.6
+    v_kmh = v_mps * KMH_PER_MPS
     if v_kmh <= 110.0:
         return 5.5 * MPS_PER_KMH
     return min(5.5 + 4.5 * (v_kmh - 110.0) / 100.0, 10.0) * MPS_PER_KMH
