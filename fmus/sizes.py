@@ -4,6 +4,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Dict
 
+#: The signal chain's sample rate unless a system sets ``fs`` (10 ms frames of 40 samples;
+#: docs/interfaces.md): the default of the coder, rail line and receiver settings and ports.
+DEFAULT_SAMPLE_RATE_HZ = 4000.0
+
 
 @dataclass(frozen=True)
 class BuildConfig:

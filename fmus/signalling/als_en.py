@@ -59,7 +59,6 @@ SPEEDS_KMH = (0, 15, 20, 25, 40, 50, 60, 70, 80, 90, 100, 120, 140, 160, 180, 20
 RED, RED_YELLOW, WHITE_FLASHING = 0, 1, 2
 FIRST_FREE = 3                       # indication 3 + n − 1: n free blocks
 LAST_INDICATION = FIRST_FREE + 5
-CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
 INCREMENT_OF_DIBIT = np.array([0.0, np.pi / 2, 3 * np.pi / 2, np.pi])   # 00, 01, 10, 11 (Gray)
 _DIBIT_OF_QUADRANT = np.array([0b00, 0b01, 0b11, 0b10])
 
@@ -229,7 +228,7 @@ class AlsEn(DigitalSystem):
 
     def indication(self, command: int, category: str) -> Indication:
         indication, speed = command_fields(command)
-        ceiling = CATEGORY_MAX_KMH[category]
+        ceiling = sig.CATEGORY_MAX_KMH[category]
         if indication == RED:
             return Indication(9, sig.RED, 0, 20.0, min(SPEEDS_KMH[speed], 20.0))
         if indication == RED_YELLOW:

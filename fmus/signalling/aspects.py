@@ -26,6 +26,11 @@ from typing import Dict, Optional, Tuple
 
 WHITE, RED, RED_YELLOW, YELLOW, GREEN = 0, 1, 2, 3, 4
 
+#: The train categories the speed tables know (the ``train_category`` parameters).
+TRAIN_CATEGORIES = ("passenger", "freight", "high_speed")
+#: Maximum speed of each category (km/h): what green permits unless ``v_max`` says otherwise.
+CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
+
 ASPECT_NAMES = {WHITE: "white", RED: "red", RED_YELLOW: "red-yellow", YELLOW: "yellow", GREEN: "green"}
 
 # category → aspect → (ceiling km/h or None for the line limit, speed at the exit signal km/h or None)

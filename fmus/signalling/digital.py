@@ -28,7 +28,6 @@ from fmus.signalling import aspects as sig
 from fmus.errors import FmuInputError
 
 FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
-CATEGORIES = ("passenger", "freight", "high_speed")
 TIMEOUT_MESSAGES, TIMEOUT_MARGIN_S = 2, 0.1        # acceptance timeout (Acceptor)
 QUALITY_MIN = 0.25                                  # a clear message (Acceptor)
 LATENCY_MESSAGES, LATENCY_MARGIN_S = 2, 0.2        # stated decoding latency (DESIGN §8)
@@ -148,8 +147,9 @@ class DigitalSystem(ABC):
 
 
 def check_category(category: str) -> None:
-    if category not in CATEGORIES:
-        raise FmuInputError(f"parameter train_category: {category!r} is not one of {', '.join(CATEGORIES)}")
+    if category not in sig.TRAIN_CATEGORIES:
+        raise FmuInputError(f"parameter train_category: {category!r} is not one of "
+                            f"{', '.join(sig.TRAIN_CATEGORIES)}")
 
 
 def check_modem_rate(system: DigitalSystem, carrier_hz: float, fs_hz: float, where: str = "parameter ") -> None:
