@@ -1,5 +1,7 @@
 """Built FMUs validate cleanly, match their committed contract manifests, rebuild only on change,
-and many instances of one FMU live in one process."""
+and many instances of one FMU live in one process; every declared parameter bound is enforced."""
+import importlib
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -9,6 +11,7 @@ import pytest
 from conftest import FIXTURE_PACKAGE, TEST_UNITS
 from orchestrator.build.builder import UnitSpec, build_unit, discover_units, validate_built
 from orchestrator.build.contract import diff, manifest_of, read_manifest
+from fmus.errors import FmuInputError
 from fmus.sizes import BuildConfig
 
 REPO = Path(__file__).resolve().parent.parent
@@ -69,3 +72,49 @@ slaves[0].dll.finalizePythonInterpreter()  # the exit-time fix, as orchestrator.
 """
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "ok 25" in proc.stdout, proc.stderr[-500:]
+
+
+# ---- parameter bounds: one check in fmus/fmi, generated from the ports --------------------------
+def _facades():
+    return [(spec.unit, getattr(importlib.import_module(spec.facade_module), spec.model_identifier))
+            for spec in discover_units()]
+
+
+def _bound_violations():
+    """For every numeric parameter of every product facade: a value past each declared bound,
+    and for a Real one a value that is not finite, with the error it must give."""
+    cases = []
+    for unit, facade in _facades():
+        for port in facade.declare_ports(BuildConfig()):
+            if port.causality != "parameter" or port.type not in ("Real", "Integer"):
+                continue
+            element = port.element_names()[-1]          # of an array, its last element
+            for bound, side, sign in ((port.min, "below its minimum", -1), (port.max, "above its maximum", 1)):
+                if bound is None:
+                    continue
+                value = bound + sign * (1 if port.type == "Integer" else 0.5 * max(abs(bound), 1.0))
+                cases.append(pytest.param(facade, port, element, value, f"{element} = {value:g} is {side} {bound:g}",
+                                          id=f"{unit}.{element}-{side.split()[0]}"))
+            if port.type == "Real":
+                for value in (math.nan, math.inf):
+                    cases.append(pytest.param(facade, port, element, value, f"{element} = {value:g} is not a finite number",
+                                              id=f"{unit}.{element}-{value}"))
+    return cases
+
+
+@pytest.mark.parametrize("unit, facade", _facades(), ids=[unit for unit, _ in _facades()])
+def test_every_parameter_start_is_within_its_declared_bounds(unit, facade):
+    facade(instance_name=unit, resources=None).check_parameter_ranges()
+
+
+@pytest.mark.parametrize("facade, port, element, value, message", _bound_violations())
+def test_every_declared_parameter_bound_is_enforced_in_the_ports_name(facade, port, element, value, message):
+    """In process, through the facade's FMI setter and exitInitializationMode, as a host does."""
+    slave = facade(instance_name="bounds", resources=None)
+    vr = next(vr for vr, variable in slave.vars.items() if variable.name == element)
+    getattr(slave, f"set_{port.type.lower()}")([vr], [value])
+    with pytest.raises(FmuInputError) as error:
+        slave.exit_initialization_mode()
+    assert str(error.value) == message
+    assert slave.core is None                          # refused before the core is made
+    assert any(message in entry.msg for entry in slave.log_queue)

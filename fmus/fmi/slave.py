@@ -11,12 +11,18 @@ do for us:
 * error handling that never lets a Python exception escape ``do_step``: pythonfmu 0.7.0 turns
   an exception into fmi2Fatal and then releases its Python references twice on
   ``fmi2FreeInstance`` (see docs/architecture.md), so a failed step logs at error status and
-  returns False, which pythonfmu reports as fmi2Discard.
+  returns False, which pythonfmu reports as fmi2Discard;
+* one range check of every parameter against its port's declared min/max (Reals also finite)
+  before the core is made, phrased in the port's own name.
+
+A port's start value is the core's settings default (``Port(..., start=settings.field)``), so
+a parameter's default is declared once, in the core.
 
 No physics or logic lives here or in a facade.
 """
 from __future__ import annotations
 
+import inspect
 import math
 import traceback
 from dataclasses import dataclass, field
@@ -69,6 +75,25 @@ class Port:
         if self.causality == "parameter":
             return "fixed"
         return "continuous" if self.type == "Real" else "discrete"
+
+    def range_error(self, element: str, value) -> Optional[str]:
+        """Why ``value`` of this port's ``element`` is out of its declared range, or None."""
+        if self.type not in ("Real", "Integer"):
+            return None
+        if not math.isfinite(value):
+            return f"{element} = {value:g} is not a finite number"
+        if self.min is not None and value < self.min:
+            return f"{element} = {value:g} is below its minimum {self.min:g}"
+        if self.max is not None and value > self.max:
+            return f"{element} = {value:g} is above its maximum {self.max:g}"
+        return None
+
+
+def keyword_defaults(function) -> Dict[str, Any]:
+    """The defaults of a core constructor's keyword parameters, for the start values of the
+    ports that set them (a core without a settings record)."""
+    return {name: p.default for name, p in inspect.signature(function).parameters.items()
+            if p.default is not inspect.Parameter.empty}
 
 
 @dataclass
@@ -128,6 +153,21 @@ class FrameSlave(Fmi2Slave):
         """Current value of a scalar parameter (Python scalar)."""
         value = self.io[name]
         return value if isinstance(value, str) else value.item()
+
+    def scalar_parameters(self) -> Dict[str, Any]:
+        """Every scalar parameter's current value by port name (Python scalars)."""
+        return {p.name: self.param(p.name) for p in self.ports if p.causality == "parameter" and not p.shape}
+
+    def check_parameter_ranges(self) -> None:
+        """Every numeric parameter element against its port's min/max, Reals also finite."""
+        for port in self.ports:
+            if port.causality != "parameter" or port.type not in ("Real", "Integer"):
+                continue
+            values = self.io[port.name].reshape(-1).tolist()
+            for element, value in zip(port.element_names(), values):
+                problem = port.range_error(element, value)
+                if problem is not None:
+                    raise FmuInputError(problem)
 
     def write_outputs(self, out, fields) -> None:
         """Copy a core's output record to the ports: ``fields`` is ((port, attribute), ...)."""
@@ -246,6 +286,7 @@ class FrameSlave(Fmi2Slave):
         # Parameters are final here. A bad parameter or data file raises: pythonfmu reports
         # fmi2Fatal with our message, which is what the host (and our CLI) shows the user.
         try:
+            self.check_parameter_ranges()
             self.core = self.create_core()
         except FmuInputError as error:
             self.log(f"{type(self).__name__}: {error}", Fmi2Status.error)
