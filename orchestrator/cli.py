@@ -13,8 +13,13 @@ from typing import List, Optional
 
 from orchestrator.errors import UserError
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-SSP_ROOT = REPO_ROOT / "ssp"
+# A checkout (the README's editable install) runs its committed ssp/ and builds into its own
+# build/ wherever the command is started; an installed wheel has no checkout, so it builds into
+# ./build and writes the shipped systems there when they are asked for (docs/architecture.md).
+PACKAGE_PARENT = Path(__file__).resolve().parent.parent
+IN_CHECKOUT = (PACKAGE_PARENT / "pyproject.toml").is_file() and (PACKAGE_PARENT / "ssp").is_dir()
+WORK_ROOT = PACKAGE_PARENT if IN_CHECKOUT else Path.cwd()
+SSP_ROOT = PACKAGE_PARENT / "ssp" if IN_CHECKOUT else WORK_ROOT / "build" / "ssp"
 DEFAULT_SYSTEM = "free_run"
 
 
@@ -26,7 +31,23 @@ class _Parser(argparse.ArgumentParser):
 def _build_dir() -> Path:
     from orchestrator.build.builder import default_build_dir
 
-    return default_build_dir(REPO_ROOT)
+    return default_build_dir(WORK_ROOT)
+
+
+def _write_shipped_systems(names: Optional[List[str]] = None) -> None:
+    """Installed package only: (re)write the shipped systems under SSP_ROOT."""
+    if not IN_CHECKOUT:
+        from orchestrator.analysis.systems import refresh_shipped
+
+        refresh_shipped(SSP_ROOT, names)
+
+
+def _shipped_names() -> List[str]:
+    if IN_CHECKOUT:
+        return sorted(p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file())
+    from orchestrator.analysis.systems import SHIPPED
+
+    return sorted(SHIPPED)
 
 
 def _system_path(name: Optional[str]) -> Path:
@@ -35,11 +56,12 @@ def _system_path(name: Optional[str]) -> Path:
     path = Path(name)
     if path.exists():
         return path
+    available = _shipped_names()
+    if name in available:
+        _write_shipped_systems([name])
     shipped = SSP_ROOT / name
     if shipped.is_dir():
         return shipped
-    available = sorted(p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()) \
-        if SSP_ROOT.is_dir() else []
     raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system "
                     f"(shipped: {', '.join(available) or 'none yet'})")
 
@@ -59,6 +81,7 @@ def cmd_build(args) -> int:
         print(f"{'built ' if result.rebuilt else 'up to date'} {result.path}")
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
+    _write_shipped_systems()
     for packed in pack_systems(SSP_ROOT, dest, dest.parent):
         print(f"packed {packed}")
     return 0
@@ -198,7 +221,7 @@ def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    build = sub.add_parser("build", help="build the FMUs into build/fmus and pack ssp/ systems")
+    build = sub.add_parser("build", help="build the FMUs into build/fmus and pack the shipped systems")
     build.add_argument("--sections", type=int, default=8, help="block sections K (default 8)")
     build.add_argument("--trains", type=int, default=2, help="trains M (default 2)")
     build.add_argument("--frame", type=int, default=40, help="samples per frame N (default 40)")

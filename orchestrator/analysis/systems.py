@@ -1,5 +1,8 @@
 """The shipped systems (ssp/<name>/), written from Python so they stay consistent with the
-FMUs' ports. ``python -m orchestrator.systems`` rewrites them; the files are committed.
+FMUs' ports. ``python -m orchestrator.analysis.systems [FOLDER]`` rewrites them (default: the
+checkout's ssp/); the files are committed, and tests/test_shipped_systems.py checks that they are
+what this module writes. An installed package has no ssp/: ``railcosim`` writes the systems it
+needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
 
 * ``free_run`` — one passenger train (Traction) driven by the ATO over the default line and
   timetable, with the ALSN chain: wayside coder → rail line → locomotive receiver → ATP.
@@ -19,12 +22,15 @@ FMUs' ports. ``python -m orchestrator.systems`` rewrites them; the files are com
 from __future__ import annotations
 
 import json
+import os
+import tempfile
+from functools import partial
 from pathlib import Path
-from typing import Dict, List, Sequence, Tuple
+from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
 
-SSP_ROOT = Path(__file__).resolve().parent.parent / "ssp"
+SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
 
@@ -235,15 +241,50 @@ def write_freight_ac(root: Path = SSP_ROOT) -> Path:
     return path
 
 
-def write_shipped(root: Path = SSP_ROOT) -> List[Path]:
-    written = [write_free_run(root), write_ato_only(root), write_following(root), write_faults(root),
-               write_joints_at_speed(root), write_freight_ac(root)]
-    for system, prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
-        written.append(write_free_run(root, system, prefix))
-        written.append(write_following(root, system, f"{prefix}_following"))
-    return written
+# name → writer(root) of every shipped system
+SHIPPED: Dict[str, Callable[[Path], Path]] = {
+    "free_run": write_free_run, "ato_only": write_ato_only, "following": write_following,
+    "faults": write_faults, "joints_at_speed": write_joints_at_speed, "freight_ac": write_freight_ac,
+}
+for _system, _prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
+    SHIPPED[_prefix] = partial(write_free_run, system=_system, name=_prefix)
+    SHIPPED[f"{_prefix}_following"] = partial(write_following, system=_system, name=f"{_prefix}_following")
+
+
+def write_shipped(root: Path = SSP_ROOT, names: Optional[Iterable[str]] = None) -> List[Path]:
+    """Write the named shipped systems (default: all) under ``root``; their SSD paths."""
+    return [SHIPPED[name](root) for name in (SHIPPED if names is None else names)]
+
+
+def refresh_shipped(root: Path, names: Optional[Iterable[str]] = None) -> List[Path]:
+    """Make ``root/<name>`` exactly what :func:`write_shipped` writes, for an installed package.
+
+    The systems are written into a scratch folder first and only files whose bytes differ are
+    moved in, each with one atomic rename, so runs started at once in one folder never read a
+    half-written file. Files in a shipped system's folder that it does not write are removed:
+    ``railcosim run free_run`` always runs the shipped free_run (copy a folder to change it).
+    """
+    names = list(SHIPPED if names is None else names)
+    root.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=root, prefix=".writing_") as scratch:
+        write_shipped(Path(scratch), names)
+        for name in names:
+            fresh, folder = Path(scratch) / name, root / name
+            wanted = {p.relative_to(fresh) for p in fresh.rglob("*") if p.is_file()}
+            stale = [p for p in folder.rglob("*") if p.is_file() and p.relative_to(folder) not in wanted] \
+                if folder.is_dir() else []
+            for path in stale:
+                path.unlink()
+            for relative in sorted(wanted):
+                target = folder / relative
+                if not target.is_file() or target.read_bytes() != (fresh / relative).read_bytes():
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(fresh / relative, target)
+    return [root / name / "SystemStructure.ssd" for name in names]
 
 
 if __name__ == "__main__":
-    for path in write_shipped():
+    import sys
+
+    for path in write_shipped(Path(sys.argv[1]) if len(sys.argv) > 1 else SSP_ROOT):
         print(f"wrote {path}")
