@@ -40,7 +40,7 @@ acquisition within two cycles + 0.5 s from any cam phase.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -50,6 +50,8 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
+from fmus.units import MPS_PER_KMH
 
 LEVEL_RELEASE_S = 1.0
 # longer than any short interval (0.12 s + 5 % drift + filter smearing), shorter than any long one
@@ -62,15 +64,16 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
-CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
+# the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
+CHANNELS = 3
 
 
 @dataclass
 class ReceiverSettings:
-    carrier_hz: float = 50.0
-    fs_hz: float = 4000.0
+    carrier_hz: float = 0.0                # 0: filters.ALSN_DEFAULT_CARRIER_HZ
+    fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     train_category: str = "passenger"
-    v_max_mps: float = 0.0                 # 0: the category's maximum (CATEGORY_MAX_KMH)
+    v_max_mps: float = 0.0                 # 0: the category's maximum (aspects.CATEGORY_MAX_KMH)
     filter_order: int = 3
     filter_bandwidth_hz: float = 0.0       # 0: 0.4 × carrier
     agc_limit_v: float = 0.5               # input amplitude above which the gain is reduced
@@ -93,15 +96,20 @@ class ReceiverOutputs:
     transmitter: int = 0                   # 5 or 7 (KPT type of the last valid cycle), 0 none
     joints: int = 0                        # KPT type changes (a new track circuit, kpt.h)
     relay: bool = False
+    # the digital receiver's per-channel commands (raw ids, 0 none) and messages of the other
+    # track discarded; an ALSN receiver has neither and reports zeros
+    channel_codes: np.ndarray = field(default_factory=lambda: np.zeros(CHANNELS, dtype=np.int64))
+    foreign: int = 0
 
 
 class LocoReceiverCore:
     def __init__(self, frame: int, settings: ReceiverSettings):
         s = settings
-        alsn.check_carrier_and_rate(s.carrier_hz, s.fs_hz, "parameter ")
-        if s.train_category not in CATEGORY_MAX_KMH:
+        carrier_hz, bandwidth, order = filters.band_pass_design(s)
+        alsn.check_carrier_and_rate(carrier_hz, s.fs_hz, "parameter ")
+        if s.train_category not in sig.TRAIN_CATEGORIES:
             raise FmuInputError(f"parameter train_category: {s.train_category!r} is not one of "
-                                f"{', '.join(CATEGORY_MAX_KMH)}")
+                                f"{', '.join(sig.TRAIN_CATEGORIES)}")
         if not 1 <= s.filter_order <= 8:
             raise FmuInputError(f"parameter filter_order: {s.filter_order} (1..8)")
         for name, value in (("agc_limit", s.agc_limit_v), ("agc_recovery", s.agc_recovery_db_per_s),
@@ -110,15 +118,15 @@ class LocoReceiverCore:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
         if s.drop_out_v >= s.pick_up_v:
             raise FmuInputError(f"parameter drop_out: {s.drop_out_v} V must be below pick_up {s.pick_up_v} V")
-        bandwidth = s.filter_bandwidth_hz if s.filter_bandwidth_hz > 0 else filters.default_bandwidth(s.carrier_hz)
-        if bandwidth >= 2 * s.carrier_hz:
+        if bandwidth >= 2 * carrier_hz:
             raise FmuInputError(f"parameter filter_bandwidth: {bandwidth:g} Hz must be below twice the carrier")
         self.settings = s
+        self.carrier_hz = carrier_hz
         self.frame = frame
         self.dt = 1.0 / s.fs_hz
-        self.band_pass = filters.band_pass(s.carrier_hz, bandwidth, s.filter_order, s.fs_hz)
-        self.envelope_lp = filters.envelope_low_pass(filters.default_envelope_corner(s.carrier_hz), s.fs_hz)
-        self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(s.carrier_hz))
+        self.band_pass = filters.band_pass(carrier_hz, bandwidth, order, s.fs_hz)
+        self.envelope_lp = filters.envelope_low_pass(filters.default_envelope_corner(carrier_hz), s.fs_hz)
+        self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
         self._gain_db = 0.0
@@ -128,7 +136,7 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
-        self.v_max = s.v_max_mps if s.v_max_mps > 0 else CATEGORY_MAX_KMH[s.train_category] / 3.6
+        self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
         # decoder state
         self._last_edge_s: Optional[float] = None
         self._last_rise_s: Optional[float] = None
@@ -194,7 +202,9 @@ class LocoReceiverCore:
         last = np.maximum.accumulate(where)
         return np.where(last >= 0, decided[np.maximum(last, 0)] == 1, self._relay), high
 
-    def step(self, t: float, e_coil: np.ndarray) -> ReceiverOutputs:
+    def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
+        """One frame of coil EMF. ``channel_faults`` is the digital receiver's per-channel fault
+        input (digital.py); the ALSN receiver is one channel without it, so it is ignored."""
         s = self.settings
         if self._started_s is None:
             self._started_s = t

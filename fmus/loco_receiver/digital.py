@@ -50,7 +50,8 @@ from fmus.signalling.digital import Acceptor, DigitalSystem, check_category, che
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
-from fmus.loco_receiver.core import ReceiverOutputs
+from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
 TIMING_CANDIDATES = 8
@@ -59,21 +60,20 @@ TIMING_SWITCH = 10 ** 0.03          # another candidate must be 0.3 dB better (a
 TIMING_DRIFT = 2                    # a re-choice by up to this many candidates keeps the symbol count
 LEVEL_FAST, LEVEL_SLOW = 1.0 / 8.0, 1.0 / 32.0   # level averages over about one and four symbols
 LEVEL_JUMP = 4.0                    # their ratio beyond this: a new signal, search the timing afresh
-CHANNELS = 3
 _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
 
 
 @dataclass
 class DigitalReceiverSettings:
-    fs_hz: float = 4000.0
+    fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     carrier_hz: float = 0.0          # 0: the system's default
     train_category: str = "passenger"
     v_max_mps: float = 0.0           # 0: the system's speed for the category
     track_parity: int = 1
     limiter_v: float = 4.0           # 0: no limiter
     min_level_v: float = 0.01        # squelch (carrier amplitude at the coil)
-    band_width_hz: float = 0.0       # 0: 10/3 × the symbol rate
+    filter_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
 
 
 class SymbolClock:
@@ -162,20 +162,20 @@ class DigitalReceiverCore:
     def __init__(self, system: DigitalSystem, frame: int, settings: DigitalReceiverSettings):
         s = settings
         check_category(s.train_category)
-        self.carrier_hz = s.carrier_hz if s.carrier_hz > 0 else system.carrier_hz
+        self.carrier_hz, bandwidth, order = filters.band_pass_design(s, system)
         check_modem_rate(system, self.carrier_hz, s.fs_hz)
         if s.track_parity not in (0, 1):
             raise FmuInputError(f"parameter track_parity: {s.track_parity} (0 even track, 1 odd track)")
-        for name, value in (("limiter", s.limiter_v), ("min_level", s.min_level_v), ("band_width", s.band_width_hz)):
+        for name, value in (("limiter", s.limiter_v), ("min_level", s.min_level_v),
+                            ("filter_bandwidth", s.filter_bandwidth_hz)):
             if value < 0:
                 raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
         self.system, self.settings, self.frame = system, s, frame
         self.baud = system.baud(self.carrier_hz)
-        bandwidth = s.band_width_hz or 10.0 / 3.0 * self.baud
         if bandwidth >= 2 * self.carrier_hz:
-            raise FmuInputError(f"parameter band_width: {bandwidth:g} Hz must be below twice the carrier")
+            raise FmuInputError(f"parameter filter_bandwidth: {bandwidth:g} Hz must be below twice the carrier")
         self.anti_alias = chebyshev_low_pass(ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB, s.fs_hz)
-        self.band_pass = filters.band_pass(self.carrier_hz, bandwidth, 2, s.fs_hz)
+        self.band_pass = filters.band_pass(self.carrier_hz, bandwidth, order, s.fs_hz)
         self._aa_state = self.anti_alias.initial_state()
         self._bp_state = self.band_pass.initial_state()
         self.clock = SymbolClock(s.fs_hz, self.carrier_hz, self.baud, frame)
@@ -190,10 +190,11 @@ class DigitalReceiverCore:
         self._voted_for = None
         self._vote_result: Optional[int] = None
         self.out = ReceiverOutputs()
-        self.channel_codes = np.zeros(CHANNELS, dtype=np.int64)
+        self.channel_codes = self.out.channel_codes
         self._publish(None)
 
     def step(self, t: float, e_coil: np.ndarray, channel_faults=(0, 0, 0)) -> ReceiverOutputs:
+        """One frame of coil EMF; ``channel_faults[i]`` is channel i's fault (CHANNEL_OK …)."""
         s = self.settings
         first = round(t * s.fs_hz)
         x = np.asarray(e_coil, dtype=float)
@@ -246,6 +247,7 @@ class DigitalReceiverCore:
         out.relay = self._level >= s.min_level_v
         out.errors = acceptor.rejected
         out.decoded_codes = acceptor.accepted
+        out.foreign = acceptor.foreign
         if acceptor.block is not None and acceptor.block != self._block:
             if self._block is not None:
                 out.joints += 1

@@ -2,12 +2,9 @@
 FIRE_DQPSK). No logic here (see core.py, digital.py)."""
 from fmus.signalling import cab_systems
 from fmus.fmi.slave import FrameSlave, Port
-from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital import CHANNELS, DigitalReceiverCore, DigitalReceiverSettings
-
-ALSN_DEFAULT_CARRIER_HZ = 50.0
-
-DEFAULT_FS_HZ = 4000.0
+from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.parameters import receiver_settings
 
 
 class LocoReceiver(FrameSlave):
@@ -17,26 +14,32 @@ class LocoReceiver(FrameSlave):
     @classmethod
     def declare_ports(cls, build):
         n = build.frame
+        s, d = ReceiverSettings(), DigitalReceiverSettings()     # ALSN and digital-only defaults
         return [
             Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
-            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+            Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz"),
-            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
+            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0,
                  description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
-            Port("train_category", "parameter", "String", start="passenger", description="passenger | freight | high_speed"),
-            Port("v_max", "parameter", unit="m/s", start=0.0, min=0.0,
+            Port("train_category", "parameter", "String", start=s.train_category,
+                 description="passenger | freight | high_speed"),
+            Port("v_max", "parameter", unit="m/s", start=s.v_max_mps, min=0.0,
                  description="speed reported on green; 0: the category's maximum"),
-            Port("filter_order", "parameter", "Integer", start=3, min=1, max=8,
+            Port("filter_order", "parameter", "Integer", start=s.filter_order, min=1, max=8,
                  description="Butterworth prototype order (band-pass order is twice this)"),
-            Port("filter_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0, description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate"),
-            Port("agc_limit", "parameter", unit="V", start=0.5, min=0.0, description="input amplitude where gain reduction starts"),
-            Port("agc_recovery", "parameter", unit="1/s", start=10.0, min=0.0, description="gain recovery rate, dB per second"),
-            Port("pick_up", "parameter", unit="V", start=0.12, min=0.0, description="relay pick-up (input-referred envelope)"),
-            Port("drop_out", "parameter", unit="V", start=0.08, min=0.0),
-            Port("track_parity", "parameter", "Integer", start=1, min=0, max=1,
+            Port("filter_bandwidth", "parameter", unit="Hz", start=s.filter_bandwidth_hz, min=0.0,
+                 description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate"),
+            Port("agc_limit", "parameter", unit="V", start=s.agc_limit_v, min=0.0,
+                 description="input amplitude where gain reduction starts"),
+            Port("agc_recovery", "parameter", unit="1/s", start=s.agc_recovery_db_per_s, min=0.0,
+                 description="gain recovery rate, dB per second"),
+            Port("pick_up", "parameter", unit="V", start=s.pick_up_v, min=0.0,
+                 description="relay pick-up (input-referred envelope)"),
+            Port("drop_out", "parameter", unit="V", start=s.drop_out_v, min=0.0),
+            Port("track_parity", "parameter", "Integer", start=d.track_parity, min=0, max=1,
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
-            Port("limiter", "parameter", unit="V", start=4.0, min=0.0, description="digital: input limiter; 0 none"),
-            Port("min_level", "parameter", unit="V", start=0.01, min=0.0,
+            Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
+            Port("min_level", "parameter", unit="V", start=d.min_level_v, min=0.0,
                  description="digital: squelch, carrier amplitude below which nothing is decided"),
             Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,),
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
@@ -60,23 +63,14 @@ class LocoReceiver(FrameSlave):
         ]
 
     def make_default_experiment(self):
-        return self.frame_experiment(DEFAULT_FS_HZ)
+        return self.frame_experiment(ReceiverSettings.fs_hz)
 
     def create_core(self):
-        p = self.param
-        system = cab_systems.digital_system(p("system"))
+        system = cab_systems.digital_system(self.param("system"))
+        settings = receiver_settings(system, self.scalar_parameters())
         if system is None:
-            settings = ReceiverSettings(
-                carrier_hz=p("carrier") or ALSN_DEFAULT_CARRIER_HZ, fs_hz=p("fs"), train_category=p("train_category"),
-                v_max_mps=p("v_max"), filter_order=p("filter_order"), filter_bandwidth_hz=p("filter_bandwidth"),
-                agc_limit_v=p("agc_limit"), agc_recovery_db_per_s=p("agc_recovery"), pick_up_v=p("pick_up"),
-                drop_out_v=p("drop_out"))
             core = LocoReceiverCore(self.build.frame, settings)
         else:
-            settings = DigitalReceiverSettings(
-                fs_hz=p("fs"), carrier_hz=p("carrier"), train_category=p("train_category"), v_max_mps=p("v_max"),
-                track_parity=p("track_parity"), limiter_v=p("limiter"), min_level_v=p("min_level"),
-                band_width_hz=p("filter_bandwidth"))
             core = DigitalReceiverCore(system, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
         return core
@@ -86,12 +80,7 @@ class LocoReceiver(FrameSlave):
 
     def step_core(self, current_time, step_size):
         io = self.io
-        if isinstance(self.core, DigitalReceiverCore):
-            self.write_outputs(self.core.step(current_time, io["e_coil"], io["channel_fault"]), _OUTPUT_FIELDS)
-            io["channel_code"][...] = self.core.channel_codes
-            io["foreign"][...] = self.core.acceptor.foreign
-        else:
-            self.write_outputs(self.core.step(current_time, io["e_coil"]), _OUTPUT_FIELDS)
+        self.write_outputs(self.core.step(current_time, io["e_coil"], io["channel_fault"]), _OUTPUT_FIELDS)
 
 
 # output port ← ReceiverOutputs field
@@ -99,4 +88,5 @@ _OUTPUT_FIELDS = (
     ("aspect", "aspect"), ("code", "code"), ("code_valid", "code_valid"), ("v_permitted", "v_permitted_mps"),
     ("v_target", "v_target_mps"), ("free_blocks", "free_blocks"), ("level", "level_v"), ("errors", "errors"),
     ("decoded_codes", "decoded_codes"), ("transmitter", "transmitter"), ("joints", "joints"), ("relay", "relay"),
+    ("channel_code", "channel_codes"), ("foreign", "foreign"),
 )

@@ -10,14 +10,25 @@ pre-warping at the carrier (docs/loco_receiver.md has the Bode plot and group de
   (10 Hz wide) it takes the 50 Hz of AC traction down by about 34 dB.
 * Envelope low-pass after full-wave rectification: 2nd-order Butterworth at min(12 Hz, f0/3),
   same discretisation, pre-warped at its corner.
+* The digital receivers' band-pass (digital.py): the same design, prototype order 2 (a
+  4th-order band-pass), 10/3 of the symbol rate wide.
+
+:func:`receiver_band_pass` is the band-pass a receiver with given settings uses; the cores and
+the run report (``railcosim report``) both design it through :func:`band_pass_design`.
 """
 from __future__ import annotations
+
+from typing import Optional, Tuple
 
 import control
 import numpy as np
 from scipy import signal
 
 from fmus.dsp.filter_design import DiscreteFilter, discretise
+
+ALSN_DEFAULT_CARRIER_HZ = 50.0        # an ALSN receiver's carrier when its settings say 0
+DIGITAL_BAND_PASS_ORDER = 2
+DIGITAL_BANDWIDTH_PER_BAUD = 10.0 / 3.0
 
 
 def band_pass(carrier_hz: float, bandwidth_hz: float, order: int, fs_hz: float) -> DiscreteFilter:
@@ -40,3 +51,22 @@ def default_bandwidth(carrier_hz: float) -> float:
 
 def default_envelope_corner(carrier_hz: float) -> float:
     return min(12.0, carrier_hz / 3.0)
+
+
+def band_pass_design(settings, system=None) -> Tuple[float, float, int]:
+    """(carrier, bandwidth, prototype order) of a receiver's band-pass, zeros in the settings
+    resolved to their defaults: an ALSN receiver (``system`` None, core.ReceiverSettings) or a
+    digital system's (digital.DigitalReceiverSettings)."""
+    if system is None:
+        carrier_hz = settings.carrier_hz or ALSN_DEFAULT_CARRIER_HZ
+        bandwidth_hz = settings.filter_bandwidth_hz if settings.filter_bandwidth_hz > 0 else default_bandwidth(carrier_hz)
+        return carrier_hz, bandwidth_hz, settings.filter_order
+    carrier_hz = settings.carrier_hz if settings.carrier_hz > 0 else system.carrier_hz
+    bandwidth_hz = settings.filter_bandwidth_hz or DIGITAL_BANDWIDTH_PER_BAUD * system.baud(carrier_hz)
+    return carrier_hz, bandwidth_hz, DIGITAL_BAND_PASS_ORDER
+
+
+def receiver_band_pass(settings, system=None) -> DiscreteFilter:
+    """The band-pass of a receiver with these settings (see :func:`band_pass_design`)."""
+    carrier_hz, bandwidth_hz, order = band_pass_design(settings, system)
+    return band_pass(carrier_hz, bandwidth_hz, order, settings.fs_hz)

@@ -218,18 +218,14 @@ def read_results_file(path: Path):
 
 
 def _receiver_band_pass(params: dict):
-    """The band-pass the receiver FMU designs from these parameters (same functions)."""
+    """The band-pass the receiver FMU designs from these parameters: its own settings mapping
+    and filter design."""
+    from fmus.loco_receiver.filters import receiver_band_pass
+    from fmus.loco_receiver.parameters import receiver_settings
     from fmus.signalling import cab_systems
-    from fmus.loco_receiver import filters
 
     system = cab_systems.DIGITAL.get(str(params.get("system", "ALSN")))
-    fs = float(params.get("fs", 4000.0))
-    carrier = float(params.get("carrier", 0.0) or (system.carrier_hz if system else 50.0))
-    if system is None:
-        width = float(params.get("filter_bandwidth", 0.0) or filters.default_bandwidth(carrier))
-        return filters.band_pass(carrier, width, int(params.get("filter_order", 3)), fs)
-    width = float(params.get("filter_bandwidth", 0.0) or 10.0 / 3.0 * system.baud(carrier))
-    return filters.band_pass(carrier, width, 2, fs)
+    return receiver_band_pass(receiver_settings(system, params), system)
 
 
 def verdict_table(summary: dict) -> str:

@@ -1,0 +1,35 @@
+"""The receiver's parameters by port name → its core settings, FMI-free, so the facade and the
+run report (``railcosim report`` redraws the receiver's band-pass) read a parameter set alike.
+The ports themselves (units, bounds, descriptions) are declared in facade.py, their start
+values taken from the settings defaults here."""
+from __future__ import annotations
+
+from typing import Mapping, Optional, Union
+
+from fmus.loco_receiver.core import ReceiverSettings
+from fmus.loco_receiver.digital import DigitalReceiverSettings
+from fmus.signalling.digital import DigitalSystem
+
+# port → settings field
+ALSN_PARAMETERS = {
+    "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
+    "filter_order": "filter_order", "filter_bandwidth": "filter_bandwidth_hz", "agc_limit": "agc_limit_v",
+    "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v",
+}
+DIGITAL_PARAMETERS = {
+    "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
+    "filter_bandwidth": "filter_bandwidth_hz", "track_parity": "track_parity", "limiter": "limiter_v",
+    "min_level": "min_level_v",
+}
+
+
+def receiver_settings(system: Optional[DigitalSystem], parameters: Mapping[str, object]
+                      ) -> Union[ReceiverSettings, DigitalReceiverSettings]:
+    """Settings of an ALSN receiver (``system`` None) or a digital one from parameter values by
+    port name; a parameter not given keeps its default, one the system does not use is ignored."""
+    settings_class, fields = ((ReceiverSettings, ALSN_PARAMETERS) if system is None
+                              else (DigitalReceiverSettings, DIGITAL_PARAMETERS))
+    defaults = settings_class()
+    values = {field: type(getattr(defaults, field))(parameters[port])
+              for port, field in fields.items() if port in parameters}
+    return settings_class(**values)
