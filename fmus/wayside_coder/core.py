@@ -36,6 +36,7 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line
 from fmus.dsp.periodic import period_samples
 from fmus.errors import FmuInputError
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
 STATUS_OK, STATUS_PARTIAL, STATUS_FAILED = 0, 1, 2
@@ -45,7 +46,7 @@ _CODE_OF_SIGNAL = np.array([alsn.NO_CODE, sig.RED_YELLOW, sig.YELLOW, sig.GREEN,
 
 @dataclass
 class CoderSettings:
-    fs_hz: float = 4000.0
+    fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     carrier_hz: float = 0.0             # 0: each section's carrier from the line file
     amplitude_v: float = 4.0            # peak transmitter voltage while a pulse is on
     block_aspects: int = 3
@@ -200,7 +201,10 @@ class WaysideCoderCore:
         """Aspect of the signal closing each section's block (the code the section carries)."""
         return block_signals(sections_to_occupied(occupied, self.count, self.block_of), self.settings.block_aspects)
 
-    def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False) -> CoderOutputs:
+    def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False,
+             wrong_command_main: int = 0, wrong_command_reserve: int = 0) -> CoderOutputs:
+        """One frame. The wrong-command faults are the digital coders' (digital.py): an ALSN
+        coder has no controllers computing commands, so it ignores them."""
         s = self.settings
         k, out = self.count, self.out
         state = (occupied[:k].tobytes(), fault_main, fault_reserve)

@@ -6,8 +6,6 @@ from fmus.fmi.slave import FrameSlave, Port
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital import DigitalCoderCore
 
-DEFAULT_FS_HZ = 4000.0
-
 
 class WaysideCoder(FrameSlave):
     description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters "
@@ -16,28 +14,29 @@ class WaysideCoder(FrameSlave):
     @classmethod
     def declare_ports(cls, build):
         k, n = build.sections, build.frame
+        s = CoderSettings()
         return [
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
             Port("codes_file", "parameter", "String", start="",
                  description="code timing tables (JSON); empty: the bundled KPT-5/KPT-7 tables"),
             Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
-            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0,
+            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0,
                  description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
-            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+            Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: ALSN each section's carrier from the line file, digital the system's "
                              "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); else this carrier for all"),
-            Port("amplitude", "parameter", unit="V", start=4.0, min=0.0, description="peak transmitter voltage"),
-            Port("block_aspects", "parameter", "Integer", start=3, min=3, max=4),
-            Port("coding", "parameter", "String", start="always", description="always | on_occupation"),
-            Port("switch_on_delay", "parameter", unit="s", start=0.0, min=0.0),
-            Port("timing_scale", "parameter", unit="1", start=1.0, min=0.5, max=2.0,
+            Port("amplitude", "parameter", unit="V", start=s.amplitude_v, min=0.0, description="peak transmitter voltage"),
+            Port("block_aspects", "parameter", "Integer", start=s.block_aspects, min=3, max=4),
+            Port("coding", "parameter", "String", start=s.coding, description="always | on_occupation"),
+            Port("switch_on_delay", "parameter", unit="s", start=s.switch_on_delay_s, min=0.0),
+            Port("timing_scale", "parameter", unit="1", start=s.timing_scale, min=0.5, max=2.0,
                  description="all code timings × this (transmitter drift)"),
-            Port("relay_time_constant", "parameter", unit="s", start=0.0, min=0.0,
+            Port("relay_time_constant", "parameter", unit="s", start=s.relay_time_constant_s, min=0.0,
                  description="transmitter-relay switching transient; 0: ideal keying"),
-            Port("seed", "parameter", "Integer", start=1, description="random cam / symbol-clock phase per section"),
-            Port("track_parity", "parameter", "Integer", start=1, min=0, max=1,
+            Port("seed", "parameter", "Integer", start=s.seed, description="random cam / symbol-clock phase per section"),
+            Port("track_parity", "parameter", "Integer", start=s.track_parity, min=0, max=1,
                  description="digital: parity of this track sent in every message (1 odd, 0 even)"),
-            Port("generator_bandwidth", "parameter", unit="Hz", start=0.0, min=0.0,
+            Port("generator_bandwidth", "parameter", unit="Hz", start=s.generator_bandwidth_hz, min=0.0,
                  description="digital: generator band-pass width; 0: 10/3 × the symbol rate"),
             Port("occupied", "input", "Boolean", start=False, shape=(k,)),
             Port("fault_main", "input", "Boolean", start=False),
@@ -55,7 +54,7 @@ class WaysideCoder(FrameSlave):
         ]
 
     def make_default_experiment(self):
-        return self.frame_experiment(DEFAULT_FS_HZ)
+        return self.frame_experiment(CoderSettings.fs_hz)
 
     def create_core(self):
         p = self.param
@@ -76,12 +75,8 @@ class WaysideCoder(FrameSlave):
 
     def step_core(self, current_time, step_size):
         io = self.io
-        faults = bool(io["fault_main"]), bool(io["fault_reserve"])
-        if isinstance(self.core, DigitalCoderCore):
-            out = self.core.step(current_time, io["occupied"], *faults, int(io["wrong_command_main"]),
-                                 int(io["wrong_command_reserve"]))
-        else:
-            out = self.core.step(current_time, io["occupied"], *faults)
+        out = self.core.step(current_time, io["occupied"], bool(io["fault_main"]), bool(io["fault_reserve"]),
+                             int(io["wrong_command_main"]), int(io["wrong_command_reserve"]))
         io["u_tx"][...] = out.u_tx
         io["code_tx"][...] = out.code_tx
         io["signal"][...] = out.signal
