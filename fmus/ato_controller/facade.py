@@ -2,7 +2,6 @@
 from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
-from fmus.signalling import alsn
 from fmus.fmi.slave import FrameSlave, Port
 from fmus.ato_controller.core import AtoCore, AtoSettings
 
@@ -12,6 +11,7 @@ class AtoController(FrameSlave):
 
     @classmethod
     def declare_ports(cls, build):
+        s = AtoSettings()
         return [
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
             Port("rolling_stock_file", "parameter", "String", start="",
@@ -19,29 +19,29 @@ class AtoController(FrameSlave):
             Port("timetable_file", "parameter", "String", start="", description="empty: the bundled default timetable"),
             Port("train_category", "parameter", "String", start="",
                  description="passenger | freight | high_speed; empty: the rolling stock's category"),
-            Port("strategy", "parameter", "String", start="programme", description="programme | predictive | flat_out"),
-            Port("cab_signal", "parameter", "String", start="ALSN",
+            Port("strategy", "parameter", "String", start=s.strategy, description="programme | predictive | flat_out"),
+            Port("cab_signal", "parameter", "String", start=s.cab_signal,
                  description="ALSN (aspect) | digital (v_permitted, v_target, free_blocks) | off (line limits only)"),
-            Port("braking_decel", "parameter", unit="m/s2", start=0.0, min=0.0,
+            Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0,
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
-            Port("atp_decel", "parameter", unit="m/s2", start=0.0, min=0.0,
+            Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0,
                  description="ATP supervision deceleration; 0: 0.7 × service"),
-            Port("speed_margin", "parameter", unit="m/s", start=2.0 / 3.6, min=0.0,
+            Port("speed_margin", "parameter", unit="m/s", start=s.speed_margin_mps, min=0.0,
                  description="the ATO stays this far below every limit"),
-            Port("stop_margin", "parameter", unit="m", start=30.0, min=0.0,
+            Port("stop_margin", "parameter", unit="m", start=s.stop_margin_m, min=0.0,
                  description="stop this far before a signal at danger"),
-            Port("k1", "parameter", unit="1/s", start=0.1, min=0.0,
+            Port("k1", "parameter", unit="1/s", start=s.k1, min=0.0,
                  description="programme strategy: cruise-speed reduction (m/s) per second ahead"),
-            Port("k2", "parameter", unit="1", start=1.0, min=0.0,
+            Port("k2", "parameter", unit="1", start=s.k2, min=0.0,
                  description="programme strategy: extra traction time per second late"),
-            Port("late_threshold", "parameter", unit="s", start=16.0, min=0.0,
+            Port("late_threshold", "parameter", unit="s", start=s.late_threshold_s, min=0.0,
                  description="later than this: drive at the maximum permitted speed"),
-            Port("early_threshold", "parameter", unit="s", start=8.0, min=0.0,
+            Port("early_threshold", "parameter", unit="s", start=s.early_threshold_s, min=0.0,
                  description="earlier than this: hold the programme speed, braking if need be"),
-            Port("min_dwell", "parameter", unit="s", start=20.0, min=0.0),
-            Port("stop_window", "parameter", unit="m", start=5.0, min=0.0,
+            Port("min_dwell", "parameter", unit="s", start=s.min_dwell_s, min=0.0),
+            Port("stop_window", "parameter", unit="m", start=s.stop_window_m, min=0.0,
                  description="standing at most this far short of the stop point counts as arrived"),
-            Port("decoding_latency", "parameter", unit="s", start=alsn.STATED_LATENCY_S, min=0.0,
+            Port("decoding_latency", "parameter", unit="s", start=s.decoding_latency_s, min=0.0,
                  description="receiver latency the ATP allows after passing a signal"),
             Port("x", "input", unit="m", start=0.0, description="head position"),
             Port("v", "input", unit="m/s", start=0.0),

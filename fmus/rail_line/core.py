@@ -47,6 +47,7 @@ from fmus.errors import FmuInputError
 from fmus.dsp.periodic import period_samples
 from fmus.rail_line.network import ShuntFamily, discretise
 from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 CONFIG_TICK_S = 0.01
 _COIL_POINTS = 5
@@ -56,7 +57,7 @@ _RIPPLE_MAX_SAMPLES = 1 << 14    # traction ripple kept as a table when it repea
 
 @dataclass
 class RailSettings:
-    fs_hz: float = 4000.0
+    fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     circuit: CircuitParameters = field(default_factory=CircuitParameters)
     transformer_ratio: float = 2.5        # u_tx → rails: 1.4 A rms at the entry of a 2.6 km section at 1 Ω·km
     coil_offset_m: float = 1.5            # ahead of the first wheelset [S seed 002]

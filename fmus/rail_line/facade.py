@@ -4,7 +4,6 @@ from fmus.fmi.slave import FrameSlave, Port
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters
 
-DEFAULT_FS_HZ = 4000.0
 OFF_LINE_M = -1000.0
 
 
@@ -18,10 +17,11 @@ class RailLine(FrameSlave):
         s = RailSettings()
         return [
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
-            Port("fs", "parameter", unit="Hz", start=DEFAULT_FS_HZ, min=1.0, description=f"sample rate; step = {n}/fs"),
-            Port("carrier", "parameter", unit="Hz", start=0.0, min=0.0,
+            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0, description=f"sample rate; step = {n}/fs"),
+            Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: each section's carrier from the line file; else this one (digital: 174.38 / 175 Hz)"),
-            Port("train_length", "parameter", unit="m", start=400.0, shape=(m,), min=1.0),
+            # one start for every train: the settings default of the first
+            Port("train_length", "parameter", unit="m", start=s.train_length_m[0], shape=(m,), min=1.0),
             Port("coil_offset", "parameter", unit="m", start=s.coil_offset_m, description="coils ahead of the first wheelset"),
             Port("coil_gain", "parameter", unit="H", start=s.coil_gain_h, min=0.0, description="EMF = gain · d(i)/dt"),
             Port("coil_length", "parameter", unit="m", start=s.coil_length_m, min=0.0, description="coil sensitivity length"),
@@ -37,7 +37,7 @@ class RailLine(FrameSlave):
             Port("segment", "parameter", unit="m", start=c.segment_m, min=1.0, description="network π-section length"),
             Port("asymmetry_min", "parameter", unit="1", start=s.asymmetry_range[0], min=0.0, max=1.0),
             Port("asymmetry_max", "parameter", unit="1", start=s.asymmetry_range[1], min=0.0, max=1.0),
-            Port("seed", "parameter", "Integer", start=1),
+            Port("seed", "parameter", "Integer", start=s.seed),
             Port("traction_time_constant", "parameter", unit="s", start=s.traction_time_constant_s, min=0.0,
                  description="lag of the traction current in the rails"),
             Port("relay_pick_up", "parameter", unit="1", start=s.relay_pick_up, description="share of the free-circuit relay voltage"),
@@ -60,7 +60,7 @@ class RailLine(FrameSlave):
         ]
 
     def make_default_experiment(self):
-        return self.frame_experiment(DEFAULT_FS_HZ)
+        return self.frame_experiment(RailSettings.fs_hz)
 
     def create_core(self):
         p, io = self.param, self.io

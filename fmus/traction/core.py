@@ -66,7 +66,7 @@ class TractionOutputs:
 class TractionCore:
     """One train's longitudinal dynamics over one line."""
 
-    def __init__(self, stock: RollingStock, line: Line, x0_m: float = 0.0, v0_mps: float = 0.0,
+    def __init__(self, stock: RollingStock, line: Line, x0_m: float = 400.0, v0_mps: float = 0.0,
                  pantograph_voltage_v: float = 0.0, mass_scale: float = 1.0, resistance_scale: float = 1.0,
                  max_substep_s: float = 0.5):
         if stock.electrical_system != "none" and line.electrification != "none" \

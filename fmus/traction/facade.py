@@ -2,7 +2,7 @@
 from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port, keyword_defaults
 from fmus.traction.core import TractionCore
 
 
@@ -11,17 +11,18 @@ class Traction(FrameSlave):
 
     @classmethod
     def declare_ports(cls, build):
+        s = keyword_defaults(TractionCore)
         return [
             Port("rolling_stock_file", "parameter", "String", start="",
                  description="rolling-stock JSON; empty: the bundled ЧС7 passenger train"),
             Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
-            Port("x0", "parameter", unit="m", start=400.0, description="initial head position"),
-            Port("v0", "parameter", unit="m/s", start=0.0, min=0.0),
-            Port("pantograph_voltage", "parameter", unit="V", start=0.0, min=0.0,
+            Port("x0", "parameter", unit="m", start=s["x0_m"], description="initial head position"),
+            Port("v0", "parameter", unit="m/s", start=s["v0_mps"], min=0.0),
+            Port("pantograph_voltage", "parameter", unit="V", start=s["pantograph_voltage_v"], min=0.0,
                  description="0: the line's nominal voltage"),
-            Port("mass_scale", "parameter", unit="1", start=1.0, min=0.1, max=10.0),
-            Port("resistance_scale", "parameter", unit="1", start=1.0, min=0.1, max=10.0),
-            Port("max_substep", "parameter", unit="s", start=0.5, min=0.001, max=10.0,
+            Port("mass_scale", "parameter", unit="1", start=s["mass_scale"], min=0.1, max=10.0),
+            Port("resistance_scale", "parameter", unit="1", start=s["resistance_scale"], min=0.1, max=10.0),
+            Port("max_substep", "parameter", unit="s", start=s["max_substep_s"], min=0.001, max=10.0,
                  description="longest RK4 sub-step inside a communication step"),
             Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0,
                  description=">0 traction share, <0 brake share; outside −1..1 clamped and counted"),
