@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -39,6 +39,17 @@ CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after s
 # two-stage stop with a slow brake (book §S.5.3, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
 FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
+
+
+@dataclass(frozen=True, slots=True)
+class BrakingTarget:
+    """A point ahead the ATO brakes for: the train's head at ``position_m`` at no more than
+    ``speed_mps`` (the timetable's stop point, a stop short of a signal at danger, a lower
+    limit, a stop on red)."""
+
+    position_m: float
+    speed_mps: float
+    is_stop_point: bool = False     # the timetable's stop point: arrival, precise stopping
 
 
 @dataclass
@@ -126,10 +137,12 @@ class AtoCore:
                     f"{infeasible.minimum_time_s:.1f} s (earliest arrival "
                     f"{origin.departure_s + infeasible.minimum_time_s:.1f} s)") from None
         self.controllers = Controllers(self.train, s.speed_gain, s.hysteresis_mps)
+        # the stop point of each stage, a target every step of it (built once)
+        self._stop_targets = [BrakingTarget(stop.stop_m, 0.0, is_stop_point=True) for stop in timetable[1:]]
         self.phase = WAITING
         self.stage = 0
         self.strategy = None
-        self.braking_target = None
+        self.braking_target: Optional[BrakingTarget] = None
         self.restricted = False
         self.recovering = False
         self.creeping = False
@@ -152,18 +165,18 @@ class AtoCore:
             earliest = max(earliest, self.arrivals[-1]["arrival_s"] + self.settings.min_dwell_s)
         return earliest
 
-    def _targets(self, x: float, v: float, atp_result):
-        """(position, speed, is_stop_point) the ATO brakes for, ahead of the head."""
+    def _targets(self, x: float, v: float, atp_result) -> List[BrakingTarget]:
+        """What the ATO brakes for, ahead of the head: the stop point and the ATP's targets
+        with the ATO's margins."""
         s = self.settings
-        stop = self.timetable[self.stage + 1]
-        targets = [(stop.stop_m, 0.0, True)]
+        targets = [self._stop_targets[self.stage]]
         for target in atp_result.constraints.targets:
             if target.signal:
-                targets.append((target.position_m - s.stop_margin_m, 0.0, False))
+                targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0))
             else:
-                targets.append((target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0), False))
+                targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0)))
         if atp_result.stop_now:
-            targets.append((x + v * v / (2.0 * self.a_plan) + 0.5, 0.0, False))
+            targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + 0.5, 0.0))
         return targets
 
     def _predict(self, x: float, v: float):
@@ -185,13 +198,14 @@ class AtoCore:
             return _INF if v > speed else 0.0
         return max((v * v - speed * speed) / (2.0 * distance), 0.0)
 
-    def _required_decel(self, x: float, v: float, targets):
+    def _required_decel(self, x: float, v: float,
+                        targets: List[BrakingTarget]) -> Tuple[float, Optional[BrakingTarget]]:
+        """The highest deceleration the targets ask for now, and which one asks for it."""
         best, which = 0.0, None
         for target in targets:
-            position, speed, _ = target
-            if v <= speed:
+            if v <= target.speed_mps:
                 continue
-            need = self._decel_to(x, v, position, speed)
+            need = self._decel_to(x, v, target.position_m, target.speed_mps)
             if need > best:
                 best, which = need, target
         return best, which
@@ -199,13 +213,7 @@ class AtoCore:
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
-        out = self.out
-        if self._t_prev is not None and t > self._t_prev:
-            # measured acceleration, low-pass filtered (1 s) so the prediction does not depend
-            # on the step size nor chatter when the electric brake steps in
-            dt = t - self._t_prev
-            self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
-        self._t_prev, self._v_prev = t, v
+        self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
@@ -214,6 +222,21 @@ class AtoCore:
             command, mode = -1.0, MODE_ATP_SERVICE
         elif atp.intervention == EMERGENCY_INTERVENTION:
             command, mode = -1.0, MODE_ATP_EMERGENCY
+        emergency = atp.intervention == EMERGENCY_INTERVENTION
+        if self.stop_approach is not None:
+            self.stop_approach.brake.command(t, command, emergency)
+        return self._publish(command, mode, emergency, atp)
+
+    def _measure_acceleration(self, t: float, v: float) -> None:
+        if self._t_prev is not None and t > self._t_prev:
+            # measured acceleration, low-pass filtered (1 s) so the prediction does not depend
+            # on the step size nor chatter when the electric brake steps in
+            dt = t - self._t_prev
+            self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
+        self._t_prev, self._v_prev = t, v
+
+    def _publish(self, command: float, mode: int, emergency: bool, atp) -> AtoOutputs:
+        out = self.out
         if self.phase == RUNNING:
             regime = 1 if command > 0.0 else (-1 if command < 0.0 else 0)
             if self._last_regime is not None and regime != self._last_regime:
@@ -221,9 +244,7 @@ class AtoCore:
             self._last_regime = regime
         out.command = command
         out.mode = mode
-        out.emergency_brake = atp.intervention == EMERGENCY_INTERVENTION
-        if self.stop_approach is not None:
-            self.stop_approach.brake.command(t, command, out.emergency_brake)
+        out.emergency_brake = emergency
         out.v_permitted_mps = min(atp.permitted_mps, 1e3)
         out.aspect = atp.aspect
         out.atp_intervention = atp.intervention
@@ -261,25 +282,35 @@ class AtoCore:
         self._last_regime = None
 
     def _run(self, t: float, x: float, v: float, atp):
+        """Running between two stops: arrive, brake for a target, or follow the strategy."""
         s = self.settings
         out = self.out
         plan = self.plans[self.stage]
-        origin = self.timetable[self.stage]
         stop = self.timetable[self.stage + 1]
-        t_run = t - origin.departure_s
         # arrival: standing at (or just past) the stop point
         if v <= 1e-3 and x >= stop.stop_m - s.stop_window_m and self.braking_target is not None \
-                and self.braking_target[2]:
+                and self.braking_target.is_stop_point:
             self._arrive(t, x)
             return -s.hold_brake, MODE_STANDSTILL
 
+        t_run = t - self.timetable[self.stage].departure_s
         guide = self.strategy.guide(t_run, x, v, out.schedule_deviation_s)
         deviation = t_run - guide.t_ref_s
         out.schedule_deviation_s = deviation
         out.v_ref_mps = guide.v_ref_mps
+        flat_out = self._drive_flat_out(atp, deviation)
 
-        # restriction memory → the book's recovery rule
-        if s.cab_signal != "off":
+        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps)
+        out.v_ceiling_mps = max(ceiling, 0.0)
+        braking = self._brake_for_targets(t, x, v, atp, stop.stop_m)
+        if braking is not None:
+            return braking
+        return self._follow(x, v, atp, guide, deviation, ceiling, flat_out)
+
+    def _drive_flat_out(self, atp, deviation: float) -> bool:
+        """The book's recovery rule: late by more than the threshold, or late when a restrictive
+        cab signal clears, drive at the maximum permitted speed until back on schedule."""
+        if self.settings.cab_signal != "off":
             if atp.aspect != sig.GREEN:
                 self.restricted = True
             elif self.restricted:
@@ -287,35 +318,46 @@ class AtoCore:
                 self.recovering = deviation > 0.0
         if self.recovering and deviation <= 0.0:
             self.recovering = False
-        flat_out = self.recovering or deviation > s.late_threshold_s
+        return self.recovering or deviation > self.settings.late_threshold_s
 
-        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps)
-        out.v_ceiling_mps = max(ceiling, 0.0)
+    def _brake_for_targets(self, t: float, x: float, v: float, atp, stop_m: float):
+        """(command, mode) while braking for a target; None when no target binds."""
         targets = self._targets(x, v, atp)
-        need, target = self._required_decel(x, v, targets)
-        if self.braking_target is not None:
-            position, speed, station = self.braking_target
-            if v <= speed + 0.05 and not station:
-                self.braking_target = None          # target speed reached: hold it
-            elif not station and not any(abs(p - position) < 1.0 and sp <= speed + 0.01 for p, sp, _ in targets):
-                # the target was lifted (a better code, or the ATP's assumption after passing a
-                # signal expired once the new section was decoded): release the brake
-                self.braking_target = None
-        if need >= 0.97 * self.a_plan and target is not None:
-            self.braking_target = target
-        if self.braking_target is not None:
-            position, speed, station = self.braking_target
-            decel = min(self._decel_to(x, v, position, speed), 2.0 * self.a_plan)
-            if station and v <= 1e-3 and x < stop.stop_m - s.stop_window_m:
-                self.braking_target = None            # stopped short of the window: creep on
-                self.creeping = True
-            elif station and self.stop_approach is not None and v <= FINAL_APPROACH_MPS:
-                # the stop point: the brake share whose predicted stopping point it is
-                return -self.stop_approach.share(t, x, v, position), MODE_BRAKE
-            else:
-                # the brake stays applied until the target is reached (no release/re-apply)
-                return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
+        need, candidate = self._required_decel(x, v, targets)
+        self._release_braking_target(v, targets)
+        if need >= 0.97 * self.a_plan and candidate is not None:
+            self.braking_target = candidate
+        target = self.braking_target
+        if target is None:
+            return None
+        if target.is_stop_point and v <= 1e-3 and x < stop_m - self.settings.stop_window_m:
+            self.braking_target = None            # stopped short of the window: creep on
+            self.creeping = True
+            return None
+        if target.is_stop_point and self.stop_approach is not None and v <= FINAL_APPROACH_MPS:
+            # the stop point: the brake share whose predicted stopping point it is
+            return -self.stop_approach.share(t, x, v, target.position_m), MODE_BRAKE
+        # the brake stays applied until the target is reached (no release/re-apply)
+        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps), 2.0 * self.a_plan)
+        return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
 
+    def _release_braking_target(self, v: float, targets: List[BrakingTarget]) -> None:
+        """A speed target is let go once its speed is reached (then held) or when it is lifted;
+        the stop point only by arriving or creeping on."""
+        held = self.braking_target
+        if held is None or held.is_stop_point:
+            return
+        if v <= held.speed_mps + 0.05:
+            self.braking_target = None          # target speed reached: hold it
+        elif not any(abs(other.position_m - held.position_m) < 1.0 and other.speed_mps <= held.speed_mps + 0.01
+                     for other in targets):
+            # the target was lifted (a better code, or the ATP's assumption after passing a
+            # signal expired once the new section was decoded): release the brake
+            self.braking_target = None
+
+    def _follow(self, x: float, v: float, atp, guide, deviation: float, ceiling: float, flat_out: bool):
+        """No target binds: the strategy's cruise speed or coasting, under the ceiling."""
+        s = self.settings
         if self.creeping:
             cruise, coast = CREEP_SPEED_MPS, False
         elif flat_out:
