@@ -124,16 +124,13 @@ class StagePlanner:
         return out
 
     # ---- programmes ---------------------------------------------------------------------------
-    def programmes(self, s, ceiling, cruise_mps: np.ndarray) -> Programmes:
+    def _coast_brake_envelope(self, ds: float, ceiling, path, coast_end) -> np.ndarray:
+        """Speed (C, n) of each programme's coasting/braking envelope on the grid, integrated
+        backwards from the stop: MARECO coasting down to Vf, then braking at the planned
+        deceleration, never above the ceiling."""
         tr = self.train
-        ds = s[1] - s[0]
-        n, c = s.size, cruise_mps.size
-        mid = s[:-1] + 0.5 * ds
-        path = tr.path_accel(mid)
-        coast_end = self.coast_end_speed(cruise_mps)
         a_brake = self.braking_decel
-
-        # coasting/braking envelope, backwards from the stop
+        n, c = ceiling.size, coast_end.size
         envelope = np.empty((c, n))
         envelope[:, -1] = 0.0
         g = np.zeros(c)
@@ -154,6 +151,18 @@ class StagePlanner:
             g = np.sqrt(2.0 * np.where(braked > switch_energy, coasted, braked))
             g = np.minimum(g, ceiling[i])
             envelope[:, i] = g
+        return envelope
+
+    def programmes(self, s, ceiling, cruise_mps: np.ndarray) -> Programmes:
+        """One programme per cruise speed V1, integrated forwards from standstill over the
+        grid ``s`` under its envelope (numpy over the candidates)."""
+        tr = self.train
+        ds = s[1] - s[0]
+        n, c = s.size, cruise_mps.size
+        mid = s[:-1] + 0.5 * ds
+        path = tr.path_accel(mid)
+        coast_end = self.coast_end_speed(cruise_mps)
+        envelope = self._coast_brake_envelope(ds, ceiling, path, coast_end)
 
         v = np.empty((c, n))
         t = np.zeros((c, n))
