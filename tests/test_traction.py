@@ -144,6 +144,34 @@ def test_stopped_train_on_a_grade_holds_until_traction_exceeds_resistance(tmp_pa
     assert out.v_mps > 0.0 and out.x_m > 5000.0
 
 
+def test_the_brake_pipeline_delays_the_pneumatic_demand_and_lets_the_electric_brake_act_first():
+    """fmus/traction/brake_pipeline.py, the one pipeline of the plant and the ATO's copy: the
+    pneumatic brake gets a demand after its delay, less what the electric brake takes at once
+    (up to its curve, which fades at low speed), and builds up with its time constant."""
+    import math
+
+    from fmus.traction.brake_pipeline import BrakePipeline
+
+    def electric_brake(v_mps):
+        return 30.0 if v_mps > 3.0 else 0.0                        # fades below 3 m/s
+
+    pipeline = BrakePipeline(delay_s=8.0, time_constant_s=25.0, emergency_demand=100.0,
+                             electric_brake=electric_brake, due_tolerance_s=1e-12)
+    pipeline.command(2.0, 50.0, emergency=False)
+    pipeline.command(3.0, 50.0, emergency=False)                  # unchanged: nothing new queued
+    assert list(pipeline.events) == [(10.0, 50.0)] and pipeline.next_change_s() == 10.0
+    pipeline.take_due(9.9)
+    assert pipeline.delayed == 0.0 and pipeline.electric(20.0) == 30.0   # electric at once
+    pipeline.take_due(10.0)
+    assert pipeline.delayed == 50.0 and pipeline.next_change_s() == math.inf
+    assert pipeline.pneumatic_target(pipeline.electric(20.0)) == 20.0    # the rest
+    assert pipeline.pneumatic_target(pipeline.electric(1.0)) == 50.0     # electric faded
+    assert pipeline.relax(0.0, 50.0, 25.0) == pytest.approx(50.0 * (1.0 - math.exp(-1.0)))
+    assert pipeline.build_up_rate(0.0, 50.0) == pytest.approx(2.0)
+    pipeline.command(12.0, 50.0, emergency=True)
+    assert pipeline.electric(20.0) == 0.0 and list(pipeline.events) == [(20.0, 100.0)]
+
+
 def test_regenerative_braking_returns_energy_and_current(tmp_path):
     line = _line_variant(tmp_path, "ac", electrification={"system": "AC25000", "nominal_voltage_v": 25000})
     core = TractionCore(load_rolling_stock(DATA / "freight_vl80.json"), line, x0_m=3000.0, v0_mps=60 * KMH)
