@@ -86,7 +86,7 @@ def _relay_levels(ballast, node=None, broken=-1.0):
     core = _steady_carrier_core()
     k = 3
     faults = Faults(ballast, broken, False)
-    return core._relay_voltage(k, node, faults)
+    return core.bank.relay_voltage(k, node, faults)
 
 
 def test_normal_mode_relay_picks_up_at_minimum_ballast():

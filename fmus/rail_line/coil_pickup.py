@@ -1,0 +1,132 @@
+"""The receiver coils' pickup: code current in the rails → coil EMF per train (no FMI here;
+docs/rail_line.md).
+
+Coils ``coil_offset`` (1.5 m) ahead of the first wheelset, EMF = M·d/dt of the loop current
+they see, which is
+
+* over their own section, between the wheelset and the feed leads: the shunt current;
+* between the feed leads and the exit joint: nothing (the ≈ 1 m null zone);
+* over the next section, before the wheelset has crossed: that section's entry-end current,
+  weak because it is not shunted yet (the ≈ 1.5 m weak zone);
+
+averaged over the coil's sensitivity length, plus the traction interference under the coil
+(traction_interference.py). The time derivative is taken on the sampled current, so the motion
+term v·∂i/∂x is included. Positions outside the line are reported, not errors.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from fmus.rail_line.circuit_bank import FrameCurrents, TrackCircuitBank
+from fmus.rail_line.traction_interference import TractionInterference
+
+_COIL_POINTS = 5
+
+
+class CoilPickup:
+    def __init__(self, line_length_m: float, settings, trains: int, bank: TrackCircuitBank,
+                 interference: TractionInterference):
+        s = settings
+        self.settings, self.trains, self.bank, self.interference = s, trains, bank, interference
+        self.line_length_m = line_length_m
+        self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
+        self._emf_gain = s.fs_hz * s.coil_gain_h
+        self._last_current = np.zeros(trains)
+        self._sensing = np.zeros(trains, dtype=bool)
+        # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones
+        # and from each feed to its section's end, widened by the coil length
+        margin = s.coil_length_m
+        bands = sorted([(lo - margin, hi + margin) for lo, _, hi in bank.joint_zones] +
+                       [(c.feed_m - margin, c.end_m + margin) for c in bank.circuits])
+        merged: List[List[float]] = []
+        for lo, hi in bands:                    # touching or overlapping bands merged: disjoint, sorted
+            if merged and lo <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        self._band_lo = [lo for lo, _ in merged]
+        self._band_hi = [hi for _, hi in merged]
+
+    def sense(self, first: int, times: np.ndarray, anchors: List[Optional[Tuple[float, float, float]]],
+              currents: FrameCurrents, out) -> None:
+        """Every train's coil EMF, code current under its first wheelset, coil section and
+        off-line flag for the frame of sample index ``first`` (``times`` its sample times),
+        its head moving as x_k + v_k·(t − t_k) from its anchor; written into ``out``."""
+        s, bank, interference = self.settings, self.bank, self.interference
+        n = times.size
+        first_s, last_s = float(times[0]), float(times[-1])
+        ends, feeds = bank.ends_list, bank.feed_list
+        for j in range(self.trains):
+            # per sample from the anchor: the same positions for any frame length
+            x_k, v_k, t_k = anchors[j]
+            head_first, head_last = x_k + v_k * (first_s - t_k), x_k + v_k * (last_s - t_k)
+            out.coil_section[j] = bank.section_at(head_last + s.coil_offset_m) + 1
+            if head_last + s.coil_offset_m + s.coil_length_m < 0.0 or head_first > self.line_length_m:
+                out.off_line[j] = True                   # no coil over the line: nothing to sense
+                if self._sensing[j]:
+                    out.e_coil[j, :n] = 0.0
+                    out.i_axle[j] = 0.0
+                    self._sensing[j] = False
+                continue
+            out.off_line[j] = head_last < 0 or head_last > self.line_length_m
+            head = x_k + v_k * (times - t_k)
+            k = bank.section_at(head_first)
+            first_coil = head_first + s.coil_offset_m + self._coil_spread[0]
+            last_coil = head_last + s.coil_offset_m + self._coil_spread[-1]
+            if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
+                    and not self._near_joint(first_coil, last_coil)):
+                # the usual frame: wheelset and whole coil over the same section, clear of joints
+                shunt_current = currents.shunt(k) * bank.scale(k, head)
+                current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
+                i_axle = shunt_current
+            else:
+                current, i_axle = self._coil_general(j, first, times, head, currents)
+            self._emf(out.e_coil[j], j, current, n)
+            out.i_axle[j] = math.sqrt(float(np.dot(i_axle, i_axle)) / n)
+
+    def _emf(self, emf: np.ndarray, j: int, current: np.ndarray, n: int) -> None:
+        """EMF = M·di/dt on the sampled current, continuing from the previous frame's last sample."""
+        previous = self._last_current[j] if self._sensing[j] else current[0]   # no step at the first sample
+        emf[0] = current[0] - previous
+        np.subtract(current[1:], current[:-1], out=emf[1:n])
+        emf[:n] *= self._emf_gain
+        self._last_current[j] = current[-1]
+        self._sensing[j] = True
+
+    def _near_joint(self, lo: float, hi: float) -> bool:
+        """Does [lo, hi] touch a joint band (bands merged, sorted, disjoint)?"""
+        i = bisect.bisect_right(self._band_hi, lo)         # first band ending after lo
+        return i < len(self._band_lo) and self._band_lo[i] <= hi
+
+    def _coil_general(self, j: int, first: int, times: np.ndarray, head: np.ndarray, currents: FrameCurrents):
+        """Sample by sample, the share of the coil's sensitivity window over each stretch of
+        rail: its own section up to the feed leads (shunt current), the dead end from the leads to
+        the joint (nothing), the next section's entry end (its unshunted current)."""
+        s, bank = self.settings, self.bank
+        n = times.size
+        axle_section = bank.section_of(head)
+        centre = head + s.coil_offset_m
+        lo, hi = centre - 0.5 * s.coil_length_m, centre + 0.5 * s.coil_length_m
+        width = max(s.coil_length_m, 1e-9)
+
+        def share(a, b):
+            return np.clip(np.minimum(hi, b) - np.maximum(lo, a), 0.0, None) / width if s.coil_length_m > 0 \
+                else ((centre >= a) & (centre < b)).astype(float)
+        seen = np.zeros(n)
+        i_axle = np.zeros(n)
+        for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
+            own = axle_section == k
+            shunt_current = currents.shunt(k) * bank.scale(k, head)
+            i_axle = np.where(own, shunt_current, i_axle)
+            view = share(-np.inf, bank.circuits[k].feed_m) * shunt_current
+            if k + 1 < bank.count:
+                beyond = share(bank.ends[k], np.inf)
+                if beyond.any():
+                    view = view + beyond * currents.entry(k + 1)
+            seen = np.where(own, view, seen)
+        coil = centre[None, :] + self._coil_spread[:, None]
+        return seen + self.interference.under_coil(j, first, times, coil), i_axle
