@@ -1,7 +1,8 @@
 """System graph: components resolved against their FMUs, checked connections, rates, order.
 
 Pure data and checks: nothing here steps an FMU. Every defect is a UserError naming the
-file and line of the SSD element it comes from.
+file and line of the SSD element it comes from. :func:`graph_of` builds a graph in memory,
+without an SSD or FMU files (slaves that are not FMUs: tests, studies).
 """
 from __future__ import annotations
 
@@ -9,10 +10,12 @@ import math
 import os
 from dataclasses import dataclass, field
 from functools import reduce
-from typing import Dict, List, Tuple
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
+from orchestrator.protocols import TRANSITIONS, Transition
 from orchestrator.ssp import Connection, SystemDescription, convert_unit
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
@@ -43,7 +46,7 @@ class Edge:
     target_var: Variable
     factor: float
     offset: float
-    transition: str
+    transition: Transition
     origin: str
 
 
@@ -80,13 +83,13 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
                                 f"{ctype} but the FMU has {var.type}")
         units = {**interface.units, **system.units}
         for value in comp.parameters:
-            _bind_parameter(nodes[comp.name], value.name, value, units, system.folder)
+            _bind_parameter(nodes[comp.name], value.name, value, units)
     for value in list(system.system_parameters) + list(extra_parameters):
         comp_name, _, var_name = value.name.partition(".")
         if comp_name not in nodes or not var_name:
             raise UserError(f"{value.origin}: parameter {value.name!r} names no component of the system")
         units = {**nodes[comp_name].interface.units, **system.units}
-        _bind_parameter(nodes[comp_name], var_name, value, units, system.folder)
+        _bind_parameter(nodes[comp_name], var_name, value, units)
     for key, raw in (overrides or {}).items():
         comp_name, _, var_name = key.partition(".")
         node = nodes.get(comp_name)
@@ -97,11 +100,59 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         if var.causality not in ("parameter", "input"):
             raise UserError(f"--set {key}: {var.causality} variables cannot be set")
         node.parameters[var_name] = _parse_value(var, raw, f"--set {key}")
+    for node in nodes.values():
+        for name, value in node.parameters.items():
+            if name.endswith("_file"):
+                node.parameters[name] = resolve_data_file(value, system.folder)
 
     edges = [_edge(system, nodes, conn) for conn in system.connections]
-    base = _base_ticks(system, nodes)
+    base = _base_ticks(nodes, system.base_step_s, f"{system.ssd_path}: BaseStep")
     order, cycles = _order(list(nodes), edges)
     return SystemGraph(system.name, nodes, edges, order, base, cycles)
+
+
+def resolve_data_file(value, system_folder: Path):
+    """The one rule for a relative ``*_file`` parameter (docs/interfaces.md, SSP conventions,
+    "Data files"): a file in the system's resources/ folder, else in the system folder;
+    anything else (an absolute path, an empty value for the bundled default, a name found in
+    neither) is left as given, for the FMU to resolve against its own resources."""
+    if not isinstance(value, str) or not value or os.path.isabs(value):
+        return value
+    for folder in (Path(system_folder) / "resources", Path(system_folder)):
+        if (folder / value).is_file():
+            return str((folder / value).resolve())
+    return value
+
+
+def graph_of(name: str, components: Sequence[Tuple[str, Interface, float]],
+             connections: Sequence[tuple], base_step_s: Optional[float] = None) -> SystemGraph:
+    """A graph built in memory from its parts, with the checks and the ordering of
+    :func:`build_graph` (no SSD, no FMU files, no units, no parameters).
+
+    ``components``: (name, interface, step in s) in declaration order (it breaks cycles);
+    ``connections``: ("source.output", "target.input") or ("source.output", "target.input",
+    transition)."""
+    nodes: Dict[str, Node] = {}
+    for component, interface, step_s in components:
+        origin = f"{name}: component {component!r}"
+        nodes[component] = Node(component, interface, "", seconds_to_ticks(step_s, f"{origin}: step size"), origin)
+    edges = []
+    for index, (start, end, *rest) in enumerate(connections):
+        origin = f"{name}: connection {index} ({start} → {end})"
+        transition = rest[0] if rest else "hold"
+        if transition not in TRANSITIONS:
+            raise UserError(f"{origin}: rate transition {transition!r} unknown (use {', '.join(TRANSITIONS)})")
+        ends = []
+        for path, role in ((start, "start"), (end, "end")):
+            element, _, connector = path.partition(".")
+            ends.append(_connection_end(nodes, element, connector, role, origin))
+        (src, svar), (dst, dvar) = ends
+        _check_connection(src, svar, dst, dvar, origin)
+        _check_transition(svar, transition, origin)
+        edges.append(Edge(src.name, svar, dst.name, dvar, 1.0, 0.0, transition, origin))
+    base = _base_ticks(nodes, base_step_s, f"{name}: base step")
+    order, cycles = _order(list(nodes), edges)
+    return SystemGraph(name, nodes, edges, order, base, cycles)
 
 
 def _parse_value(var: Variable, raw, what: str):
@@ -121,7 +172,7 @@ def _parse_value(var: Variable, raw, what: str):
     return raw
 
 
-def _bind_parameter(node: Node, var_name: str, value, units, system_folder=None) -> None:
+def _bind_parameter(node: Node, var_name: str, value, units) -> None:
     var = node.interface.variables.get(var_name)
     if var is None:
         raise UserError(f"{value.origin}: parameter {var_name!r} does not exist in component {node.name!r}")
@@ -131,37 +182,47 @@ def _bind_parameter(node: Node, var_name: str, value, units, system_folder=None)
     if var.type != value.type:
         raise UserError(f"{value.origin}: {node.name}.{var_name} is {var.type}, the binding gives {value.type}")
     result = value.value
-    if var.type == "String" and var_name.endswith("_file") and result and not os.path.isabs(result) \
-            and system_folder is not None and (system_folder / result).exists():
-        result = str((system_folder / result).resolve())   # DESIGN §5: relative to the system
     if var.type == "Real":
         factor, offset = convert_unit(value.unit, var.unit, units, value.origin)
         result = result * factor + offset
     node.parameters[var_name] = result
 
 
-def _edge(system: SystemDescription, nodes: Dict[str, Node], conn: Connection) -> Edge:
-    ends = []
-    for element, connector, role in ((conn.start_element, conn.start_connector, "start"),
-                                     (conn.end_element, conn.end_connector, "end")):
-        node = nodes.get(element)
-        if node is None:
-            raise UserError(f"{conn.origin}: connection {role} names component {element!r}, "
-                            "which is not in the system")
-        var = node.interface.variables.get(connector)
-        if var is None:
-            raise UserError(f"{conn.origin}: connection {role} {element}.{connector} does not exist")
-        ends.append((node, var))
-    (src, svar), (dst, dvar) = ends
+def _connection_end(nodes: Dict[str, Node], element: str, connector: str, role: str,
+                    origin: str) -> Tuple[Node, Variable]:
+    node = nodes.get(element)
+    if node is None:
+        raise UserError(f"{origin}: connection {role} names component {element!r}, "
+                        "which is not in the system")
+    var = node.interface.variables.get(connector)
+    if var is None:
+        raise UserError(f"{origin}: connection {role} {element}.{connector} does not exist")
+    return node, var
+
+
+def _check_connection(src: Node, svar: Variable, dst: Node, dvar: Variable, origin: str) -> None:
     if svar.causality != "output":
-        raise UserError(f"{conn.origin}: connection starts at {src.name}.{svar.name}, which is "
+        raise UserError(f"{origin}: connection starts at {src.name}.{svar.name}, which is "
                         f"an {svar.causality}, not an output")
     if dvar.causality != "input":
-        raise UserError(f"{conn.origin}: connection ends at {dst.name}.{dvar.name}, which is "
+        raise UserError(f"{origin}: connection ends at {dst.name}.{dvar.name}, which is "
                         f"an {dvar.causality}, not an input")
     if svar.type != dvar.type:
-        raise UserError(f"{conn.origin}: type mismatch: {src.name}.{svar.name} is {svar.type}, "
+        raise UserError(f"{origin}: type mismatch: {src.name}.{svar.name} is {svar.type}, "
                         f"{dst.name}.{dvar.name} is {dvar.type}")
+
+
+def _check_transition(svar: Variable, transition: str, origin: str) -> None:
+    if transition != "hold" and svar.type != "Real":
+        raise UserError(f"{origin}: rate transition {transition!r} needs Real values")
+
+
+def _edge(system: SystemDescription, nodes: Dict[str, Node], conn: Connection) -> Edge:
+    (src, svar), (dst, dvar) = (
+        _connection_end(nodes, element, connector, role, conn.origin)
+        for element, connector, role in ((conn.start_element, conn.start_connector, "start"),
+                                         (conn.end_element, conn.end_connector, "end")))
+    _check_connection(src, svar, dst, dvar, conn.origin)
     factor, offset = conn.factor, conn.offset
     if (factor, offset) != (1.0, 0.0) and svar.type != "Real":
         raise UserError(f"{conn.origin}: LinearTransformation applies to Real connections only")
@@ -171,16 +232,17 @@ def _edge(system: SystemDescription, nodes: Dict[str, Node], conn: Connection) -
         # then the result is converted to the end connector's unit.
         unit_factor, unit_offset = convert_unit(svar.unit, dvar.unit, units, conn.origin)
         factor, offset = factor * unit_factor, offset * unit_factor + unit_offset
-    if conn.transition != "hold" and svar.type != "Real":
-        raise UserError(f"{conn.origin}: rate transition {conn.transition!r} needs Real values")
+    _check_transition(svar, conn.transition, conn.origin)
     return Edge(src.name, svar, dst.name, dvar, factor, offset, conn.transition, conn.origin)
 
 
-def _base_ticks(system: SystemDescription, nodes: Dict[str, Node]) -> int:
+def _base_ticks(nodes: Dict[str, Node], base_step_s: Optional[float], where: str) -> int:
+    """The declared base step, checked against every component's step; by default their
+    greatest common divisor."""
     steps = [n.step_ticks for n in nodes.values()]
-    if system.base_step_s is None:
+    if base_step_s is None:
         return reduce(math.gcd, steps)
-    base = seconds_to_ticks(system.base_step_s, f"{system.ssd_path}: BaseStep")
+    base = seconds_to_ticks(base_step_s, where)
     for node in nodes.values():
         if node.step_ticks % base:
             raise UserError(f"{node.origin}: step size {node.step_ticks / TICKS_PER_SECOND:g} s of "

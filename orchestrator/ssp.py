@@ -22,6 +22,7 @@ from typing import Dict, List, Optional, Tuple
 from lxml import etree
 
 from orchestrator.errors import UserError, where
+from orchestrator.protocols import TRANSITIONS
 
 NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -33,7 +34,7 @@ RCS_ANNOTATION = "org.railcosim"
 RCS_NS = "http://railcosim.org/SSP/1"
 OSP_ANNOTATION = "com.opensimulationplatform"
 OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
-RATE_TRANSITIONS = ("hold", "linear", "mean")
+RATE_TRANSITIONS = TRANSITIONS            # hold, linear, mean (orchestrator/protocols.py)
 _SCHEMAS: Dict[str, etree.XMLSchema] = {}
 
 
