@@ -107,3 +107,10 @@ def test_step_failure_mid_run_keeps_results(tmp_path, test_fmus):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is False and "clock" in summary["error"]
     assert summary["sim_time_s"] == pytest.approx(1.0)
+
+
+def test_parameter_outside_its_declared_range_names_the_port(tmp_path, product_fmus):
+    """Through FMI: the facade's range check refuses it at exitInitializationMode, in the port's name."""
+    code, _, stderr = railcosim("run", "ato_only", "--no-build", "--output", tmp_path / "out",
+                                "--set", "train.mass_scale=0.05")
+    _expect_error(code, stderr, "train", "mass_scale = 0.05 is below its minimum 0.1")
