@@ -1,8 +1,8 @@
 """Slaves the master steps: an FMU through fmpy, or a facade in-process without FMI.
 
-Both expose the same small interface (preallocated value buffers per FMI type, step, read,
-write), so the master does not know which it drives. The in-process slave is the
-performance reference ("the limit", DESIGN §9) and a debugging aid.
+Both implement the slave protocol (orchestrator/protocols.py: preallocated value buffers per
+FMI type, step, read, write), so the master does not know which it drives. The in-process
+slave is the performance reference (docs/performance.md) and a debugging aid.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from orchestrator.errors import SimulationError, UserError
+from orchestrator.protocols import Causality, Slave
 from orchestrator.ssp import UnitDef, safe_extract
 
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
@@ -30,7 +31,7 @@ class Variable:
     name: str
     vr: int
     type: str
-    causality: str
+    causality: Causality
     variability: str
     unit: Optional[str]
     start: object
@@ -140,7 +141,7 @@ def _make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
     return {t: ValueBuffer(t, vrs) for t, vrs in table.items() if vrs}
 
 
-class FmuSlave:
+class FmuSlave(Slave):
     """One FMU instance driven through fmpy's ctypes functions with preallocated buffers."""
 
     in_process = False
@@ -330,7 +331,7 @@ def _release_library(unzip_dir: Path) -> bool:
     return _LIVE_LIBRARIES[key] <= 0
 
 
-class InProcessSlave:
+class InProcessSlave(Slave):
     """The same facade class, driven directly in this interpreter (no FMI, no ctypes)."""
 
     in_process = True
@@ -348,6 +349,8 @@ class InProcessSlave:
         self._resources = str(resources)
         self.messages: List[str] = []
         self._slave = None
+        self.inputs: Dict[str, ValueBuffer] = {}
+        self.outputs: Dict[str, ValueBuffer] = {}
 
     def instantiate(self) -> None:
         self._slave = self._class(instance_name=self.name, resources=self._resources)
@@ -418,7 +421,7 @@ class InProcessSlave:
         self._slave = None
 
 
-def make_slave(name: str, fmu_path: Path, interface: Interface, workdir: Path, in_process: bool):
+def make_slave(name: str, fmu_path: Path, interface: Interface, workdir: Path, in_process: bool) -> Slave:
     if in_process:
         return InProcessSlave(name, fmu_path, interface, workdir)
     return FmuSlave(name, fmu_path, interface, workdir)

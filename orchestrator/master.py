@@ -1,46 +1,60 @@
 """Multi-rate fixed-step master algorithm on integer nanosecond ticks.
 
 The algorithm only steps slaves and moves values along links; loading is ssp.py/graph.py,
-recording is observers.py, timed events are manipulators (hooks called before each tick).
+recording is observers.py, timed events are manipulators (orchestrator/protocols.py says what
+each plug-in provides; docs/architecture.md, "Master algorithm").
 
-Semantics (DESIGN §3): a component with step h (a whole multiple of the base step) steps
-at every tick T with T % h == 0, from T to T + h. Gauss-Seidel (default) visits the due
-components in data-flow order, so a consumer in the same macro step sees what its producer
-has just computed (no latency along a chain). Jacobi first gathers every due component's
-inputs, then steps them all: each hop adds one step of latency.
+Semantics (docs/interfaces.md, "Time and frames"): a component with step h (a whole multiple of
+the base step) steps at every tick T with T % h == 0, from T to T + h. Every component steps
+through one sequence: gather its inputs (and let manipulators adjust them) → write them →
+doStep → read what is needed of its outputs (and let manipulators adjust them) → tell the
+interpolating links of the new source value. Gauss-Seidel (default) runs the whole sequence for
+one due component after the other, in data-flow order, so a consumer in the same macro step
+sees what its producer has just computed (no latency along a chain). Jacobi runs each stage for
+every due component before the next stage: all inputs are gathered before anything steps, so
+each hop adds one step of latency.
 Rate transitions per connection: hold (latest value), linear (extrapolated from the last
 two values of the source to the consumer's step start), mean (average of the source's
 values since the consumer last read).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence
+import math
+from typing import Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, StepRecord, Transition
 
-ALGORITHMS = ("gauss-seidel", "jacobi")
+__all__ = ["ALGORITHMS", "Algorithm", "Link", "Master"]
+
+#: schedules of distinct tick phases kept (a general multi-rate layout past that is planned per tick)
+_MAX_PLANS = 4096
 
 
-@dataclass
 class Link:
-    """All connections from one source to one target of one type and transition kind."""
+    """All connections from one source to one target of one FMI type and one transition kind:
+    index arrays into the two components' buffers and the scratch the hot path works in."""
 
-    source: str
-    target: str
-    type: str
-    transition: str
-    source_index: np.ndarray   # slots in the source's output buffer
-    target_index: np.ndarray   # slots in the target's input buffer
-    factor: Optional[np.ndarray]
-    offset: Optional[np.ndarray]
+    __slots__ = ("source", "target", "type", "transition", "source_index", "target_index", "factor",
+                 "offset", "scratch", "source_values", "target_values", "source_slave", "source_stale",
+                 "type_only", "gather", "current", "previous", "current_t", "previous_t", "sum", "count",
+                 "slope", "slope_t")
 
-    def __post_init__(self):
-        n = len(self.source_index)
-        # scratch for the hot path: hold links move values without allocating
-        self.scratch = np.zeros(n, dtype=np.float64 if self.type == "Real" else np.intc)
+    def __init__(self, source: str, target: str, type_name: str, transition: Transition,
+                 source_index: np.ndarray, target_index: np.ndarray,
+                 factor: Optional[np.ndarray], offset: Optional[np.ndarray]):
+        self.source, self.target, self.type, self.transition = source, target, type_name, transition
+        self.source_index, self.target_index = source_index, target_index
+        self.factor, self.offset = factor, offset
+        n = len(source_index)
+        # scratch for the hot path: a hold link moves values without allocating
+        self.scratch = np.zeros(n, dtype=np.float64 if type_name == "Real" else np.intc)
+        self.type_only = (type_name,)
+        # the kind is chosen once, not tested at every gather
+        self.gather = {"hold": self._gather_hold, "linear": self._gather_linear,
+                       "mean": self._gather_mean}[transition]
         self.current = np.zeros(n)
         self.previous = np.zeros(n)
         self.current_t: Optional[float] = None
@@ -49,45 +63,82 @@ class Link:
         self.count = 0
         self.slope = np.zeros(n)
         self.slope_t: Optional[float] = None
+        self.source_values = self.target_values = self.source_slave = self.source_stale = None
 
-    def source_updated(self, values: np.ndarray, time_s: float) -> None:
+    def attach(self, source_slave: Slave, target_slave: Slave, source_stale: set) -> None:
+        """Resolve the buffers once the slaves are bound (they never move afterwards)."""
+        self.source_slave, self.source_stale = source_slave, source_stale
+        self.source_values = source_slave.outputs[self.type].values
+        self.target_values = target_slave.inputs[self.type].values
+
+    def source_updated(self, time_s: float) -> None:
+        """The source has new values at ``time_s`` (linear and mean links track them)."""
         if self.transition == "linear":
             self.previous, self.previous_t = self.current, self.current_t
-            self.current, self.current_t = values[self.source_index].astype(float), time_s
+            self.current, self.current_t = self.source_values[self.source_index].astype(float), time_s
         elif self.transition == "mean":
-            self.sum += values[self.source_index]
+            self.sum += self.source_values[self.source_index]
             self.count += 1
 
-    def gather(self, source_values, target_values, time_s: float) -> None:
-        if self.transition == "hold":
-            value = np.take(source_values, self.source_index, out=self.scratch)
-        elif self.transition == "linear":
-            if self.previous_t is not None and self.current_t > self.previous_t:
-                if self.slope_t != self.current_t:       # once per source step
-                    self.slope = (self.current - self.previous) / (self.current_t - self.previous_t)
-                    self.slope_t = self.current_t
-                value = np.multiply(self.slope, time_s - self.current_t, out=self.scratch)
-                value += self.current
-            else:
-                value = self.current
-        else:
-            if self.count:
-                value = self.sum / self.count
-                self.sum[:] = 0.0
-                self.count = 0
-            else:
-                value = source_values[self.source_index]
+    def _gather_hold(self, time_s: float) -> None:
+        value = np.take(self.source_values, self.source_index, out=self.scratch)
         if self.factor is not None:
             value = np.multiply(value, self.factor, out=self.scratch)
             value += self.offset
-        target_values[self.target_index] = value
+        self.target_values[self.target_index] = value
+
+    def _gather_linear(self, time_s: float) -> None:
+        if self.previous_t is not None and self.current_t > self.previous_t:
+            if self.slope_t != self.current_t:       # once per source step
+                self.slope = (self.current - self.previous) / (self.current_t - self.previous_t)
+                self.slope_t = self.current_t
+            value = np.multiply(self.slope, time_s - self.current_t, out=self.scratch)
+            value += self.current
+        else:
+            value = self.current
+        self._deliver(value)
+
+    def _gather_mean(self, time_s: float) -> None:
+        if self.count:
+            value = self.sum / self.count
+            self.sum[:] = 0.0
+            self.count = 0
+        else:
+            value = self.source_values[self.source_index]
+        self._deliver(value)
+
+    def _deliver(self, value: np.ndarray) -> None:
+        if self.factor is not None:
+            value = np.multiply(value, self.factor, out=self.scratch)
+            value += self.offset
+        self.target_values[self.target_index] = value
+
+
+class _Component:
+    """One component as the step sequence needs it, every lookup resolved once."""
+
+    __slots__ = ("name", "slave", "step_ticks", "step_s", "links_in", "tracked_links", "adjust_inputs",
+                 "adjust_outputs", "output_types", "eager_types", "stale")
+
+    def __init__(self, name: str, slave: Slave, step_ticks: int):
+        self.name, self.slave, self.step_ticks = name, slave, step_ticks
+        self.step_s = step_ticks / TICKS_PER_SECOND
+        self.links_in: Tuple[Link, ...] = ()
+        self.tracked_links: Tuple[Link, ...] = ()     # links from it that interpolate or average
+        self.adjust_inputs: Tuple = ()
+        self.adjust_outputs: Tuple = ()
+        self.output_types: frozenset = frozenset()
+        # output types read right after each step; None: all of them (a manipulator adjusts them)
+        self.eager_types: Optional[Tuple[str, ...]] = ()
+        self.stale: set = set()                       # output types not read since the last step
 
 
 class Master:
-    """Steps the slaves of a graph from start to stop; observers and manipulators plug in."""
+    """Steps the slaves of a graph from start to stop; observers and manipulators plug in
+    (orchestrator/protocols.py)."""
 
-    def __init__(self, graph: SystemGraph, slaves: Dict[str, object], algorithm: str = "gauss-seidel",
-                 observers: Sequence[object] = (), manipulators: Sequence[object] = ()):
+    def __init__(self, graph: SystemGraph, slaves: Mapping[str, Slave], algorithm: Algorithm = "gauss-seidel",
+                 observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = ()):
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}")
         self.graph = graph
@@ -97,18 +148,28 @@ class Master:
         self.manipulators = list(manipulators)
         self.steps_taken = {name: 0 for name in graph.nodes}
         self.time_ticks = 0
+        self._components = {name: _Component(name, slaves[name], graph.nodes[name].step_ticks)
+                            for name in graph.order}
 
     # ---- setup ------------------------------------------------------------------------------
-    def bind(self, extra_outputs: Dict[str, List[str]] = None, extra_inputs: Dict[str, List[str]] = None) -> None:
-        """Preallocate every buffer and link once; nothing is allocated on the hot path.
-        ``extra_inputs``: unconnected inputs a manipulator writes."""
-        extra_outputs = extra_outputs or {}
+    def bind(self, extra_outputs: Mapping[str, Sequence[str]] = None,
+             extra_inputs: Mapping[str, Sequence[str]] = None) -> None:
+        """Lay out every buffer and link once; nothing is allocated on the hot path. Besides the
+        connections, the buffers hold what observers and manipulators say they need and
+        ``extra_outputs`` / ``extra_inputs`` (unconnected inputs a caller writes)."""
+        wanted_outputs: Dict[str, List[str]] = {}
+        wanted_inputs: Dict[str, List[str]] = {}
+        for table, more in ((wanted_outputs, extra_outputs), (wanted_inputs, extra_inputs)):
+            for name, variables in (more or {}).items():
+                table.setdefault(name, []).extend(variables)
+        for plugin in self.observers:
+            for name, variables in plugin.outputs_needed().items():
+                wanted_outputs.setdefault(name, []).extend(variables)
         for manipulator in self.manipulators:
-            for name, variables in getattr(manipulator, "outputs_needed", dict)().items():
-                extra_outputs.setdefault(name, []).extend(variables)
-            for name, variables in getattr(manipulator, "inputs_needed", dict)().items():
-                extra_inputs = extra_inputs or {}
-                extra_inputs.setdefault(name, []).extend(variables)
+            for name, variables in manipulator.outputs_needed().items():
+                wanted_outputs.setdefault(name, []).extend(variables)
+            for name, variables in manipulator.inputs_needed().items():
+                wanted_inputs.setdefault(name, []).extend(variables)
         inputs = {n: {} for n in self.graph.nodes}
         outputs = {n: {} for n in self.graph.nodes}
 
@@ -124,14 +185,11 @@ class Master:
             grouped.setdefault(key, []).append(
                 (slot(outputs, edge.source, edge.source_var), slot(inputs, edge.target, edge.target_var),
                  edge.factor, edge.offset))
-        for name, variables in extra_outputs.items():
-            node = self.graph.nodes[name]
-            for var_name in variables:
-                slot(outputs, name, node.interface.variables[var_name])
-        for name, variables in (extra_inputs or {}).items():
-            node = self.graph.nodes[name]
-            for var_name in variables:
-                slot(inputs, name, node.interface.variables[var_name])
+        for table, wanted in ((outputs, wanted_outputs), (inputs, wanted_inputs)):
+            for name, variables in wanted.items():
+                node = self.graph.nodes[name]
+                for var_name in variables:
+                    slot(table, name, node.interface.variables[var_name])
         self._buffer_layout = (inputs, outputs)  # slaves get their buffers once instantiated
         self.links: List[Link] = []
         for (source, target, type_name, transition), rows in grouped.items():
@@ -140,23 +198,39 @@ class Master:
             self.links.append(Link(source, target, type_name, transition, src.astype(np.int64),
                                    dst.astype(np.int64), factor if scaled else None,
                                    offset if scaled else None))
-        self.links_into = {n: [l for l in self.links if l.target == n] for n in self.graph.nodes}
-        self.links_from = {n: [l for l in self.links if l.source == n and l.transition != "hold"]
-                           for n in self.graph.nodes}
+        adjusted_inputs: Dict[str, list] = {}
+        adjusted_outputs: Dict[str, list] = {}
+        for manipulator in self.manipulators:
+            input_components, output_components = manipulator.adjusted_components()
+            for name in input_components:
+                adjusted_inputs.setdefault(name, []).append(manipulator.adjust_inputs)
+            for name in output_components:
+                adjusted_outputs.setdefault(name, []).append(manipulator.adjust_outputs)
+        for name, component in self._components.items():
+            component.links_in = tuple(link for link in self.links if link.target == name)
+            component.tracked_links = tuple(link for link in self.links
+                                            if link.source == name and link.transition != "hold")
+            component.adjust_inputs = tuple(adjusted_inputs.get(name, ()))
+            component.adjust_outputs = tuple(adjusted_outputs.get(name, ()))
+            # read after every step: the types a linear or mean link tracks; everything when a
+            # manipulator adjusts the outputs (all read at once); the rest on demand
+            component.eager_types = None if name in adjusted_outputs else \
+                tuple({link.type for link in component.tracked_links})
 
     def fresh(self, component: str, type_name: Optional[str] = None) -> None:
         """Make a component's output buffers (or those of one FMI type) current. Outputs are
         read from a slave when something needs them, not after every step: an FMI get is a
         call into the FMU per type, and most outputs of the signal chain are looked at only
         at the recorder's or a verdict's interval."""
-        stale = self._stale[component]
+        entry = self._components[component]
+        stale = entry.stale
         if not stale:
             return
         if type_name is None:
-            self.slaves[component].read_outputs(tuple(stale))
+            entry.slave.read_outputs(tuple(stale))
             stale.clear()
         elif type_name in stale:
-            self.slaves[component].read_outputs((type_name,))
+            entry.slave.read_outputs((type_name,))
             stale.discard(type_name)
 
     def fresh_all(self) -> None:
@@ -172,123 +246,118 @@ class Master:
 
     # ---- lifecycle ---------------------------------------------------------------------------
     def initialize(self, start_time_s: float, stop_time_s: Optional[float]) -> None:
-        order = self.graph.order
-        for name in order:
-            slave = self.slaves[name]
+        components = [self._components[name] for name in self.graph.order]
+        inputs, outputs = self._buffer_layout
+        for component in components:
+            slave, name = component.slave, component.name
             slave.instantiate()
-            slave.bind(self._buffer_layout[0][name], self._buffer_layout[1][name])
+            slave.bind(inputs[name], outputs[name])
             slave.setup_experiment(start_time_s, stop_time_s)
             if self.graph.nodes[name].parameters:
                 slave.set_values(self.graph.nodes[name].parameters)
-        self._output_types = {name: set(self.slaves[name].outputs) for name in order}
-        self._stale = {name: set() for name in order}
-        self._eager_types = {name: tuple({link.type for link in self.links_from[name]}) for name in order}
-        for manipulator in self.manipulators:
-            if hasattr(manipulator, "components"):
-                for name in manipulator.components()[1]:
-                    self._eager_types[name] = None          # adjusted outputs: read them all at once
-        for name in order:
-            self.slaves[name].enter_initialization()
-        for name in order:  # initial exchange along the data flow
-            self._gather(name, start_time_s)
-            self.slaves[name].write_inputs()
-            self.slaves[name].read_outputs()
-        for name in order:
-            self.slaves[name].exit_initialization()
-            self.slaves[name].read_outputs()
-            self._source_updated(name, start_time_s)
+        for component in components:
+            component.output_types = frozenset(component.slave.outputs)
+        for link in self.links:
+            source = self._components[link.source]
+            link.attach(source.slave, self.slaves[link.target], source.stale)
+        for component in components:
+            component.slave.enter_initialization()
+        for component in components:  # initial exchange along the data flow
+            self._gather(component, start_time_s)
+            component.slave.write_inputs()
+            component.slave.read_outputs()
+        for component in components:
+            component.slave.exit_initialization()
+            component.slave.read_outputs()
+            for link in component.tracked_links:
+                link.source_updated(start_time_s)
         self.time_ticks = round(start_time_s * TICKS_PER_SECOND)
         for manipulator in self.manipulators:
-            if hasattr(manipulator, "bound"):
-                manipulator.bound(self)
+            manipulator.bound(self)
+        start = StepRecord(self.time_ticks, self.time_ticks / TICKS_PER_SECOND, frozenset())
         for observer in self.observers:
-            observer.started(self, self.time_ticks)
+            observer.started(self, start)
 
-    def _gather(self, name: str, time_s: float) -> None:
-        slave = self.slaves[name]
-        stale = self._stale
-        for link in self.links_into[name]:
-            if link.type in stale[link.source]:
-                self.fresh(link.source, link.type)
-            link.gather(self.slaves[link.source].outputs[link.type].values,
-                        slave.inputs[link.type].values, time_s)
+    # ---- the step sequence: every component goes through these three stages in this order ---
+    def _gather(self, component: _Component, time_s: float) -> None:
+        """Stage 1: the component's inputs from its links (and the manipulators' adjustments)."""
+        for link in component.links_in:
+            stale = link.source_stale
+            if link.type in stale:               # the source's outputs are read on demand
+                link.source_slave.read_outputs(link.type_only)
+                stale.discard(link.type)
+            link.gather(time_s)
+        for adjust in component.adjust_inputs:
+            adjust(component.name)
 
-    def _stepped(self, name: str, slave) -> None:
-        """After a step: read what is needed at once (links that interpolate or average the
-        source, manipulators that adjust the outputs); the rest is read on demand."""
-        eager = self._eager_types[name]
+    def _step(self, component: _Component, time_s: float) -> None:
+        """Stage 2: write the inputs, step from ``time_s`` by the component's own step."""
+        component.slave.write_inputs()
+        component.slave.do_step(time_s, component.step_s)
+        self.steps_taken[component.name] += 1
+
+    def _conclude(self, component: _Component, tick: int) -> None:
+        """Stage 3: read what must be read at once (what linear and mean links track, or all
+        that a manipulator adjusts; the rest on demand), then update the tracking links."""
+        slave = component.slave
+        eager = component.eager_types
         if eager is None:
             slave.read_outputs()
         else:
-            self._stale[name].update(self._output_types[name])
+            stale = component.stale
+            stale.update(component.output_types)
             if eager:
                 slave.read_outputs(eager)
-                self._stale[name].difference_update(eager)
+                stale.difference_update(eager)
+        for adjust in component.adjust_outputs:
+            adjust(component.name)
+        if component.tracked_links:
+            end_s = (tick + component.step_ticks) / TICKS_PER_SECOND
+            for link in component.tracked_links:
+                link.source_updated(end_s)
 
-    def _source_updated(self, name: str, time_s: float) -> None:
-        for link in self.links_from[name]:
-            link.source_updated(self.slaves[name].outputs[link.type].values, time_s)
+    def _plan(self, tick: int) -> Tuple[Tuple[Tuple[_Component, ...], ...], FrozenSet[str]]:
+        """The components due at ``tick``, grouped: Gauss-Seidel one group per component (each
+        goes through all three stages before the next starts), Jacobi one group of all (each
+        stage for all before the next stage)."""
+        due = tuple(c for c in (self._components[name] for name in self.graph.order) if tick % c.step_ticks == 0)
+        groups = tuple((c,) for c in due) if self.algorithm == "gauss-seidel" else ((due,) if due else ())
+        return groups, frozenset(c.name for c in due)
 
     def run_until(self, stop_ticks: int) -> None:
-        graph, slaves = self.graph, self.slaves
-        base = graph.base_ticks
-        schedule = [(name, graph.nodes[name].step_ticks, slaves[name]) for name in graph.order]
-        gauss_seidel = self.algorithm == "gauss-seidel"
-        steps_taken = self.steps_taken
-        observers = [o for o in self.observers if hasattr(o, "after_tick")]
+        base = self.graph.base_ticks
+        # the due components repeat with the least common multiple of the steps: one plan per
+        # phase, made once (a layout with too many phases is planned at each tick)
+        period = math.lcm(*(c.step_ticks for c in self._components.values())) if self._components else base
+        plans: Dict[int, tuple] = {}
         manipulators = self.manipulators
-        # components whose inputs / outputs a manipulator adjusts after each gather / read
-        adjust_in: Dict[str, list] = {}
-        adjust_out: Dict[str, list] = {}
-        for manipulator in manipulators:
-            if hasattr(manipulator, "components"):
-                ins, outs = manipulator.components()
-                for name in ins:
-                    adjust_in.setdefault(name, []).append(manipulator.adjust_inputs)
-                for name in outs:
-                    adjust_out.setdefault(name, []).append(manipulator.adjust_outputs)
-        # the components due at a tick that is not a multiple of every step: those stepping at
-        # the base step (the signal chain), the same list every time
-        every_tick = [entry for entry in schedule if entry[1] == base]
-        slowest = int(np.lcm.reduce([step for _, step, _ in schedule])) if schedule else 1
-        if any(step not in (base, slowest) for _, step, _ in schedule):
-            slowest = 1                    # a general multi-rate layout: evaluate every tick
+        observers = self.observers
+        gather, step, conclude = self._gather, self._step, self._conclude
         tick = self.time_ticks
         while tick < stop_ticks:
             for manipulator in manipulators:
                 manipulator.before_tick(self, tick)
             time_s = tick / TICKS_PER_SECOND
-            due = every_tick if tick % slowest else [entry for entry in schedule if tick % entry[1] == 0]
-            if gauss_seidel:
-                for name, step, slave in due:
-                    self._gather(name, time_s)
-                    for adjust in adjust_in.get(name, ()):
-                        adjust(name)
-                    slave.write_inputs()
-                    slave.do_step(time_s, step / TICKS_PER_SECOND)
-                    self._stepped(name, slave)
-                    for adjust in adjust_out.get(name, ()):
-                        adjust(name)
-                    steps_taken[name] += 1
-                    self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
-            else:
-                for name, step, slave in due:
-                    self._gather(name, time_s)
-                    for adjust in adjust_in.get(name, ()):
-                        adjust(name)
-                for name, step, slave in due:
-                    slave.write_inputs()
-                    slave.do_step(time_s, step / TICKS_PER_SECOND)
-                    steps_taken[name] += 1
-                for name, step, slave in due:
-                    self._stepped(name, slave)
-                    for adjust in adjust_out.get(name, ()):
-                        adjust(name)
-                    self._source_updated(name, (tick + step) / TICKS_PER_SECOND)
+            phase = tick % period
+            plan = plans.get(phase)
+            if plan is None:
+                plan = self._plan(tick)
+                if len(plans) < _MAX_PLANS:
+                    plans[phase] = plan
+            groups, stepped = plan
+            for group in groups:
+                for component in group:
+                    gather(component, time_s)
+                for component in group:
+                    step(component, time_s)
+                for component in group:
+                    conclude(component, tick)
             tick += base
             self.time_ticks = tick
-            for observer in observers:
-                observer.after_tick(self, tick, due)
+            if observers:
+                record = StepRecord(tick, tick / TICKS_PER_SECOND, stepped)
+                for observer in observers:
+                    observer.after_tick(self, record)
         self.fresh_all()           # the final state, for summaries and whoever reads it next
 
     def shutdown(self) -> List[str]:

@@ -1,10 +1,12 @@
-"""Observers: what a run records. They read the master's output buffers after each tick
-(``master.fresh(component)`` first: outputs are read from the slaves on demand).
+"""Observers: what a run records (the Observer protocol, orchestrator/protocols.py). They read
+the master's output buffers after each tick (``master.fresh(component)`` first: outputs are
+read from the slaves on demand).
 
 * Recorder: chosen scalar outputs at a fixed output interval → results.csv (rows are written
   and flushed as the run goes, so a failed run keeps everything computed before it failed).
 * WaveformCapture: every sample of a frame output port inside a time window → capture CSV.
-  Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (DESIGN §3).
+  Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (docs/interfaces.md,
+  "Time and frames").
 * ProgressBar: a terminal progress line on stderr.
 """
 from __future__ import annotations
@@ -15,12 +17,13 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
 from orchestrator.errors import UserError
 from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.protocols import MasterView, Observer, StepRecord
 
 _ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
 
@@ -38,7 +41,7 @@ def scalar_outputs(interface) -> List[str]:
     return names
 
 
-class Recorder:
+class Recorder(Observer):
     """Chosen outputs at every output interval, streamed to CSV."""
 
     def __init__(self, path: Path, variables: Sequence[Tuple[str, str]], interval_ticks: int):
@@ -48,19 +51,25 @@ class Recorder:
         self.rows_written = 0
         self._file = None
 
-    def started(self, master, tick: int) -> None:
+    def outputs_needed(self) -> Dict[str, List[str]]:
+        needed: Dict[str, List[str]] = {}
+        for component, variable in self.variables:
+            needed.setdefault(component, []).append(variable)
+        return needed
+
+    def started(self, master: MasterView, step: StepRecord) -> None:
         self._slots = [master.output_slot(c, v) for c, v in self.variables]
         self._components = sorted({c for c, _ in self.variables})
         self._file = open(self.path, "w", newline="")
         self._writer = csv.writer(self._file)
         self._writer.writerow(["time"] + [f"{c}.{v}" for c, v in self.variables])
-        self._write(master, tick)
+        self._write(master, step.tick)
 
-    def after_tick(self, master, tick: int, due) -> None:
-        if tick % self.interval_ticks == 0:
-            self._write(master, tick)
+    def after_tick(self, master: MasterView, step: StepRecord) -> None:
+        if step.tick % self.interval_ticks == 0:
+            self._write(master, step.tick)
 
-    def _write(self, master, tick: int) -> None:
+    def _write(self, master: MasterView, tick: int) -> None:
         for component in self._components:
             master.fresh(component)
         row = [repr(tick / TICKS_PER_SECOND)]
@@ -115,14 +124,19 @@ class CaptureRequest:
         return sorted(names, key=lambda n: int(n[len(prefix):-1]))
 
 
-class WaveformCapture:
+class WaveformCapture(Observer):
+    """Every sample of one frame output inside a time window."""
+
     def __init__(self, path: Path, request: CaptureRequest, elements: List[str]):
         self.path = Path(path)
         self.request = request
         self.elements = elements
         self._file = None
 
-    def started(self, master, tick: int) -> None:
+    def outputs_needed(self) -> Dict[str, List[str]]:
+        return {self.request.component: list(self.elements)}
+
+    def started(self, master: MasterView, step: StepRecord) -> None:
         slots = [master.output_slot(self.request.component, e) for e in self.elements]
         self._buffer = slots[0][0]
         self._index = np.array([i for _, i in slots])
@@ -130,10 +144,10 @@ class WaveformCapture:
         self._file = open(self.path, "w", newline="")
         self._file.write(f"time,{self.request.component}.{self.request.port}\n")
 
-    def after_tick(self, master, tick: int, due) -> None:
-        if not any(name == self.request.component for name, _, _ in due):
+    def after_tick(self, master: MasterView, step: StepRecord) -> None:
+        if self.request.component not in step.stepped:
             return
-        start_ticks = tick - master.graph.base_ticks
+        start_ticks = step.tick - master.graph.base_ticks
         step_start = start_ticks / TICKS_PER_SECOND
         if step_start + self._step_ticks / TICKS_PER_SECOND <= self.request.t0 or step_start >= self.request.t1:
             return
@@ -151,7 +165,7 @@ class WaveformCapture:
             self._file = None
 
 
-class ProgressBar:
+class ProgressBar(Observer):
     """A one-line progress indicator on a terminal's stderr, refreshed twice a second."""
 
     def __init__(self, stop_ticks: int, start_ticks: int = 0, stream=sys.stderr, min_seconds: float = 2.0):
@@ -163,18 +177,18 @@ class ProgressBar:
         self._last = 0.0
         self._shown = False
 
-    def started(self, master, tick: int) -> None:
+    def started(self, master: MasterView, step: StepRecord) -> None:
         self._began = time.monotonic()
 
-    def after_tick(self, master, tick: int, due) -> None:
+    def after_tick(self, master: MasterView, step: StepRecord) -> None:
         now = time.monotonic()
         if now - self._last < 0.5 or now - self._began < self.min_seconds:
             return
         self._last = now
         span = max(self.stop_ticks - self.start_ticks, 1)
-        share = (tick - self.start_ticks) / span
+        share = (step.tick - self.start_ticks) / span
         bar = "#" * int(share * 30)
-        self.stream.write(f"\r[{bar:<30}] {share * 100:5.1f}%  t = {tick / TICKS_PER_SECOND:8.1f} s")
+        self.stream.write(f"\r[{bar:<30}] {share * 100:5.1f}%  t = {step.time_s:8.1f} s")
         self.stream.flush()
         self._shown = True
 

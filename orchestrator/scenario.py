@@ -28,6 +28,7 @@ from typing import Dict, List, Optional, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.protocols import Manipulator, MasterView
 
 ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
 
@@ -85,7 +86,7 @@ def load_scenario(path) -> Scenario:
     return Scenario(path, str(doc.get("description", "")), events, None if end is None else float(end))
 
 
-class ScenarioManipulator:
+class ScenarioManipulator(Manipulator):
     """Applies a scenario's events; the master calls :meth:`before_tick`, and after each gather
     (inputs) or read (outputs) of a component with events, :meth:`adjust_inputs` /
     :meth:`adjust_outputs`."""
@@ -134,13 +135,13 @@ class ScenarioManipulator:
                 needed.setdefault(component, []).append(variable)
         return needed
 
-    def components(self) -> Tuple[set, set]:
+    def adjusted_components(self) -> Tuple[set, set]:
         """(components whose inputs are adjusted, components whose outputs are adjusted)."""
         inputs = {c for (c, _), k in self.kinds.items() if k != "output"}
         outputs = {c for (c, _), k in self.kinds.items() if k == "output"}
         return inputs, outputs
 
-    def bound(self, master) -> None:
+    def bound(self, master: MasterView) -> None:
         """Resolve buffer slots once the slaves are bound; free inputs start at their start value."""
         for (component, variable), kind in self.kinds.items():
             var = self.graph.nodes[component].interface.variables[variable]
@@ -153,7 +154,7 @@ class ScenarioManipulator:
                 buffer.values[index] = start
 
     # ---- hooks --------------------------------------------------------------------------------
-    def before_tick(self, master, tick: int) -> None:
+    def before_tick(self, master: MasterView, tick: int) -> None:
         while self.pending and round(self.pending[0].time_s * TICKS_PER_SECOND) <= tick + master.graph.base_ticks // 2:
             event = self.pending.pop(0)
             key = (event.component, event.variable)

@@ -14,6 +14,7 @@ from fmus.signalling import aspects as sig
 
 from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
 TRAIN_MODEL = "Traction"
 ATO_MODEL = "AtoController"
@@ -57,11 +58,13 @@ def _timetable(graph: SystemGraph, ato: str) -> list:
         return []     # the FMU itself reports the bad file at initialisation
 
 
-class TrainVerdict:
+class TrainVerdict(SummaryObserver):
     """Observer: records stops and aspect changes of every ATO-driven train."""
 
     def __init__(self, graph: SystemGraph):
         self.trains = trains_of(graph)
+        # where each output lives, set when the run starts (None: it failed before that)
+        self._slots: Optional[Dict[tuple, tuple]] = None
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -71,7 +74,7 @@ class TrainVerdict:
                 needed.setdefault(train.ato, []).extend(ATO_OUTPUTS)
         return needed
 
-    def started(self, master, tick: int) -> None:
+    def started(self, master: MasterView, step: StepRecord) -> None:
         self._slots = {}
         for train in self.trains:
             for var in TRAIN_OUTPUTS:
@@ -79,27 +82,30 @@ class TrainVerdict:
             if train.ato:
                 for var in ATO_OUTPUTS:
                     self._slots[(train.ato, var)] = master.output_slot(train.ato, var)
-        self.after_tick(master, tick, ())
+        for train in self.trains:
+            if train.ato:
+                self._check(master, train, step.tick)
 
     def _value(self, component: str, var: str):
         buffer, index = self._slots[(component, var)]
         return buffer.values[index]
 
-    def after_tick(self, master, tick: int, due) -> None:
-        stepped = {name for name, _, _ in due}
+    def after_tick(self, master: MasterView, step: StepRecord) -> None:
         for train in self.trains:
-            if not train.ato or (due and train.ato not in stepped):
-                continue                       # its outputs change only when it steps
-            master.fresh(train.ato)
-            master.fresh(train.name)
-            stop_index = int(self._value(train.ato, "stop_index"))
-            if stop_index != train.last_stop_index:
-                train.last_stop_index = stop_index
-                self._record_stop(train, stop_index)
-            aspect = int(self._value(train.ato, "atp_aspect"))
-            if aspect != train.last_aspect:
-                train.last_aspect = aspect
-                self._record_aspect(train, tick, aspect)
+            if train.ato and train.ato in step.stepped:     # its outputs change only when it steps
+                self._check(master, train, step.tick)
+
+    def _check(self, master: MasterView, train: _Train, tick: int) -> None:
+        master.fresh(train.ato)
+        master.fresh(train.name)
+        stop_index = int(self._value(train.ato, "stop_index"))
+        if stop_index != train.last_stop_index:
+            train.last_stop_index = stop_index
+            self._record_stop(train, stop_index)
+        aspect = int(self._value(train.ato, "atp_aspect"))
+        if aspect != train.last_aspect:
+            train.last_aspect = aspect
+            self._record_aspect(train, tick, aspect)
 
     def _record_stop(self, train: _Train, stop_index: int) -> None:
         arrival = float(self._value(train.ato, "arrival_time"))
@@ -121,7 +127,7 @@ class TrainVerdict:
         return {"trains": self.summary()}
 
     def summary(self) -> List[dict]:
-        if not hasattr(self, "_slots"):      # the run failed before it started
+        if self._slots is None:              # the run failed before it started
             return [{"name": train.name} for train in self.trains]
         entries = []
         for train in self.trains:
@@ -199,7 +205,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
 CHECK_INTERVAL_S = 0.1
 
 
-class ReceiverVerdict:
+class ReceiverVerdict(SummaryObserver):
     """Observer: judges every receiver against the code transmitted into the section under its
     train's coils (the rail line's ``coil_section``, the coder's ``code_tx``). More permissive
     (aspect, free blocks or speed) for longer than the system's stated latency is a wrong-side
@@ -208,6 +214,8 @@ class ReceiverVerdict:
     def __init__(self, graph: SystemGraph):
         self.graph = graph
         self.receivers = receivers_of(graph)
+        # where each output lives, set when the run starts (None: it failed before that)
+        self._slots: Optional[Dict[tuple, tuple]] = None
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -218,7 +226,7 @@ class ReceiverVerdict:
             needed.setdefault(r.coder, []).extend(codes)
         return needed
 
-    def started(self, master, tick: int) -> None:
+    def started(self, master: MasterView, step: StepRecord) -> None:
         self._slots = {}
         for component, variables in self.outputs_needed().items():
             for var in variables:
@@ -240,11 +248,10 @@ class ReceiverVerdict:
         buffer, index = self._slots[(component, var)]
         return buffer.values[index]
 
-    def after_tick(self, master, tick: int, due) -> None:
-        now = tick / TICKS_PER_SECOND
-        stepped = {name for name, _, _ in due}
+    def after_tick(self, master: MasterView, step: StepRecord) -> None:
+        now, tick = step.time_s, step.tick
         for r in self.receivers:
-            if r.name not in stepped or tick % self._check_ticks[r.name]:
+            if r.name not in step.stepped or tick % self._check_ticks[r.name]:
                 continue
             for component in (r.name, r.rail, r.coder):
                 master.fresh(component)
@@ -292,7 +299,7 @@ class ReceiverVerdict:
             entry = {"receiver": r.name, "train": r.train, "system": "ALSN" if r.system is None else r.system.name,
                      "latency_s": r.latency_s, "wrong_side_failures": r.failures,
                      "wrong_side_s": round(r.wrong_side_s, 3), "wrong_side_events": r.events}
-            if hasattr(self, "_slots"):
+            if self._slots is not None:
                 entry.update(decoded_codes=int(self._value(r.name, "decoded_codes")),
                              code_errors=int(self._value(r.name, "errors")))
             entries.append(entry)
