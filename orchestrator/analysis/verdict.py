@@ -1,4 +1,4 @@
-"""The per-train part of summary.json (DESIGN §8), gathered while the run goes.
+"""The per-train part of summary.json (docs/interfaces.md, "Results"), gathered while the run goes.
 
 A train is a Traction component. When an AtoController drives it (its ``command`` output is
 connected to the train's ``command`` input), the train's entry also carries the ATP/ATO
@@ -144,7 +144,7 @@ class TrainVerdict(SummaryObserver):
         return entries
 
 
-# ---- receivers: decoded codes, errors, wrong-side failures (DESIGN §8) ---------------------------
+# ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
 RECEIVER_MODEL = "LocoReceiver"
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 SPEED_TOLERANCE_KMH = 0.5
