@@ -1,6 +1,6 @@
 """The default system in full (issue 8: ≥ 50× real time in one process): free_run = wayside
 coder → rail line → locomotive receiver (4 kHz, 10 ms frames) → ATP/ATO → train (0.5 s), 1100 s
-of the default timetable, in process (the facades driven directly, DESIGN §9's reference) and
+of the default timetable, in process (the facades driven directly, the performance reference of docs/architecture.md#master-algorithm-orchestratormasterpy) and
 through FMI (fmpy + pythonfmu, the same process).
 
     python benchmarks/bench_free_run.py [--stop-time 1100] [--repeats 3]

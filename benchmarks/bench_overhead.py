@@ -3,7 +3,7 @@
 Runs the same two-counter system (one connection each way per step) three ways in one
 process and reports medians over repeats:
   fmi       : full co-simulation through fmpy (what users run)
-  inprocess : the same facades stepped without FMI (the reference, DESIGN §9)
+  inprocess : the same facades stepped without FMI (the reference, docs/architecture.md#master-algorithm-orchestratormasterpy)
   raw       : bare fmpy calls set+doStep+get on the same FMU, no master (FMI cost alone)
   null      : the master driving slaves that do nothing: the orchestrator's own overhead
               per component step (scheduling, links, buffers, observers)

@@ -11,7 +11,7 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
    * message error rate (MER) = 1 − messages decoded correctly / messages sent;
    * undetected errors = messages that passed the code check but differ from the one sent;
    * wrong-side failure = the receiver shows a command more permissive than every command sent
-     within the stated latency before (DESIGN §8: two messages + 0.2 s; ALSN two cycles + 0.5 s),
+     within the stated latency before (docs/scenarios.md#results-summaryjson: two messages + 0.2 s; ALSN two cycles + 0.5 s),
      counted as events and as time;
    * availability = share of time a command is shown that was sent within the latency before
      (after the first four messages).

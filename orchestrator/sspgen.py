@@ -2,7 +2,7 @@
 
 Frame ports are FMI structured arrays, so one frame link is N (or K·N) scalar connections;
 ``frame_connections`` expands them. Step sizes are written both as our annotation and as
-``osp:StepSizeHint`` so libcosim-based tools run the system multi-rate too (DESIGN §6).
+``osp:StepSizeHint`` so libcosim-based tools run the system multi-rate too (docs/interfaces.md#ssp-conventions).
 """
 from __future__ import annotations
 

@@ -167,7 +167,7 @@ def test_a_25_hz_code_is_not_decoded_by_a_50_hz_receiver():
 
 # ---- receiver details ---------------------------------------------------------------------------
 def test_recovery_after_a_ten_fold_overload_takes_0_6_to_1_5_s():
-    """Seed 002: at the feed end the coil sees 3.5 V; past the joint 0.28 V; the receiver's
+    """The joints paper (docs/sources.md#interference-at-insulated-joints): at the feed end the coil sees 3.5 V; past the joint 0.28 V; the receiver's
     sensitivity takes 0.6–1.5 s to recover."""
     receiver = LocoReceiverCore(N, ReceiverSettings())
     t = np.arange(int(4.0 * FS)) / FS

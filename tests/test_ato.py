@@ -274,7 +274,7 @@ def test_unknown_strategy_is_an_initialisation_error(tmp_path, product_fmus):
 def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_tolerance(tmp_path):
     """ВЛ80 + 62 wagons (5152 t), pneumatic brake with 8 s delay and 25 s build-up: the brake is
     released ahead of departure, the train is held back when running away downhill, and the stop
-    meets the book's ±10 m for loco-hauled trains (seed 003 §S.5.4)."""
+    meets the book's ±10 m for loco-hauled trains (docs/sources.md#ato-precise-stopping)."""
     from fmus.data.loader import DATA
 
     timetable = tmp_path / "freight.json"
@@ -285,7 +285,7 @@ def test_heavy_freight_on_the_ac_line_keeps_time_and_stops_within_the_book_toler
                              timetable_file=timetable, settings=AtoSettings(cab_signal="off"))
     _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=10.0)
     assert result.ato.atp.interventions == 0
-    # and better: predictive stopping (book §S.5.2) reaches the ATOMIC class's 0.5 m with this
+    # and better: predictive stopping (docs/sources.md#ato-precise-stopping) reaches the ATOMIC class's 0.5 m with this
     # brake too; braking on the distance left alone stopped 1.7 m short at C
     _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=0.5)
 
@@ -347,7 +347,7 @@ def test_free_run_with_the_alsn_chain_departs_on_a_decoded_green(tmp_path, produ
     header, data = read_csv(out / "results.csv")
     col = {name: data[:, i] for i, name in enumerate(header)}
     settled = col["time"] > 6.0
-    # the receiver may lose the code for a moment at a joint (white: gain recovery, seed 002),
+    # the receiver may lose the code for a moment at a joint (white: gain recovery, docs/sources.md#interference-at-insulated-joints),
     # never show a wrong code; the ATP bridges the dropout with the last valid green
     assert set(np.unique(col["rx.aspect"][settled])) <= {sig.GREEN, sig.WHITE}
     assert np.all(col["ato.atp_aspect"][settled] == sig.GREEN)

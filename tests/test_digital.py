@@ -90,7 +90,7 @@ def test_a_restrictive_change_is_shown_within_the_latency_and_nothing_more_permi
     rows = chain.run(4 * chain.message_s, _occupied(0))
     kzh = chain.system.command_for(0)
     shown_at = next(r[0] for r in rows if r[2] == kzh)
-    latency = stated_latency_s(chain.message_s)                  # DESIGN §8, digital systems
+    latency = stated_latency_s(chain.message_s)                  # docs/scenarios.md#results-summaryjson, digital systems
     assert shown_at - change_s <= latency
     # from the moment the modulated message changed: one message and the filters' delay
     sent_at = next(r[0] for r in rows if r[1] == kzh)

@@ -18,7 +18,7 @@ def test_round_trip_without_noise_at_any_carrier_phase():
 
 
 def test_a_word_takes_0_4_s():
-    """12 bits = 6 symbols at 15 Bd (seed 000 §8.5), plus the reference symbol."""
+    """12 bits = 6 symbols at 15 Bd (docs/sources.md#fire-code-and-pi4-dqpsk), plus the reference symbol."""
     samples = dqpsk.modulate(np.zeros(6, dtype=int), FS, FC, BAUD)
     assert samples.size == pytest.approx(7 / BAUD * FS, abs=1)
 

@@ -19,7 +19,7 @@ def test_generator_divides_x12_plus_1_so_the_code_is_cyclic():
 
 
 def test_systematic_words_match_the_thesis_digest():
-    # seed 000 digest §8.3: info 1 → 000001110111, info 15 → 001111001111
+    # docs/sources.md#fire-code-and-pi4-dqpsk: info 1 → 000001110111, info 15 → 001111001111
     assert format(fc.encode(1), "012b") == "000001110111"
     assert format(fc.encode(15), "012b") == "001111001111"
     assert all(fc.decode(fc.encode(i)) == i for i in range(64))

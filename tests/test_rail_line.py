@@ -15,7 +15,7 @@ W50 = 2 * np.pi * 50.0
 
 
 def test_worked_example_two_port_is_reproduced():
-    """domain-facts §2.2: z = 0.52 + j1.224 Ω/km, r_и = 1 Ω·km, l = 0.3 km."""
+    """docs/sources.md#track-circuits-and-rail-impedance: z = 0.52 + j1.224 Ω/km, r_и = 1 Ω·km, l = 0.3 km."""
     abcd = two_port(0.52 + 1.224j, 1.0, 0.3)
     assert abcd[0, 0] == pytest.approx(1.023 + 0.055j, abs=1e-3)
     assert abcd[0, 1] == pytest.approx(0.151 + 0.373j, abs=1.5e-3)
@@ -153,7 +153,7 @@ def test_joint_crossing_null_and_weak_zones_scale_with_speed(speed_kmh):
     assert strong > 5 * weak                     # feed end of one section vs entry end of the next
     quiet = (coil > joint - 3) & (coil < joint + 4) & (env < 0.2 * weak)
     null_m = quiet.sum() / FS * v
-    # the ≈ 1 m null zone (seed 002), smeared by the coil and by the envelope (one carrier period)
+    # the ≈ 1 m null zone (docs/sources.md#interference-at-insulated-joints), smeared by the coil and by the envelope (one carrier period)
     assert 0.5 <= null_m <= 1.5
 
 

@@ -4,7 +4,7 @@
    of the discretised filters) and their group delay.
 2. receiver_code_z.png — code З at the filter output while the coils pass an insulated joint:
    the feed end of one section (3.5 V at the coil), a 1 m null zone, then the entry end of the
-   next section (0.28 V, another cam phase), as in seed 002's Fig. 2 and its table row 3.
+   next section (0.28 V, another cam phase), as in the joints paper's Fig. 2 and its table row 3 (docs/sources.md#interference-at-insulated-joints).
 Prints the overload-recovery table.
 """
 from pathlib import Path

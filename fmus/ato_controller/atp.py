@@ -1,4 +1,4 @@
-"""ATP: the independent speed-supervision layer with priority over the ATO (DESIGN §4).
+"""ATP: the independent speed-supervision layer with priority over the ATO (docs/ato.md).
 
 What it supervises at each step, as constraints (a ceiling now and targets ahead):
 
@@ -21,7 +21,7 @@ Fail-safe rules (never more permissive than the last valid code):
   → yellow, yellow → red-yellow); passing the exit signal under red-yellow is a signal passed
   at danger: counted, and the emergency brake is applied.
 
-Braking-curve supervision, ETCS-like margins (domain-facts §3.3): the permitted speed at the
+Braking-curve supervision, ETCS-like margins (docs/sources.md#atp-margins-etcs): the permitted speed at the
 head is min(ceiling, sqrt(v_t² + 2·a·(x_t − x)) over the targets) with the supervision
 deceleration a. Above it by dV_sbi the ATP commands full service braking until the train is
 back under the permitted speed; above it by dV_ebi (7.5 km/h up to 110 km/h, rising linearly
@@ -46,7 +46,7 @@ _INF = math.inf
 
 
 def dv_ebi_mps(v_mps: float) -> float:
-    """Emergency-brake intervention margin (ETCS dV_ebi, domain-facts §3.3)."""
+    """Emergency-brake intervention margin (ETCS dV_ebi, docs/sources.md#atp-margins-etcs)."""
     v_kmh = v_mps * KMH_PER_MPS
     if v_kmh <= 110.0:
         return 7.5 * MPS_PER_KMH
@@ -188,7 +188,7 @@ class Atp:
             if not code_valid and self.last_valid is not None:
                 c.add(self.last_valid)
                 if t - self.last_valid_s <= self.latency_s:
-                    # a dropout shorter than the decoding latency (joints: seed 002): the last valid
+                    # a dropout shorter than the decoding latency (joints: docs/sources.md#interference-at-insulated-joints): the last valid
                     # code still holds, never anything more permissive; no-code rules after that
                     acted_aspect = self.last_valid_aspect
                 else:

@@ -36,7 +36,7 @@ WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finish
 ACCEL_FILTER_S = 1.0
 MIN_BRAKE_SHARE = 0.02
 CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
-# two-stage stop with a slow brake (book §S.5.3, ATOMIC): the planned deceleration down to this
+# two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
 FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
 
@@ -67,7 +67,7 @@ class AtoSettings:
     min_dwell_s: float = 20.0
     stop_window_m: float = 5.0            # standing at most this far short of the stop point is an arrival
     hold_brake: float = 0.3               # brake share held while standing
-    decoding_latency_s: float = alsn.STATED_LATENCY_S   # ALSN: two KPT-7 cycles + 0.5 s (DESIGN §8)
+    decoding_latency_s: float = alsn.STATED_LATENCY_S   # ALSN: two KPT-7 cycles + 0.5 s (docs/scenarios.md#results-summaryjson)
     speed_gain: float = 0.2               # 1/s, speed-holding loop
     hysteresis_mps: float = 1.0 * MPS_PER_KMH     # coast → traction again only this far below the set speed
     brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)
@@ -369,7 +369,7 @@ class AtoCore:
         v_set = min(cruise, ceiling)
         if deviation < -s.early_threshold_s and not self.creeping:
             # well ahead (e.g. a heavy train running away down a grade): hold the programme speed,
-            # braking if need be (ЭР200 rule "well ahead → drop one grade", book §S.4.2)
+            # braking if need be (ЭР200 rule "well ahead → drop one grade", docs/sources.md#ato-timetable-following)
             return self._hold(x, v, min(guide.v_ref_mps, ceiling), may_brake=True)
         if coast:
             self.controllers.coasting = True

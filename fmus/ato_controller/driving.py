@@ -1,7 +1,7 @@
 """Online driving: strategies that choose what the train should do now, and the two low-level
 controllers that turn that into a command (speed holding, target braking).
 
-Strategies (ATO book, seed 003 part 2 §S.4):
+Strategies (ATO book, docs/sources.md#ato-timetable-following):
 
 * ``programme`` — АМ ЦНИИ coast-speed control on the energy-efficient programme: traction up
   to the programme's cruise speed, then the programme's regime (cruise / coast); ahead of
@@ -13,7 +13,7 @@ Strategies (ATO book, seed 003 part 2 §S.4):
 * ``flat_out`` — the minimum-time profile (maximum traction, line speed, latest braking):
   the energy baseline.
 
-Rules common to all (book §3.1, §S.4.6): late by more than ``late_threshold_s`` (МИИТ: 16 s),
+Rules common to all (docs/sources.md#ato-timetable-following): late by more than ``late_threshold_s`` (МИИТ: 16 s),
 or after a restrictive cab signal has cleared while late, drive at the maximum permitted speed
 until back on schedule.
 """

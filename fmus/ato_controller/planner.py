@@ -2,24 +2,24 @@
 
 1. **Static speed profile** (MRSP) on a distance grid: the line's limit for the train's
    category, applied from the head reaching a lower limit until the *tail* has cleared it
-   (re-acceleration only after the last car, book §3.4), less the ATO speed margin, capped by
+   (re-acceleration only after the last car, docs/sources.md#running-time-calculation-osrd-mareco), less the ATO speed margin, capped by
    the vehicle's maximum speed.
 2. **Speed ceiling**: braking curves at the planned deceleration integrated backwards from
    every limit drop and from the stop point (closed form: a reverse cumulative minimum of
    v² + 2·a·s).
 3. **Family of driving programmes** parametrised by a cruise speed V1, with the structure of
-   the optimal control (Strobel/Horn, Howlett; domain-facts §3.6): maximum traction up to V1,
+   the optimal control (Strobel/Horn, Howlett; docs/sources.md#ato-energy-efficient-control): maximum traction up to V1,
    cruise at V1 (partial traction; above V1 on down-grades the train coasts up to the
    ceiling instead of braking), MARECO coasting before each braking phase, braking at the
    planned deceleration. Coasting ends at the MARECO speed Vf = w·V1/(w + R(V1)·V1) with
-   w = V1²·R'(V1) (domain-facts §3.2). V1 = ∞ is the **minimum-time** (flat-out) profile.
+   w = V1²·R'(V1) (docs/sources.md#running-time-calculation-osrd-mareco). V1 = ∞ is the **minimum-time** (flat-out) profile.
    All candidates are integrated together (numpy over candidates, RK2 in distance).
 4. **Energy-efficient programme**: the V1 whose running time equals the scheduled time,
    found by interpolation on the family's time–V1 curve and refined twice by a bracket of
    candidates (no per-iteration scalar loop).
 
 The coasting curves run backwards through down-grades too, so the programme coasts before a
-crest and lets the down-grade bring the speed back (book Fig. 15; MARECO's "accelerating
+crest and lets the down-grade bring the speed back (the ATO book's Fig. 15, docs/sources.md#ato-energy-efficient-control; MARECO's "accelerating
 slopes"), never below Vf. Simplification (docs/ato.md): above V1 on a down-grade the
 train coasts up to the ceiling instead of MARECO's explicit accelerating-slope search.
 """

@@ -6,11 +6,11 @@ locomotive's electric brake fades below 10 km/h. A controller that maps the dist
 a deceleration now (``AtoCore._decel_to``) then keeps braking on the force it asked for
 20–30 s earlier and stops metres short. The ATO instead keeps its own copy of the brake
 pipeline (the demands it sent, their delay and the build-up, from the nominal stock data:
-the traction unit's model, fmus/traction/brake_pipeline.py, DESIGN §4) and, braking for a station stop below 30 km/h,
+the traction unit's model, fmus/traction/brake_pipeline.py, docs/traction.md#physics-fmustractioncorepy) and, braking for a station stop below 30 km/h,
 simulates the nominal train forward for a set of constant brake commands at once, choosing
 the one whose predicted stopping point is the stop point (receding horizon: chosen again
 every tenth of the brake's lead from the measured position and speed, so model errors are
-corrected as the train closes in). Book §S.5.2 (seed 003, НИИ УВМ predictive stopping): the
+corrected as the train closes in). The ATO book's НИИ УВМ predictive stopping (docs/sources.md#ato-precise-stopping): the
 stopping point is predicted, not the deceleration. Used for brakes slower than
 ``AtoSettings.predictive_stop_lead_s``; docs/ato.md has the figures and the reasons.
 """

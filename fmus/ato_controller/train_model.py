@@ -3,7 +3,7 @@
 It is tabulated from the traction unit's force functions (one source of physics) over a
 speed grid and a distance grid, so planning can evaluate accelerations for many speeds at
 once with ``np.interp``. The plant may differ (mass ±10 %, resistance ±20 %, voltage ±5 %):
-the ATO copes by feedback, as the book's robustness section asks (seed 003 part 2 §1.4).
+the ATO copes by feedback, as the book's robustness section asks (docs/sources.md#ato-robustness-to-train-parameters).
 """
 from __future__ import annotations
 

@@ -173,7 +173,7 @@ class Line:
     def curve_resistance_at(self, x: float) -> float:
         for start, end, radius in self.curves:
             if start <= x < end:
-                return 700.0 / radius   # ПТР: w_r = 700/R N/kN (domain-facts §3.4)
+                return 700.0 / radius   # ПТР: w_r = 700/R N/kN (docs/sources.md#train-resistance-and-adhesion)
         return 0.0
 
     def _integral(self, slopes, cumulative, x: float) -> float:

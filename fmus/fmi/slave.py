@@ -5,7 +5,7 @@ them onto a model core. This module owns everything FMI-specific that pythonfmu 
 do for us:
 
 * one flat numpy value store per FMI type, so ``set_real``/``get_real`` are a single
-  fancy-indexing operation instead of one Python setter call per variable (DESIGN §9);
+  fancy-indexing operation instead of one Python setter call per variable (docs/architecture.md#build-pipeline-railcosim-build);
 * the modelDescription additions pythonfmu omits (units, min/max, ModelStructure
   InitialUnknowns and output dependencies, DefaultExperiment), so ``fmpy validate`` is clean;
 * error handling that never lets a Python exception escape ``do_step``: pythonfmu 0.7.0 turns

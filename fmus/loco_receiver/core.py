@@ -2,10 +2,10 @@
 relay → decoder (no FMI here).
 
 Signal chain, vectorised over the frame with carried state (so any frame length gives the
-same result, DESIGN §3):
+same result, docs/loco_receiver.md#signal-chain-corepy-filterspy):
 
 1. **Band-pass** at the carrier (filters.py), lfilter's routine with carried state.
-2. **Gain control** on the in-band signal (seed 002: the receiver is overloaded up to 10× by
+2. **Gain control** on the in-band signal (docs/sources.md#interference-at-insulated-joints: the receiver is overloaded up to 10× by
    the code current at the feed end of a section and recovers in 0.6–1.5 s after the joint; an
    out-of-band interferer must not desensitise it, so the level is taken after the band-pass).
    Instant attack, slow release in the log domain: G[n] = min(G_req[n], G[n−1] + r·Δt) with
@@ -16,7 +16,7 @@ same result, DESIGN §3):
 3. **Envelope**: full-wave rectification, 2nd-order low-pass, × π/2 (peak-equivalent).
 4. **Impulse relay** with pick-up and drop-out thresholds (hysteresis), vectorised by
    forward-filling the last decided state.
-5. **Decoder** (firmware kpt.h rules, domain-facts §1.3): edges of the relay are events; an
+5. **Decoder** (firmware kpt.h rules, docs/sources.md#alsn-decoder-rules): edges of the relay are events; an
    interval longer than 0.35 s ends a cycle; the number of short intervals gives З (2), Ж (1),
    КЖ (0, period doubled); the period classifies KPT-5 (1.47–1.73 s) or KPT-7 (1.73–1.99 s),
    other lengths are invalid (counted in ``errors``). Added plausibility (our choice, against
@@ -57,7 +57,7 @@ LEVEL_RELEASE_S = 1.0
 # longer than any short interval (0.12 s + 5 % drift + filter smearing), shorter than any long one
 UNAMBIGUOUS_OFF_S = 0.2
 # a cycle whose pulses differ in level by more than this straddles an insulated joint (the
-# feed end of one section against the entry end of the next, ≈ 10× apart, seed 002)
+# feed end of one section against the entry end of the next, ≈ 10× apart, docs/sources.md#interference-at-insulated-joints)
 LEVEL_SPREAD = 2.5
 # a pulse whose relay input peaked below this × pick-up while the code itself (input-referred)
 # was above it was marginal through the reduced gain: its cycle is not decoded

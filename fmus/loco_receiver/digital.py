@@ -1,9 +1,9 @@
 """Locomotive receiver for the digital systems (ALS-EN, FIRE_DQPSK): coil EMF → amplitude
 limiter → anti-alias low-pass → band-pass → symbol timing and I/Q correlation → differential
-decision → framing and code check → acceptance → three channels voted 2-out-of-3 (seed 000
-§10; no FMI here).
+decision → framing and code check → acceptance → three channels voted 2-out-of-3 (
+docs/sources.md#digital-generator-receiver-and-redundancy; no FMI here).
 
-* **Front end.** Back-to-back zener limiter at ±`limiter` V (seed 000 §10.3: КС133А), the
+* **Front end.** Back-to-back zener limiter at ±`limiter` V (docs/sources.md#digital-generator-receiver-and-redundancy: КС133А), the
   6th-order Chebyshev low-pass at 500 Hz (1 dB ripple; the thesis' anti-alias filter, an
   analog design in python-control discretised with Tustin), then a digital band-pass at the
   carrier (Butterworth, 4th order, 10/3 of the symbol rate wide).

@@ -38,8 +38,8 @@ class RailSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     circuit: CircuitParameters = field(default_factory=CircuitParameters)
     transformer_ratio: float = 2.5        # u_tx → rails: 1.4 A rms at the entry of a 2.6 km section at 1 Ω·km
-    coil_offset_m: float = 1.5            # ahead of the first wheelset [S seed 002]
-    coil_gain_h: float = 4.5e-4           # EMF = M·di/dt: 0.28 V at 2 A peak, 50 Hz (seed 002's weak level)
+    coil_offset_m: float = 1.5            # ahead of the first wheelset [S docs/sources.md#code-current-and-receiver-coils]
+    coil_gain_h: float = 4.5e-4           # EMF = M·di/dt: 0.28 V at 2 A peak, 50 Hz (the joints paper's weak level, docs/sources.md#interference-at-insulated-joints)
     coil_length_m: float = 0.3            # sensitivity length of the coil core [U]
     train_length_m: Tuple[float, ...] = (400.0, 400.0)
     asymmetry_range: Tuple[float, float] = (0.01, 0.05)

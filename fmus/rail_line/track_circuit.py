@@ -1,6 +1,6 @@
 """One coded track circuit (block section) as a network of components (network.py).
 
-Layout along the section, running direction left → right (domain-facts §1.4: the code is fed
+Layout along the section, running direction left → right (docs/sources.md#track-circuits-and-rail-impedance: the code is fed
 at the signal end ahead of the train, the track relay sits at the entry end):
 
     entry joint            relay end                                   feed end      exit joint
@@ -11,7 +11,7 @@ at the signal end ahead of the train, the track relay sits at the entry end):
   each end node (π sections of at most ``segment_m``);
 * feed end at ``bond_lead_offset`` before the exit joint: the code source (u_tx × transformer
   ratio behind the feed resistance) and the impedance bond's signal winding (R–L to the other
-  rail); the rails between the bond leads and the joint carry no signal current (seed 002's
+  rail); the rails between the bond leads and the joint carry no signal current (docs/sources.md#interference-at-insulated-joints:
   ≈ 1 m null zone);
 * relay end at the entry joint: the track relay (a resistance referred to the rails) and the
   bond winding;
@@ -19,7 +19,7 @@ at the signal end ahead of the train, the track relay sits at the entry end):
 * faults: broken rail (the segment containing it opens), ballast override, bond disconnected
   or feed failed (no source at the feed end).
 
-Also the uniform-line two-port (ABCD) solution used to validate the network (domain-facts §2.2).
+Also the uniform-line two-port (ABCD) solution used to validate the network (docs/sources.md#track-circuits-and-rail-impedance).
 """
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ OPEN_OHM = 1e9
 
 @dataclass(frozen=True)
 class CircuitParameters:
-    rail_r_ohm_per_km: float = 0.52        # rail loop, worked example (domain-facts §2.1) [S]
+    rail_r_ohm_per_km: float = 0.52        # rail loop, worked example (docs/sources.md#track-circuits-and-rail-impedance) [S]
     rail_l_h_per_km: float = 1.18e-3       # L_int 0.177 + L_ext ≈ 1.0 mH/km [S]/[D]
     ballast_ohm_km: float = 1.0            # normative minimum [S]
     feed_r_ohm: float = 0.5                # track transformer + limiting resistor, at the rails [U]

@@ -1,9 +1,9 @@
 """ALS-EN (АЛС-ЕН): double relative phase modulation on one ≈175 Hz carrier with two
-subchannels of 8-bit, distance-4 words (seed 000 §5; domain-facts §1.5). No FMI here.
+subchannels of 8-bit, distance-4 words (docs/sources.md#als-en; docs/sources.md#als-en). No FMI here.
 
 Modem. Each symbol carries a dibit: one bit of subchannel 1 and one of subchannel 2 (the "0°
 and 90° channels"), as a phase increment with Gray mapping 00 → 0, 01 → π/2, 11 → π,
-10 → 3π/2 (the open receiver code's table, domain-facts §1.5). A symbol lasts 16 carrier
+10 → 3π/2 (the open receiver code's table, docs/sources.md#als-en). A symbol lasts 16 carrier
 cycles (10.9 Bd at 174.38 Hz; the sources' 174.38 / 174.89 / 175 Hz all give ≈ 10.9 Bd, the
 thesis' 10.9 bit/s per subchannel). Words are sent MSB first, both subchannels aligned.
 
@@ -20,7 +20,7 @@ Message cycle (our layout of the sources' contents, docs/digital_channels.md): t
 * subchannel 2, every word: cycle position p (bit 3; 0: subchannel 1 carries the indication,
   1: the speed), track parity (bit 2), block-section parity (bit 1), route (bit 0; 0 straight
   / main, sent as 0). This is the cyclic synchronisation and the adjacent-track / adjacent-
-  section protection of seed 000 §5.
+  section protection of docs/sources.md#als-en.
 * subchannel 1, word p = 0: the indication: 0 red (in an occupied section), 1 КЖ (approach to
   a closed signal), 2 БМ (flashing white, passing a signal at danger), 3…8 = 1…6 free blocks;
   9…15 unused (discarded).
@@ -36,7 +36,7 @@ yields another message.
 
 Plain-line automatic block (wayside), by free blocks n: n = 0 → КЖ with speed 0; n = 1 → 1
 free block, 60 km/h at the next signal (ALSN's yellow rule, signalling.py); n ≥ 2 → n free
-blocks (≤ 6), 200 km/h. Reported `code`: the KLUB register number (domain-facts §1.5):
+blocks (≤ 6), 200 km/h. Reported `code`: the KLUB register number (docs/sources.md#als-en):
 9 red, 10 КЖ, 11…15 one…five (or more) free blocks, 5 flashing white.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """ALSN numeric codes: the KPT-5/KPT-7 timing tables (fmus/signalling/alsn_codes.json) and the
 decoder's classification windows, shared by the wayside coder and the locomotive receiver.
 
-Codes are named by the aspect they give on the locomotive and carry its enumeration (DESIGN §4):
+Codes are named by the aspect they give on the locomotive and carry its enumeration (docs/interfaces.md#locoreceiver-locoreceiverfmu):
 З (Z) = 4 green, Ж (Zh) = 3 yellow, КЖ (KZh) = 2 red-yellow; 0 = no code.
 """
 from __future__ import annotations
@@ -24,13 +24,13 @@ NO_CODE = 0
 SUPPORTED_CARRIERS_HZ = (25.0, 50.0, 75.0)
 MIN_SAMPLES_PER_CARRIER_PERIOD = 8
 
-# decoder rules, firmware kpt.h (domain-facts §1.3 A) [S]
+# decoder rules, firmware kpt.h (docs/sources.md#alsn-decoder-rules) [S]
 LONG_INTERVAL_S = 0.35
 LONG_INTERVAL_MAX_S = 1.0     # the longest code interval is 0.86 s (KPT-7 Ж) + 5 % drift: longer = pulses missed
 KPT5_WINDOW_S = (1.47, 1.73)
 KPT7_WINDOW_S = (1.73, 1.99)
 CODE_TIMEOUT_S = 2.0
-# the stated decoding latency (DESIGN §8): two code cycles of the slower transmitter (KPT-7,
+# the stated decoding latency (docs/scenarios.md#results-summaryjson): two code cycles of the slower transmitter (KPT-7,
 # 1.86 s) + 0.5 s; the ATP's allowance and the wrong-side judgement use it
 STATED_LATENCY_S = 2 * 1.86 + 0.5
 # plausibility of the parts of a cycle (our addition, docs/loco_receiver.md): the shortest code

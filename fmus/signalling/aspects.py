@@ -1,21 +1,21 @@
 """Cab-signal aspects and the ALSN speed table shared by the receiver and the ATP.
 
-Aspect enumeration (DESIGN §4): 0 white/none (Б), 1 red (К), 2 red-yellow (КЖ), 3 yellow (Ж),
+Aspect enumeration (docs/interfaces.md#locoreceiver-locoreceiverfmu): 0 white/none (Б), 1 red (К), 2 red-yellow (КЖ), 3 yellow (Ж),
 4 green (З). Lower numbers are more restrictive, except white, which is ranked between red
 and red-yellow by :func:`restrictiveness` (no code: 40 km/h, no stop target).
 
 Speeds per aspect and train category (km/h). ``ceiling``: highest speed while the aspect is
 shown (None: the line's limit). ``at_signal``: speed to be reached at the next (exit) signal
-(0: stop before it). Sources (tags as in reference/domain-facts.md):
+(0: stop before it). Sources (tags as in docs/sources.md#how-to-read-this-page):
 
 * yellow, passenger: reduce to 60 km/h by the end of the block section — ATO book, МИИТ
-  reactions (seed 003 part 2 §S.6) [S];
+  reactions (docs/sources.md#cab-signal-speeds-per-aspect) [S];
 * yellow, freight 50 / high-speed 80: the thesis' 4-aspect ALSU values for passing a wayside
-  yellow (seed 000 §4) [S], applied to ALSN by analogy [U];
+  yellow (docs/sources.md#cab-signal-speeds-per-aspect) [S], applied to ALSN by analogy [U];
 * red-yellow: traction–coast band 60…42 km/h (МИИТ) → ceiling 60 km/h passenger [S], freight
-  50 [U]; stop before the red signal (seed 000 §3) [S];
-* red: 20 km/h — ДКСВ vigilance rule "red and v < 20 km/h" (domain-facts §1.3 B) [S];
-* white (no code): 40 km/h — KLUB ``no_code_limit`` 41 km/h (domain-facts §1.3 D) [S].
+  50 [U]; stop before the red signal (docs/sources.md#alsn-carriers-and-aspects) [S];
+* red: 20 km/h — ДКСВ vigilance rule "red and v < 20 km/h" (docs/sources.md#cab-signal-speeds-per-aspect) [S];
+* white (no code): 40 km/h — KLUB ``no_code_limit`` 41 km/h (docs/sources.md#cab-signal-speeds-per-aspect) [S].
 
 Everything is a parameter of the data, not of the code: replace this table for another
 railway's rules.

@@ -3,7 +3,7 @@ model, the interface a system implements (ALS-EN in als_en.py, the thesis' FIRE_
 fire_dqpsk.py), and the receiver's acceptance rules. No FMI and no signal processing here.
 
 A **message** carries a system command plus two parity bits the wayside adds for protection
-(seed 000 §5, ALS-EN): the parity of the track (a code induced from the adjacent track of a
+(docs/sources.md#als-en, ALS-EN): the parity of the track (a code induced from the adjacent track of a
 double-track line is discarded) and of the block section (a code leaking from the next section
 across a failed insulated joint, or from under the tail of the train ahead, cannot make the
 display more permissive while the own section's code is still being received).
@@ -30,7 +30,7 @@ from fmus.errors import FmuInputError
 FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
 TIMEOUT_MESSAGES, TIMEOUT_MARGIN_S = 2, 0.1        # acceptance timeout (Acceptor)
 QUALITY_MIN = 0.25                                  # a clear message (Acceptor)
-LATENCY_MESSAGES, LATENCY_MARGIN_S = 2, 0.2        # stated decoding latency (DESIGN §8)
+LATENCY_MESSAGES, LATENCY_MARGIN_S = 2, 0.2        # stated decoding latency (docs/scenarios.md#results-summaryjson)
 
 
 def stated_latency_s(message_s: float) -> float:
@@ -61,7 +61,7 @@ class Message:
 @dataclass(frozen=True)
 class Indication:
     code: int                 # raw id reported on the `code` port
-    aspect: int               # DESIGN §4 enumeration
+    aspect: int               # aspect enumeration, docs/interfaces.md#locoreceiver-locoreceiverfmu
     free_blocks: int
     permitted_kmh: float      # ceiling from now on
     target_kmh: float         # speed for passing the next signal
@@ -196,7 +196,7 @@ class Acceptor:
     * no confirming message of the command in force for two message periods + 0.1 s → no
       code (the ATP then applies its no-code rules). One lost message is bridged; and since a
       changed command is sent from the next message boundary on, an old command can never be
-      shown for longer than the stated latency (DESIGN §8: two messages + 0.2 s) after the
+      shown for longer than the stated latency (docs/scenarios.md#results-summaryjson: two messages + 0.2 s) after the
       change, even when every message after it is lost.
     """
 

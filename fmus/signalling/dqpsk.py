@@ -1,4 +1,4 @@
-"""π/4-DQPSK at a low carrier (the thesis' 175 Hz, 15 Bd; seed 000 §8.4–8.5): modulation,
+"""π/4-DQPSK at a low carrier (the thesis' 175 Hz, 15 Bd; docs/sources.md#fire-code-and-pi4-dqpsk): modulation,
 I/Q correlation (integrate and dump over each symbol) and differential decision, vectorised
 over whole messages. Symbol boundaries fall at t = k/baud, not on whole samples (4000/15 is
 not an integer): each sample belongs to the symbol its time falls in.

@@ -1,4 +1,4 @@
-"""The thesis' Fire (12,6) code (seed 000 §8.3): g(x) = (x² + x + 1)(x⁴ + 1) = x⁶+x⁵+x⁴+x²+x+1.
+"""The thesis' Fire (12,6) code (docs/sources.md#fire-code-and-pi4-dqpsk): g(x) = (x² + x + 1)(x⁴ + 1) = x⁶+x⁵+x⁴+x²+x+1.
 
 Systematic, MSB first: a 12-bit word is the 6 information bits (x¹¹…x⁶) followed by the
 remainder of info·x⁶ divided by g(x) (x⁵…x⁰). The receiver only *detects* errors (a word whose

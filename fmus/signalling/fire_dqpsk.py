@@ -1,4 +1,4 @@
-"""The thesis' 16-command system on one track (seed 000 §8): commands → Fire (12,6) words →
+"""The thesis' 16-command system on one track (docs/sources.md#fire-code-and-pi4-dqpsk): commands → Fire (12,6) words →
 π/4-DQPSK at 175 Hz, 15 Bd — plus the frame synchronisation the thesis leaves out (our design).
 
 Frame synchronisation. The Fire code is cyclic, so a receiver that reads a repeated word one
@@ -25,7 +25,7 @@ sync symbols only, no data) never yields a command.
 Commands: Table 2.1 of the thesis (16 rows, speeds high-speed/passenger/freight as printed;
 unreadable cells marked [U]). Information word (6 bits, the thesis leaves the map to us):
 command − 1 in the low 4 bits, the track parity in bit 4 and the block-section parity in bit 5
-(the thesis has no protection against adjacent tracks and sections; ALS-EN has, seed 000 §5 —
+(the thesis has no protection against adjacent tracks and sections; ALS-EN has, docs/sources.md#als-en —
 we use the two spare bits for it). The code's d_min = 4 holds between any two words.
 
 What a command means to the ATP (docs/digital_channels.md): the cab signal, the free blocks,
@@ -62,7 +62,7 @@ class Command:
     controlled_kmh: tuple
 
 
-# seed 000 Table 2.1 (OCR-damaged cells as read in the digest; [U] where the digest is unsure)
+# the ALS thesis' Table 2.1, docs/sources.md#fire-code-and-pi4-dqpsk (OCR-damaged cells as read in the digest; [U] where the digest is unsure)
 COMMANDS = {c.number: c for c in (
     Command(1, 0, "red", (20, 20, 20), (0, 0, 0)),
     Command(2, 0, "red-yellow", (20, 20, 20), (0, 0, 0)),

@@ -21,7 +21,7 @@ Faults: main transmitter failed → reserve takes over (status 1, same codes); m
 failed → no code anywhere (status 2).
 
 Everything is a pure function of the sample index and the carried filter state, so frames of
-any length N give the same samples (DESIGN §3).
+any length N give the same samples (docs/wayside_coder.md#model-corepy).
 """
 from __future__ import annotations
 

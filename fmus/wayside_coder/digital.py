@@ -1,6 +1,6 @@
 """Wayside coder for the digital systems (ALS-EN, FIRE_DQPSK): block logic → command per
 section → duplicated generators compared 2-out-of-2 → phase-modulated square-wave carrier →
-Chebyshev band-pass (seed 000 §9; no FMI here).
+Chebyshev band-pass (docs/sources.md#digital-generator-receiver-and-redundancy; no FMI here).
 
 * **Commands.** Free sections ahead n (the block logic of core.py; the line beyond the model
   is free) → the system's plain-line command for n (als_en.py, fire_dqpsk.py), with the
@@ -36,7 +36,7 @@ from fmus.dsp.filter_design import chebyshev_band_pass
 from fmus.errors import FmuInputError
 from fmus.wayside_coder.core import SIGNAL_DARK, CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings, sections_to_occupied
 
-GENERATOR_PROTOTYPE_ORDER = 2      # 4th-order band-pass (seed 000 §9.3: two biquads)
+GENERATOR_PROTOTYPE_ORDER = 2      # 4th-order band-pass (docs/sources.md#digital-generator-receiver-and-redundancy: two biquads)
 SQUARE_FUNDAMENTAL = 4.0 / np.pi   # amplitude of a ±1 square wave's fundamental
 
 
