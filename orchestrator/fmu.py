@@ -141,7 +141,16 @@ def _make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
     return {t: ValueBuffer(t, vrs) for t, vrs in table.items() if vrs}
 
 
-class FmuSlave(Slave):
+class _ExtractedComponent(Slave):
+    """A component whose FMU archive is extracted (once per run) into the work folder."""
+
+    def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
+        self.name = name
+        self.interface = interface
+        self.unzip_dir = _extract_once(fmu_path, workdir)
+
+
+class FmuSlave(_ExtractedComponent):
     """One FMU instance driven through fmpy's ctypes functions with preallocated buffers."""
 
     in_process = False
@@ -149,9 +158,7 @@ class FmuSlave(Slave):
     def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
         from fmpy.fmi2 import FMU2Slave
 
-        self.name = name
-        self.interface = interface
-        self.unzip_dir = _extract_once(fmu_path, workdir)
+        super().__init__(name, fmu_path, interface, workdir)
         self._fmu = FMU2Slave(guid=interface.guid, unzipDirectory=str(self.unzip_dir),
                               modelIdentifier=interface.model_identifier, instanceName=name)
         self._component = None
@@ -331,15 +338,13 @@ def _release_library(unzip_dir: Path) -> bool:
     return _LIVE_LIBRARIES[key] <= 0
 
 
-class InProcessSlave(Slave):
+class InProcessSlave(_ExtractedComponent):
     """The same facade class, driven directly in this interpreter (no FMI, no ctypes)."""
 
     in_process = True
 
     def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
-        self.name = name
-        self.interface = interface
-        self.unzip_dir = _extract_once(fmu_path, workdir)
+        super().__init__(name, fmu_path, interface, workdir)
         resources = self.unzip_dir / "resources"
         module_name = (resources / "slavemodule.txt").read_text().strip()
         if str(resources) not in sys.path:

@@ -2,7 +2,7 @@
 from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port, line_file_port
 from fmus.ato_controller.core import AtoCore, AtoSettings
 
 
@@ -13,7 +13,7 @@ class AtoController(FrameSlave):
     def declare_ports(cls, build):
         s = AtoSettings()
         return [
-            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            line_file_port(),
             Port("rolling_stock_file", "parameter", "String", start="",
                  description="the ATO's nominal train; empty: the bundled ЧС7 passenger train"),
             Port("timetable_file", "parameter", "String", start="", description="empty: the bundled default timetable"),

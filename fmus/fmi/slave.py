@@ -96,6 +96,22 @@ def keyword_defaults(function) -> Dict[str, Any]:
             if p.default is not inspect.Parameter.empty}
 
 
+def line_file_port() -> Port:
+    """The line description every unit reads: one file shared by a system's components."""
+    return Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line")
+
+
+def cab_system_port() -> Port:
+    """The cab-signalling system a coder sends and a receiver decodes."""
+    return Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK")
+
+
+def sample_rate_port(fs_hz: float, frame: int) -> Port:
+    """The sample rate of a signal-chain unit; its communication step is one frame."""
+    return Port("fs", "parameter", unit="Hz", start=fs_hz, min=1.0,
+                description=f"sample rate; the communication step must be frame/fs ({frame} samples)")
+
+
 @dataclass
 class _Store:
     """Flat value store of one FMI type plus the value-reference → slot table."""

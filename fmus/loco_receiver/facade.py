@@ -1,7 +1,7 @@
 """LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
 FIRE_DQPSK). No logic here (see core.py, digital.py)."""
 from fmus.signalling import cab_systems
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.loco_receiver.parameters import receiver_settings
@@ -16,11 +16,10 @@ class LocoReceiver(FrameSlave):
         n = build.frame
         s, d = ReceiverSettings(), DigitalReceiverSettings()     # ALSN and digital-only defaults
         return [
-            Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
+            cab_system_port(),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz"),
-            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0,
-                 description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
+            sample_rate_port(s.fs_hz, n),
             Port("train_category", "parameter", "String", start=s.train_category,
                  description="passenger | freight | high_speed"),
             Port("v_max", "parameter", unit="m/s", start=s.v_max_mps, min=0.0,

@@ -1,6 +1,6 @@
 """RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
 from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port, line_file_port, sample_rate_port
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters
 
@@ -16,8 +16,8 @@ class RailLine(FrameSlave):
         c = CircuitParameters()
         s = RailSettings()
         return [
-            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
-            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0, description=f"sample rate; step = {n}/fs"),
+            line_file_port(),
+            sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: each section's carrier from the line file; else this one (digital: 174.38 / 175 Hz)"),
             # one start for every train: the settings default of the first

@@ -2,7 +2,7 @@
 from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
-from fmus.fmi.slave import FrameSlave, Port, keyword_defaults
+from fmus.fmi.slave import FrameSlave, Port, line_file_port, keyword_defaults
 from fmus.traction.core import TractionCore
 
 
@@ -15,7 +15,7 @@ class Traction(FrameSlave):
         return [
             Port("rolling_stock_file", "parameter", "String", start="",
                  description="rolling-stock JSON; empty: the bundled ЧС7 passenger train"),
-            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            line_file_port(),
             Port("x0", "parameter", unit="m", start=s["x0_m"], description="initial head position"),
             Port("v0", "parameter", unit="m/s", start=s["v0_mps"], min=0.0),
             Port("pantograph_voltage", "parameter", unit="V", start=s["pantograph_voltage_v"], min=0.0,

@@ -2,7 +2,7 @@
 FIRE_DQPSK). No logic here (see core.py, digital.py)."""
 from fmus.signalling import alsn, cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FrameSlave, Port, line_file_port, cab_system_port, sample_rate_port
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital import DigitalCoderCore
 
@@ -16,12 +16,11 @@ class WaysideCoder(FrameSlave):
         k, n = build.sections, build.frame
         s = CoderSettings()
         return [
-            Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line"),
+            line_file_port(),
             Port("codes_file", "parameter", "String", start="",
                  description="code timing tables (JSON); empty: the bundled KPT-5/KPT-7 tables"),
-            Port("system", "parameter", "String", start="ALSN", description="ALSN | ALS-EN | FIRE_DQPSK"),
-            Port("fs", "parameter", unit="Hz", start=s.fs_hz, min=1.0,
-                 description=f"sample rate; the communication step must be frame/fs ({n} samples)"),
+            cab_system_port(),
+            sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: ALSN each section's carrier from the line file, digital the system's "
                              "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); else this carrier for all"),

@@ -58,13 +58,28 @@ def _timetable(graph: SystemGraph, ato: str) -> list:
         return []     # the FMU itself reports the bad file at initialisation
 
 
-class TrainVerdict(SummaryObserver):
+class _OutputJudge(SummaryObserver):
+    """A verdict reading the outputs it names in ``outputs_needed`` through slots bound once
+    when the run starts (``_slots`` stays None when the run failed before that)."""
+
+    _slots: Optional[Dict[tuple, tuple]] = None
+
+    def _bind_slots(self, master: MasterView) -> None:
+        self._slots = {}
+        for component, variables in self.outputs_needed().items():
+            for var in variables:
+                self._slots[(component, var)] = master.output_slot(component, var)
+
+    def _value(self, component: str, var: str):
+        buffer, index = self._slots[(component, var)]
+        return buffer.values[index]
+
+
+class TrainVerdict(_OutputJudge):
     """Observer: records stops and aspect changes of every ATO-driven train."""
 
     def __init__(self, graph: SystemGraph):
         self.trains = trains_of(graph)
-        # where each output lives, set when the run starts (None: it failed before that)
-        self._slots: Optional[Dict[tuple, tuple]] = None
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -75,20 +90,10 @@ class TrainVerdict(SummaryObserver):
         return needed
 
     def started(self, master: MasterView, step: StepRecord) -> None:
-        self._slots = {}
-        for train in self.trains:
-            for var in TRAIN_OUTPUTS:
-                self._slots[(train.name, var)] = master.output_slot(train.name, var)
-            if train.ato:
-                for var in ATO_OUTPUTS:
-                    self._slots[(train.ato, var)] = master.output_slot(train.ato, var)
+        self._bind_slots(master)
         for train in self.trains:
             if train.ato:
                 self._check(master, train, step.tick)
-
-    def _value(self, component: str, var: str):
-        buffer, index = self._slots[(component, var)]
-        return buffer.values[index]
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
         for train in self.trains:
@@ -135,7 +140,7 @@ class TrainVerdict(SummaryObserver):
             if train.ato:
                 entry.update(
                     ato=train.ato,
-                    max_overspeed_kmh=float(self._value(train.ato, "max_overspeed")) * 3.6,
+                    max_overspeed_kmh=float(self._value(train.ato, "max_overspeed")) * KMH_PER_MPS,
                     atp_interventions=int(self._value(train.ato, "atp_interventions")),
                     emergency_brakings=int(self._value(train.ato, "emergency_brakings")),
                     signals_passed_at_danger=int(self._value(train.ato, "signals_passed_at_danger")),
@@ -205,7 +210,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
 CHECK_INTERVAL_S = 0.1
 
 
-class ReceiverVerdict(SummaryObserver):
+class ReceiverVerdict(_OutputJudge):
     """Observer: judges every receiver against the code transmitted into the section under its
     train's coils (the rail line's ``coil_section``, the coder's ``code_tx``). More permissive
     (aspect, free blocks or speed) for longer than the system's stated latency is a wrong-side
@@ -214,8 +219,6 @@ class ReceiverVerdict(SummaryObserver):
     def __init__(self, graph: SystemGraph):
         self.graph = graph
         self.receivers = receivers_of(graph)
-        # where each output lives, set when the run starts (None: it failed before that)
-        self._slots: Optional[Dict[tuple, tuple]] = None
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -227,10 +230,7 @@ class ReceiverVerdict(SummaryObserver):
         return needed
 
     def started(self, master: MasterView, step: StepRecord) -> None:
-        self._slots = {}
-        for component, variables in self.outputs_needed().items():
-            for var in variables:
-                self._slots[(component, var)] = master.output_slot(component, var)
+        self._bind_slots(master)
         # checked at the first multiple of the receiver's step from CHECK_INTERVAL_S on: an
         # episode is timed to that, against stated latencies of 1.1 s (FIRE) to 4.2 s (ALSN)
         self._check_ticks = {}
@@ -243,10 +243,6 @@ class ReceiverVerdict(SummaryObserver):
         for r in self.receivers:
             count = sum(1 for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx["))
             self._code_tx[r.name] = [self._slots[(r.coder, f"code_tx[{k}]")] for k in range(1, count + 1)]
-
-    def _value(self, component: str, var: str):
-        buffer, index = self._slots[(component, var)]
-        return buffer.values[index]
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
         now, tick = step.time_s, step.tick
