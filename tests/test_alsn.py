@@ -220,7 +220,8 @@ def test_block_logic_three_and_four_aspects():
 def test_track_circuits_without_signals_are_coded_as_one_block():
     """A station throat: sections 4-6 of the joints_at_speed line form one block (signals only
     at its ends). Occupancy anywhere in it closes the signal before it; its track circuits carry
-    the code of the block's exit signal and show no signal of their own."""
+    the code of the block's exit signal, except behind the occupied circuit (no code: the block
+    rules, tests/test_block_rules.py), and show no signal of their own."""
     from orchestrator.analysis.systems import SSP_ROOT
 
     line = load_line(SSP_ROOT / "joints_at_speed" / "resources" / "throat_line.json")
@@ -229,7 +230,7 @@ def test_track_circuits_without_signals_are_coded_as_one_block():
     occ = np.zeros(8, dtype=bool)
     occ[4] = True                                              # the middle circuit of the throat
     out = coder.step(0.0, occ)
-    assert out.code_tx[:6].tolist() == [sig.GREEN, sig.YELLOW, sig.RED_YELLOW, sig.GREEN, sig.GREEN, sig.GREEN]
+    assert out.code_tx[:6].tolist() == [sig.GREEN, sig.YELLOW, sig.RED_YELLOW, alsn.NO_CODE, sig.GREEN, sig.GREEN]
     assert out.signal[3:6].tolist() == [0, 0, SIGNAL_GREEN]    # dark inside the throat
 
 

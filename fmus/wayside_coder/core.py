@@ -7,8 +7,10 @@ Per block section k (line data: transmitter type and carrier per section):
   signal at its exit, which depends on the occupancy of the sections ahead. 3-aspect block:
   next section occupied → red → КЖ; the one after occupied → yellow → Ж; else green → З.
   4-aspect block adds yellow-green (three sections ahead occupied), sent as З [U]. Beyond the
-  last modelled section the line is taken as free. Coding is either always on or switched on
-  when the section is occupied, after a switch-on delay.
+  last modelled section the line is taken as free. A track circuit behind an occupied one of
+  the same block (throats: circuits without their own signal) gets no code. The rules are
+  fmus/signalling/block_rules.py, shared with the digital coder and the run verdict. Coding is
+  either always on or switched on when the section is occupied, after a switch-on delay.
 * **Transmitter** — the cam turns continuously with the transmitter's cycle (KPT-5 1.6 s,
   KPT-7 1.86 s, scaled by ``timing_scale`` to model drift); a code change selects another cam
   contact at the current cam phase (no resynchronisation). Each section starts at a random cam
@@ -32,16 +34,15 @@ import numpy as np
 from scipy.signal import lfilter
 
 from fmus.signalling import alsn
-from fmus.signalling import aspects as sig
+from fmus.signalling.block_rules import (SIGNAL_DARK, SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW,  # noqa: F401 (re-exported)
+                                         SIGNAL_YELLOW_GREEN, BlockCodes, block_codes)
 from fmus.data.loader import Line
 from fmus.dsp.periodic import period_samples
 from fmus.errors import FmuInputError
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
-SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
 STATUS_OK, STATUS_PARTIAL, STATUS_FAILED = 0, 1, 2
 _WAVE_MAX_SAMPLES = 1 << 16     # longest repeating output kept as a table, per section and code
-_CODE_OF_SIGNAL = np.array([alsn.NO_CODE, sig.RED_YELLOW, sig.YELLOW, sig.GREEN, sig.GREEN])
 
 
 @dataclass
@@ -115,33 +116,6 @@ class CodingSwitch:
         return coded
 
 
-def sections_to_occupied(occupied: np.ndarray, count: int, block_of: Optional[np.ndarray] = None) -> np.ndarray:
-    """For each section, how many blocks ahead of its own block the first occupied one lies (1:
-    the next); a block is occupied when any of its track circuits is (``block_of``: block of
-    each section; None: one section per block). Beyond the last modelled section the line is
-    taken as free (a large number)."""
-    occ = np.asarray(occupied[:count], dtype=bool)
-    if block_of is not None:
-        blocks = int(block_of[-1]) + 1
-        per_block = np.zeros(blocks, dtype=bool)
-        np.logical_or.at(per_block, block_of, occ)
-        return sections_to_occupied(per_block, blocks)[block_of]
-    occ = np.concatenate([occ, [False]])
-    index = np.where(occ, np.arange(count + 1), count + 10)
-    next_occupied = np.minimum.accumulate(index[::-1])[::-1]
-    return next_occupied[1:] - np.arange(count)
-
-
-def block_signals(ahead: np.ndarray, block_aspects: int) -> np.ndarray:
-    """Aspect of the signal at each section's exit from the distance to the occupancy ahead."""
-    signals = np.full(ahead.size, SIGNAL_GREEN)
-    signals[ahead == 1] = SIGNAL_RED
-    signals[ahead == 2] = SIGNAL_YELLOW
-    if block_aspects == 4:
-        signals[ahead == 3] = SIGNAL_YELLOW_GREEN
-    return signals
-
-
 class WaysideCoderCore:
     def __init__(self, line: Line, sections: int, frame: int, settings: CoderSettings,
                  transmitters: Optional[dict] = None):
@@ -197,9 +171,13 @@ class WaysideCoderCore:
                                 np.zeros(sections, dtype=np.int64))
 
     # ---- block logic --------------------------------------------------------------------------
+    def block_codes(self, occupied: np.ndarray) -> BlockCodes:
+        """The block rules for this line (fmus/signalling/block_rules.py)."""
+        return block_codes(np.asarray(occupied[:self.count], dtype=bool), self.block_of, self.settings.block_aspects)
+
     def block_signals(self, occupied: np.ndarray) -> np.ndarray:
-        """Aspect of the signal closing each section's block (the code the section carries)."""
-        return block_signals(sections_to_occupied(occupied, self.count, self.block_of), self.settings.block_aspects)
+        """Aspect of the signal closing each section's block."""
+        return self.block_codes(occupied).signal
 
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False,
              wrong_command_main: int = 0, wrong_command_reserve: int = 0) -> CoderOutputs:
@@ -227,8 +205,10 @@ class WaysideCoderCore:
     def _block_logic(self, t: float, occupied: np.ndarray, fault_main: bool, fault_reserve: bool) -> None:
         """Signals, codes, transmitter status and the cam contacts the codes select."""
         k, out = self.count, self.out
-        signals = self.block_signals(occupied)
-        codes = np.where(self.switch.coded(t, occupied), _CODE_OF_SIGNAL[signals], alsn.NO_CODE)
+        rules = self.block_codes(occupied)
+        signals = rules.signal
+        # the block rules' code: none behind an occupied circuit of the same block
+        codes = np.where(self.switch.coded(t, occupied), rules.alsn_code, alsn.NO_CODE)
         out.status = STATUS_FAILED if (fault_main and fault_reserve) else (STATUS_PARTIAL if fault_main or fault_reserve else STATUS_OK)
         if out.status == STATUS_FAILED:
             codes = np.zeros(k, dtype=np.int64)

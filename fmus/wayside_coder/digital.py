@@ -2,9 +2,11 @@
 section → duplicated generators compared 2-out-of-2 → phase-modulated square-wave carrier →
 Chebyshev band-pass (docs/sources.md#digital-generator-receiver-and-redundancy; no FMI here).
 
-* **Commands.** Free sections ahead n (the block logic of core.py; the line beyond the model
-  is free) → the system's plain-line command for n (als_en.py, fire_dqpsk.py), with the
-  track parity (`track_parity`) and the section's block parity (its index mod 2).
+* **Commands.** Free sections ahead n (the block rules, fmus/signalling/block_rules.py; the
+  line beyond the model is free) → the system's plain-line command for n (als_en.py,
+  fire_dqpsk.py), with the track parity (`track_parity`) and the section's block parity (its
+  index mod 2). A section behind an occupied one of the same block gets no output (its code
+  is cut, as ALSN's).
 * **2-out-of-2.** Main and reserve controllers compute the commands independently. Equal →
   sent; different (a controller computing a wrong command, `wrong_command_main/reserve`) →
   the more restrictive; one failed (`fault_main`/`fault_reserve`, found by its self-test) →
@@ -34,7 +36,8 @@ from fmus.data.loader import Line
 from fmus.signalling.digital import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_band_pass
 from fmus.errors import FmuInputError
-from fmus.wayside_coder.core import SIGNAL_DARK, CoderOutputs, CoderSettings, CodingSwitch, block_signals, check_settings, sections_to_occupied
+from fmus.signalling.block_rules import SIGNAL_DARK, block_codes
+from fmus.wayside_coder.core import CoderOutputs, CoderSettings, CodingSwitch, check_settings
 
 GENERATOR_PROTOTYPE_ORDER = 2      # 4th-order band-pass (docs/sources.md#digital-generator-receiver-and-redundancy: two biquads)
 SQUARE_FUNDAMENTAL = 4.0 / np.pi   # amplitude of a ±1 square wave's fundamental
@@ -125,14 +128,15 @@ class DigitalCoderCore:
                   int(wrong_command_reserve))
         if inputs != self._inputs:         # the decision changes only with its inputs
             self._inputs = inputs
-            ahead = sections_to_occupied(occ, k, self.block_of)
-            commands, out.status = self._decide(ahead - 1, *inputs[1:])
-            self._sending = np.array([c is not None for c in commands])
+            rules = block_codes(occ, self.block_of, s.block_aspects)
+            commands, out.status = self._decide(np.maximum(rules.free_blocks, 0), *inputs[1:])
+            # behind an occupied circuit of the same block the code is cut: no output (block rules)
+            self._sending = np.array([c is not None for c in commands]) & rules.coded
             for index, command in enumerate(commands):
                 if command is not None and command != self.pending[index].command:
                     self.pending[index] = self._message(command, self.blocks[index])
             self._changing = np.flatnonzero([p != c for p, c in zip(self.pending, self.current)])
-            out.signal[:k] = np.where(self.has_signal, block_signals(ahead, s.block_aspects), SIGNAL_DARK)
+            out.signal[:k] = np.where(self.has_signal, rules.signal, SIGNAL_DARK)
         self.live = coded & self._sending
         if not self._started:              # nothing modulated yet: start with the commands of now
             self._started = True
