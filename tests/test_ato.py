@@ -165,6 +165,47 @@ def test_digital_cab_signal_targets_the_next_signal_and_a_stop_after_the_free_bl
     assert not any(t.signal for t in open_line.constraints.targets)
 
 
+@pytest.mark.parametrize("mode, aspect, valid, v_permitted, permits", [
+    ("ALSN", sig.GREEN, True, 0.0, True), ("ALSN", sig.YELLOW, True, 0.0, True),
+    ("ALSN", sig.RED_YELLOW, True, 0.0, True),           # moving up to the signal is permitted
+    ("ALSN", sig.WHITE, False, 0.0, False), ("ALSN", sig.RED, True, 0.0, False),
+    ("ALSN", sig.GREEN, False, 0.0, False),              # a remembered code is no departure code
+    ("digital", sig.GREEN, True, 120 * KMH, True), ("digital", sig.RED_YELLOW, True, 0.0, False),
+    ("digital", sig.WHITE, False, 0.0, False), ("off", sig.WHITE, False, 0.0, True)])
+def test_a_standing_train_may_start_only_on_a_valid_permissive_code(mode, aspect, valid, v_permitted, permits):
+    assert _atp(mode).permits_departure(aspect, valid, v_permitted) is permits
+
+
+def _code_from(t_code_s, before=(sig.WHITE, False)):
+    """Cab signal: ``before`` (aspect, code_valid) until ``t_code_s``, then green."""
+    return lambda t, x: before if t < t_code_s else (sig.GREEN, True)
+
+
+@pytest.mark.parametrize("before", [(sig.WHITE, False), (sig.RED, True)])
+def test_without_a_permissive_code_at_departure_the_train_waits_then_departs_normally(before):
+    """Departure hold (docs/ato.md): no code (or red) at the departure time (60 s) → the brake
+    stays on and the train does not move; the code arrives at 250 s → it departs and runs
+    to B as it would, late by the hold."""
+    code_s = 250.0
+    result = run_closed_loop(900.0, cab_signal=_code_from(code_s, before))
+    t, x, command = result.column("t"), result.column("x"), result.column("command")
+    waiting = t < code_s
+    assert np.ptp(x[waiting]) < 1e-6 and np.all(command[waiting] < 0)       # braked, not a centimetre moved
+    assert result.ato.out.departure_hold_s == pytest.approx(code_s - 60.0, abs=0.6)
+    assert x[t > code_s + 30].min() > x[0] + 50                              # away once the code came
+    arrival = result.ato.arrivals[0]
+    assert arrival["station"] == "B" and abs(arrival["stop_error_m"]) <= 0.5
+    assert 0 < arrival["arrival_deviation_s"] <= code_s - 60.0               # late by at most the hold
+    assert result.ato.atp.interventions == 0 and result.ato.atp.signals_passed_at_danger == 0
+
+
+def test_a_code_at_departure_does_not_hold_the_train():
+    result = run_closed_loop(200.0, cab_signal=_code_from(0.0))
+    assert result.ato.out.departure_hold_s == 0.0
+    t, x = result.column("t"), result.column("x")
+    assert x[t < 60.0].max() == x[0] and x[-1] > x[0] + 500               # leaves at 60 s as before
+
+
 # ---- driving to the timetable ------------------------------------------------------------------
 @pytest.mark.parametrize("strategy", ["programme", "predictive"])
 def test_nominal_run_is_on_time_on_the_mark_without_interventions(strategy):

@@ -42,6 +42,10 @@ from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
+# aspects a train may start on (docs/ato.md, departure hold): red-yellow too, since it permits
+# moving up to the exit signal, which the ATP supervises as a stop target; white (no code) and
+# red never (issue 22's "white or red at departure: hold")
+DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
 
 
@@ -162,6 +166,16 @@ class Atp:
             if free_blocks < FREE_BLOCKS_OPEN:       # the section after the free ones is occupied
                 c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), 0.0, signal=True))
         return c
+
+    def permits_departure(self, aspect: int, code_valid: bool, v_permitted_mps: float) -> bool:
+        """A standing train may start only on a valid permissive cab code (docs/ato.md,
+        departure hold): what the receiver shows now, not a remembered code. ``off`` (no cab
+        signal) always permits; digital also needs a permitted speed above zero."""
+        if self.mode == "off":
+            return True
+        if not code_valid or int(aspect) not in DEPARTURE_ASPECTS:
+            return False
+        return self.mode == "ALSN" or v_permitted_mps > 0.0
 
     def _no_code(self) -> Constraints:
         return self._alsn(sig.WHITE, None)

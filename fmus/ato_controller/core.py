@@ -97,6 +97,7 @@ class AtoOutputs:
     stop_error_m: float = 0.0             # head position − stop point at the last arrival
     mode_changes: int = 0                 # traction/coast/brake changes while running
     stage: int = 0
+    departure_hold_s: float = 0.0         # time standing past a departure time for want of a permissive cab code
 
 
 class AtoCore:
@@ -217,7 +218,8 @@ class AtoCore:
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
-        command, mode = self._drive(t, x, v, atp)
+        permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
+        command, mode = self._drive(t, h, x, v, atp, permissive)
         if atp.intervention == SERVICE_INTERVENTION:
             command, mode = -1.0, MODE_ATP_SERVICE
         elif atp.intervention == EMERGENCY_INTERVENTION:
@@ -255,7 +257,7 @@ class AtoCore:
         out.stage = self.stage
         return out
 
-    def _drive(self, t: float, x: float, v: float, atp):
+    def _drive(self, t: float, h: float, x: float, v: float, atp, permissive: bool):
         s = self.settings
         out = self.out
         if self.phase == FINISHED:
@@ -266,12 +268,17 @@ class AtoCore:
             departure = self.departure_time(self.stage)
             out.schedule_deviation_s = max(t - self.timetable[self.stage].departure_s, 0.0) \
                 if self.phase == DWELLING or t > departure else 0.0
-            may_go = atp.permitted_mps > 1.0 and not atp.stop_now
-            if t + 1e-9 >= departure and may_go:
+            # departure hold: the ATO knows only the cab signal and the line, never where the
+            # train ahead is, so it starts only on a valid permissive code (atp.permits_departure)
+            may_go = atp.permitted_mps > 1.0 and not atp.stop_now and permissive
+            due = t + 1e-9 >= departure
+            if due and may_go:
                 self._depart(t)
             elif may_go and t + self.release_lead_s >= departure:
                 return 0.0, MODE_STANDSTILL    # release the brake ahead of the departure time
             else:
+                if due and not permissive:
+                    out.departure_hold_s += h
                 return -s.hold_brake, MODE_STANDSTILL
         return self._run(t, x, v, atp)
 

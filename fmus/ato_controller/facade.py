@@ -71,6 +71,8 @@ class AtoController(FrameSlave):
             Port("stop_error", "output", unit="m", description="head − stop point at the last arrival"),
             Port("mode_changes", "output", "Integer", start=0, description="traction/coast/brake changes while running"),
             Port("stage", "output", "Integer", start=0, description="timetable stage (0 = first stop to second)"),
+            Port("departure_hold", "output", unit="s",
+                 description="time standing past a departure time without a valid permissive cab code"),
         ]
 
     def make_default_experiment(self):
@@ -111,4 +113,5 @@ _OUTPUT_FIELDS = (
     ("emergency_brakings", "emergency_brakings"), ("signals_passed_at_danger", "signals_passed_at_danger"),
     ("max_overspeed", "max_overspeed_mps"), ("stop_index", "stop_index"), ("arrival_time", "arrival_time_s"),
     ("stop_error", "stop_error_m"), ("mode_changes", "mode_changes"), ("stage", "stage"),
+    ("departure_hold", "departure_hold_s"),
 )
