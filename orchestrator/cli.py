@@ -121,6 +121,10 @@ def cmd_run(args) -> int:
                if "atp_interventions" in train else "")
         print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
               + (f"; arrivals {stops}" if stops else "") + atp)
+    if summary.get("receivers"):
+        from orchestrator.analysis.verdict import safety_verdict
+
+        print(f"  {safety_verdict(summary)[1]}")
     return 0
 
 

@@ -243,10 +243,16 @@ def verdict_table(summary: dict) -> str:
             lines.append(f"{train['name']:12s} energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
                          f"{train.get('max_overspeed_kmh', 0):.1f} km/h, ATP interventions {train['atp_interventions']}, "
                          f"emergency brakings {train['emergency_brakings']}, SPAD {train['signals_passed_at_danger']}")
+        if train.get("min_headway_m") is not None:
+            lines.append(f"{train['name']:12s} min. headway to the train ahead {train['min_headway_m']:.0f} m")
     for rx in summary.get("receivers", []):
         lines.append(f"receiver {rx['receiver']} ({rx['system']}, train {rx['train']}): decoded "
                      f"{rx.get('decoded_codes', '?')}, errors {rx.get('code_errors', '?')}, wrong-side failures "
-                     f"{rx['wrong_side_failures']}")
+                     f"{rx['wrong_side_failures']}, unsafe indications {rx.get('unsafe_indications', '?')}")
+    if summary.get("receivers"):
+        from orchestrator.analysis.verdict import safety_verdict
+
+        lines.append(safety_verdict(summary)[1])
     if summary.get("scenario"):
         lines.append(f"scenario: {len(summary['scenario']['events_applied'])} events applied "
                      f"({summary['scenario']['file']})")

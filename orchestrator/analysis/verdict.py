@@ -8,7 +8,7 @@ verdict: overspeed, interventions, signals passed at danger, every timetable sto
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 from fmus.signalling import aspects as sig
 
@@ -32,6 +32,7 @@ class _Train:
     aspects: List[dict] = field(default_factory=list)
     last_stop_index: int = 1
     last_aspect: Optional[int] = None
+    min_headway_m: Optional[float] = None     # to the tail of the train ahead on its line
 
 
 def trains_of(graph: SystemGraph) -> List[_Train]:
@@ -80,6 +81,7 @@ class TrainVerdict(_OutputJudge):
 
     def __init__(self, graph: SystemGraph):
         self.trains = trains_of(graph)
+        self._headways = _Headways(graph, self.trains)
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -94,8 +96,10 @@ class TrainVerdict(_OutputJudge):
         for train in self.trains:
             if train.ato:
                 self._check(master, train, step.tick)
+        self._headways.check(master, step.tick, self._value)
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
+        self._headways.check(master, step.tick, self._value)
         for train in self.trains:
             if train.ato and train.ato in step.stepped:     # its outputs change only when it steps
                 self._check(master, train, step.tick)
@@ -137,6 +141,8 @@ class TrainVerdict(_OutputJudge):
         entries = []
         for train in self.trains:
             entry = {"name": train.name, "energy_kwh": float(self._value(train.name, "energy")) / J_PER_KWH}
+            if self._headways.shares_line(train.name):
+                entry["min_headway_m"] = train.min_headway_m
             if train.ato:
                 entry.update(
                     ato=train.ato,
@@ -151,10 +157,207 @@ class TrainVerdict(_OutputJudge):
         return entries
 
 
+class _Headways:
+    """Per train, the least distance from its head to the tail of the train ahead on the same
+    line (trains whose ``line_file`` is the same file), checked every CHECK_INTERVAL_S."""
+
+    def __init__(self, graph: SystemGraph, trains: List[_Train]):
+        from fmus.data.loader import DEFAULT_LINE
+
+        lengths = train_lengths(graph)
+        groups: Dict[str, List[_Train]] = {}
+        for train in trains:
+            line = str(_data_file(_parameter(graph, train.name, "line_file"), DEFAULT_LINE))
+            groups.setdefault(line, []).append(train)
+        self.groups = [(group, [lengths[t.name] for t in group]) for group in groups.values() if len(group) > 1]
+        self._shared = {t.name for group, _ in self.groups for t in group}
+        self._interval_ticks = max(1, graph.base_ticks * -(-round(CHECK_INTERVAL_S * TICKS_PER_SECOND) // graph.base_ticks))
+
+    def shares_line(self, name: str) -> bool:
+        return name in self._shared
+
+    def check(self, master: MasterView, tick: int, value) -> None:
+        if not self.groups or tick % self._interval_ticks:
+            return
+        for group, lengths in self.groups:
+            heads = []
+            for train in group:
+                master.fresh(train.name)
+                heads.append(float(value(train.name, "x")))
+            for train, head in zip(group, heads):
+                gaps = [other - length - head for other, length in zip(heads, lengths) if other > head]
+                if gaps and (train.min_headway_m is None or min(gaps) < train.min_headway_m):
+                    train.min_headway_m = min(gaps)
+
+
+# ---- the track as the orchestrator knows it (docs/scenarios.md, "Results: summary.json") ----
+def _parameter(graph: SystemGraph, component: str, name: str, default=None):
+    """A parameter (or an input's start value) as the component will read it."""
+    node = graph.nodes[component]
+    if name in node.parameters:
+        return node.parameters[name]
+    var = node.interface.variables.get(name)
+    return default if var is None or var.start is None else var.start
+
+
+def _data_file(value, default):
+    """A ``*_file`` parameter as the FMU opens it: resolved by the graph, else a bundled file."""
+    from pathlib import Path
+
+    from fmus.data.loader import DATA
+
+    if not value:
+        return default
+    path = Path(str(value))
+    return path if path.is_absolute() or path.exists() else DATA / path
+
+
+def train_lengths(graph: SystemGraph) -> Dict[str, float]:
+    """Length of every train (Traction component): the rail line's ``train_length[j]`` of the
+    slot its ``x`` feeds, else its rolling-stock file's length."""
+    from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
+    from fmus.errors import FmuInputError
+
+    lengths = {}
+    for edge in graph.edges:
+        if edge.source_var.name == "x" and edge.target_var.name.startswith("x_head["):
+            slot = edge.target_var.name[len("x_head"):]
+            lengths[edge.source] = float(_parameter(graph, edge.target, f"train_length{slot}", 0.0))
+    for name in graph.order:
+        if graph.nodes[name].interface.model_identifier == TRAIN_MODEL and not lengths.get(name):
+            try:
+                stock = _data_file(_parameter(graph, name, "rolling_stock_file"), DEFAULT_ROLLING_STOCK)
+                lengths[name] = load_rolling_stock(stock).length_m
+            except FmuInputError:
+                lengths[name] = 0.0        # the FMU itself reports the bad file at initialisation
+    return lengths
+
+
+class _Track:
+    """One rail line: its track circuits and blocks (the line file it reads), the trains on it
+    (the Traction components feeding its ``x_head[j]``, with their lengths) and the broken rail
+    the scenario sets (its ``broken_rail_at`` input). :meth:`occupied` is the real occupancy,
+    not the rail line's relays: a circuit is occupied when a train overlaps it or its rail is
+    broken."""
+
+    def __init__(self, graph: SystemGraph, rail: str, line, lengths: Dict[str, float], block_aspects: int):
+        import numpy as np
+
+        self.rail, self.line, self.block_aspects = rail, line, block_aspects
+        self.starts_m = np.array([s.start_m for s in line.sections])
+        self.ends_m = np.array([s.end_m for s in line.sections])
+        self.block_of = np.array(line.block_of_section)
+        self.trains = [e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("x_head[")
+                       and graph.nodes[e.source].interface.model_identifier == TRAIN_MODEL]
+        self.lengths_m = np.array([lengths.get(t, 0.0) for t in self.trains])
+        self.coil_offset_m = float(_parameter(graph, rail, "coil_offset", 0.0))
+        # the time the track takes to detect a change: the relay's drop-out delay
+        self.detection_s = float(_parameter(graph, rail, "relay_drop_out_delay", 0.0))
+        self.broken_rail_start_m = float(_parameter(graph, rail, "broken_rail_at", -1.0))
+        self._broken_rail = None
+        self._cache = (None, None)
+
+    def bind(self, master: MasterView, slots: Dict[tuple, tuple]) -> None:
+        import numpy as np
+
+        self._x = [slots[(t, "x")] for t in self.trains]
+        var = master.graph.nodes[self.rail].interface.variables.get("broken_rail_at")
+        buffer = master.slaves[self.rail].inputs.get(var.type) if var is not None else None
+        if buffer is not None and np.any(buffer.vr_array == var.vr):       # bound: a scenario drives it
+            self._broken_rail = (buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0]))
+
+    def heads_m(self, master: MasterView):
+        import numpy as np
+
+        for train in self.trains:
+            master.fresh(train)
+        return np.array([float(buffer.values[index]) for buffer, index in self._x])
+
+    def broken_rail_m(self) -> float:
+        if self._broken_rail is None:
+            return self.broken_rail_start_m
+        buffer, index = self._broken_rail
+        return float(buffer.values[index])
+
+    def occupied(self, heads_m):
+        """Occupancy of every track circuit from the trains' extents and the broken rail."""
+        import numpy as np
+
+        tails = heads_m - self.lengths_m
+        occ = ((heads_m[:, None] >= self.starts_m) & (tails[:, None] < self.ends_m)).any(axis=0)
+        broken = self.broken_rail_m()
+        if broken >= 0:                 # a broken rail drops its circuit's relay (control mode)
+            occ |= (self.starts_m <= broken) & (broken < self.ends_m)
+        return occ
+
+    def rules(self, master: MasterView, tick: int):
+        """(trains' heads, block rules of the real occupancy), once per tick."""
+        from fmus.signalling.block_rules import block_codes
+
+        if self._cache[0] != tick:
+            heads = self.heads_m(master)
+            self._cache = (tick, (heads, block_codes(self.occupied(heads), self.block_of, self.block_aspects)))
+        return self._cache[1]
+
+    def circuit_at(self, x_m: float) -> int:
+        """0-based track circuit containing ``x_m``, -1 outside every circuit."""
+        import numpy as np
+
+        k = int(np.searchsorted(self.starts_m, x_m, side="right")) - 1
+        return k if k >= 0 and x_m < self.ends_m[k] else -1
+
+
+def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
+    """The tracks of the rail lines ``rails`` (name → coder feeding it); a rail line whose line
+    file does not load is not judged (the FMU reports the file)."""
+    from fmus.data.loader import DEFAULT_LINE, load_line
+    from fmus.errors import FmuInputError
+
+    lengths = train_lengths(graph)
+    tracks = {}
+    for rail, coder in rails.items():
+        try:
+            line = load_line(_data_file(_parameter(graph, rail, "line_file"), DEFAULT_LINE))
+        except FmuInputError:
+            continue
+        aspects = int(_parameter(graph, coder, "block_aspects", 3))
+        tracks[rail] = _Track(graph, rail, line, lengths, aspects)
+    return tracks
+
+
 # ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
 RECEIVER_MODEL = "LocoReceiver"
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 SPEED_TOLERANCE_KMH = 0.5
+
+
+@dataclass
+class _Episodes:
+    """Episodes of a receiver showing more than it may, counted once each when longer than the
+    allowed latency (latency_s)."""
+
+    latency_s: float
+    start_s: Optional[float] = None
+    counted: bool = False
+    count: int = 0
+    seconds: float = 0.0
+    last_check_s: Optional[float] = None
+    events: List[dict] = field(default_factory=list)
+
+    def check(self, now: float, too_permissive: Optional[bool], event: dict) -> None:
+        """``too_permissive`` None: not judged now (the coil outside every section)."""
+        if too_permissive:
+            if self.start_s is None:
+                self.start_s, self.counted = now, False
+            elif now - self.start_s > self.latency_s:
+                if not self.counted:
+                    self.count += 1
+                    self.counted = True
+                    self.events.append({"t": self.start_s, **event})
+                self.seconds += now - max(self.last_check_s or now, self.start_s + self.latency_s)
+        else:
+            self.start_s = None
+        self.last_check_s = now
 
 
 @dataclass
@@ -167,12 +370,11 @@ class _Receiver:
     system: object                 # DigitalSystem, or None for ALSN
     category: str
     latency_s: float
-    episode_start_s: Optional[float] = None
-    counted: bool = False
-    failures: int = 0
-    wrong_side_s: float = 0.0
-    last_check_s: Optional[float] = None
-    events: List[dict] = field(default_factory=list)
+    wrong_side: Optional[_Episodes] = None       # against the code the coder sent
+    unsafe: Optional[_Episodes] = None           # against the real occupancy by the block rules
+
+    def __post_init__(self):
+        self.wrong_side = self.wrong_side or _Episodes(self.latency_s)
 
 
 def receivers_of(graph: SystemGraph) -> List[_Receiver]:
@@ -213,14 +415,27 @@ CHECK_INTERVAL_S = 0.1
 
 
 class ReceiverVerdict(_OutputJudge):
-    """Observer: judges every receiver against the code transmitted into the section under its
-    train's coils (the rail line's ``coil_section``, the coder's ``code_tx``). More permissive
-    (aspect, free blocks or speed) for longer than the system's stated latency is a wrong-side
-    failure, counted once per episode."""
+    """Observer: judges every receiver twice, each time counting episodes longer than the
+    system's stated latency once:
+
+    * **wrong-side failures** — against the code transmitted into the section under its
+      train's coils (the rail line's ``coil_section``, the coder's ``code_tx``): more permissive
+      (aspect, free blocks or speed) than sent;
+    * **unsafe indications** — against the track: more permissive than the block rules
+      (fmus/signalling/block_rules.py) allow for the track circuit under the coils from the
+      real occupancy (every train's extent from its ``x`` and length, the broken rail), which
+      the orchestrator computes itself; the latency then also holds the track's detection time
+      (the rail line's relay drop-out delay). This catches a coder or a track detection that is
+      wrong, which the first check cannot see."""
 
     def __init__(self, graph: SystemGraph):
         self.graph = graph
         self.receivers = receivers_of(graph)
+        self.tracks = tracks_of(graph, {r.rail: r.coder for r in self.receivers})
+        for r in self.receivers:
+            track = self.tracks.get(r.rail)
+            if track is not None:
+                r.unsafe = _Episodes(r.latency_s + track.detection_s)
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -229,10 +444,15 @@ class ReceiverVerdict(_OutputJudge):
             needed.setdefault(r.rail, []).append(f"coil_section[{r.slot}]")
             codes = [v for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx[")]
             needed.setdefault(r.coder, []).extend(codes)
+        for track in self.tracks.values():
+            for train in track.trains:
+                needed.setdefault(train, []).append("x")
         return needed
 
     def started(self, master: MasterView, step: StepRecord) -> None:
         self._bind_slots(master)
+        for track in self.tracks.values():
+            track.bind(master, self._slots)
         # checked at the first multiple of the receiver's step from CHECK_INTERVAL_S on: an
         # episode is timed to that, against stated latencies of 1.1 s (FIRE) to 4.2 s (ALSN)
         self._check_ticks = {}
@@ -253,35 +473,49 @@ class ReceiverVerdict(_OutputJudge):
                 continue
             for component in (r.name, r.rail, r.coder):
                 master.fresh(component)
+            if r.unsafe is not None:
+                self._check_track(master, r, tick, now)
             buffer, index = self._coil_section[r.name]
             section = int(buffer.values[index])
             if section <= 0:
-                r.episode_start_s = None
+                r.wrong_side.check(now, None, {})
                 continue
             buffer, index = self._code_tx[r.name][section - 1]
             sent = int(buffer.values[index])
-            if self._more_permissive(r, sent):
-                if r.episode_start_s is None:
-                    r.episode_start_s, r.counted = now, False
-                elif now - r.episode_start_s > r.latency_s:
-                    if not r.counted:
-                        r.failures += 1
-                        r.counted = True
-                        r.events.append({"t": r.episode_start_s, "section": section, "code_sent": sent})
-                    r.wrong_side_s += now - max(r.last_check_s or now, r.episode_start_s + r.latency_s)
-            else:
-                r.episode_start_s = None
-            r.last_check_s = now
+            meant = sent if r.system is None else transmitted_indication(r.system, sent, r.category)
+            r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent})
 
-    def _more_permissive(self, r: _Receiver, sent: int) -> bool:
+    def _check_track(self, master: MasterView, r: _Receiver, tick: int, now: float) -> None:
+        from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS
+        from fmus.signalling.digital import FREE_BLOCKS_OPEN
+
+        track = self.tracks[r.rail]
+        heads, rules = track.rules(master, tick)
+        circuit = track.circuit_at(float(heads[track.trains.index(r.train)]) + track.coil_offset_m)
+        if circuit < 0:
+            r.unsafe.check(now, None, {})
+            return
+        free = int(rules.free_blocks[circuit])
+        if r.system is None:
+            allowed = int(rules.alsn_code[circuit])
+        elif free == NO_CODE_FREE_BLOCKS:
+            allowed = None
+        else:
+            allowed = r.system.indication(r.system.command_for(min(free, FREE_BLOCKS_OPEN)), r.category)
+        r.unsafe.check(now, self._more_permissive(r, allowed),
+                       {"section": circuit + 1, "free_blocks_allowed": None if free < 0 else min(free, FREE_BLOCKS_OPEN),
+                        "aspect_shown": int(self._value(r.name, "aspect"))})
+
+    def _more_permissive(self, r: _Receiver, meant) -> bool:
+        """Whether the receiver shows more than ``meant``: an ALSN code (aspect enumeration, 0
+        none) or a digital Indication (None: no code)."""
         aspect = int(self._value(r.name, "aspect"))
         if r.system is None:                       # ALSN: code_tx is in the aspect enumeration
-            return sig.restrictiveness(aspect) > sig.restrictiveness(sent if sent else sig.WHITE)
+            return sig.restrictiveness(aspect) > sig.restrictiveness(meant if meant else sig.WHITE)
         shown = (sig.restrictiveness(aspect), int(self._value(r.name, "free_blocks")),
-                 float(self._value(r.name, "v_target")) * 3.6, float(self._value(r.name, "v_permitted")) * 3.6)
+                 float(self._value(r.name, "v_target")) * KMH_PER_MPS, float(self._value(r.name, "v_permitted")) * KMH_PER_MPS)
         if not bool(self._value(r.name, "code_valid")):
             return False                           # white / red: the no-code rules, never permissive
-        meant = transmitted_indication(r.system, sent, r.category)
         if meant is None:                          # nothing sent: any valid code is more than that
             return True
         return (shown[0] > sig.restrictiveness(meant.aspect) or shown[1] > meant.free_blocks
@@ -295,8 +529,11 @@ class ReceiverVerdict(_OutputJudge):
         entries = []
         for r in self.receivers:
             entry = {"receiver": r.name, "train": r.train, "system": "ALSN" if r.system is None else r.system.name,
-                     "latency_s": r.latency_s, "wrong_side_failures": r.failures,
-                     "wrong_side_s": round(r.wrong_side_s, 3), "wrong_side_events": r.events}
+                     "latency_s": r.latency_s, "wrong_side_failures": r.wrong_side.count,
+                     "wrong_side_s": round(r.wrong_side.seconds, 3), "wrong_side_events": r.wrong_side.events}
+            if r.unsafe is not None:
+                entry.update(unsafe_indications=r.unsafe.count, unsafe_s=round(r.unsafe.seconds, 3),
+                             unsafe_latency_s=r.unsafe.latency_s, unsafe_events=r.unsafe.events)
             if self._slots is not None:
                 entry.update(decoded_codes=int(self._value(r.name, "decoded_codes")),
                              code_errors=int(self._value(r.name, "errors")))
@@ -310,7 +547,19 @@ def transmitted_indication(system, code: int, category: str):
     return None if command is None else system.indication(command, category)
 
 
+def safety_verdict(summary: dict) -> Tuple[bool, str]:
+    """The run's safety verdict from summary.json: safe when no train passed a signal at danger
+    and no receiver had a wrong-side failure or an unsafe indication (docs/scenarios.md)."""
+    spad = sum(t.get("signals_passed_at_danger", 0) for t in summary.get("trains", []))
+    wrong = sum(r.get("wrong_side_failures", 0) for r in summary.get("receivers", []))
+    unsafe = sum(r.get("unsafe_indications", 0) for r in summary.get("receivers", []))
+    safe = spad == 0 and wrong == 0 and unsafe == 0
+    return safe, (f"safety: {'safe' if safe else 'UNSAFE'} (signals passed at danger {spad}, "
+                  f"wrong-side failures {wrong}, unsafe indications {unsafe})")
+
+
 def railway_verdicts(graph: SystemGraph) -> list:
-    """The summary observers of a railway run: per train (arrivals, stops, energy, ATP) and
-    per receiver (codes, errors, wrong-side failures). Pass as ``RunOptions.summaries``."""
+    """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
+    headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
+    ``RunOptions.summaries``."""
     return [TrainVerdict(graph), ReceiverVerdict(graph)]
