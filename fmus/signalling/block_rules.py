@@ -19,8 +19,8 @@ what the verdict allows are one rule (docs/wayside_coder.md#block-rules).
   signal is relayed through the front contacts of the track relay of the circuit ahead, so a
   dropped relay ahead cuts it. The sources in docs/sources.md do not state this relaying; we
   take the restrictive reading [U]: nothing permissive may reach a train behind an occupied or
-  failed circuit, and a cut code (white on the cab, docs/sources.md#alsn-carriers-and-aspects
-  #3) is the most restrictive thing the track can tell it.
+  failed circuit; without code the cab shows white, as on track not equipped
+  (docs/sources.md#alsn-carriers-and-aspects #3). docs/wayside_coder.md#block-rules.
 """
 from __future__ import annotations
 
