@@ -68,17 +68,17 @@ def test_installed_wheel_builds_and_runs_a_shipped_system(wheel, tmp_path):
     env["PATH"] = f"{venv / 'bin'}{os.pathsep}{env.get('PATH', '')}"
 
     where = _run([python, "-c", "import fmus, orchestrator, orchestrator.cli as cli; "
-                  "print(fmus.__file__, orchestrator.__file__, cli.IN_CHECKOUT)"], cwd=work).split()
+                  "print(fmus.__file__, orchestrator.__file__, cli.IN_CHECKOUT)"], cwd=work, env=env).split()
     assert all(Path(path).is_relative_to(venv) for path in where[:2]), where   # the wheel, not the checkout
     assert where[2] == "False"
 
     railcosim = venv / "bin" / "railcosim"
-    _run([railcosim, "build"], cwd=work)
+    _run([railcosim, "build"], cwd=work, env=env)
     assert sorted(p.name for p in (work / "build" / "fmus").glob("*.fmu")) == [
         "AtoController.fmu", "LocoReceiver.fmu", "RailLine.fmu", "Traction.fmu", "WaysideCoder.fmu"]
     assert (work / "build" / "ato_only.ssp").is_file() and (work / "build" / "free_run.ssp").is_file()
 
-    _run([railcosim, "run", "ato_only"], cwd=work)   # finds the FMUs up to date
+    _run([railcosim, "run", "ato_only"], cwd=work, env=env)   # finds the FMUs up to date
     summary = json.loads((work / "results" / "summary.json").read_text())
     assert summary["system"] == "ato_only"
     (train,) = summary["trains"]
