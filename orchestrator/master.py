@@ -262,6 +262,14 @@ class Master:
             link.attach(source.slave, self.slaves[link.target], source.stale)
         for component in components:
             component.slave.enter_initialization()
+        # outputs known in initialisation mode (a train's initial position) reach every consumer,
+        # also one that comes first in a cycle: read them all before the exchange, and let the
+        # linear links start from them instead of zeros
+        for component in components:
+            component.slave.read_outputs()
+        for link in self.links:
+            if link.transition == "linear":
+                link.source_updated(start_time_s)
         for component in components:  # initial exchange along the data flow
             self._gather(component, start_time_s)
             component.slave.write_inputs()

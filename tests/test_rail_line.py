@@ -23,22 +23,35 @@ def test_worked_example_two_port_is_reproduced():
     assert np.linalg.det(abcd) == pytest.approx(1.0)
 
 
-def _analytic_shunt_current(circuit: TrackCircuit, x_m: float, params: CircuitParameters) -> float:
-    """Cascade of two-ports: source ‖ bond at the feed, line to the shunt, shunt ‖ (line to the
-    relay end terminated by relay ‖ bond); unit source voltage."""
+def _analytic_shunt_current(circuit: TrackCircuit, x_m: float, params: CircuitParameters,
+                            train_length_m: float = 0.0) -> float:
+    """Cascade of two-ports: source ‖ bond at the feed, line to the train's first axle, then the
+    train as shunts at its first axle and at every other network node it covers, each behind
+    the line to the previous, down to the relay end terminated by relay ‖ bond;
+    unit source voltage. Returns the current arriving at the first axle from the feed."""
     z = params.rail_r_ohm_per_km + 1j * W50 * params.rail_l_h_per_km
     y = 1.0 / params.ballast_ohm_km
     z_bond = params.bond_r_ohm + 1j * W50 * params.bond_l_h
-    z_relay = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond)
-    behind = two_port(z, y, (x_m - circuit.start_m) / 1000.0)
-    z_behind = (behind[0, 0] * z_relay + behind[0, 1]) / (behind[1, 0] * z_relay + behind[1, 1])
-    z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / z_behind)
+
+    def through(length_m, z_end):
+        abcd = two_port(z, y, length_m / 1000.0)
+        return (abcd[0, 0] * z_end + abcd[0, 1]) / (abcd[1, 0] * z_end + abcd[1, 1])
+    # the model's lumping (docs/rail_line.md): a shunt at every node the train covers, its tail
+    # snapped to the nearest node, its first axle where it is (the node nearest to it replaced)
+    spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
+    head_node = round((x_m - circuit.start_m) / spacing)
+    tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
+    axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
+    z_load, previous = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond), circuit.start_m
+    for position in axles:
+        z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / through(position - previous, z_load))
+        previous = position
     ahead = two_port(z, y, (circuit.feed_m - x_m) / 1000.0)
     z_in = (ahead[0, 0] * z_load + ahead[0, 1]) / (ahead[1, 0] * z_load + ahead[1, 1])
     z_feed = 1.0 / (1.0 / z_in + 1.0 / z_bond)
     v_feed = z_feed / (params.feed_r_ohm + z_feed)
     v_shunt = v_feed / (ahead[0, 0] + ahead[0, 1] / z_load)
-    return abs(v_shunt / params.shunt_r_ohm)
+    return abs(v_shunt / z_load)
 
 
 def _steady_carrier_core(line=None, **settings):
@@ -63,11 +76,11 @@ def _run(core, seconds, x_of_t, v, u_amplitude=1.0, i_traction=0.0, sections=Non
 
 @pytest.mark.parametrize("x_m", [7850.0, 8600.0, 9137.0, 9900.0, 10350.0])
 def test_code_current_under_the_first_axle_matches_the_two_port_solution(x_m):
-    params = CircuitParameters()
     core = _steady_carrier_core(transformer_ratio=1.0)
+    params = core.circuits[3].params
     _, _, axle = _run(core, 0.6, lambda t: x_m, 0.0, sections=[3])
     measured = axle[-20:].mean() * np.sqrt(2.0)          # rms over whole periods → amplitude
-    expected = _analytic_shunt_current(core.circuits[3], x_m, params)
+    expected = _analytic_shunt_current(core.circuits[3], x_m, params, core.settings.train_length_m[0])
     assert measured == pytest.approx(expected, rel=0.01)
 
 
@@ -82,29 +95,30 @@ def test_code_current_is_continuous_as_the_train_moves():
     assert steps.max() < 0.01                            # no jumps at the 50 m model nodes
 
 
-def _relay_levels(ballast, node=None, broken=-1.0):
+def _relay_levels(ballast, node=None, broken=-1.0, supply=1.0):
     core = _steady_carrier_core()
     k = 3
     faults = Faults(ballast, broken, False)
-    return core.bank.relay_voltage(k, node, faults)
+    return core.bank.relay_level(k, () if node is None else (node,), faults, supply)
 
 
 def test_normal_mode_relay_picks_up_at_minimum_ballast():
     settings = RailSettings()
-    assert _relay_levels(1.0) >= settings.relay_pick_up
+    assert _relay_levels(1.0, supply=1.0 - settings.supply_tolerance) >= settings.relay_pick_up
 
 
 def test_shunt_mode_relay_drops_with_a_normative_shunt_anywhere_at_maximum_ballast():
     settings = RailSettings()
     circuit = _steady_carrier_core().circuits[3]
-    for node in range(0, circuit.segments + 1, 4):
-        assert _relay_levels(50.0, node) < settings.relay_drop_out, node
+    for node in range(0, circuit.segments + 1):
+        level = _relay_levels(50.0, node, supply=1.0 + settings.supply_tolerance)
+        assert level * (1 + settings.shunt_margin) < settings.relay_drop_out, node
 
 
 def test_control_mode_relay_drops_on_a_broken_rail():
     settings = RailSettings()
     for position in (7900.0, 9000.0, 10300.0):
-        assert _relay_levels(1.0, None, position) < settings.relay_drop_out
+        assert _relay_levels(1.0, None, position, supply=1.0 + settings.supply_tolerance) < settings.relay_drop_out
 
 
 def test_occupancy_follows_the_train_with_relay_delays():

@@ -63,6 +63,9 @@ def _fail(path, field: str, message: str):
 
 
 # ---- line ---------------------------------------------------------------------------------------
+DEFAULT_MAX_BALLAST_OHM_KM = 50.0
+
+
 @dataclass(frozen=True)
 class BlockSection:
     name: str
@@ -93,6 +96,9 @@ class Line:
         self.sections = [BlockSection(**s) for s in document["block_sections"]]
         self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
         self.joints = document.get("insulated_joints", [])
+        # the track circuits' ballast range: each section's minimum, one maximum for the line (a
+        # dry or frozen bed, docs/rail_line.md: above it the shunt-mode level hardly changes)
+        self.max_ballast_ohm_km = float(document.get("max_ballast_ohm_km", DEFAULT_MAX_BALLAST_OHM_KM))
         self._check(document)
         # blocks: a block ends at a section with a signal at its exit; a section with no signal
         # ("signal": "") is a track circuit inside a block (a station throat) — the line end
@@ -130,6 +136,9 @@ class Line:
             if previous_end is not None and s.start_m < previous_end - 1e-9:
                 _fail(p, f"block_sections[{k}].start_m", f"{s.start_m} overlaps the previous section (ends {previous_end})")
             previous_end = s.end_m
+            if s.ballast_ohm_km > self.max_ballast_ohm_km:
+                _fail(p, f"block_sections[{k}].ballast_ohm_km",
+                      f"{s.ballast_ohm_km:g} is above the line's max_ballast_ohm_km {self.max_ballast_ohm_km:g}")
         for k, j in enumerate(self.joints):
             if j["position_m"] > self.length_m:
                 _fail(p, f"insulated_joints[{k}].position_m", f"{j['position_m']} is outside the line (0..{self.length_m})")

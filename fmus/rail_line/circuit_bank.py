@@ -1,59 +1,86 @@
 """The track-circuit bank: the line's K coded track circuits under the trains' wheelsets, their
-network states frame by frame, and the track relays (no FMI here).
+network states frame by frame, and the track relays (no FMI here; docs/rail_line.md).
 
-Per section the network of track_circuit.py is generated for the current position of the
-front-most wheelset in it (snapped to the network's nodes), turned into a state-space model by
-modified nodal analysis (network.py) and discretised exactly at fs (zero-order hold). Models
-are cached per (shunt node, faults); the branch currents (the states) carry over when the
-train moves to the next node, and the code-current amplitude is interpolated between nodes
-from the phasor solution, so it varies continuously with position ("regenerated and
-interpolated as the trains move"). The rail line core takes the configuration every 10 ms of
+Every train is a set of wheelset shunts over its whole length: a 0.06 Ω conductance at every
+network node it covers, its head and tail snapped to the nearest node (nodes are ≤ 50 m apart,
+bogies closer: docs/rail_line.md, trains as shunts). Per section ONE network holds all shunts of
+all trains in it, turned into a state-space model by modified nodal analysis and a Woodbury
+update of the free network (network.py), discretised exactly at fs (zero-order hold). Models are
+cached per (shunt nodes, train heads, faults); the branch currents (the states) carry over when
+a train moves. The current a train's coils see is the rail-loop current arriving at its first
+axle from the feed (a branch current: a state), so a train behind another one in the same
+circuit gets only what the front train's axles leave; for the train whose head is the
+front-most shunt the amplitude is interpolated between nodes from the phasor solution, so it
+varies continuously with position. The rail line core takes the configuration every 10 ms of
 simulated time, whatever the frame length, so frames of any length give the same result.
 
-Track relays: the relay-end voltage of the track circuit's own feed (phasor at the carrier,
-relative to the free circuit at the design ballast) against pick-up / drop-out ratios, with
-pick-up and drop-out delays → occupancy.
+Track relays: the relay-end voltage of the track circuit's own feed (phasor at the carrier) with
+every shunt and fault, relative to each circuit's calibrated reference (see ``_calibrate``), against
+pick-up / drop-out levels with pick-up and drop-out delays → occupancy.
 """
 from __future__ import annotations
 
 import bisect
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from dataclasses import dataclass, replace
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from fmus.data.loader import Line
-from fmus.rail_line.network import ShuntFamily, discretise
-from fmus.rail_line.track_circuit import Faults, TrackCircuit
+from fmus.errors import FmuInputError
+from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
+from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
 
 _CACHE_SIZE = 64
+# a section's configuration: (shunt nodes, sorted; head nodes, one per train head in it, front first)
+Config = Tuple[Tuple[int, ...], Tuple[int, ...]]
+_NO_TRAIN: Config = ((), ())
 
 
 @dataclass
 class _Model:
     phi_n: np.ndarray       # (nx, nx) state after a frame
     psi: np.ndarray         # (nx, N) input → state after a frame
-    shunt_o: np.ndarray     # (N, nx) state at the frame start → shunt current per sample
-    shunt_t: np.ndarray     # (N, N) inputs of the frame → shunt current per sample
+    ahead_o: np.ndarray     # (H, N, nx) state at the frame start → current arriving at head h, per sample
+    ahead_t: np.ndarray     # (H, N, N) inputs of the frame → the same
     entry_o: np.ndarray     # (N, nx) the same for the entry-end current
     entry_t: np.ndarray     # (N, N)
-    relay_level: float      # relay-end voltage relative to the free circuit at the design ballast
+    relay_level: float      # relay-end voltage relative to the circuit's calibrated reference
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A track circuit's design levels (relay-end voltage / calibrated reference, docs/rail_line.md)."""
+    length_m: float
+    ballast_min_ohm_km: float
+    ballast_max_ohm_km: float
+    normal_level: float      # free circuit, minimum ballast, minimum supply (= pick-up by construction)
+    shunt_level: float       # worst 0.06 Ω shunt over all nodes, maximum ballast, maximum supply
+    shunt_node: int          # where that worst shunt is (0 relay end … S feed end)
+    control_level: float     # worst broken rail over all segments, either ballast, maximum supply
+    shunt_margin: float      # drop-out / shunt_level − 1 (required ≥ settings.shunt_margin)
 
 
 class FrameCurrents:
-    """A frame's per-sample shunt and entry-end currents of a section, computed only for the
-    sections a coil sees (from the states at the frame start and the frame's code input)."""
+    """A frame's per-sample currents of a section, computed only for the sections a coil sees
+    (from the states at the frame start and the frame's code input)."""
 
     __slots__ = ("bank", "states", "u")
 
     def __init__(self, bank: "TrackCircuitBank", states: np.ndarray, u: np.ndarray):
         self.bank, self.states, self.u = bank, states, u
 
-    def shunt(self, k: int) -> np.ndarray:
-        model = self.bank._active[k][1]
-        return model.shunt_o @ self.states[k, :model.shunt_o.shape[1]] + model.shunt_t @ self.u[k]
+    def ahead(self, k: int, j: int) -> np.ndarray:
+        """Rail current arriving from the feed at train j's first axle in section k (zero when
+        its head was not in section k at the configuration tick)."""
+        bank = self.bank
+        row = bank._rows[k].get(j)
+        if row is None:
+            return bank._zeros
+        model = bank._active[k][1]
+        return model.ahead_o[row] @ self.states[k, :model.ahead_o.shape[2]] + model.ahead_t[row] @ self.u[k]
 
     def entry(self, k: int) -> np.ndarray:
         model = self.bank._active[k][1]
@@ -61,17 +88,22 @@ class FrameCurrents:
 
 
 class TrackCircuitBank:
-    """The line's track circuits: geometry, faults, network models and states, relays."""
+    """The line's track circuits: geometry, faults, calibration, network models and states, relays."""
 
     def __init__(self, line: Line, settings, trains: int, frame: int):
         s, c = settings, settings.circuit
-        self.settings = s
+        self.settings, self.line = s, line
         self.count, self.trains, self.frame = len(line.sections), trains, frame
         self.dt = 1.0 / s.fs_hz
+        self.g_shunt = 1.0 / c.shunt_r_ohm
         leads = [(float(j["position_m"]), float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
         offsets = {round(position, 6): offset for position, offset in leads}
-        self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0), c)
+        # each circuit's ballast: the line file's per-section minimum unless the `ballast` parameter overrides all
+        self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0),
+                                      replace(c, ballast_ohm_km=c.ballast_ohm_km if c.ballast_ohm_km > 0
+                                              else float(sec.ballast_ohm_km)))
                          for sec in line.sections]
+        self.ballast_max_ohm_km = float(getattr(line, "max_ballast_ohm_km", 50.0))
         # (bond lead before, joint, bond lead beyond) of every insulated joint
         self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
         self.starts = np.array([sec.start_m for sec in line.sections])
@@ -84,22 +116,21 @@ class TrackCircuitBank:
         self._spacing_list = [float(circuit.nodes_m[1] - circuit.nodes_m[0]) for circuit in self.circuits]
         self._segments_list = [circuit.segments for circuit in self.circuits]
         self._train_lengths = [float(length) for length in s.train_length_m]
-        # positions where a train's shunt configuration may change, whatever its own section
-        self._config_edges = {length: sorted(set(self._starts_list + self.ends_list + self.feed_list +
-                                                 [end + length for end in self.ends_list]))
-                              for length in self._train_lengths}
+        # positions where a train's head or tail changes section or clipping to the feed
+        self._edges = sorted(set(self._starts_list + self.ends_list + self.feed_list))
         self._fault_inputs = None
         self._relay_levels = np.ones(self.count)
         self._relays_settled = False
         self.faults = [Faults() for _ in range(self.count)]
         self.broken_rail_m = -1.0
-        self._refresh_faults()
         self._models: List[OrderedDict] = [OrderedDict() for _ in range(self.count)]
         self._families: Dict[Tuple[int, Faults], Tuple[ShuntFamily, Dict[str, int]]] = {}
+        self._phasor_families: Dict[Tuple[int, Faults], PhasorFamily] = {}
         self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        # |relay-end voltage| of the free circuit at the design ballast, unit feed
-        self._relay_ref = np.array([self._phasor_table(k, Faults())[2][-1] for k in range(self.count)])
-        size = max(self._model(k, None).phi_n.shape[0] for k in range(self.count))
+        self._zeros = np.zeros(frame)
+        self.calibration = self._calibrate()
+        self._refresh_faults()
+        size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
         self.states = np.zeros((self.count, size))
         self._spare_states = np.zeros((self.count, size))       # the two alternate frame by frame
         self._input_response = np.zeros((self.count, size, 1))
@@ -117,6 +148,102 @@ class TrackCircuitBank:
         k = bisect.bisect_right(self._starts_list, x) - 1
         return k if k >= 0 and x < self.ends_list[k] else -1
 
+    def node_at(self, k: int, x: float) -> int:
+        """Network node of section k nearest to x (clipped to the circuit: beyond the feed leads
+        the rails carry no signal current, so a wheelset there shunts at the feed node)."""
+        return min(max(round((min(x, self.feed_list[k]) - self._starts_list[k]) / self._spacing_list[k]), 0),
+                   self._segments_list[k])
+
+    # ---- calibration ------------------------------------------------------------------------
+    def _design_levels(self, circuit: TrackCircuit, carrier_hz: float, ballast_min: float, ballast_max: float):
+        """Relay-end voltages per unit feed at the carrier: (free circuit at the minimum ballast;
+        the worst 0.06 Ω shunt over all nodes at the maximum ballast and its node; the worst
+        broken rail over all segments at either ballast)."""
+        omega, g = 2 * np.pi * carrier_hz, self.g_shunt
+        worst_control = 0.0
+        for ballast in (ballast_min, ballast_max):
+            net = circuit.network(None, Faults(ballast), 1.0)
+            family = PhasorFamily(net, omega, [1.0])
+            relay = net.node_index["n0"]
+            nodes = np.array([net.node_index[f"n{i}"] for i in range(circuit.segments + 1)])
+            broken = family.with_branch_opened(np.arange(circuit.segments), OPEN_OHM, relay)
+            worst_control = max(worst_control, float(np.abs(broken).max()))
+            if ballast == ballast_min:
+                normal = abs(family.free[relay])
+            else:
+                # one shunt at each node in turn: Sherman–Morrison on Z
+                z = family.impedance
+                at_node = family.free[nodes] / (1.0 + g * z[nodes, nodes])
+                shunted = np.abs(family.free[relay] - g * z[relay, nodes] * at_node)
+                worst_node = int(np.argmax(shunted))
+                worst_shunt = float(shunted[worst_node])
+        return normal, worst_shunt, worst_node, worst_control
+
+    def _levels(self, circuit: TrackCircuit, carrier_hz: float) -> Tuple[Calibration, float]:
+        """Calibrate one circuit (docs/rail_line.md, relay calibration): the reference is set so that
+        the free circuit at the minimum ballast and minimum supply reads exactly the pick-up
+        level; the shunt and control modes are then read at the maximum supply."""
+        s = self.settings
+        tol = s.supply_tolerance
+        ballast_min = circuit.params.ballast_ohm_km
+        normal, shunt, node, control = self._design_levels(circuit, carrier_hz, ballast_min, self.ballast_max_ohm_km)
+        reference = (1.0 - tol) * normal / s.relay_pick_up * (1.0 - 1e-9)   # 1e-9: picks up despite rounding
+        shunt_level = (1.0 + tol) * shunt / reference
+        control_level = (1.0 + tol) * control / reference
+        return Calibration(float(circuit.feed_m - circuit.start_m), ballast_min, self.ballast_max_ohm_km,
+                           float((1.0 - tol) * normal / reference), float(shunt_level), node, float(control_level),
+                           float(s.relay_drop_out / max(shunt_level, control_level) - 1.0)), float(reference)
+
+    def _calibrates(self, calibration: Calibration) -> bool:
+        return calibration.shunt_margin >= self.settings.shunt_margin - 1e-12
+
+    def _calibrate(self) -> List[Calibration]:
+        """Each circuit's reference voltage (self._reference) from the three design regimes
+        (docs/sources.md#track-circuits-and-rail-impedance, row 8), or the line refused naming the
+        circuit and the longest circuit that would calibrate."""
+        s = self.settings
+        table, references = [], []
+        for k, (circuit, section) in enumerate(zip(self.circuits, self.line.sections)):
+            if circuit.params.ballast_ohm_km > self.ballast_max_ohm_km:
+                raise FmuInputError(f"{self.line.path}: field block_sections[{k}].ballast_ohm_km: "
+                                    f"{circuit.params.ballast_ohm_km:g} Ω·km is above the line's max_ballast_ohm_km "
+                                    f"{self.ballast_max_ohm_km:g}")
+            calibration, reference = self._levels(circuit, self.carriers[k])
+            if not self._calibrates(calibration):
+                longest = self.longest_calibratable_m(k)
+                raise FmuInputError(
+                    f"{self.line.path}: field block_sections[{k}]: track circuit '{section.name}' "
+                    f"({calibration.length_m:.0f} m feed to relay) cannot be calibrated for ballast "
+                    f"{calibration.ballast_min_ohm_km:g}–{calibration.ballast_max_ohm_km:g} Ω·km and "
+                    f"±{100 * s.supply_tolerance:g} % supply: a 0.06 Ω shunt leaves the relay at "
+                    f"{calibration.shunt_level:.3f} of its reference, drop-out {s.relay_drop_out:g} needs a margin of "
+                    f"{100 * s.shunt_margin:g} %; the longest circuit that calibrates is {longest:.0f} m")
+            table.append(calibration)
+            references.append(reference)
+        self._reference = np.array(references)
+        return table
+
+    def longest_calibratable_m(self, k: int) -> float:
+        """The longest circuit (feed leads to relay end) with section k's equipment and ballast
+        range that meets the normal and shunt modes with the required margin (bisection, 1 m)."""
+        circuit = self.circuits[k]
+        offset = circuit.end_m - circuit.feed_m
+
+        def ok(length_m):
+            trial = TrackCircuit(0.0, length_m + offset, offset, circuit.params)
+            return self._calibrates(self._levels(trial, self.carriers[k])[0])
+        lo, hi = 1.0, max(circuit.feed_m - circuit.start_m, 1.0)
+        if ok(hi):
+            while ok(2 * hi) and hi < 1e5:
+                lo, hi = 2 * hi, 2 * hi
+            hi = 2 * hi
+        elif not ok(lo):
+            return 0.0
+        while hi - lo > 1.0:
+            middle = 0.5 * (lo + hi)
+            lo, hi = (middle, hi) if ok(middle) else (lo, middle)
+        return lo
+
     # ---- faults -----------------------------------------------------------------------------
     def set_faults(self, broken_rail_m: float, ballast_override: np.ndarray, feed_open: np.ndarray) -> None:
         raw = (float(broken_rail_m), ballast_override[:self.count].tobytes(), feed_open[:self.count].tobytes())
@@ -133,13 +260,14 @@ class TrackCircuitBank:
             Faults(f.ballast_ohm_km, self.broken_rail_m if self.starts[k] <= self.broken_rail_m < self.ends[k] else -1.0,
                    f.feed_open) for k, f in enumerate(self.faults)]
         self._active = [None] * self.count          # models and relay levels follow the new faults
-        self._nodes = [-2] * self.count             # (−1 is "no shunt"): every section re-activates
+        self._configs: List[Optional[Config]] = [None] * self.count    # every section re-activates
+        self._rows: List[Dict[int, int]] = [{} for _ in range(self.count)]
         self._node_bounds = [(0.0, 0.0)] * self.trains
 
     # ---- models -----------------------------------------------------------------------------
-    def _model(self, k: int, node: Optional[int]) -> _Model:
+    def _model(self, k: int, config: Config) -> _Model:
         faults = self._effective_faults[k]
-        key = (node, faults)
+        key = (config, faults)
         cache = self._models[k]
         if key in cache:
             cache.move_to_end(key)
@@ -147,23 +275,30 @@ class TrackCircuitBank:
         family_key = (k, faults)
         if family_key not in self._families:
             net = self.circuits[k].network(None, faults, self.settings.transformer_ratio)
-            self._families[family_key] = (ShuntFamily(net, 1.0 / self.settings.circuit.shunt_r_ohm), net.node_index)
+            self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
         family, node_index = self._families[family_key]
-        system = family.state_space(None if node is None else node_index[f"n{node}"])
+        shunts, heads = config
+        system = family.state_space([node_index[f"n{node}"] for node in shunts])
         phi, gamma = discretise(system, self.dt)
         n = self.frame
         nx = phi.shape[0]
-        # output rows: shunt current (node voltage / R_sh) and entry-end current (−segment 0)
-        rows = np.zeros((2, nx))
-        direct = np.zeros(2)
-        if node is not None:
-            index = node_index[f"n{node}"]
-            g_sh = 1.0 / self.settings.circuit.shunt_r_ohm
-            rows[0] = system.node_from_state[index] * g_sh
-            direct[0] = system.node_from_input[index, 0] * g_sh
-        rows[1, 0] = -1.0
-        out_o = np.empty((n, 2, nx))
-        markov = np.empty((n, 2))              # C·Φ^k·Γ
+        segments = self.circuits[k].segments
+        # output rows: the current arriving from the feed at each head (−segment current ahead of
+        # its node; at the feed node, what the feed delivers: source − bond winding), then the
+        # entry-end current (−segment 0)
+        rows = np.zeros((len(heads) + 1, nx))
+        direct = np.zeros(len(heads) + 1)
+        for h, node in enumerate(heads):
+            if node < segments:
+                rows[h, node] = -1.0
+            elif not faults.feed_open:
+                g_feed, feed = 1.0 / self.settings.circuit.feed_r_ohm, node_index[f"n{segments}"]
+                rows[h] = -g_feed * system.node_from_state[feed]
+                rows[h, segments + 1] -= 1.0                 # the feed bond winding's branch
+                direct[h] = g_feed * (self.settings.transformer_ratio - system.node_from_input[feed, 0])
+        rows[-1, 0] = -1.0
+        out_o = np.empty((n, len(rows), nx))
+        markov = np.empty((n, len(rows)))       # C·Φ^k·Γ
         row_power = rows.copy()
         for i in range(n):
             out_o[i] = row_power
@@ -178,23 +313,33 @@ class TrackCircuitBank:
         for m in range(n - 1, -1, -1):
             psi[:, m] = column
             column = phi @ column
-        # outputs of all samples at once: (N, nx) and (N, N) matrices per output
-        model = _Model(np.linalg.matrix_power(phi, n), psi, np.ascontiguousarray(out_o[:, 0]),
-                       np.ascontiguousarray(out_t[:, 0]), np.ascontiguousarray(out_o[:, 1]),
-                       np.ascontiguousarray(out_t[:, 1]), self.relay_voltage(k, node))
+        # outputs of all samples at once: (H, N, nx) and (H, N, N) per head, (N, nx), (N, N) entry
+        model = _Model(np.linalg.matrix_power(phi, n), psi,
+                       np.ascontiguousarray(out_o[:, :-1].transpose(1, 0, 2)),
+                       np.ascontiguousarray(out_t[:, :-1].transpose(1, 0, 2)),
+                       np.ascontiguousarray(out_o[:, -1]), np.ascontiguousarray(out_t[:, -1]),
+                       self.relay_level(k, shunts))
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
         return model
 
+    def _phasor_family(self, k: int, faults: Faults) -> PhasorFamily:
+        key = (k, faults)
+        if key not in self._phasor_families:
+            self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0),
+                                                      2 * np.pi * self.carriers[k], [1.0])
+        return self._phasor_families[key]
+
     def _phasor_table(self, k: int, faults: Optional[Faults] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For a wheelset shunt at each node of section k (the current faults unless given; unit
+        """For ONE wheelset shunt at each node of section k (the current faults unless given; unit
         feed, phasor at the carrier): |shunt current|, its log, and |relay-end voltage|; the last
-        relay entry is the circuit without a shunt."""
+        relay entry is the circuit without a shunt. The shape of the amplitude between nodes
+        (``scale``) and the ALS-mode regime (one normative shunt) use it."""
         faults = self._effective_faults[k] if faults is None else faults
         key = (k, faults)
         if key not in self._phasors:
-            circuit, g_sh = self.circuits[k], 1.0 / self.settings.circuit.shunt_r_ohm
+            circuit, g_sh = self.circuits[k], self.g_shunt
             net = circuit.network(None, faults, 1.0)
             nodes = [net.node_index[f"n{node}"] for node in range(circuit.segments + 1)]
             at_node, at_relay, free_relay = net.phasor_with_shunt(2 * np.pi * self.carriers[k], [1.0], g_sh,
@@ -204,66 +349,83 @@ class TrackCircuitBank:
             self._phasors[key] = (amplitude, np.log(amplitude), relay)
         return self._phasors[key]
 
-    def relay_voltage(self, k: int, node: Optional[int], faults: Optional[Faults] = None) -> float:
-        """Relay-end voltage of section k with a shunt at ``node`` (None: none) under the current
-        faults unless given, relative to the free circuit at the design ballast."""
-        relay = self._phasor_table(k, faults)[2]
-        return float(relay[-1 if node is None else node]) / self._relay_ref[k]
+    def relay_level(self, k: int, shunts: Sequence[int] = (), faults: Optional[Faults] = None,
+                    supply: float = 1.0) -> float:
+        """Relay-end voltage of section k with a 0.06 Ω shunt at each node in ``shunts`` under the
+        current faults unless given, at ``supply`` × the nominal feed, relative to the circuit's
+        calibrated reference (pick-up and drop-out are levels of this)."""
+        faults = self._effective_faults[k] if faults is None else faults
+        family = self._phasor_family(k, faults)
+        return supply * abs(family.with_shunts(list(shunts), self.g_shunt, 0)) / self._reference[k]
 
-    def scale(self, k: int, head: np.ndarray) -> np.ndarray:
-        """Code-current amplitude at the exact wheelset position over the one at the model's node."""
-        _, _, log_amplitude, at_node = self._active[k]
+    def scale(self, k: int, head: np.ndarray, j: int):
+        """Code-current amplitude at the exact wheelset position over the one at the model's node,
+        for the train whose head is the section's front-most shunt (1 for any other train)."""
+        _, _, log_amplitude, at_node, front = self._active[k]
+        if j != front:
+            return 1.0
         return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
 
     # ---- the trains' shunts -----------------------------------------------------------------
     def follow_shunts(self, heads: List[float]) -> None:
-        """Take the front-most wheelset of each train in each section (heads at the
-        configuration tick) as its shunt, activating the models of the sections whose shunt
-        node changed."""
-        nodes = self._shunt_nodes(heads)
-        if nodes != self._nodes:
-            for k, (node, was) in enumerate(zip(nodes, self._nodes)):
-                if node != was:
-                    self._activate(k, None if node < 0 else node)
-            self._nodes = nodes
-
-    def _shunt_nodes(self, heads: List[float]) -> List[int]:
-        """Network node of the front-most wheelset in each section (−1: no train in the
-        section). Unchanged while every train stays strictly inside the interval, found with the
-        last evaluation, over which its own contribution is constant."""
+        """Every train's wheelsets (heads at the configuration tick) as shunts, activating the
+        models of the sections whose configuration changed."""
         if all(lo < head < hi for head, (lo, hi) in zip(heads, self._node_bounds)):
-            return self._nodes
-        front = [-math.inf] * self.count
-        bounds = []
-        for head, length in zip(heads, self._train_lengths):
-            # sections with start ≤ head and end > head − length (sorted, disjoint)
-            last = bisect.bisect_right(self._starts_list, head) - 1
-            for k in range(bisect.bisect_right(self.ends_list, head - length), last + 1):
-                front[k] = max(front[k], min(head, self.feed_list[k]))
-            bounds.append(self._node_interval(head, length, last))
-        self._node_bounds = bounds
-        return [-1 if f == -math.inf else
-                min(max(round((f - self._starts_list[k]) / self._spacing_list[k]), 0), self._segments_list[k])
-                for k, f in enumerate(front)]
+            return
+        configs, rows = self._configuration(heads)
+        for k, config in enumerate(configs):
+            if config != self._configs[k]:
+                self._rows[k] = rows[k]
+                self._activate(k, config, rows[k])
+        self._configs = configs
 
-    def _node_interval(self, head: float, length: float, k: int) -> Tuple[float, float]:
-        """Open interval of head positions around ``head`` over which a train's shunt nodes do
-        not change: no section start, section end + length, feed end or node-rounding boundary
-        of its own section in between."""
-        edges = self._config_edges[length]
-        i = bisect.bisect_right(edges, head)
+    def _configuration(self, heads: List[float]):
+        """Per section: (its shunt nodes, the head nodes of the trains whose head is in it, front
+        first) and which row each such train reads; per train the open interval of head
+        positions over which its contribution is constant (self._node_bounds)."""
+        shunts = [set() for _ in range(self.count)]
+        in_section: List[List[Tuple[int, int]]] = [[] for _ in range(self.count)]
+        bounds = []
+        for j, (head, length) in enumerate(zip(heads, self._train_lengths)):
+            tail = head - length
+            # sections with start ≤ head and end > tail (sorted, disjoint)
+            last = bisect.bisect_right(self._starts_list, head) - 1
+            for k in range(bisect.bisect_right(self.ends_list, tail), last + 1):
+                front = self.node_at(k, head)
+                shunts[k].update(range(self.node_at(k, max(tail, self._starts_list[k])), front + 1))
+                if k == last and head < self.ends_list[k]:
+                    in_section[k].append((front, j))
+            head_lo, head_hi = self._interval(head)
+            tail_lo, tail_hi = self._interval(tail)
+            bounds.append((max(head_lo, tail_lo + length), min(head_hi, tail_hi + length)))
+        self._node_bounds = bounds
+        configs, rows = [], []
+        for k in range(self.count):
+            order = sorted(in_section[k], reverse=True)
+            configs.append((tuple(sorted(shunts[k])), tuple(node for node, _ in order)))
+            rows.append({j: h for h, (_, j) in enumerate(order)})
+        return configs, rows
+
+    def _interval(self, x: float) -> Tuple[float, float]:
+        """Open interval around a head or tail position x over which its section, its clipping
+        to the feed and its nearest node do not change."""
+        edges = self._edges
+        i = bisect.bisect_right(edges, x)
         lo, hi = (edges[i - 1] if i > 0 else -math.inf), (edges[i] if i < len(edges) else math.inf)
-        if 0 <= k and head < self.feed_list[k]:
+        k = self.section_at(x)
+        if 0 <= k and x < self.feed_list[k]:
             start, spacing = self._starts_list[k], self._spacing_list[k]
-            middle = round((head - start) / spacing)
+            middle = round((x - start) / spacing)
             lo, hi = max(lo, start + (middle - 0.5) * spacing), min(hi, start + (middle + 0.5) * spacing)
         return lo, hi
 
-    def _activate(self, k: int, node: Optional[int]) -> None:
-        model = self._model(k, node)
+    def _activate(self, k: int, config: Config, rows: Dict[int, int]) -> None:
+        model = self._model(k, config)
         log_amplitude = self._phasor_table(k)[1]
-        # (node, model, log amplitude at the nodes, at the model's node): see scale
-        self._active[k] = (node, model, log_amplitude, log_amplitude[node if node is not None else 0])
+        shunts, heads = config
+        # the train whose head is the front-most shunt gets the continuous amplitude (scale)
+        front = next((j for j, h in rows.items() if h == 0), -1) if heads and heads[0] == shunts[-1] else -1
+        self._active[k] = (config, model, log_amplitude, log_amplitude[heads[0]] if front >= 0 else 0.0, front)
         size = model.phi_n.shape[0]
         self._phi_stack[k] = 0.0                             # sections padded to one size:
         self._psi_stack[k] = 0.0                             # one product advances them all
@@ -274,6 +436,15 @@ class TrackCircuitBank:
         self._relays_settled = False
 
     # ---- a frame ----------------------------------------------------------------------------
+    def start(self, heads: List[float]) -> None:
+        """The state at t = 0 with the trains at ``heads``: the relays stand as the trains'
+        shunts leave them, with no pick-up or drop-out delay (up only at or above pick-up:
+        the restrictive reading of a relay whose history is unknown)."""
+        self.follow_shunts(heads)
+        self.relay_up = self._relay_levels >= self.settings.relay_pick_up
+        self._relay_timer[:] = 0.0
+        self._relays_settled = False
+
     def advance(self, u: np.ndarray, n: int) -> FrameCurrents:
         """Every section's states over a frame of code input ``u`` (K, n) and the relays; the
         frame's currents, computed on demand from the states it started from."""
@@ -303,12 +474,8 @@ class TrackCircuitBank:
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:
-        """ALS mode: the smallest code current (A rms) under the first wheelset over all positions
-        in section k, for the nominal code amplitude 4 V × transformer ratio."""
-        saved = self._effective_faults[k]
-        self._effective_faults[k] = Faults(ballast_ohm_km, -1.0, False)
-        try:
-            amplitude = self._phasor_table(k)[0]
-        finally:
-            self._effective_faults[k] = saved
+        """ALS mode: the smallest code current (A rms) under one normative shunt (the first
+        wheelset, the standard's regime) over all positions in section k, for the nominal code
+        amplitude 4 V × transformer ratio."""
+        amplitude = self._phasor_table(k, Faults(ballast_ohm_km, -1.0, False))[0]
         return float(amplitude.min() * 4.0 * self.settings.transformer_ratio / np.sqrt(2.0))

@@ -4,7 +4,8 @@ docs/rail_line.md).
 Coils ``coil_offset`` (1.5 m) ahead of the first wheelset, EMF = M·d/dt of the loop current
 they see, which is
 
-* over their own section, between the wheelset and the feed leads: the shunt current;
+* over their own section, between the wheelset and the feed leads: the rail current arriving
+  from the feed at the train's first axle (what the axles of any train ahead in the section leave);
 * between the feed leads and the exit joint: nothing (the ≈ 1 m null zone);
 * over the next section, before the wheelset has crossed: that section's entry-end current,
   weak because it is not shunted yet (the ≈ 1.5 m weak zone);
@@ -80,7 +81,7 @@ class CoilPickup:
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
-                shunt_current = currents.shunt(k) * bank.scale(k, head)
+                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j)
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
             else:
@@ -120,7 +121,7 @@ class CoilPickup:
         i_axle = np.zeros(n)
         for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
             own = axle_section == k
-            shunt_current = currents.shunt(k) * bank.scale(k, head)
+            shunt_current = currents.ahead(k, j) * bank.scale(k, head, j)
             i_axle = np.where(own, shunt_current, i_axle)
             view = share(-np.inf, bank.circuits[k].feed_m) * shunt_current
             if k + 1 < bank.count:

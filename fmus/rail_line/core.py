@@ -47,8 +47,10 @@ class RailSettings:
     dc_ripple: Tuple[float, float] = (0.02, 0.01)       # 300 Hz, 600 Hz shares of the DC traction current [U]
     ac_harmonics: Tuple[float, float] = (0.10, 0.05)    # 150 Hz, 250 Hz shares on AC lines [U]
     traction_time_constant_s: float = 0.1               # traction circuit lag seen in the rails [U]
-    relay_pick_up: float = 0.8            # share of the free-circuit relay voltage at the design ballast
-    relay_drop_out: float = 0.5
+    relay_pick_up: float = 0.8            # share of the circuit's calibrated reference (docs/rail_line.md): the
+    relay_drop_out: float = 0.5           # free circuit at minimum ballast and supply reads exactly relay_pick_up
+    supply_tolerance: float = 0.1         # ± share of the nominal feed the calibration covers [U]
+    shunt_margin: float = 0.02            # drop-out ≥ (1 + margin) × the worst shunt-mode level [U]
     relay_pick_up_delay_s: float = 1.0
     relay_drop_out_delay_s: float = 0.2
     carrier_hz: float = 0.0               # 0: each section's carrier from the line file (ALSN); else this
@@ -73,11 +75,17 @@ class RailLineCore:
         c = s.circuit
         for name, value in (("fs", s.fs_hz), ("transformer_ratio", s.transformer_ratio), ("coil_gain", s.coil_gain_h),
                             ("coil_length", s.coil_length_m), ("rail_r", c.rail_r_ohm_per_km), ("rail_l", c.rail_l_h_per_km),
-                            ("ballast", c.ballast_ohm_km), ("feed_r", c.feed_r_ohm), ("relay_r", c.relay_r_ohm),
+                            ("feed_r", c.feed_r_ohm), ("relay_r", c.relay_r_ohm),
                             ("bond_l", c.bond_l_h), ("shunt_r", c.shunt_r_ohm), ("segment", c.segment_m),
                             ("traction_time_constant", s.traction_time_constant_s)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
+        if c.ballast_ohm_km < 0:
+            raise FmuInputError(f"parameter ballast: {c.ballast_ohm_km:g} (0: each section's from the line file)")
+        if not 0 <= s.supply_tolerance < 0.5:
+            raise FmuInputError(f"parameter supply_tolerance: {s.supply_tolerance:g} (need 0 ≤ tolerance < 0.5)")
+        if not s.shunt_margin >= 0:
+            raise FmuInputError(f"parameter shunt_margin: {s.shunt_margin:g} (need ≥ 0)")
         if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz / 4:
             raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz (0: the line file's; else up to fs/4)")
         if not 0 < s.relay_drop_out < s.relay_pick_up <= 1.0:
@@ -120,12 +128,30 @@ class RailLineCore:
             x_k, v_k, t_k = self._update_anchor(j, t, float(x_head[j]), float(v[j]))
             at_tick.append(x_k + v_k * (tick - t_k))
         self.interference.new_frame(i_traction, n)
-        self.bank.follow_shunts(at_tick)         # the front-most wheelset of each train in each section shunts it
+        self.bank.follow_shunts(at_tick)         # every wheelset of every train shunts its section
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
         self.pickup.sense(first, times, self._anchors, currents, out)
         out.occupied[:self.count] = ~self.bank.relay_up
         return out
+
+    def start(self, x_head: np.ndarray) -> RailOutputs:
+        """The state at t = 0 from the trains' initial head positions: a train placed overlapping
+        another is refused; the relays stand as the trains leave them (no delays), so
+        ``occupied`` holds before the first step."""
+        length = self.line.length_m
+        spans = [(float(x_head[j]) - self.settings.train_length_m[j], float(x_head[j])) for j in range(self.trains)]
+        on_line = [j for j, (tail, head) in enumerate(spans) if head >= 0.0 and tail <= length]
+        for a in on_line:
+            for b in on_line:
+                if a < b and spans[a][0] < spans[b][1] and spans[b][0] < spans[a][1]:
+                    raise FmuInputError(
+                        f"input x_head[{b + 1}]: train {b + 1} (head {spans[b][1]:g} m, length "
+                        f"{spans[b][1] - spans[b][0]:g} m) overlaps train {a + 1} (head {spans[a][1]:g} m, length "
+                        f"{spans[a][1] - spans[a][0]:g} m) at initialisation")
+        self.bank.start([float(x) for x in x_head[:self.trains]])
+        self.out.occupied[:self.count] = ~self.bank.relay_up
+        return self.out
 
     def _update_anchor(self, j: int, t: float, x: float, v: float) -> Tuple[float, float, float]:
         """A new position update starts x(t) = x_k + v_k·(t − t_k)."""

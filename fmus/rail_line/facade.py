@@ -28,7 +28,8 @@ class RailLine(FrameSlave):
             Port("transformer_ratio", "parameter", unit="1", start=s.transformer_ratio, min=0.0, description="u_tx → rail feed"),
             Port("rail_r", "parameter", unit="Ohm/km", start=c.rail_r_ohm_per_km, min=0.0, description="rail loop resistance"),
             Port("rail_l", "parameter", unit="H/km", start=c.rail_l_h_per_km, min=0.0, description="rail loop inductance"),
-            Port("ballast", "parameter", unit="Ohm.km", start=c.ballast_ohm_km, min=0.0, description="design ballast resistance"),
+            Port("ballast", "parameter", unit="Ohm.km", start=c.ballast_ohm_km, min=0.0,
+                 description="minimum (wet) ballast of every section; 0: each section's ballast_ohm_km from the line file"),
             Port("feed_r", "parameter", unit="Ohm", start=c.feed_r_ohm, min=0.0),
             Port("relay_r", "parameter", unit="Ohm", start=c.relay_r_ohm, min=0.0),
             Port("bond_r", "parameter", unit="Ohm", start=c.bond_r_ohm, min=0.0),
@@ -40,8 +41,13 @@ class RailLine(FrameSlave):
             Port("seed", "parameter", "Integer", start=s.seed),
             Port("traction_time_constant", "parameter", unit="s", start=s.traction_time_constant_s, min=0.0,
                  description="lag of the traction current in the rails"),
-            Port("relay_pick_up", "parameter", unit="1", start=s.relay_pick_up, description="share of the free-circuit relay voltage"),
+            Port("relay_pick_up", "parameter", unit="1", start=s.relay_pick_up,
+                 description="share of the calibrated reference: the free circuit at minimum ballast and supply"),
             Port("relay_drop_out", "parameter", unit="1", start=s.relay_drop_out),
+            Port("supply_tolerance", "parameter", unit="1", start=s.supply_tolerance, min=0.0, max=0.49,
+                 description="± share of the nominal feed the relay calibration covers"),
+            Port("shunt_margin", "parameter", unit="1", start=s.shunt_margin, min=0.0,
+                 description="required margin: drop-out ≥ (1 + margin) × worst shunt-mode level"),
             Port("relay_pick_up_delay", "parameter", unit="s", start=s.relay_pick_up_delay_s, min=0.0),
             Port("relay_drop_out_delay", "parameter", unit="s", start=s.relay_drop_out_delay_s, min=0.0),
             Port("u_tx", "input", unit="V", shape=(k, n), frame=True, description="code voltage per section (coder)"),
@@ -76,14 +82,18 @@ class RailLine(FrameSlave):
             traction_time_constant_s=p("traction_time_constant"),
             relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
             relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"),
-            carrier_hz=p("carrier"))
+            supply_tolerance=p("supply_tolerance"), shunt_margin=p("shunt_margin"), carrier_hz=p("carrier"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
+        # the trains' initial positions (the traction units publish x0 in initialisation mode):
+        # trains on the line occupy their circuits from the first sample
+        core.start(io["x_head"])
         return core
 
     def publish_initial_outputs(self):
         self.io["off_line"][...] = True
+        self.io["occupied"][...] = self.core.out.occupied
 
     def step_core(self, current_time, step_size):
         io = self.io

@@ -26,7 +26,7 @@ Ground is the node named ``"0"``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.linalg import expm
@@ -161,9 +161,10 @@ def _state_space(q, r, l, g_inv_q, g_inv_p) -> StateSpace:
 
 
 class ShuntFamily:
-    """State-space models of one network with a conductance ``g`` to ground added at any one
-    node (a wheelset at each position): the free network's G⁻¹ once, then a rank-one
-    (Sherman–Morrison) update per node instead of assembling and solving a new network."""
+    """State-space models of one network with a conductance ``g`` to ground added at any set of
+    nodes (the wheelsets of the trains in a section): the free network's G⁻¹ once, then a
+    rank-s (Woodbury) update for s shunt nodes instead of assembling and solving a new network:
+    (G + g·E·Eᵀ)⁻¹ = G⁻¹ − G⁻¹E·(I/g + EᵀG⁻¹E)⁻¹·EᵀG⁻¹, E the shunt nodes' unit columns."""
 
     def __init__(self, net: Network, g: float):
         self.g = g
@@ -172,14 +173,48 @@ class ShuntFamily:
         self.g_inv_q = self.g_inv @ self.q
         self.g_inv_p = self.g_inv @ p
 
-    def state_space(self, node: Optional[int]) -> StateSpace:
-        """The model with the shunt at node index ``node`` (None: no shunt)."""
+    def state_space(self, nodes: Sequence[int] = ()) -> StateSpace:
+        """The model with a shunt at each node index in ``nodes`` (empty or None: no shunt; an
+        int: one shunt)."""
         g_inv_q, g_inv_p = self.g_inv_q, self.g_inv_p
-        if node is not None:
-            column = self.g_inv[:, node] * (self.g / (1.0 + self.g * self.g_inv[node, node]))
-            g_inv_q = g_inv_q - np.outer(column, g_inv_q[node])
-            g_inv_p = g_inv_p - np.outer(column, g_inv_p[node])
+        if nodes is not None and not isinstance(nodes, (list, tuple, np.ndarray)):
+            nodes = (nodes,)
+        if nodes is not None and len(nodes):
+            idx = np.asarray(nodes, dtype=np.intp)
+            core = np.eye(idx.size) / self.g + self.g_inv[np.ix_(idx, idx)]
+            g_inv_q = g_inv_q - self.g_inv[:, idx] @ np.linalg.solve(core, g_inv_q[idx])
+            g_inv_p = g_inv_p - self.g_inv[:, idx] @ np.linalg.solve(core, g_inv_p[idx])
         return _state_space(self.q, self.r, self.l, g_inv_q, g_inv_p)
+
+
+class PhasorFamily:
+    """The same network at one angular frequency: Z = Y⁻¹ and the free node voltages once, then
+    node voltages with any set of shunts (Woodbury) or with one branch opened (Sherman–Morrison),
+    without a new solve of the whole network."""
+
+    def __init__(self, net: Network, omega: float, u: Sequence[float]):
+        y, p, self.q, self.z_branch = net._admittance(omega)
+        self.impedance = np.linalg.inv(y)
+        self.free = self.impedance @ (p @ np.asarray(u, dtype=complex))
+
+    def with_shunts(self, nodes: Sequence[int], g: float, observe: int) -> complex:
+        """Voltage at node ``observe`` with a conductance g to ground at every node in ``nodes``."""
+        if not len(nodes):
+            return complex(self.free[observe])
+        idx = np.asarray(nodes, dtype=np.intp)
+        core = np.eye(idx.size) / g + self.impedance[np.ix_(idx, idx)]
+        return complex(self.free[observe] - self.impedance[observe, idx] @ np.linalg.solve(core, self.free[idx]))
+
+    def with_branch_opened(self, branches: Sequence[int], z_open: float, observe: int) -> np.ndarray:
+        """Voltage at node ``observe`` with each branch in ``branches`` in turn replaced by the
+        impedance ``z_open`` (a broken rail), one rank-one update per branch."""
+        k = np.asarray(branches, dtype=np.intp)
+        q = self.q[:, k]                                   # (n, b) incidence columns
+        dy = 1.0 / z_open - 1.0 / self.z_branch[k]         # admittance change per branch
+        zq = self.impedance @ q                            # (n, b)
+        qzq = np.einsum("nb,nb->b", q, zq)
+        qv = q.T @ self.free
+        return self.free[observe] - zq[observe] * dy * qv / (1.0 + dy * qzq)
 
 
 def discretise(system: StateSpace, step_s: float):

@@ -15,7 +15,7 @@ at the signal end ahead of the train, the track relay sits at the entry end):
   ≈ 1 m null zone);
 * relay end at the entry joint: the track relay (a resistance referred to the rails) and the
   bond winding;
-* wheelsets: a 0.06 Ω conductance at a node (the train's front-most axle in the section);
+* wheelsets: a 0.06 Ω conductance at each node a train covers (circuit_bank.py);
 * faults: broken rail (the segment containing it opens), ballast override, bond disconnected
   or feed failed (no source at the feed end).
 
@@ -37,7 +37,8 @@ OPEN_OHM = 1e9
 class CircuitParameters:
     rail_r_ohm_per_km: float = 0.52        # rail loop, worked example (docs/sources.md#track-circuits-and-rail-impedance) [S]
     rail_l_h_per_km: float = 1.18e-3       # L_int 0.177 + L_ext ≈ 1.0 mH/km [S]/[D]
-    ballast_ohm_km: float = 1.0            # normative minimum [S]
+    ballast_ohm_km: float = 0.0            # minimum (wet) ballast; 0: each section's from the line file (the
+                                           # shipped lines: 1 Ω·km, the normative minimum [S])
     feed_r_ohm: float = 0.5                # track transformer + limiting resistor, at the rails [U]
     relay_r_ohm: float = 4.0               # relay end equipment at the rails [U]
     bond_r_ohm: float = 0.05               # impedance bond signal winding [U]
@@ -48,7 +49,7 @@ class CircuitParameters:
 
 @dataclass(frozen=True)
 class Faults:
-    ballast_ohm_km: float = 0.0            # 0: the parameter value
+    ballast_ohm_km: float = 0.0            # 0: the circuit's own (minimum) ballast
     broken_rail_m: float = -1.0            # absolute position, < 0: none
     feed_open: bool = False                # bond disconnected or feed failed: no code source
 

@@ -55,6 +55,12 @@ class Traction(FrameSlave):
                             mass_scale=self.param("mass_scale"), resistance_scale=self.param("resistance_scale"),
                             max_substep_s=self.param("max_substep"))
 
+    def enter_initialization_mode(self):
+        # the initial state is known once the parameters are: a unit that needs the train's
+        # position during initialisation (the rail line's initial occupancy) reads it here
+        self.io["x"][...] = self.param("x0")
+        self.io["v"][...] = self.param("v0")
+
     def publish_initial_outputs(self):
         self._write(self.core._publish(0.0))
 
