@@ -247,6 +247,7 @@ class _Track:
         self.starts_m = np.array([s.start_m for s in line.sections])
         self.ends_m = np.array([s.end_m for s in line.sections])
         self.block_of = np.array(line.block_of_section)
+        self.block_ends_m = np.array([end for _, end in line.block_bounds])
         self.trains = [e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("x_head[")
                        and graph.nodes[e.source].interface.model_identifier == TRAIN_MODEL]
         self.lengths_m = np.array([lengths.get(t, 0.0) for t in self.trains])
@@ -298,6 +299,19 @@ class _Track:
             heads = self.heads_m(master)
             self._cache = (tick, (heads, block_codes(self.occupied(heads), self.block_of, self.block_aspects)))
         return self._cache[1]
+
+    def occupied_ahead_in_block(self, heads_m, train: int, coil_m: float, circuit: int) -> bool:
+        """Whether another train or the broken rail lies between the coil of train ``train`` and
+        the exit signal of its block: the block rules applied to the track ahead of the coil
+        inside its own circuit too (a train ahead in the same circuit)."""
+        import numpy as np
+
+        end_m = self.block_ends_m[self.block_of[circuit]]
+        tails = heads_m - self.lengths_m
+        others = (heads_m > coil_m) & (tails < end_m)
+        others[train] = False
+        broken = self.broken_rail_m()
+        return bool(others.any()) or coil_m < broken < end_m
 
     def circuit_at(self, x_m: float) -> int:
         """0-based track circuit containing ``x_m``, -1 outside every circuit."""
@@ -423,7 +437,9 @@ class ReceiverVerdict(_OutputJudge):
       (aspect, free blocks or speed) than sent;
     * **unsafe indications** — against the track: more permissive than the block rules
       (fmus/signalling/block_rules.py) allow for the track circuit under the coils from the
-      real occupancy (every train's extent from its ``x`` and length, the broken rail), which
+      real occupancy (every train's extent from its ``x`` and length, the broken rail), and no
+      code at all when another train or the broken rail lies between the coils and the
+      block's exit signal (a train ahead in the same circuit), which
       the orchestrator computes itself; the latency then also holds the track's detection time
       (the rail line's relay drop-out delay). This catches a coder or a track detection that is
       wrong, which the first check cannot see."""
@@ -486,18 +502,23 @@ class ReceiverVerdict(_OutputJudge):
             r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent})
 
     def _check_track(self, master: MasterView, r: _Receiver, tick: int, now: float) -> None:
+        from fmus.signalling import alsn
         from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS
         from fmus.signalling.digital import FREE_BLOCKS_OPEN
 
         track = self.tracks[r.rail]
         heads, rules = track.rules(master, tick)
-        circuit = track.circuit_at(float(heads[track.trains.index(r.train)]) + track.coil_offset_m)
+        train = track.trains.index(r.train)
+        coil_m = float(heads[train]) + track.coil_offset_m
+        circuit = track.circuit_at(coil_m)
         if circuit < 0:
             r.unsafe.check(now, None, {})
             return
         free = int(rules.free_blocks[circuit])
+        if free != NO_CODE_FREE_BLOCKS and track.occupied_ahead_in_block(heads, train, coil_m, circuit):
+            free = NO_CODE_FREE_BLOCKS          # occupied between the coil and the block's exit signal
         if r.system is None:
-            allowed = int(rules.alsn_code[circuit])
+            allowed = alsn.NO_CODE if free == NO_CODE_FREE_BLOCKS else int(rules.alsn_code[circuit])
         elif free == NO_CODE_FREE_BLOCKS:
             allowed = None
         else:
