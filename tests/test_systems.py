@@ -31,6 +31,7 @@ def _no_danger(summary, emergency_allowed=False):
     assert summary["receivers"], "no receiver judged"
     for receiver in summary["receivers"]:
         assert receiver["wrong_side_failures"] == 0, receiver
+        assert receiver["unsafe_indications"] == 0, receiver     # judged against the track (issue 22)
 
 
 def _on_time(train, stations):
@@ -130,6 +131,73 @@ def test_freight_ac_reaches_b_on_time(tmp_path, product_fmus):
     assert abs(stops["B"]["arrival_deviation_s"]) <= 15.0 and abs(stops["B"]["stop_error_m"]) <= 10.0
 
 
+def _headways_m(summary):
+    """min_headway_m wherever the train verdict puts it (per train, or for the run)."""
+    found = [t["min_headway_m"] for t in summary["trains"] if t.get("min_headway_m") is not None]
+    return found + ([summary["min_headway_m"]] if summary.get("min_headway_m") is not None else [])
+
+
+def test_same_block_the_follower_waits_for_a_code_while_the_leader_stands_in_its_circuit(tmp_path, product_fmus):
+    """The follower at A (400 m) and the leader standing at 2 km, both in track circuit 1
+    (0-2600 m), the leader until 180 s. The follower's receiver never shows a permissive code
+    while the leader is in that circuit; its ATO, due at 60 s, holds the departure and runs once
+    the code arrives (docs/scenarios.md, same_block)."""
+    summary, col = _run(tmp_path, product_fmus, "same_block", 420.0,
+                        ["leader.x", "follower.x", "follower.v", "rx2.aspect", "rx2.code_valid",
+                         "follower_ato.departure_hold"])
+    _no_danger(summary)
+    for receiver in summary["receivers"]:
+        assert receiver["unsafe_indications"] == 0, receiver
+    leader_tail_m = col["leader.x"] - 400.0
+    in_circuit = leader_tail_m < 2600.0
+    permissive = np.isin(col["rx2.aspect"], [sig.GREEN, sig.YELLOW, sig.RED_YELLOW]) & (col["rx2.code_valid"] > 0.5)
+    assert in_circuit.any() and not permissive[in_circuit].any()
+    # the follower stands (not a centimetre) until the leader has cleared, then goes
+    assert np.ptp(col["follower.x"][in_circuit]) < 1e-6
+    assert col["follower.x"][-1] > 400.0 + 500.0
+    assert (leader_tail_m - col["follower.x"]).min() > 0.0                 # never closer than touching
+    follower = next(t for t in summary["trains"] if t["name"] == "follower")
+    assert follower["departure_hold_s"] >= 120.0                            # due at 60 s, leader away at 180 s
+    leader = next(t for t in summary["trains"] if t["name"] == "leader")
+    assert leader["departure_hold_s"] == 0.0
+    headways = _headways_m(summary)
+    assert headways and min(headways) > 0.0
+
+
+def test_no_shipped_system_places_trains_overlapping_or_off_the_line():
+    """Initial placements (docs/scenarios.md): every train's head (x0) and tail (its length: the
+    rolling-stock file's or the rail line's train_length, the longer) on the line, no two overlapping."""
+    from fmus.data.loader import DATA
+    from orchestrator.ssp import read_ssd
+
+    for folder in sorted(p for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()):
+        system = read_ssd(folder / "SystemStructure.ssd", folder)
+
+        def param(component, name, default):
+            return next((v.value for v in system.components[component].parameters if v.name == name), default)
+
+        def data(name, default):
+            return json.loads(((folder / "resources" / name) if name else (DATA / default)).read_text())
+
+        spans = []
+        for name, component in system.components.items():
+            if not component.source.endswith("Traction.fmu"):
+                continue
+            line = data(param(name, "line_file", ""), "default_line.json")
+            length_m = data(param(name, "rolling_stock_file", ""), "passenger_chs7.json")["length_m"]
+            slot = next((c.end_connector for c in system.connections
+                         if c.start_element == name and c.start_connector == "x"
+                         and c.end_connector.startswith("x_head[")), None)
+            if slot is not None:
+                length_m = max(length_m, param("rail", slot.replace("x_head", "train_length"), 400.0))
+            head_m = param(name, "x0", 400.0)
+            assert head_m - length_m >= 0.0 and head_m <= line["length_m"], (folder.name, name)
+            spans.append((head_m - length_m, head_m, name))
+        spans.sort()
+        for (_, head_m, name), (tail_m, _, other) in zip(spans, spans[1:]):
+            assert tail_m > head_m, (folder.name, name, other)
+
+
 def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
     import zipfile
 
@@ -137,7 +205,7 @@ def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
 
     names = {p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()}
     assert {"free_run", "ato_only", "following", "faults", "joints_at_speed", "freight_ac", "als_en", "fire_dqpsk",
-            "als_en_following", "fire_dqpsk_following"} <= names
+            "als_en_following", "fire_dqpsk_following", "same_block"} <= names
     packed = {p.stem: p for p in pack_systems(SSP_ROOT, product_fmus, tmp_path)}
     assert set(packed) == names
     with zipfile.ZipFile(packed["following"]) as archive:      # the archive carries its scenario and data

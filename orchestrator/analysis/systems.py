@@ -16,8 +16,14 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
 * ``joints_at_speed`` — 160 km/h through a station throat: three short track circuits inside one
   block (joints without signals).
 * ``freight_ac`` — a heavy freight train, AC 25 kV, ALSN 25 Hz.
+* ``same_block`` — the follower starts in the track circuit in which, ahead of it, the leader
+  stands for three minutes: its receiver gets no code and its ATO holds the departure until the
+  leader has cleared the circuit and a permissive code arrives.
 * ``als_en``, ``fire_dqpsk``, ``als_en_following``, ``fire_dqpsk_following`` — ``free_run``
   and ``following`` with the digital systems.
+
+Every train's initial placement is checked here (:func:`check_placements`): on the line, tail
+included, and no two trains overlapping (the rail line refuses both at initialisation).
 """
 from __future__ import annotations
 
@@ -33,6 +39,43 @@ from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
+RAIL_TRAIN_LENGTH_M = 400.0     # the rail line's train_length default (fmus/rail_line/core.py RailSettings)
+
+
+def _shipped_json(name: str) -> dict:
+    from fmus.data.loader import DATA
+
+    return json.loads((DATA / name).read_text())
+
+
+def stock_length_m(stock_file: str = "passenger_chs7.json") -> float:
+    """A train's length from its rolling-stock file (a bundled one)."""
+    return float(_shipped_json(stock_file)["length_m"])
+
+
+def check_placements(line: dict, trains: Sequence[Tuple[str, float, float]]) -> None:
+    """Refuse (ValueError) initial placements (name, head position, length) with a tail before
+    the line start or two trains overlapping: the rail line refuses them at initialisation."""
+    spans = sorted((head - length, head, name) for name, head, length in trains)
+    for tail, head, name in spans:
+        if tail < 0.0 or head > line["length_m"]:
+            raise ValueError(f"{name}: {tail:g}..{head:g} m is not on the line (0..{line['length_m']:g} m)")
+    for (_, head, name), (tail, _, other) in zip(spans, spans[1:]):
+        if tail <= head:
+            raise ValueError(f"{name} (head {head:g} m) overlaps {other} (tail {tail:g} m)")
+
+
+def _stop_m(line: dict, station: str) -> float:
+    return float(next(s["stop_m"] for s in line["stations"] if s["name"] == station))
+
+
+def _with_station(line: dict, name: str, stop_m: float, description: str) -> dict:
+    """A copy of a line with one more stopping point (stations in running order)."""
+    copy = json.loads(json.dumps(line))
+    copy["description"] = f"{line.get('description', line['name'])}; {description}"
+    copy["stations"] = sorted(copy["stations"] + [{"name": name, "stop_m": stop_m, "platform_length_m": 400}],
+                              key=lambda s: s["stop_m"])
+    return copy
 
 
 def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict[str, object] = None,
@@ -113,19 +156,33 @@ FOLLOWER_TIMETABLE = {"train": "passenger 103 (following)",
                       "stops": [{"station": "A", "departure_s": 430},
                                 {"station": "C", "arrival_s": 1380}]}
 LEADER_HALT_S = (810.0, 810.0 + 50.0 + 180.0)   # full service brake from (≈15.5 km, 100 km/h) → released at
+# the two trains cannot both stand at A (400 m) at t = 0: the leader starts ahead at "A east",
+# its head 500 m further on, clear of the follower by 100 m (check_placements)
+LEADER_ORIGIN = ("A east", 900.0)
+LEADER_TIMETABLE = {"train": "passenger 101 (leader)", "stops": [
+    {"station": LEADER_ORIGIN[0], "departure_s": 60}, {"station": "B", "arrival_s": 515, "departure_s": 575},
+    {"station": "C", "arrival_s": 1015}]}
 
 
 def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "following") -> Path:
+    line = _with_station(_shipped_json("default_line.json"), *LEADER_ORIGIN,
+                         "A east: where the leader of the following systems starts, ahead of the follower at A")
+    check_placements(line, [("leader", LEADER_ORIGIN[1], RAIL_TRAIN_LENGTH_M),
+                            ("follower", _stop_m(line, "A"), RAIL_TRAIN_LENGTH_M)])
+    files = {"line_file": "following_line.json"}
     coder, rail, receiver, ato = cab_settings(system)
-    leader, leader_links = train_and_ato("leader", "leader_ato", ato_parameters=ato)
-    follower, follower_links = train_and_ato("follower", "follower_ato",
-                                             ato_parameters={**ato, "timetable_file": "follower_timetable.json"})
+    leader, leader_links = train_and_ato("leader", "leader_ato", train_parameters={**files, "x0": LEADER_ORIGIN[1]},
+                                         ato_parameters={**ato, **files, "timetable_file": "leader_timetable.json"})
+    follower, follower_links = train_and_ato("follower", "follower_ato", train_parameters=files,
+                                             ato_parameters={**ato, **files, "timetable_file": "follower_timetable.json"})
     chain, links = signal_chain((("leader", "leader_ato"), ("follower", "follower_ato")),
-                                coder=coder, rail=rail, receiver=receiver)
+                                coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
     folder = root / name
     path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links, stop_time=1600.0)
     resources = folder / "resources"
     resources.mkdir(exist_ok=True)
+    _write_json(resources / "following_line.json", line)
+    _write_json(resources / "leader_timetable.json", LEADER_TIMETABLE)
     _write_json(resources / "follower_timetable.json", FOLLOWER_TIMETABLE)
     halt, release = LEADER_HALT_S
     scenario = {
@@ -219,25 +276,63 @@ def write_joints_at_speed(root: Path = SSP_ROOT) -> Path:
 FREIGHT_TIMETABLE = {"train": "freight 2001", "stops": [
     {"station": "A", "departure_s": 60}, {"station": "B", "arrival_s": 900, "departure_s": 960},
     {"station": "C", "arrival_s": 1800}]}
-FREIGHT_LENGTH_M = 1000.0
+# the 944 m train (its rolling-stock file) does not fit behind A's stop point at 400 m: in this
+# system's copy of the line, A's stop point is at 1000 m (tail at 56 m)
+FREIGHT_ORIGIN_M = 1000.0
 
 
 def write_freight_ac(root: Path = SSP_ROOT) -> Path:
-    from fmus.data.loader import DATA
-
     folder = root / "freight_ac"
     files = {"line_file": "default_line_ac.json"}
     stock = {"rolling_stock_file": "freight_vl80.json"}
+    length_m = stock_length_m(stock["rolling_stock_file"])
+    line = _shipped_json("default_line_ac.json")
+    next(s for s in line["stations"] if s["name"] == "A")["stop_m"] = FREIGHT_ORIGIN_M
+    check_placements(line, [("train", FREIGHT_ORIGIN_M, length_m)])
     coder, rail, receiver, ato = cab_settings("ALSN")
     components, connections = train_and_ato(
-        train_parameters={**files, **stock},
+        train_parameters={**files, **stock, "x0": FREIGHT_ORIGIN_M},
         ato_parameters={**ato, **files, **stock, "timetable_file": "freight_timetable.json"})
-    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files, "train_length[1]": FREIGHT_LENGTH_M},
+    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files, "train_length[1]": length_m},
                                 receiver={**receiver, "train_category": "freight", "carrier": 25.0})
     path = write_ssd(folder, "freight_ac", chain + components, connections + links, stop_time=1900.0)
-    for name in ("default_line_ac.json", "freight_vl80.json"):
-        _write_json(folder / "resources" / name, json.loads((DATA / name).read_text()))
+    _write_json(folder / "resources" / "default_line_ac.json", line)
+    _write_json(folder / "resources" / "freight_vl80.json", _shipped_json("freight_vl80.json"))
     _write_json(folder / "resources" / "freight_timetable.json", FREIGHT_TIMETABLE)
+    return path
+
+
+# same_block: the follower at A (400 m) and, ahead of it in the same track circuit (block section
+# 1, 0-2600 m), the leader standing for three minutes at "2 km" (the state after a permissive
+# restart past a red signal). The leader departs at 180 s and runs to C; the follower, due at
+# 60 s, waits for a permissive code (docs/ato.md, departure hold) and runs to B.
+SAME_BLOCK_LEADER_ORIGIN = ("2 km", 2000.0)
+SAME_BLOCK_LEADER_TIMETABLE = {"train": "passenger 111 (standing ahead)", "stops": [
+    {"station": SAME_BLOCK_LEADER_ORIGIN[0], "departure_s": 180}, {"station": "C", "arrival_s": 1060}]}
+SAME_BLOCK_FOLLOWER_TIMETABLE = {"train": "passenger 113 (behind it)", "stops": [
+    {"station": "A", "departure_s": 60}, {"station": "B", "arrival_s": 515}]}
+
+
+def write_same_block(root: Path = SSP_ROOT) -> Path:
+    line = _with_station(_shipped_json("default_line.json"), *SAME_BLOCK_LEADER_ORIGIN,
+                         "2 km: where the leader of the same_block system stands, in the follower's track circuit")
+    check_placements(line, [("leader", SAME_BLOCK_LEADER_ORIGIN[1], RAIL_TRAIN_LENGTH_M),
+                            ("follower", _stop_m(line, "A"), RAIL_TRAIN_LENGTH_M)])
+    files = {"line_file": "same_block_line.json"}
+    coder, rail, receiver, ato = cab_settings("ALSN")
+    leader, leader_links = train_and_ato(
+        "leader", "leader_ato", train_parameters={**files, "x0": SAME_BLOCK_LEADER_ORIGIN[1]},
+        ato_parameters={**ato, **files, "timetable_file": "leader_timetable.json"})
+    follower, follower_links = train_and_ato("follower", "follower_ato", train_parameters=files,
+                                             ato_parameters={**ato, **files, "timetable_file": "follower_timetable.json"})
+    chain, links = signal_chain((("leader", "leader_ato"), ("follower", "follower_ato")),
+                                coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
+    folder = root / "same_block"
+    path = write_ssd(folder, "same_block", chain + leader + follower, links + leader_links + follower_links,
+                     stop_time=1100.0)
+    _write_json(folder / "resources" / "same_block_line.json", line)
+    _write_json(folder / "resources" / "leader_timetable.json", SAME_BLOCK_LEADER_TIMETABLE)
+    _write_json(folder / "resources" / "follower_timetable.json", SAME_BLOCK_FOLLOWER_TIMETABLE)
     return path
 
 
@@ -245,6 +340,7 @@ def write_freight_ac(root: Path = SSP_ROOT) -> Path:
 SHIPPED: Dict[str, Callable[[Path], Path]] = {
     "free_run": write_free_run, "ato_only": write_ato_only, "following": write_following,
     "faults": write_faults, "joints_at_speed": write_joints_at_speed, "freight_ac": write_freight_ac,
+    "same_block": write_same_block,
 }
 for _system, _prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
     SHIPPED[_prefix] = partial(write_free_run, system=_system, name=_prefix)
