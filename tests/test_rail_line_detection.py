@@ -206,3 +206,22 @@ def test_traction_publishes_its_initial_position_in_initialisation_mode():
     slave.io["v0"][...] = 5.0
     slave.enter_initialization_mode()
     assert float(slave.io["x"]) == 1234.0 and float(slave.io["v"]) == 5.0
+
+
+def test_calibration_table_in_docs_matches_the_model():
+    """docs/rail_line.md, relay calibration: the levels per shipped line are the model's."""
+    text = (ROOT / "docs" / "rail_line.md").read_text()
+    rows = [line.split("|")[1:-1] for line in text.splitlines()
+            if line.startswith("| default_line") or line.startswith("| throat line")]
+    assert len(rows) == 8
+    cores = {}
+    for cells in rows:
+        name = cells[0].strip()
+        path = SHIPPED_LINES[0 if name == "default_line" else 1 if name.startswith("default_line_ac") else 2]
+        core = cores.setdefault(path, _core(load_line(path)))
+        first = int(cells[1].strip().split("–")[0]) - 1
+        calibration = core.bank.calibration[first]
+        assert float(cells[2]) == pytest.approx(calibration.length_m, abs=1)
+        assert float(cells[4]) == pytest.approx(calibration.normal_level, abs=5e-4)
+        assert float(cells[5].split("(")[0]) == pytest.approx(calibration.shunt_level, abs=5e-4)
+        assert float(cells[7].strip(" %")) == pytest.approx(100 * calibration.shunt_margin, abs=0.05)

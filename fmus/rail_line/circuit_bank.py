@@ -202,13 +202,16 @@ class TrackCircuitBank:
         (docs/sources.md#track-circuits-and-rail-impedance, row 8), or the line refused naming the
         circuit and the longest circuit that would calibrate."""
         s = self.settings
-        table, references = [], []
+        table, references, known = [], [], {}
         for k, (circuit, section) in enumerate(zip(self.circuits, self.line.sections)):
             if circuit.params.ballast_ohm_km > self.ballast_max_ohm_km:
                 raise FmuInputError(f"{self.line.path}: field block_sections[{k}].ballast_ohm_km: "
                                     f"{circuit.params.ballast_ohm_km:g} Ω·km is above the line's max_ballast_ohm_km "
                                     f"{self.ballast_max_ohm_km:g}")
-            calibration, reference = self._levels(circuit, self.carriers[k])
+            key = (circuit.feed_m - circuit.start_m, circuit.params, float(self.carriers[k]))
+            if key not in known:                 # sections of one design share their calibration
+                known[key] = self._levels(circuit, self.carriers[k])
+            calibration, reference = known[key]
             if not self._calibrates(calibration):
                 longest = self.longest_calibratable_m(k)
                 raise FmuInputError(
