@@ -14,7 +14,8 @@ front-most shunt the amplitude is interpolated between nodes from the phasor sol
 varies continuously with position. The rail line core takes the configuration every 10 ms of
 simulated time, whatever the frame length, so frames of any length give the same result.
 
-Track relays: the relay-end voltage of the track circuit's own feed (phasor at the carrier) with
+Track relays: the relay-end voltage of the track circuit's own feed (phasor at the track circuit's frequency
+from the line file, whatever cab-signal carrier is superimposed) with
 every shunt and fault, relative to each circuit's calibrated reference (see ``_calibrate``), against
 pick-up / drop-out levels with pick-up and drop-out delays → occupancy.
 """
@@ -113,6 +114,9 @@ class TrackCircuitBank:
         self.ends_list = self.ends.tolist()
         self.feed_list = [float(circuit.feed_m) for circuit in self.circuits]
         self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
+        # train detection works at the track circuit's own frequency (the line file's): a digital
+        # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
+        self.track_frequencies = np.array([sec.carrier_hz for sec in line.sections], dtype=float)
         self._spacing_list = [float(circuit.nodes_m[1] - circuit.nodes_m[0]) for circuit in self.circuits]
         self._segments_list = [circuit.segments for circuit in self.circuits]
         self._train_lengths = [float(length) for length in s.train_length_m]
@@ -208,9 +212,9 @@ class TrackCircuitBank:
                 raise FmuInputError(f"{self.line.path}: field block_sections[{k}].ballast_ohm_km: "
                                     f"{circuit.params.ballast_ohm_km:g} Ω·km is above the line's max_ballast_ohm_km "
                                     f"{self.ballast_max_ohm_km:g}")
-            key = (circuit.feed_m - circuit.start_m, circuit.params, float(self.carriers[k]))
+            key = (circuit.feed_m - circuit.start_m, circuit.params, float(self.track_frequencies[k]))
             if key not in known:                 # sections of one design share their calibration
-                known[key] = self._levels(circuit, self.carriers[k])
+                known[key] = self._levels(circuit, self.track_frequencies[k])
             calibration, reference = known[key]
             if not self._calibrates(calibration):
                 longest = self.longest_calibratable_m(k)
@@ -234,7 +238,7 @@ class TrackCircuitBank:
 
         def ok(length_m):
             trial = TrackCircuit(0.0, length_m + offset, offset, circuit.params)
-            return self._calibrates(self._levels(trial, self.carriers[k])[0])
+            return self._calibrates(self._levels(trial, self.track_frequencies[k])[0])
         lo, hi = 1.0, max(circuit.feed_m - circuit.start_m, 1.0)
         if ok(hi):
             while ok(2 * hi) and hi < 1e5:
@@ -331,7 +335,7 @@ class TrackCircuitBank:
         key = (k, faults)
         if key not in self._phasor_families:
             self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0),
-                                                      2 * np.pi * self.carriers[k], [1.0])
+                                                      2 * np.pi * self.track_frequencies[k], [1.0])
         return self._phasor_families[key]
 
     def _phasor_table(self, k: int, faults: Optional[Faults] = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
