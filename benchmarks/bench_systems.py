@@ -19,7 +19,9 @@ def describe(train: dict) -> str:
     stops = ", ".join(f"{s['station']} {s['arrival_deviation_s']:+.1f} s / {s['stop_error_m']:+.2f} m"
                       for s in train.get("stops", []) if s.get("arrival_deviation_s") is not None)
     return (f"{train['name']}: {train.get('energy_kwh', 0):.1f} kWh, interventions {train.get('atp_interventions')}, "
-            f"SPAD {train.get('signals_passed_at_danger')}" + (f", {stops}" if stops else ""))
+            f"SPAD {train.get('signals_passed_at_danger')}" + (f", {stops}" if stops else "")
+            + (f", min headway {train['min_headway_m']:.0f} m" if train.get("min_headway_m") is not None else "")
+            + (f", departure held {train['departure_hold_s']:.1f} s" if train.get("departure_hold_s") else ""))
 
 
 def main():
@@ -30,9 +32,11 @@ def main():
             options = RunOptions(summaries=railway_verdicts, output_dir=Path(folder), in_process=mode != "fmi", fmu_dirs=[_build_dir()])
             summary = run_system(SSP_ROOT / name, options).summary
         wrong_side = sum(r["wrong_side_failures"] for r in summary["receivers"])
+        unsafe = sum(r.get("unsafe_indications", 0) for r in summary["receivers"])
         print(f"{name}{' through FMI' if mode == 'fmi' else ''}: {summary['sim_time_s']:.0f} s simulated in "
               f"{summary['wall_time_s']:.1f} s = {summary['realtime_factor']:.1f}x real time; wrong-side failures "
-              f"{wrong_side}; " + "; ".join(describe(t) for t in summary["trains"]), flush=True)
+              f"{wrong_side}, unsafe indications {unsafe}; " + "; ".join(describe(t) for t in summary["trains"]),
+              flush=True)
 
 
 if __name__ == "__main__":

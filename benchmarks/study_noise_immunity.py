@@ -50,6 +50,9 @@ from fmus.wayside_coder.digital import DigitalCoderCore
 
 FS = 4000.0
 AMPLITUDE_V = 0.2
+# the squelch the study's figures were taken with: 20x below the coil level, as a receiver at a
+# normal code level sees it (the receiver is scale-free apart from squelch and limiter)
+SQUELCH_V = 0.01
 CHUNK = 40000                       # 10 s of signal per receiver step (the core is frame-length invariant)
 GRID_S = 0.01
 HOLD = 6
@@ -123,7 +126,7 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
     # track_parity 0: the adjacent track's signal, received by a train on track 1
     messages = [Message(system.command_for(int(n)), track_parity, 0) for n in free for _ in range(HOLD)][:count]
     tx = Transmission(system, messages)
-    receiver = DigitalReceiverCore(system, CHUNK, DigitalReceiverSettings(fs_hz=FS, track_parity=1))
+    receiver = DigitalReceiverCore(system, CHUNK, DigitalReceiverSettings(fs_hz=FS, track_parity=1, min_level_v=SQUELCH_V))
     acceptor = receiver.acceptor
     events = []                                              # (time, decoded message or None, command in force)
     original = acceptor.push

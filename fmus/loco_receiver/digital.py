@@ -72,7 +72,7 @@ class DigitalReceiverSettings:
     v_max_mps: float = 0.0           # 0: the system's speed for the category
     track_parity: int = 1
     limiter_v: float = 4.0           # 0: no limiter
-    min_level_v: float = 0.01        # squelch (carrier amplitude at the coil)
+    min_level_v: float = 0.1         # squelch, V at the coil: the ALSN relay's pick-up level (docs/digital_channels.md)
     filter_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
 
 
