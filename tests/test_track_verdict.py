@@ -46,3 +46,34 @@ def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus):
     summary, rx = _run(tmp_path, product_fmus, occupancy_sent=True)
     assert rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
     assert safety_verdict(summary)[0]
+
+
+def test_the_verdict_judges_the_real_train_length_not_a_shorter_one_given_to_the_rail_line(tmp_path, product_fmus):
+    """A 944 m freight train whose rail line keeps its 400 m default: the verdict's occupancy uses
+    the rolling-stock file's length, so it does not share the rail line's blind spot."""
+    from orchestrator.analysis.verdict import train_lengths
+    from orchestrator.graph import build_graph
+    from orchestrator.ssp import open_system
+
+    folder = str(product_fmus)
+    stock = {"rolling_stock_file": "freight_vl80.json"}
+    components, connections = train_and_ato(fmu_folder=folder, train_parameters=stock,
+                                            ato_parameters={"cab_signal": "ALSN", **stock})
+    chain, links = signal_chain(fmu_folder=folder)
+    ssd = write_ssd(tmp_path / "sys", "sys", chain + components, connections + links, stop_time=1.0)
+    system = open_system(ssd.parent if ssd.is_file() else ssd, [product_fmus])
+    try:
+        assert train_lengths(build_graph(system, {}, []))["train"] == pytest.approx(944.0)
+    finally:
+        system.close()
+
+
+def test_a_receiver_the_verdict_cannot_judge_is_never_reported_safe():
+    summary = {"trains": [{"signals_passed_at_danger": 0}],
+               "receivers": [{"wrong_side_failures": 0, "unsafe_indications": 0}],
+               "receivers_not_judged": ["rx2"]}
+    safe, line = safety_verdict(summary)
+    assert not safe and "not judged" in line and "rx2" in line
+    del summary["receivers_not_judged"]
+    assert safety_verdict(summary) == (True, "safety: safe (signals passed at danger 0, wrong-side failures 0, "
+                                             "unsafe indications 0)")

@@ -213,8 +213,11 @@ def _data_file(value, default):
 
 
 def train_lengths(graph: SystemGraph) -> Dict[str, float]:
-    """Length of every train (Traction component): the rail line's ``train_length[j]`` of the
-    slot its ``x`` feeds, else its rolling-stock file's length."""
+    """Length of every train (Traction component): the longer of the rail line's
+    ``train_length[j]`` of the slot its ``x`` feeds and its rolling-stock file's length. The
+    verdict judges against the real train: a rail line given a shorter train (its 400 m default
+    under a 944 m freight train) would miss the rear of it, and taking the rail line's figure
+    alone would make the verdict agree with that mistake instead of catching it."""
     from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
     from fmus.errors import FmuInputError
 
@@ -224,12 +227,12 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
             slot = edge.target_var.name[len("x_head"):]
             lengths[edge.source] = float(_parameter(graph, edge.target, f"train_length{slot}", 0.0))
     for name in graph.order:
-        if graph.nodes[name].interface.model_identifier == TRAIN_MODEL and not lengths.get(name):
+        if graph.nodes[name].interface.model_identifier == TRAIN_MODEL:
             try:
                 stock = _data_file(_parameter(graph, name, "rolling_stock_file"), DEFAULT_ROLLING_STOCK)
-                lengths[name] = load_rolling_stock(stock).length_m
+                lengths[name] = max(lengths.get(name, 0.0), load_rolling_stock(stock).length_m)
             except FmuInputError:
-                lengths[name] = 0.0        # the FMU itself reports the bad file at initialisation
+                lengths.setdefault(name, 0.0)   # the FMU itself reports the bad file at initialisation
     return lengths
 
 
@@ -544,7 +547,13 @@ class ReceiverVerdict(_OutputJudge):
                 or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH)
 
     def summary_section(self) -> Dict[str, list]:
-        return {"receivers": self.summary()}
+        judged = {r.name for r in self.receivers}
+        unjudged = [name for name in self.graph.order
+                    if self.graph.nodes[name].interface.model_identifier == RECEIVER_MODEL and name not in judged]
+        section = {"receivers": self.summary()}
+        if unjudged:            # no coder, rail line or train position known for them: said, never "safe"
+            section["receivers_not_judged"] = unjudged
+        return section
 
     def summary(self) -> List[dict]:
         entries = []
@@ -574,9 +583,12 @@ def safety_verdict(summary: dict) -> Tuple[bool, str]:
     spad = sum(t.get("signals_passed_at_danger", 0) for t in summary.get("trains", []))
     wrong = sum(r.get("wrong_side_failures", 0) for r in summary.get("receivers", []))
     unsafe = sum(r.get("unsafe_indications", 0) for r in summary.get("receivers", []))
-    safe = spad == 0 and wrong == 0 and unsafe == 0
-    return safe, (f"safety: {'safe' if safe else 'UNSAFE'} (signals passed at danger {spad}, "
-                  f"wrong-side failures {wrong}, unsafe indications {unsafe})")
+    unjudged = summary.get("receivers_not_judged", [])
+    safe = spad == 0 and wrong == 0 and unsafe == 0 and not unjudged
+    word = "UNSAFE" if spad or wrong or unsafe else ("not judged" if unjudged else "safe")
+    return safe, (f"safety: {word} (signals passed at danger {spad}, "
+                  f"wrong-side failures {wrong}, unsafe indications {unsafe}"
+                  + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")")
 
 
 def railway_verdicts(graph: SystemGraph) -> list:
