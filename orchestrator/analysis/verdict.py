@@ -10,7 +10,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
+import numpy as np
+
+from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
+                              load_rolling_stock, load_timetable)
+from fmus.errors import FmuInputError
+from fmus.signalling import alsn, cab_systems, digital
 from fmus.signalling import aspects as sig
+from fmus.signalling.aspects import ASPECT_NAMES
+from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, block_codes
+from fmus.signalling.digital import FREE_BLOCKS_OPEN
 
 from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
@@ -48,8 +57,6 @@ def trains_of(graph: SystemGraph) -> List[_Train]:
 
 def _timetable(graph: SystemGraph, ato: str) -> list:
     """The ATO's timetable as it will read it (same files, same defaults)."""
-    from fmus.data.loader import DEFAULT_LINE, DEFAULT_TIMETABLE, load_line, load_timetable
-    from fmus.errors import FmuInputError
 
     params = graph.nodes[ato].parameters
     try:
@@ -127,7 +134,6 @@ class TrainVerdict(_OutputJudge):
         train.stops.append(entry)
 
     def _record_aspect(self, train: _Train, tick: int, aspect: int) -> None:
-        from fmus.signalling.aspects import ASPECT_NAMES
 
         train.aspects.append({"t": tick / TICKS_PER_SECOND, "x": float(self._value(train.name, "x")),
                               "aspect": ASPECT_NAMES.get(aspect, str(aspect))})
@@ -162,7 +168,6 @@ class _Headways:
     line (trains whose ``line_file`` is the same file), checked every CHECK_INTERVAL_S."""
 
     def __init__(self, graph: SystemGraph, trains: List[_Train]):
-        from fmus.data.loader import DEFAULT_LINE
 
         lengths = train_lengths(graph)
         groups: Dict[str, List[_Train]] = {}
@@ -204,7 +209,6 @@ def _data_file(value, default):
     """A ``*_file`` parameter as the FMU opens it: resolved by the graph, else a bundled file."""
     from pathlib import Path
 
-    from fmus.data.loader import DATA
 
     if not value:
         return default
@@ -218,8 +222,6 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
     verdict judges against the real train: a rail line given a shorter train (its 400 m default
     under a 944 m freight train) would miss the rear of it, and taking the rail line's figure
     alone would make the verdict agree with that mistake instead of catching it."""
-    from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
-    from fmus.errors import FmuInputError
 
     lengths = {}
     for edge in graph.edges:
@@ -244,7 +246,6 @@ class _Track:
     broken."""
 
     def __init__(self, graph: SystemGraph, rail: str, line, lengths: Dict[str, float], block_aspects: int):
-        import numpy as np
 
         self.rail, self.line, self.block_aspects = rail, line, block_aspects
         self.starts_m = np.array([s.start_m for s in line.sections])
@@ -262,7 +263,6 @@ class _Track:
         self._cache = (None, None)
 
     def bind(self, master: MasterView, slots: Dict[tuple, tuple]) -> None:
-        import numpy as np
 
         self._x = [slots[(t, "x")] for t in self.trains]
         var = master.graph.nodes[self.rail].interface.variables.get("broken_rail_at")
@@ -271,7 +271,6 @@ class _Track:
             self._broken_rail = (buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0]))
 
     def heads_m(self, master: MasterView):
-        import numpy as np
 
         for train in self.trains:
             master.fresh(train)
@@ -285,7 +284,6 @@ class _Track:
 
     def occupied(self, heads_m):
         """Occupancy of every track circuit from the trains' extents and the broken rail."""
-        import numpy as np
 
         tails = heads_m - self.lengths_m
         occ = ((heads_m[:, None] >= self.starts_m) & (tails[:, None] < self.ends_m)).any(axis=0)
@@ -296,7 +294,6 @@ class _Track:
 
     def rules(self, master: MasterView, tick: int):
         """(trains' heads, block rules of the real occupancy), once per tick."""
-        from fmus.signalling.block_rules import block_codes
 
         if self._cache[0] != tick:
             heads = self.heads_m(master)
@@ -307,7 +304,6 @@ class _Track:
         """Whether another train or the broken rail lies between the coil of train ``train`` and
         the exit signal of its block: the block rules applied to the track ahead of the coil
         inside its own circuit too (a train ahead in the same circuit)."""
-        import numpy as np
 
         end_m = self.block_ends_m[self.block_of[circuit]]
         tails = heads_m - self.lengths_m
@@ -318,7 +314,6 @@ class _Track:
 
     def circuit_at(self, x_m: float) -> int:
         """0-based track circuit containing ``x_m``, -1 outside every circuit."""
-        import numpy as np
 
         k = int(np.searchsorted(self.starts_m, x_m, side="right")) - 1
         return k if k >= 0 and x_m < self.ends_m[k] else -1
@@ -327,8 +322,6 @@ class _Track:
 def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
     """The tracks of the rail lines ``rails`` (name → coder feeding it); a rail line whose line
     file does not load is not judged (the FMU reports the file)."""
-    from fmus.data.loader import DEFAULT_LINE, load_line
-    from fmus.errors import FmuInputError
 
     lengths = train_lengths(graph)
     tracks = {}
@@ -396,8 +389,6 @@ class _Receiver:
 
 def receivers_of(graph: SystemGraph) -> List[_Receiver]:
     """Receivers fed by a rail line whose train and coder are known; others are not judged."""
-    from fmus.signalling import alsn, cab_systems, digital
-    from fmus.errors import FmuInputError
 
     found = []
     for name in graph.order:
@@ -505,9 +496,6 @@ class ReceiverVerdict(_OutputJudge):
             r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent})
 
     def _check_track(self, master: MasterView, r: _Receiver, tick: int, now: float) -> None:
-        from fmus.signalling import alsn
-        from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS
-        from fmus.signalling.digital import FREE_BLOCKS_OPEN
 
         track = self.tracks[r.rail]
         heads, rules = track.rules(master, tick)
