@@ -111,7 +111,7 @@ def safe_extract(archive_path: Path, dest: Path) -> None:
     try:
         archive = zipfile.ZipFile(archive_path)
     except zipfile.BadZipFile:
-        raise UserError(f"{archive_path}: not a zip archive") from None
+        raise UserError(f"{archive_path}: not a zip archive (or cut short)") from None
     except OSError as error:
         raise UserError(f"{archive_path}: cannot open ({error.strerror})") from None
     root = dest.resolve()
