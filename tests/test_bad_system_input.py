@@ -247,3 +247,12 @@ def test_same_line_in_two_files_of_identical_content_is_accepted(tmp_path, produ
     shutil.copy(REPO / "fmus" / "data" / "shipped" / "default_line.json", copy)
     code, _, stderr = _run("ato_only", tmp_path, "--set", f"ato.line_file={copy}", "--stop-time", "1")
     assert code == 0, stderr
+
+
+def test_report_of_a_run_folder_with_json_nested_too_deeply(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.csv").write_text("time\n0\n")
+    (run / "summary.json").write_text("[" * 100000 + "]" * 100000)
+    (run / "metadata.json").write_text("{}")
+    _expect_error(*railcosim("report", run)[::2], "summary.json", "nested too deeply")
