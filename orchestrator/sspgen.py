@@ -117,12 +117,18 @@ def committed_ports(folder: Path, source: str) -> Optional[Ports]:
 
 
 def fmu_ports(folder: Path, source: str) -> Optional[Ports]:
-    """The variables of the FMU at ``folder / source`` (its modelDescription) when it exists, else
-    :func:`committed_ports`; None when neither knows the FMU (the SSD then declares no connectors)."""
+    """The variables of the FMU a component will run (its modelDescription): the one at
+    ``folder / source``, else the one of that name in the build folder ``railcosim run`` also
+    looks in (``build/fmus/``, built with any --sections/--trains/--frame), else
+    :func:`committed_ports`; None when none knows the FMU (the SSD then declares no connectors)."""
+    from orchestrator.build.builder import default_build_dir
     from orchestrator.build.contract import manifest_of
+    from orchestrator.cli import WORK_ROOT
 
-    path = Path(folder) / source
-    return manifest_of(path) if path.is_file() else committed_ports(folder, source)
+    for path in (Path(folder) / source, default_build_dir(WORK_ROOT) / Path(source).name):
+        if path.is_file():
+            return manifest_of(path)
+    return committed_ports(folder, source)
 
 
 def connectors_of(ports: Ports, connected_inputs: Sequence[str] = ()) -> List[Tuple[str, str, str, Optional[str]]]:
@@ -174,8 +180,8 @@ def write_ssd(folder: Path, name: str, components: Sequence[ComponentSpec],
               start_time: float = 0.0, base_step_s: Optional[float] = None,
               ports: PortsOf = fmu_ports) -> Path:
     """Write ``folder/SystemStructure.ssd``. Each component declares the connectors
-    :func:`connectors_of` lists, from ``ports(folder, source)`` (default: the FMU itself, else
-    its committed manifest). The DefaultExperiment carries ``osp:FixedStepAlgorithm`` with the
+    :func:`connectors_of` lists, from ``ports(folder, source)`` (default :func:`fmu_ports`: the
+    FMU it will run, else its committed manifest). The DefaultExperiment carries ``osp:FixedStepAlgorithm`` with the
     base step (the given one or the gcd of the component steps) and, when given, ``rcs:BaseStep``.
     """
     folder.mkdir(parents=True, exist_ok=True)
