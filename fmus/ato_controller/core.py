@@ -248,7 +248,7 @@ class AtoCore:
         if self.settings.cab_signal == "off":
             return None
         if not sig.WHITE <= aspect <= sig.GREEN:
-            return "aspect", f"cab-signal aspect {aspect} is not an aspect (0..4)"
+            return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
         if self.settings.cab_signal == "digital":
             for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
                 if not (math.isfinite(value) and value >= 0.0):
