@@ -234,6 +234,20 @@ def test_a_bad_input_refuses_the_step_without_touching_the_state(product_fmus, u
     assert values_got == values_ref and any(v not in (0, False) for v in values_ref)
 
 
+def test_traction_still_clamps_a_finite_command_outside_its_range():
+    """The declared −1…1 of traction's command is clamped and counted, not refused (docs/traction.md)."""
+    from fmus.traction.facade import Traction
+
+    slave = Traction(instance_name="t", resources=None)
+    slave.setup_experiment(0.0, None, None)
+    slave.enter_initialization_mode()
+    slave.exit_initialization_mode()
+    slave.io["command"][...] = 7.0
+    assert slave.do_step(0.0, 0.5) and int(slave.io["commands_clamped"]) == 1
+    slave.io["command"][...] = -math.inf
+    assert not slave.do_step(0.5, 0.5) and "input command = -inf is not a finite number" in slave.log_queue[-1].msg
+
+
 # ---- 5. the ATO fails safe on impossible measurements ---------------------------------------------
 def _ato(**parameters):
     from fmus.ato_controller.facade import AtoController

@@ -25,7 +25,7 @@ class Traction(FrameSlave):
             Port("resistance_scale", "parameter", unit="1", start=s["resistance_scale"], min=0.1, max=10.0),
             Port("max_substep", "parameter", unit="s", start=s["max_substep_s"], min=0.001, max=10.0,
                  description="longest RK4 sub-step inside a communication step"),
-            Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0,
+            Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0, bad_input="clamp",
                  description=">0 traction share, <0 brake share; outside −1..1 clamped and counted"),
             Port("emergency_brake", "input", "Boolean", start=False),
             Port("x", "output", unit="m", description="head position along the line"),
