@@ -69,6 +69,10 @@ class Port:
     # "unit" (the unit handles every value itself: the ATO's measurements fail safe)
     bad_input: str = "refuse"
 
+    def __post_init__(self):
+        if self.bad_input not in ("refuse", "clamp", "unit"):
+            raise TypeError(f"port {self.name}: bad_input {self.bad_input!r} is not refuse, clamp or unit")
+
     @property
     def size(self) -> int:
         return int(np.prod(self.shape)) if self.shape else 1
@@ -138,14 +142,14 @@ _FALLBACK = {"Real": math.nan, "Integer": 0, "Boolean": False, "String": ""}
 class _InputCheck:
     """The inputs of one numeric type checked before each step: their slots (a slice when
     contiguous); whether they must be finite (Reals); the positions among them with a declared
-    range and its bounds; (port, element, clamped) of each value, for the message."""
+    range and its bounds; (port, element) of each value, for the message."""
 
     index: Any
     finite: bool
     bounded: Optional[np.ndarray]
     low: np.ndarray
     high: np.ndarray
-    elements: List[Tuple[Port, str, bool]]
+    elements: List[Tuple[Port, str]]
 
 
 @dataclass
@@ -284,13 +288,12 @@ class FrameSlave(Fmi2Slave):
                 if port.type != type_name:
                     continue
                 if port.causality == "input" and port.bad_input != "unit":
-                    clamp = port.bad_input == "clamp"
-                    if not clamp and (port.min is not None or port.max is not None):
+                    if port.bad_input != "clamp" and (port.min is not None or port.max is not None):
                         bounded.extend(range(len(slots), len(slots) + port.size))
                         low.extend([-math.inf if port.min is None else port.min] * port.size)
                         high.extend([math.inf if port.max is None else port.max] * port.size)
                     slots.extend(range(first, first + port.size))
-                    elements.extend((port, element, clamp) for element in port.element_names())
+                    elements.extend((port, element) for element in port.element_names())
                 first += port.size
             if not slots or (type_name == "Integer" and not bounded):
                 continue                  # an integer without a declared range cannot be wrong
@@ -312,14 +315,14 @@ class FrameSlave(Fmi2Slave):
                 finite = np.isfinite(values)
                 if not finite.all():
                     k = int(np.argmin(finite))
-                    port, element, _ = check.elements[k]
+                    port, element = check.elements[k]
                     return "input " + port.range_error(element, values[k].item())
             if check.bounded is not None:
                 inside = values[check.bounded]
                 good = (inside >= check.low) & (inside <= check.high)
                 if not good.all():
                     k = int(check.bounded[int(np.argmin(good))])
-                    port, element, _ = check.elements[k]
+                    port, element = check.elements[k]
                     return "input " + port.range_error(element, values[k].item())
         return None
 
