@@ -26,6 +26,7 @@ from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.traction.brake_pipeline import brake_lead_s
+from fmus.traction.core import MAX_SPEED_MPS  # noqa: F401  (the facade's declared bound of speed_margin)
 from fmus.units import MPS_PER_KMH
 
 _INF = math.inf

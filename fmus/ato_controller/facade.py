@@ -4,7 +4,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FrameSlave, Port, line_file_port
-from fmus.ato_controller.core import MAX_DECEL_MPS2, AtoCore, AtoSettings
+from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, AtoCore, AtoSettings
 
 
 class AtoController(FrameSlave):
@@ -27,7 +27,7 @@ class AtoController(FrameSlave):
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
             Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="ATP supervision deceleration; 0: 0.7 × service"),
-            Port("speed_margin", "parameter", unit="m/s", start=s.speed_margin_mps, min=0.0,
+            Port("speed_margin", "parameter", unit="m/s", start=s.speed_margin_mps, min=0.0, max=MAX_SPEED_MPS,
                  description="the ATO stays this far below every limit"),
             Port("stop_margin", "parameter", unit="m", start=s.stop_margin_m, min=0.0,
                  description="stop this far before a signal at danger"),
