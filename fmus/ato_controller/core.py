@@ -243,7 +243,7 @@ class AtoCore:
                           free_blocks: int) -> Optional[Tuple[str, str]]:
         """(input, why) when a measurement the ATP relies on cannot be true, else None."""
         if not math.isfinite(x):
-            return "x", f"measured position x = {x:g} m is not a number"
+            return "x", f"measured position x = {x:g} m is not finite"
         if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
             return "v", f"measured speed v = {v:g} m/s is impossible"
         if self.settings.cab_signal == "off":
