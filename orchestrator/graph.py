@@ -17,7 +17,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
 from orchestrator.protocols import TRANSITIONS, Transition
-from orchestrator.ssp import Connection, SystemDescription, convert_unit
+from orchestrator.ssp import Connection, SystemDescription, check_connectors, convert_unit
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
 
@@ -76,14 +76,7 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
                             "(add <rcs:StepSize> or osp:StepSizeHint)")
         ticks = seconds_to_ticks(step, f"{comp.step_origin}: step size of {comp.name!r}")
         nodes[comp.name] = Node(comp.name, interface, str(comp.fmu_path), ticks, comp.origin)
-        for declared, (kind, ctype, cunit) in comp.connectors.items():
-            var = interface.variables.get(declared)
-            if var is None:
-                raise UserError(f"{comp.origin}: connector {comp.name}.{declared} does not exist "
-                                f"in {comp.fmu_path}")
-            if ctype and ctype != var.type:
-                raise UserError(f"{comp.origin}: connector {comp.name}.{declared} is declared "
-                                f"{ctype} but the FMU has {var.type}")
+        check_connectors(comp, {v.name: (v.causality, v.type, v.unit) for v in interface.variables.values()})
         units = {**interface.units, **system.units}
         for value in comp.parameters:
             _bind_parameter(nodes[comp.name], value.name, value, units)

@@ -195,17 +195,18 @@ def _finite(text: str, element, what: str) -> float:
     return value
 
 
-def _annotation_seconds(child, ssd_path: Path) -> Tuple[float, str]:
-    """The ``value`` of a step annotation (rcs:StepSize, osp:StepSizeHint, rcs:BaseStep): a
-    positive finite number of seconds, else an error naming file, line and the annotation."""
+def _annotation_seconds(child, ssd_path: Path, attribute: str = "value") -> Tuple[float, str]:
+    """The ``value`` of a step annotation (rcs:StepSize, osp:StepSizeHint, rcs:BaseStep; the
+    ``baseStepSize`` of osp:FixedStepAlgorithm): a positive finite number of seconds, else an
+    error naming file, line and the annotation."""
     origin = where(ssd_path, child.sourceline)
-    text = child.get("value")
+    text = child.get(attribute)
     try:
         value = float(text)
     except (TypeError, ValueError):
         value = None
     if value is None or not math.isfinite(value) or value <= 0:
-        raise UserError(f"{origin}: {etree.QName(child).localname} value {text!r} is not a "
+        raise UserError(f"{origin}: {etree.QName(child).localname} {attribute} {text!r} is not a "
                         "positive number of seconds")
     return value, origin
 
@@ -372,6 +373,39 @@ def _transition(connection, ssd_path: Path) -> str:
     return "hold"
 
 
+def _base_step(experiment, ssd_path: Path) -> Optional[float]:
+    """The DefaultExperiment's base step: ``rcs:BaseStep``, else the baseStepSize of
+    ``osp:Algorithm/osp:FixedStepAlgorithm`` (what libcosim reads); None when neither is given."""
+    ours, osp = None, None
+    for annotation in experiment.findall("ssd:Annotations/ssc:Annotation", NS):
+        for child in annotation:
+            if _local(child) == "BaseStep" and annotation.get("type") == RCS_ANNOTATION:
+                ours = _annotation_seconds(child, ssd_path)[0]
+            elif _local(child) == "Algorithm" and annotation.get("type") == OSP_ANNOTATION:
+                fixed = [a for a in child if _local(a) == "FixedStepAlgorithm" and a.get("baseStepSize")]
+                osp = _annotation_seconds(fixed[0], ssd_path, "baseStepSize")[0] if fixed else osp
+    return ours if ours is not None else osp
+
+
+def check_connectors(component: Component, variables: Dict[str, Tuple[str, str, Optional[str]]]) -> None:
+    """A component's declared connectors against its FMU's variables (name → causality, type,
+    unit): a connector the FMU lacks, of another kind (causality) or type, or in another unit
+    (we convert units along connections from the FMUs' units, not at connectors) is an error
+    naming the SSD line and the component. A component without connectors is not checked."""
+    for name, (kind, ctype, cunit) in component.connectors.items():
+        what = f"{component.origin}: component {component.name!r}: connector {name!r}"
+        if name not in variables:
+            raise UserError(f"{what} does not exist in {component.fmu_path}")
+        causality, vtype, vunit = variables[name]
+        if kind != causality:
+            raise UserError(f"{what} is declared kind={kind!r} but the FMU has causality {causality!r}")
+        if ctype and ctype != vtype:
+            raise UserError(f"{what} is declared {ctype} but the FMU has {vtype}")
+        if cunit and vunit and cunit != vunit:
+            raise UserError(f"{what} is declared in {cunit!r} but the FMU's unit is {vunit!r} "
+                            "(conversion at a connector is not supported)")
+
+
 # ---- system ------------------------------------------------------------------------------------
 def open_system(path: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
     """Load a system from a folder holding SystemStructure.ssd or from a .ssp archive."""
@@ -456,10 +490,7 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
     if experiment is not None:
         start = _float(experiment, "startTime", 0.0)
         stop = _float(experiment, "stopTime")
-        for annotation in experiment.findall("ssd:Annotations/ssc:Annotation", NS):
-            for child in annotation:
-                if _local(child) == "BaseStep" and annotation.get("type") == RCS_ANNOTATION:
-                    base = _annotation_seconds(child, ssd_path)[0]
+        base = _base_step(experiment, ssd_path)
     return SystemDescription(
         name=system.get("name") or root.get("name"), folder=folder, ssd_path=ssd_path,
         components=components, connections=connections, start_time=start, stop_time=stop,

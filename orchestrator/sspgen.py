@@ -2,13 +2,19 @@
 
 Frame ports are FMI structured arrays, so one frame link is N (or K·N) scalar connections;
 ``frame_connections`` expands them. Step sizes are written both as our annotation and as
-``osp:StepSizeHint`` so libcosim-based tools run the system multi-rate too (docs/interfaces.md#ssp-conventions).
+``osp:StepSizeHint``, and the base step as ``osp:Algorithm/osp:FixedStepAlgorithm``, so
+libcosim-based tools run the system multi-rate too; every component declares its connectors
+(from its FMU's variables) so that tools which resolve connections through them (libcosim, FMPy)
+make every connection (docs/interfaces.md#ssp-conventions).
 """
 from __future__ import annotations
 
+import itertools
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from lxml import etree
 
@@ -43,8 +49,6 @@ class ConnectionSpec:
 
 def frame_connections(start: str, end: str, shape: Sequence[int]) -> List[ConnectionSpec]:
     """All element connections between two ports of equal shape, e.g. u_tx[8,40] → u_tx[8,40]."""
-    import itertools
-
     connections = []
     for index in itertools.product(*(range(1, n + 1) for n in shape)):
         suffix = "[" + ",".join(map(str, index)) + "]"
@@ -90,16 +94,110 @@ def write_ssv(path: Path, name: str, values: Dict[str, object], units: Dict[str,
     return path
 
 
+# ---- connectors --------------------------------------------------------------------------------
+# An FMU's variables as its contract manifest lists them (orchestrator/build/contract.py): name →
+# causality, type, unit and, for an array, shape. ``PortsOf(folder, source)`` gives them for a
+# component's source, or None when they are unknown.
+Ports = Dict[str, dict]
+PortsOf = Callable[[Path, str], Optional[Ports]]
+_CONNECTOR_TYPES = ("Real", "Integer", "Boolean", "String")
+
+
+def committed_ports(folder: Path, source: str) -> Optional[Ports]:
+    """The committed contract manifest of a railcosim FMU (``fmus/<unit>/contract.json``, checked
+    against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
+    (``Traction.fmu`` → ``fmus/traction``); None for any other FMU. Independent of the build: the
+    shipped systems are written from it."""
+    import fmus
+    from orchestrator.build.contract import read_manifest
+
+    stem = Path(source).stem
+    manifest = Path(fmus.__file__).parent / re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower() / "contract.json"
+    return read_manifest(manifest) if stem and manifest.is_file() else None
+
+
+def fmu_ports(folder: Path, source: str) -> Optional[Ports]:
+    """The variables of the FMU a component will run (its modelDescription): the one at
+    ``folder / source``, else the one of that name in the build folder ``railcosim run`` also
+    looks in (``build/fmus/``, built with any --sections/--trains/--frame), else
+    :func:`committed_ports`; None when none knows the FMU (the SSD then declares no connectors)."""
+    from orchestrator.build.builder import default_build_dir
+    from orchestrator.build.contract import manifest_of
+    from orchestrator.cli import WORK_ROOT
+
+    for path in (Path(folder) / source, default_build_dir(WORK_ROOT) / Path(source).name):
+        if path.is_file():
+            return manifest_of(path)
+    return committed_ports(folder, source)
+
+
+def connectors_of(ports: Ports, connected_inputs: Sequence[str] = ()) -> List[Tuple[str, str, str, Optional[str]]]:
+    """(name, kind, type, unit) of the connectors a component declares: one per scalar variable
+    (an array's elements one by one, as connections link them), in name order — every output,
+    parameter and calculated parameter, and the inputs the system connects. An unconnected input
+    is left out: it keeps the FMU's start value in every tool (FMPy 0.3.32 sets each declared
+    input from a connection and, for one without, reuses the previous input's source)."""
+    connected = set(connected_inputs)
+    result = []
+    for base in sorted(ports):
+        port = ports[base]
+        kind, ctype = port["causality"], port["type"]
+        if kind not in ("input", "output", "parameter", "calculatedParameter") or ctype not in _CONNECTOR_TYPES:
+            continue
+        shape = port.get("shape")
+        names = [base] if not shape else [
+            base + "[" + ",".join(map(str, index)) + "]"
+            for index in itertools.product(*(range(1, n + 1) for n in shape))]
+        result += [(name, kind, ctype, port.get("unit")) for name in names
+                   if kind != "input" or name in connected]
+    return result
+
+
+def _connectors(node, connectors) -> None:
+    if not connectors:
+        return
+    parent = etree.SubElement(node, SSD + "Connectors")
+    for name, kind, ctype, unit in connectors:
+        connector = etree.SubElement(parent, SSD + "Connector", name=name, kind=kind)
+        typed = etree.SubElement(connector, SSC + ctype)
+        if unit and ctype == "Real":
+            typed.set("unit", unit)
+
+
+def _base_step(components: Sequence[ComponentSpec], base_step_s: Optional[float]) -> Optional[float]:
+    """The system's base step: the given one, else the greatest common divisor of the
+    components' steps (in whole nanoseconds, as the master counts); None when a step is unknown."""
+    if base_step_s is not None:
+        return base_step_s
+    steps = [c.step_size_s for c in components]
+    if not steps or None in steps:
+        return None
+    return math.gcd(*(round(step * 1e9) for step in steps)) / 1e9
+
+
 def write_ssd(folder: Path, name: str, components: Sequence[ComponentSpec],
               connections: Sequence[ConnectionSpec], stop_time: Optional[float] = None,
-              start_time: float = 0.0, base_step_s: Optional[float] = None) -> Path:
+              start_time: float = 0.0, base_step_s: Optional[float] = None,
+              ports: PortsOf = fmu_ports) -> Path:
+    """Write ``folder/SystemStructure.ssd``. Each component declares the connectors
+    :func:`connectors_of` lists, from ``ports(folder, source)`` (default :func:`fmu_ports`: the
+    FMU it will run, else its committed manifest). The DefaultExperiment carries ``osp:FixedStepAlgorithm`` with the
+    base step (the given one or the gcd of the component steps) and, when given, ``rcs:BaseStep``.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     root = etree.Element(SSD + "SystemStructureDescription", nsmap=_NSMAP, version="1.0", name=name)
     system = etree.SubElement(root, SSD + "System", name=name)
     elements = etree.SubElement(system, SSD + "Elements")
+    connected_inputs: Dict[str, List[str]] = {}
+    for conn in connections:
+        element, _, connector = conn.end.partition(".")
+        connected_inputs.setdefault(element, []).append(connector)
     for comp in components:
         node = etree.SubElement(elements, SSD + "Component", name=comp.name, source=comp.source,
                                 type="application/x-fmu-sharedlibrary")
+        component_ports = ports(folder, comp.source)
+        if component_ports is not None:
+            _connectors(node, connectors_of(component_ports, connected_inputs.get(comp.name, ())))
         if comp.parameters or comp.parameter_file:
             bindings = etree.SubElement(node, SSD + "ParameterBindings")
             if comp.parameter_file:
@@ -135,6 +233,11 @@ def write_ssd(folder: Path, name: str, components: Sequence[ComponentSpec],
         experiment.set("stopTime", repr(stop_time))
     if base_step_s is not None:
         _annotation(experiment, RCS_ANNOTATION, RCS_NS, "BaseStep", value=repr(base_step_s))
+    base = _base_step(components, base_step_s)
+    if base is not None:
+        _annotation(experiment, OSP_ANNOTATION, OSP_NS, "Algorithm")
+        algorithm = experiment.find(SSD + "Annotations")[-1][0]
+        etree.SubElement(algorithm, "{%s}FixedStepAlgorithm" % OSP_NS, baseStepSize=repr(base))
     path = folder / "SystemStructure.ssd"
     etree.ElementTree(root).write(str(path), pretty_print=True, xml_declaration=True, encoding="UTF-8")
     return path

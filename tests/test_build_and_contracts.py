@@ -113,6 +113,7 @@ def test_every_declared_parameter_bound_is_enforced_in_the_ports_name(facade, po
     slave = facade(instance_name="bounds", resources=None)
     vr = next(vr for vr, variable in slave.vars.items() if variable.name == element)
     getattr(slave, f"set_{port.type.lower()}")([vr], [value])
+    slave.enter_initialization_mode()
     with pytest.raises(FmuInputError) as error:
         slave.exit_initialization_mode()
     assert str(error.value) == message

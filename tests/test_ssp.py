@@ -1,8 +1,9 @@
 """SSP loading: parameter bindings (external, inline, prefix), SSM mappings, LinearTransformation,
 connector units, named parameter sets and command-line overrides — values checked after a run."""
+import pytest
 from lxml import etree
 
-from helpers import ComponentSpec, ConnectionSpec, read_csv, write_ssd
+from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
 from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 from orchestrator.sspgen import write_ssv
@@ -79,3 +80,145 @@ def test_connector_units_are_converted(tmp_path, test_fmus):
     # 36 km/h → 10 m/s
     assert abs(result.graph.nodes["gain"].parameters["bias"] - 10.0) < 1e-12
     assert abs(_last(out)["gain.y"] - 10.0) < 1e-12
+
+
+# ---- connectors and the OSP algorithm annotation (docs/interfaces.md#ssp-conventions) ------------
+SSD_NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
+          "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
+          "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+          "rcs": "http://railcosim.org/SSP/1"}
+
+
+def _edit_ssd(folder, edit):
+    ssd = folder / "SystemStructure.ssd"
+    tree = etree.parse(str(ssd))
+    edit(tree.getroot())
+    tree.write(str(ssd))
+    return ssd
+
+
+def _connector(root, component, name):
+    return root.find(f".//ssd:Component[@name='{component}']/ssd:Connectors/ssd:Connector[@name='{name}']", SSD_NS)
+
+
+def test_written_ssd_declares_connectors_and_the_osp_base_step(tmp_path, test_fmus):
+    """write_ssd declares each component's outputs, parameters and connected inputs (types and
+    units from the FMU) and the base step as osp:FixedStepAlgorithm; the loader reads it back."""
+    from orchestrator.ssp import open_system
+
+    folder = _system(tmp_path, test_fmus, {"parameters": {"k": 2.0}})
+    system = open_system(folder)
+    assert system.components["gain"].connectors == {
+        "bias": ("parameter", "Real", "m/s"), "enabled": ("parameter", "Boolean", None),
+        "enabled_out": ("output", "Boolean", None), "k": ("parameter", "Real", "1"),
+        "label": ("parameter", "String", None), "mode": ("parameter", "Integer", None),
+        "mode_out": ("output", "Integer", None), "u": ("input", "Real", "m/s"), "y": ("output", "Real", "m/s")}
+    assert "u" not in system.components["clock"].connectors      # an unconnected input is not declared
+    root = etree.parse(str(folder / "SystemStructure.ssd")).getroot()
+    fixed = root.find("ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation[@type='com.opensimulationplatform']"
+                      "/osp:Algorithm/osp:FixedStepAlgorithm", SSD_NS)
+    assert fixed.get("baseStepSize") == "0.5" and system.base_step_s == 0.5
+    assert root.find(".//rcs:BaseStep", SSD_NS) is None
+
+    # steps 0.5 and 0.2 → base 0.1 (gcd); a given base step is written both ways, ours wins when they differ
+    write_ssd(folder, "rates", [ComponentSpec("clock", str(test_fmus / "TestCounter.fmu"), 0.5),
+                                ComponentSpec("gain", str(test_fmus / "TestGain.fmu"), 0.2)], [])
+    assert open_system(folder).base_step_s == 0.1
+    write_ssd(folder, "rates", [ComponentSpec("clock", str(test_fmus / "TestCounter.fmu"), 0.5)], [],
+              base_step_s=0.25)
+    _edit_ssd(folder, lambda root: root.find(".//osp:FixedStepAlgorithm", SSD_NS).set("baseStepSize", "0.05"))
+    assert open_system(folder).base_step_s == 0.25
+
+
+def test_ssd_without_connectors_or_osp_annotations_runs_the_same(tmp_path, test_fmus):
+    """Users' own SSDs need not declare connectors: the same system without them (and without any
+    osp annotation) gives the same results."""
+    runs = {}
+    for variant in ("declared", "bare"):
+        folder = _system(tmp_path / variant, test_fmus, {"parameters": {"k": 2.0, "bias": 0.25}})
+        if variant == "bare":
+            def strip(root):
+                for node in root.findall(".//ssd:Connectors", SSD_NS) + root.findall(
+                        ".//ssc:Annotation[@type='com.opensimulationplatform']", SSD_NS):
+                    node.getparent().remove(node)
+                for empty in root.findall(".//ssd:Annotations", SSD_NS):
+                    if not len(empty):
+                        empty.getparent().remove(empty)
+            text = _edit_ssd(folder, strip).read_text()
+            assert "<ssd:Connector" not in text and "<osp:" not in text
+        out = tmp_path / variant / "out"
+        run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=out, output_interval=0.5))
+        runs[variant] = read_csv(out / "results.csv")
+    assert runs["declared"][0] == runs["bare"][0]
+    assert (runs["declared"][1] == runs["bare"][1]).all() and len(runs["bare"][1]) == 5
+
+
+def _bad_kind(root):
+    _connector(root, "gain", "y").set("kind", "input")
+
+
+def _bad_type(root):
+    typed = _connector(root, "gain", "mode")[0]
+    typed.tag = typed.tag.replace("Integer", "Real")
+
+
+def _bad_unit(root):
+    _connector(root, "gain", "u")[0].set("unit", "km/h")
+
+
+def _missing(root):
+    _connector(root, "gain", "k").set("name", "gain_k")
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (_missing, "connector 'gain_k' does not exist in"),
+    (_bad_kind, "connector 'y' is declared kind='input' but the FMU has causality 'output'"),
+    (_bad_type, "connector 'mode' is declared Real but the FMU has Integer"),
+    (_bad_unit, "connector 'u' is declared in 'km/h' but the FMU's unit is 'm/s'"),
+])
+def test_declared_connectors_are_checked_against_the_fmu(tmp_path, test_fmus, edit, expected):
+    from orchestrator.errors import UserError
+    from orchestrator.graph import build_graph
+    from orchestrator.ssp import open_system
+
+    folder = _system(tmp_path, test_fmus, {"parameters": {"k": 2.0}})
+    ssd = _edit_ssd(folder, edit)
+    line = next(n for n, text in enumerate(ssd.read_text().splitlines(), 1) if 'name="gain"' in text)
+    with pytest.raises(UserError) as error:
+        build_graph(open_system(folder))
+    message = str(error.value)
+    assert "\n" not in message and expected in message
+    assert message.startswith(f"{ssd}:{line}: component 'gain': ")
+
+
+def test_cli_names_ssd_and_component_of_a_bad_connector(tmp_path, test_fmus):
+    folder = _system(tmp_path, test_fmus, {"parameters": {"k": 2.0}})
+    ssd = _edit_ssd(folder, _bad_kind)
+    code, _, err = railcosim("validate", folder)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert str(ssd) in err and "component 'gain'" in err and "kind='input'" in err
+
+
+def test_shipped_systems_declare_what_libcosim_and_fmpy_need():
+    """Every shipped SSD: each connection's ends are declared connectors of the right kind, no
+    unconnected input is declared, and the DefaultExperiment carries osp:FixedStepAlgorithm with
+    the greatest common divisor of the component steps (libcosim needs both; FMPy the first)."""
+    import math
+    from pathlib import Path
+
+    from orchestrator.ssp import parse_validated
+
+    for ssd in sorted((Path(__file__).resolve().parent.parent / "ssp").glob("*/SystemStructure.ssd")):
+        root = parse_validated(ssd, "SystemStructureDescription.xsd")
+        declared = {(c.getparent().getparent().get("name"), c.get("name")): c.get("kind")
+                    for c in root.iterfind(".//ssd:Connector", SSD_NS)}
+        connected = set()
+        for link in root.iterfind(".//ssd:Connection", SSD_NS):
+            start = (link.get("startElement"), link.get("startConnector"))
+            end = (link.get("endElement"), link.get("endConnector"))
+            assert declared.get(start) == "output" and declared.get(end) == "input", (ssd, start, end)
+            connected.add(end)
+        assert {key for key, kind in declared.items() if kind == "input"} == connected, ssd
+        steps = [round(float(h.get("value")) * 1e9) for h in root.iterfind(".//osp:StepSizeHint", SSD_NS)]
+        fixed = root.findall("ssd:DefaultExperiment//osp:Algorithm/osp:FixedStepAlgorithm", SSD_NS)
+        assert len(fixed) == 1 and round(float(fixed[0].get("baseStepSize")) * 1e9) == math.gcd(*steps), ssd

@@ -253,6 +253,10 @@ class Atp:
             self.assumed = self.last_valid
         self.assumed_until = t + self.latency_s
 
+    def apply_emergency(self) -> None:
+        """Emergency brake until standstill, counted once per application (a fault: core.py)."""
+        self._emergency()
+
     def _emergency(self) -> None:
         if not self.emergency_latched:
             self.emergency_latched = True

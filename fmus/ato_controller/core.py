@@ -20,12 +20,13 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, RollingStock, TimetableStop
 from fmus.errors import FmuInputError
-from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.traction.brake_pipeline import brake_lead_s
+from fmus.traction.core import MAX_SPEED_MPS  # noqa: F401  (the facade's declared bound of speed_margin)
 from fmus.units import MPS_PER_KMH
 
 _INF = math.inf
@@ -34,6 +35,10 @@ _INF = math.inf
 MODE_STANDSTILL, MODE_TRACTION, MODE_COAST, MODE_BRAKE, MODE_ATP_SERVICE, MODE_ATP_EMERGENCY = range(6)
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
 ACCEL_FILTER_S = 1.0
+# no train brakes harder: the adhesion limit is about 0.35 g (declared maximum of the decelerations)
+MAX_DECEL_MPS2 = 5.0
+# a measured speed below −this is impossible, not noise at standstill (docs/ato.md, "Measurement faults")
+NEGATIVE_SPEED_TOLERANCE_MPS = 0.2
 MIN_BRAKE_SHARE = 0.02
 CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
 # two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
@@ -112,7 +117,7 @@ class AtoCore:
                             ("min_dwell", s.min_dwell_s), ("k1", s.k1), ("k2", s.k2),
                             ("late_threshold", s.late_threshold_s), ("early_threshold", s.early_threshold_s),
                             ("stop_window", s.stop_window_m)):
-            if value < 0:
+            if not value >= 0:
                 raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
         self.settings = s
         self.line, self.stock, self.category = line, stock, category
@@ -157,6 +162,8 @@ class AtoCore:
             if self.brake_lead_s > s.predictive_stop_lead_s else None
         self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
         self.arrivals: List[dict] = []
+        # (input, message) of the measurement fault of the last step, None while all are valid
+        self.fault: Optional[Tuple[str, str]] = None
 
     # ---- helpers ----------------------------------------------------------------------------
     def departure_time(self, k: int) -> float:
@@ -214,6 +221,9 @@ class AtoCore:
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
+        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks)
+        if self.fault is not None:
+            return self._fail_safe(t)
         self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
@@ -228,6 +238,37 @@ class AtoCore:
         if self.stop_approach is not None:
             self.stop_approach.brake.command(t, command, emergency)
         return self._publish(command, mode, emergency, atp)
+
+    def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
+                          free_blocks: int) -> Optional[Tuple[str, str]]:
+        """(input, why) when a measurement the ATP relies on cannot be true, else None."""
+        if not math.isfinite(x):
+            return "x", f"measured position x = {x:g} m is not finite"
+        if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
+            return "v", f"measured speed v = {v:g} m/s is impossible"
+        if self.settings.cab_signal == "off":
+            return None
+        if not sig.WHITE <= aspect <= sig.GREEN:
+            return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
+        if self.settings.cab_signal == "digital":
+            for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
+                if not (math.isfinite(value) and value >= 0.0):
+                    return name, f"cab-signal speed {name} = {value:g} m/s is impossible"
+            if free_blocks < 0:
+                return "free_blocks", f"free_blocks = {free_blocks} is negative"
+        return None
+
+    def _fail_safe(self, t: float) -> AtoOutputs:
+        """A measurement cannot be true: nothing computed from it is trusted. The ATP applies
+        the emergency brake, held until the train stands with valid measurements again."""
+        self.atp.apply_emergency()
+        if self.stop_approach is not None:
+            self.stop_approach.brake.advance(t, self._v_prev)
+            self.stop_approach.brake.command(t, -1.0, True)
+        self.out.v_ref_mps, self.out.v_ceiling_mps = 0.0, 0.0
+        atp = AtpResult(intervention=EMERGENCY_INTERVENTION, permitted_mps=0.0, ceiling_mps=0.0,
+                        aspect=self.out.aspect)
+        return self._publish(-1.0, MODE_ATP_EMERGENCY, True, atp)
 
     def _measure_acceleration(self, t: float, v: float) -> None:
         if self._t_prev is not None and t > self._t_prev:

@@ -1,9 +1,10 @@
 """AtoController FMU facade: ports ↔ AtoCore. No logic here (see core.py, atp.py, driving.py)."""
 from pythonfmu.default_experiment import DefaultExperiment
+from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FrameSlave, Port, line_file_port
-from fmus.ato_controller.core import AtoCore, AtoSettings
+from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, AtoCore, AtoSettings
 
 
 class AtoController(FrameSlave):
@@ -22,11 +23,11 @@ class AtoController(FrameSlave):
             Port("strategy", "parameter", "String", start=s.strategy, description="programme | predictive | flat_out"),
             Port("cab_signal", "parameter", "String", start=s.cab_signal,
                  description="ALSN (aspect) | digital (v_permitted, v_target, free_blocks) | off (line limits only)"),
-            Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0,
+            Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
-            Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0,
+            Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="ATP supervision deceleration; 0: 0.7 × service"),
-            Port("speed_margin", "parameter", unit="m/s", start=s.speed_margin_mps, min=0.0,
+            Port("speed_margin", "parameter", unit="m/s", start=s.speed_margin_mps, min=0.0, max=MAX_SPEED_MPS,
                  description="the ATO stays this far below every limit"),
             Port("stop_margin", "parameter", unit="m", start=s.stop_margin_m, min=0.0,
                  description="stop this far before a signal at danger"),
@@ -43,14 +44,17 @@ class AtoController(FrameSlave):
                  description="standing at most this far short of the stop point counts as arrived"),
             Port("decoding_latency", "parameter", unit="s", start=s.decoding_latency_s, min=0.0,
                  description="receiver latency the ATP allows after passing a signal"),
-            Port("x", "input", unit="m", start=0.0, description="head position"),
-            Port("v", "input", unit="m/s", start=0.0),
-            Port("aspect", "input", "Integer", start=0, min=0, max=4,
+            # the measurements: an impossible value is a fault the ATP answers with the emergency
+            # brake (core.py), never a refused step (docs/ato.md, "Measurement faults")
+            Port("x", "input", unit="m", start=0.0, description="head position", bad_input="unit"),
+            Port("v", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
+                 description="below -0.2 m/s or not a number: emergency brake"),
+            Port("aspect", "input", "Integer", start=0, min=0, max=4, bad_input="unit",
                  description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code_valid", "input", "Boolean", start=False),
-            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, description="digital systems"),
-            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, description="digital systems"),
-            Port("free_blocks", "input", "Integer", start=0, min=0, description="digital systems"),
+            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
+            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
+            Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
             Port("command", "output", unit="1", min=-1.0, max=1.0,
                  description=">0 traction share, <0 brake share (to traction.command)"),
             Port("emergency_brake", "output", "Boolean", start=False),
@@ -75,6 +79,8 @@ class AtoController(FrameSlave):
                  description="time standing past a departure time without a valid permissive cab code"),
         ]
 
+    _fault_logged = None      # the input whose fault was last logged
+
     def make_default_experiment(self):
         return DefaultExperiment(start_time=0.0, stop_time=1200.0, step_size=0.5)
 
@@ -97,9 +103,19 @@ class AtoController(FrameSlave):
 
     def step_core(self, current_time, step_size):
         io = self.io
-        self._write(self.core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
-                                   bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
-                                   int(io["free_blocks"])))
+        core = self.core
+        self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
+                              bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
+                              int(io["free_blocks"])))
+        fault = core.fault[0] if core.fault else None
+        if fault != self._fault_logged:                 # once per fault, not every step
+            if core.fault:
+                self.log(f"AtoController: t={current_time:.6g} s: {core.fault[1]}: emergency brake (fail-safe)",
+                         Fmi2Status.warning)
+            else:
+                self.log(f"AtoController: t={current_time:.6g} s: measurements valid again; the emergency "
+                         f"brake holds until standstill", Fmi2Status.warning)
+            self._fault_logged = fault
 
     def _write(self, out):
         self.write_outputs(out, _OUTPUT_FIELDS)

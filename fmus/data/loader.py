@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import bisect
 import json
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -39,14 +40,58 @@ def _field(path) -> str:
     return text or "(top level)"
 
 
-def load_json(path, schema: str) -> dict:
+#: deepest nesting of arrays and objects a data file may have (the schemas need 4); deeper
+#: files are refused before parsing, so neither the parser nor the schema check can recurse
+#: past Python's limit
+MAX_JSON_DEPTH = 64
+
+
+def read_json_file(path) -> object:
+    """A JSON data file's document; every failure an FmuInputError naming the file: missing or
+    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON."""
     path = Path(path)
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
     try:
-        document = json.loads(path.read_text())
+        raw = path.read_bytes()
+    except OSError as error:
+        raise FmuInputError(f"{path}: cannot be read ({error.strerror or error})") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise FmuInputError(f"{path}: not UTF-8 text (byte 0x{raw[error.start]:02x} at offset {error.start}); "
+                            f"save the file as UTF-8") from None
+    depth = json_nesting_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise FmuInputError(f"{path}: not a data file: arrays and objects nested {depth} deep "
+                            f"(at most {MAX_JSON_DEPTH})")
+    try:
+        return json.loads(text)
     except json.JSONDecodeError as error:
         raise FmuInputError(f"{path}: not valid JSON (line {error.lineno}: {error.msg})") from None
+    except RecursionError:           # (not reached below MAX_JSON_DEPTH; a last guard)
+        raise FmuInputError(f"{path}: not a data file: nested too deeply") from None
+
+
+_BRACKETS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
+
+
+def json_nesting_depth(text: str) -> int:
+    """The deepest nesting of brackets outside strings (a malformed text may give any count;
+    the parser reports it)."""
+    depth = deepest = 0
+    for token in _BRACKETS.findall(text):
+        if token in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif token in "]}":
+            depth -= 1
+    return deepest
+
+
+def load_json(path, schema: str) -> dict:
+    path = Path(path)
+    document = read_json_file(path)
     errors = sorted(_validator(schema).iter_errors(document), key=lambda e: list(e.absolute_path))
     if errors:
         error = errors[0]

@@ -13,7 +13,13 @@ do for us:
   ``fmi2FreeInstance`` (see docs/architecture.md), so a failed step logs at error status and
   returns False, which pythonfmu reports as fmi2Discard;
 * one range check of every parameter against its port's declared min/max (Reals also finite)
-  before the core is made, phrased in the port's own name.
+  before the core is made, phrased in the port's own name;
+* one vectorised check of the numeric inputs before each step (finite, within a declared
+  min/max): a bad input refuses the step before anything is computed, so the state is untouched;
+* the FMI call order (setupExperiment → enterInitializationMode → exitInitializationMode → doStep
+  from the last communication point → terminate) and value references: an unknown reference is
+  refused without a Python exception, which pythonfmu 0.7.0 would turn into fmi2Fatal
+  (docs/interfaces.md, "Bad parameters, inputs and calls").
 
 A port's start value is the core's settings default (``Port(..., start=settings.field)``), so
 a parameter's default is declared once, in the core.
@@ -58,6 +64,14 @@ class Port:
     description: str = ""
     variability: Optional[str] = None   # default derived from causality and type
     frame: bool = False                 # last index runs over the samples of a frame
+    # an input outside its declared range or not finite: "refuse" the step (FrameSlave),
+    # "clamp" (finite values outside min/max are the unit's to clamp; non-finite refused) or
+    # "unit" (the unit handles every value itself: the ATO's measurements fail safe)
+    bad_input: str = "refuse"
+
+    def __post_init__(self):
+        if self.bad_input not in ("refuse", "clamp", "unit"):
+            raise TypeError(f"port {self.name}: bad_input {self.bad_input!r} is not refuse, clamp or unit")
 
     @property
     def size(self) -> int:
@@ -112,6 +126,41 @@ def sample_rate_port(fs_hz: float, frame: int) -> Port:
                 description=f"sample rate; the communication step must be frame/fs ({frame} samples)")
 
 
+class FmuCallError(RuntimeError):
+    """An FMI call out of order or with unknown value references (the host's mistake)."""
+
+
+#: FMI life cycle states of a FrameSlave (docs/interfaces.md, "Bad parameters, inputs and calls")
+INSTANTIATED, INITIALISATION, STEPPING, TERMINATED, FAILED = (
+    "instantiated", "initialisation", "stepping", "terminated", "failed")
+#: communication points closer than this to the expected one continue it (host rounding)
+_TIME_REL_TOL, _TIME_ABS_TOL = 1e-12, 1e-9
+_FALLBACK = {"Real": math.nan, "Integer": 0, "Boolean": False, "String": ""}
+
+
+@dataclass
+class _InputCheck:
+    """The inputs of one numeric type checked before each step: a view of them in the value
+    store (their slots when not contiguous); whether they must be finite (Reals), with a scratch
+    buffer; those with a declared range (a few: (position, min, max) tested in plain Python,
+    cheaper than numpy for a handful; many: positions and bound arrays); (port, element) of each
+    value, for the message."""
+
+    view: Optional[np.ndarray]
+    index: Any
+    finite: bool
+    scratch: np.ndarray
+    few: Optional[List[Tuple[int, float, float]]]
+    bounded: Optional[np.ndarray]
+    low: np.ndarray
+    high: np.ndarray
+    elements: List[Tuple[Port, str]]
+
+
+#: at most this many range-checked inputs of a type are tested in plain Python
+_FEW_BOUNDED = 8
+
+
 @dataclass
 class _Store:
     """Flat value store of one FMI type plus the value-reference → slot table."""
@@ -143,8 +192,12 @@ class FrameSlave(Fmi2Slave):
         self.io: Dict[str, np.ndarray] = {}
         self._slot_cache: Dict[tuple, Tuple[list, np.ndarray]] = {}
         self._allocate(self.ports)
+        self._input_checks = self._make_input_checks(self.ports)
         self.core = None
         self.default_experiment = self.make_default_experiment()
+        self.state = INSTANTIATED
+        self._next_time_s: Optional[float] = None      # where the next doStep must start
+        self._call_error: Optional[str] = None          # a refused get/set, reported at the next step
 
     # ---- to be provided by a facade -------------------------------------------------------
     @classmethod
@@ -158,6 +211,10 @@ class FrameSlave(Fmi2Slave):
         raise TypeError(f"{type(self).__name__} must step its core")
 
     def make_default_experiment(self) -> Optional[DefaultExperiment]:
+        return None
+
+    def step_refusal(self, current_time: float, step_size: float) -> Optional[str]:
+        """Why the core cannot take this step (checked before anything changes), or None."""
         return None
 
     def frame_experiment(self, fs_hz: float, stop_time_s: float = 10.0) -> DefaultExperiment:
@@ -230,6 +287,63 @@ class FrameSlave(Fmi2Slave):
                 store.slot_of_vr[var.value_reference] = slot
             next_slot[port.type] += port.size
 
+    def _make_input_checks(self, ports: Sequence[Port]) -> List[Tuple[str, _InputCheck]]:
+        """Per numeric type, the input slots checked before each step and their bounds."""
+        checks = []
+        for type_name in ("Real", "Integer"):
+            slots, bounded, low, high, elements = [], [], [], [], []
+            first = 0
+            for port in ports:
+                if port.type != type_name:
+                    continue
+                if port.causality == "input" and port.bad_input != "unit":
+                    if port.bad_input != "clamp" and (port.min is not None or port.max is not None):
+                        bounded.extend(range(len(slots), len(slots) + port.size))
+                        low.extend([-math.inf if port.min is None else port.min] * port.size)
+                        high.extend([math.inf if port.max is None else port.max] * port.size)
+                    slots.extend(range(first, first + port.size))
+                    elements.extend((port, element) for element in port.element_names())
+                first += port.size
+            if not slots or (type_name == "Integer" and not bounded):
+                continue                  # an integer without a declared range cannot be wrong
+            contiguous = slots == list(range(slots[0], slots[0] + len(slots)))
+            index = slice(slots[0], slots[0] + len(slots)) if contiguous else np.array(slots, dtype=np.int64)
+            # the stores are allocated once and written in place, so a slice stays their view
+            view = self._stores[type_name].values[index] if contiguous else None
+            few = list(zip(bounded, low, high)) if 0 < len(bounded) <= _FEW_BOUNDED else None
+            checks.append((type_name, _InputCheck(
+                view, index, type_name == "Real", np.zeros(len(slots), dtype=bool), few,
+                np.array(bounded, dtype=np.int64) if bounded and few is None else None,
+                np.array(low, dtype=np.float64), np.array(high, dtype=np.float64), elements)))
+        return checks
+
+    def input_error(self) -> Optional[str]:
+        """The first input that is not finite or outside its declared range, or None: per numeric
+        type one vectorised finiteness test over all its inputs (no warnings, unlike a sum or dot
+        product of ±inf) and one test of the few with a declared range."""
+        for type_name, check in self._input_checks:
+            values = check.view if check.view is not None else self._stores[type_name].values[check.index]
+            if check.finite:
+                finite = np.isfinite(values, out=check.scratch)
+                if not finite.all():
+                    return self._input_message(check, int(np.argmin(finite)), values)
+            if check.few is not None:
+                listed = values.tolist()
+                for k, low, high in check.few:
+                    if not low <= listed[k] <= high:
+                        return self._input_message(check, k, values)
+            elif check.bounded is not None:
+                inside = values[check.bounded]
+                good = (inside >= check.low) & (inside <= check.high)
+                if not good.all():
+                    return self._input_message(check, int(check.bounded[int(np.argmin(good))]), values)
+        return None
+
+    @staticmethod
+    def _input_message(check: _InputCheck, k: int, values: np.ndarray) -> str:
+        port, element = check.elements[k]
+        return "input " + port.range_error(element, values[k].item())
+
     def _make_variable(self, port: Port, element: str, slot: int):
         causality = Fmi2Causality[port.causality]
         variability = Fmi2Variability[port.resolved_variability()]
@@ -257,11 +371,21 @@ class FrameSlave(Fmi2Slave):
         store = self._stores[type_name]
         vr_array = np.asarray(vrs, dtype=np.int64)
         if vr_array.size and (vr_array.max() >= store.slot_of_vr.size or vr_array.min() < 0):
-            raise TypeError(f"unknown value reference in {list(vrs)}")
+            unknown = [int(vr) for vr in vr_array if not 0 <= vr < store.slot_of_vr.size]
+            raise FmuCallError(f"unknown value reference(s) {unknown[:10]}")
         slots = store.slot_of_vr[vr_array]
         if (slots < 0).any():
-            raise TypeError(f"value reference(s) {vr_array[slots < 0].tolist()} are not {type_name}")
+            raise FmuCallError(f"value reference(s) {vr_array[slots < 0].tolist()[:10]} are not {type_name}")
         return slots
+
+    def _refuse_call(self, call: str, error: FmuCallError) -> None:
+        """A get/set with a bad value reference: refused and logged. pythonfmu 0.7.0 turns an
+        exception here into fmi2Fatal and then uses freed objects on the next call, so nothing is
+        raised; the next doStep (or exitInitializationMode) fails with this message instead."""
+        message = f"{call} refused: {error}; nothing was {'written' if call.startswith('fmi2Set') else 'read'}"
+        self.log(f"{type(self).__name__}: {message}", Fmi2Status.error)
+        if self._call_error is None:
+            self._call_error = message
 
     def value_view(self, type_name: str, vrs) -> Tuple[np.ndarray, np.ndarray]:
         """(store, slots): the flat value store of a numeric type and the slots of ``vrs`` in it,
@@ -269,62 +393,171 @@ class FrameSlave(Fmi2Slave):
         return self._stores[type_name].values, self._slots(type_name, vrs)
 
     def set_string(self, vrs, values):
-        for vr, value in zip(vrs, values):
-            slot = self._slots("String", [vr])[0]
+        try:
+            slots = self._slots("String", list(vrs))
+        except FmuCallError as error:
+            return self._refuse_call("fmi2SetString", error)
+        for slot, value in zip(slots, values):
             self._stores["String"].values[slot] = str(value)
         for name, slot in self._string_ports.items():
             self.io[name] = self._stores["String"].values[slot]
 
     def get_string(self, vrs):
         strings = self._stores["String"].values
-        return [strings[s] for s in self._slots("String", vrs)]
+        try:
+            return [strings[s] for s in self._slots("String", vrs)]
+        except FmuCallError as error:
+            self._refuse_call("fmi2GetString", error)
+            return [""] * len(vrs)
+
+    # numeric get/set: one fancy-indexing operation; a bad value reference costs nothing until
+    # it happens (the C layer needs a list of len(vrs) back from a get, whatever happens)
+    def _set(self, type_name: str, vrs, values) -> None:
+        try:
+            self._stores[type_name].values[self._slots(type_name, vrs)] = values
+        except FmuCallError as error:
+            self._refuse_call(f"fmi2Set{type_name}", error)
+
+    def _get(self, type_name: str, vrs) -> list:
+        try:
+            return self._stores[type_name].values[self._slots(type_name, vrs)].tolist()
+        except FmuCallError as error:
+            self._refuse_call(f"fmi2Get{type_name}", error)
+            return [_FALLBACK[type_name]] * len(vrs)
 
     def set_real(self, vrs, values):
-        self._stores["Real"].values[self._slots("Real", vrs)] = values
+        self._set("Real", vrs, values)
 
     def get_real(self, vrs):
-        return self._stores["Real"].values[self._slots("Real", vrs)].tolist()
+        return self._get("Real", vrs)
 
     def set_integer(self, vrs, values):
-        self._stores["Integer"].values[self._slots("Integer", vrs)] = values
+        self._set("Integer", vrs, values)
 
     def get_integer(self, vrs):
-        return self._stores["Integer"].values[self._slots("Integer", vrs)].tolist()
+        return self._get("Integer", vrs)
 
     def set_boolean(self, vrs, values):
-        self._stores["Boolean"].values[self._slots("Boolean", vrs)] = values
+        self._set("Boolean", vrs, values)
 
     def get_boolean(self, vrs):
-        return self._stores["Boolean"].values[self._slots("Boolean", vrs)].tolist()
+        return self._get("Boolean", vrs)
+
+    def value_reference_table(self) -> Dict[str, Dict[str, List[int]]]:
+        """Per FMI type, the value references by causality: what a C layer in front of this
+        facade needs to refuse an unknown reference with fmi2Error before Python is called."""
+        table: Dict[str, Dict[str, List[int]]] = {t: {} for t in _TYPE_CLASSES}
+        port_of = {element: port for port in self.ports for element in port.element_names()}
+        for vr, variable in self.vars.items():
+            port = port_of[variable.name]
+            table[port.type].setdefault(port.causality, []).append(int(vr))
+        return table
 
     # ---- FMI lifecycle -----------------------------------------------------------------------
+    # pythonfmu 0.7.0 reports an exception from any call as fmi2Fatal (and then uses freed Python
+    # objects: docs/architecture.md), and a False from do_step as fmi2Discard; it has no way to
+    # fmi2Error. So doStep refuses with False and a logged message; an initialisation call out of
+    # order raises (fmi2Fatal, like a bad parameter: the instance never starts).
+    def _refuse_init(self, call: str, allowed: str) -> None:
+        message = f"{type(self).__name__}: {call} refused in state {self.state!r}; allowed only {allowed}"
+        self.log(message, Fmi2Status.error)
+        raise FmuCallError(message)
+
+    def setup_experiment(self, start_time: float, stop_time: Optional[float], tolerance: Optional[float]):
+        if self.state != INSTANTIATED:
+            self._refuse_init("fmi2SetupExperiment", "after fmi2Instantiate")
+        if not math.isfinite(start_time):
+            self.log(f"{type(self).__name__}: fmi2SetupExperiment refused: start time {start_time:g} is not finite",
+                     Fmi2Status.error)
+            raise FmuCallError(f"start time {start_time:g} is not finite")
+        self._next_time_s = float(start_time)
+
+    def enter_initialization_mode(self):
+        if self.state != INSTANTIATED:
+            self._refuse_init("fmi2EnterInitializationMode", "once, after fmi2Instantiate / fmi2SetupExperiment")
+        self.state = INITIALISATION
+
     def exit_initialization_mode(self):
         # Parameters are final here. A bad parameter or data file raises: pythonfmu reports
         # fmi2Fatal with our message, which is what the host (and our CLI) shows the user.
+        if self.state != INITIALISATION:
+            self._refuse_init("fmi2ExitInitializationMode", "after fmi2EnterInitializationMode")
         try:
+            if self._call_error is not None:
+                message, self._call_error = self._call_error, None
+                self.log(f"{type(self).__name__}: fmi2ExitInitializationMode refused after an earlier call: {message}",
+                         Fmi2Status.error)
+                raise FmuCallError(message)
             self.check_parameter_ranges()
+            problem = self.input_error()        # the inputs a core reads when it is made
+            if problem is not None:
+                raise FmuInputError(problem)
             self.core = self.create_core()
-        except FmuInputError as error:
-            self.log(f"{type(self).__name__}: {error}", Fmi2Status.error)
+            self.publish_initial_outputs()
+        except Exception as error:
+            self.state = FAILED
+            self.core = None
+            if isinstance(error, FmuInputError):
+                self.log(f"{type(self).__name__}: {error}", Fmi2Status.error)
+            elif not isinstance(error, FmuCallError):       # (already logged)
+                detail = traceback.format_exception_only(type(error), error)[-1].strip()
+                self.log(f"{type(self).__name__}: initialisation failed: {detail}", Fmi2Status.error)
             raise
-        self.publish_initial_outputs()
+        self.state = STEPPING
 
     def publish_initial_outputs(self) -> None:
         """Write the outputs that hold before the first step (default: leave starts)."""
 
-    def do_step(self, current_time: float, step_size: float) -> bool:
+    def terminate(self):
+        if self.state == TERMINATED:
+            self.log(f"{type(self).__name__}: fmi2Terminate called twice", Fmi2Status.warning)
+        self.state = TERMINATED
+
+    def _step_refusal(self, current_time: float, step_size: float) -> Optional[str]:
+        """Why this doStep must not run (nothing has changed yet), or None."""
+        if self.state != STEPPING:
+            why = {INSTANTIATED: "before fmi2ExitInitializationMode", INITIALISATION: "before fmi2ExitInitializationMode",
+                   TERMINATED: "after fmi2Terminate",
+                   FAILED: "after a failed step or initialisation (the state is not valid)"}[self.state]
+            return f"doStep {why}"
+        if self._call_error is not None:
+            message, self._call_error = self._call_error, None
+            return f"doStep refused once after an earlier call: {message}"
+        if not (math.isfinite(current_time) and math.isfinite(step_size) and step_size > 0.0):
+            return f"doStep(t={current_time:g} s, h={step_size:g} s): time and step must be finite, the step positive"
+        expected = self._next_time_s
+        if expected is not None and not math.isclose(current_time, expected, rel_tol=_TIME_REL_TOL,
+                                                     abs_tol=_TIME_ABS_TOL):
+            return (f"doStep from t={current_time:.9g} s refused: the last communication point is "
+                    f"{expected:.9g} s (time must continue from it)")
         required = self.required_step_s
         if required is not None and not math.isclose(step_size, required, rel_tol=1e-9, abs_tol=1e-12):
-            self.log(f"{type(self).__name__}: communication step {step_size:.9g} s refused; "
-                     f"this build needs exactly {required:.9g} s (frame/fs)", Fmi2Status.error)
+            return (f"communication step {step_size:.9g} s refused; "
+                    f"this build needs exactly {required:.9g} s (frame/fs)")
+        problem = self.input_error()
+        if problem is not None:
+            return f"step at t={current_time:.6g} s refused, state unchanged: {problem}"
+        return self.step_refusal(current_time, step_size)
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        refusal = self._step_refusal(current_time, step_size)
+        if refusal is not None:
+            self.log(f"{type(self).__name__}: {refusal}", Fmi2Status.error)
             return False
         try:
             self.step_core(current_time, step_size)
+        except FmuInputError as error:
+            # a core refuses an input it cannot take before it changes anything (the digital
+            # coder's unknown wrong_command): the step may be retried with other inputs
+            self.log(f"{type(self).__name__}: step at t={current_time:.6g} s refused: {error}", Fmi2Status.error)
+            return False
         except Exception as error:  # never let an exception reach pythonfmu's C layer
             detail = traceback.format_exception_only(type(error), error)[-1].strip()
             self.log(f"{type(self).__name__}: step at t={current_time:.6g} s failed: {detail}",
                      Fmi2Status.error)
+            self.state = FAILED       # the core may be half-way through the step
             return False
+        self._next_time_s = current_time + step_size
         return True
 
     # ---- model description -------------------------------------------------------------------

@@ -40,7 +40,7 @@ class LocoReceiver(FrameSlave):
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
             Port("min_level", "parameter", unit="V", start=d.min_level_v, min=0.0,
                  description="digital: squelch, carrier amplitude below which nothing is decided"),
-            Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,),
+            Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,), min=0, max=3,
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
             Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),

@@ -61,10 +61,16 @@ def load_transmitters(path=CODES_FILE) -> Dict[str, Transmitter]:
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
     try:
-        doc = json.loads(path.read_text())
+        doc = json.loads(path.read_bytes().decode("utf-8-sig"))
         table = doc["transmitters"]
+    except UnicodeDecodeError as error:
+        raise FmuInputError(f"{path}: not UTF-8 text (offset {error.start}); save the file as UTF-8") from None
+    except RecursionError:
+        raise FmuInputError(f"{path}: not a code table: nested too deeply") from None
     except (json.JSONDecodeError, KeyError, TypeError):
         raise FmuInputError(f"{path}: field transmitters: missing or not valid JSON") from None
+    if not isinstance(table, dict) or not all(isinstance(spec, dict) for spec in table.values()):
+        raise FmuInputError(f"{path}: field transmitters: expected an object of transmitter objects")
     result = {}
     for name, spec in table.items():
         where = f"transmitters.{name}"

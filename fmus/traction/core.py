@@ -27,7 +27,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional
 
 from fmus.data.loader import Line, RollingStock
 from fmus.units import KMH_PER_MPS, STANDARD_GRAVITY_MPS2
@@ -63,6 +63,16 @@ class TractionOutputs:
     off_line: bool = False
 
 
+#: declared bounds of the parameters (docs/interfaces.md): a line position (10 000 km), a speed
+#: above any train's (540 km/h) and a pantograph voltage above any system's (25 kV AC: 29 kV peak)
+MAX_LINE_M = 1.0e7
+MAX_SPEED_MPS = 150.0
+MAX_PANTOGRAPH_V = 50_000.0
+#: most RK4 sub-steps one communication step may take (about two seconds of computing): a longer
+#: step is refused before anything changes, never integrated for hours (docs/traction.md)
+MAX_SUBSTEPS_PER_STEP = 100_000
+
+
 class TractionCore:
     """One train's longitudinal dynamics over one line."""
 
@@ -77,8 +87,10 @@ class TractionCore:
                             ("max_substep_s", max_substep_s)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
-        if v0_mps < 0:
-            raise FmuInputError(f"parameter v0: must not be negative, got {v0_mps}")
+        if not 0.0 <= v0_mps <= MAX_SPEED_MPS:
+            raise FmuInputError(f"parameter v0: must lie in 0..{MAX_SPEED_MPS:g} m/s, got {v0_mps}")
+        if not 0.0 <= x0_m <= line.length_m:
+            raise FmuInputError(f"parameter x0: {x0_m:g} m is outside the line {line.path} (0..{line.length_m:g} m)")
         self.stock, self.line = stock, line
         self.mass_kg = stock.mass_kg * mass_scale
         self.powered_mass_kg = stock.powered_mass_kg * mass_scale
@@ -155,7 +167,18 @@ class TractionCore:
         out.brake_step = (self.stock.brake_steps + 1 if emergency else
                           math.ceil(share_b * self.stock.brake_steps - 1e-9) if share_b > 0 else 0)
 
+    def step_refusal(self, step_s: float) -> Optional[str]:
+        """Why a communication step of ``step_s`` is refused (too many sub-steps), or None."""
+        needed = step_s / self.max_substep_s
+        if not needed <= MAX_SUBSTEPS_PER_STEP:
+            return (f"a step of {step_s:g} s needs {needed:.3g} sub-steps of at most max_substep = "
+                    f"{self.max_substep_s:g} s; at most {MAX_SUBSTEPS_PER_STEP} are taken per step")
+        return None
+
     def step(self, time_s: float, step_s: float, command: float, emergency: bool = False) -> TractionOutputs:
+        refusal = self.step_refusal(step_s)
+        if refusal is not None:
+            raise FmuInputError(refusal)
         self.set_command(time_s, command, emergency)
         end = time_s + step_s
         t = time_s

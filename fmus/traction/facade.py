@@ -3,7 +3,7 @@ from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
 from fmus.fmi.slave import FrameSlave, Port, line_file_port, keyword_defaults
-from fmus.traction.core import TractionCore
+from fmus.traction.core import MAX_LINE_M, MAX_PANTOGRAPH_V, MAX_SPEED_MPS, TractionCore
 
 
 class Traction(FrameSlave):
@@ -16,15 +16,16 @@ class Traction(FrameSlave):
             Port("rolling_stock_file", "parameter", "String", start="",
                  description="rolling-stock JSON; empty: the bundled ЧС7 passenger train"),
             line_file_port(),
-            Port("x0", "parameter", unit="m", start=s["x0_m"], description="initial head position"),
-            Port("v0", "parameter", unit="m/s", start=s["v0_mps"], min=0.0),
+            Port("x0", "parameter", unit="m", start=s["x0_m"], min=0.0, max=MAX_LINE_M,
+                 description="initial head position; within the line"),
+            Port("v0", "parameter", unit="m/s", start=s["v0_mps"], min=0.0, max=MAX_SPEED_MPS),
             Port("pantograph_voltage", "parameter", unit="V", start=s["pantograph_voltage_v"], min=0.0,
-                 description="0: the line's nominal voltage"),
+                 max=MAX_PANTOGRAPH_V, description="0: the line's nominal voltage"),
             Port("mass_scale", "parameter", unit="1", start=s["mass_scale"], min=0.1, max=10.0),
             Port("resistance_scale", "parameter", unit="1", start=s["resistance_scale"], min=0.1, max=10.0),
             Port("max_substep", "parameter", unit="s", start=s["max_substep_s"], min=0.001, max=10.0,
                  description="longest RK4 sub-step inside a communication step"),
-            Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0,
+            Port("command", "input", unit="1", start=0.0, min=-1.0, max=1.0, bad_input="clamp",
                  description=">0 traction share, <0 brake share; outside −1..1 clamped and counted"),
             Port("emergency_brake", "input", "Boolean", start=False),
             Port("x", "output", unit="m", description="head position along the line"),
@@ -56,6 +57,7 @@ class Traction(FrameSlave):
                             max_substep_s=self.param("max_substep"))
 
     def enter_initialization_mode(self):
+        super().enter_initialization_mode()
         # the initial state is known once the parameters are: a unit that needs the train's
         # position during initialisation (the rail line's initial occupancy) reads it here
         self.io["x"][...] = self.param("x0")
@@ -63,6 +65,9 @@ class Traction(FrameSlave):
 
     def publish_initial_outputs(self):
         self._write(self.core._publish(0.0))
+
+    def step_refusal(self, current_time, step_size):
+        return self.core.step_refusal(step_size)
 
     def step_core(self, current_time, step_size):
         io = self.io

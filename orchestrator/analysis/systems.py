@@ -34,12 +34,19 @@ from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
-from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
+from orchestrator.sspgen import ComponentSpec, ConnectionSpec, committed_ports
+from orchestrator.sspgen import write_ssd as _write_ssd
 
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
 RAIL_TRAIN_LENGTH_M = 400.0     # the rail line's train_length default (fmus/rail_line/core.py RailSettings)
+
+
+def write_ssd(folder: Path, name: str, components, connections, **options) -> Path:
+    """A shipped system's SSD: its connectors come from the committed contract manifests, so
+    the files do not depend on what is built (tests/test_shipped_systems.py compares bytes)."""
+    return _write_ssd(folder, name, components, connections, ports=committed_ports, **options)
 
 
 def _shipped_json(name: str) -> dict:
