@@ -222,7 +222,7 @@ def test_data_file_nested_too_deeply(tmp_path, product_fmus):
     deep = tmp_path / "deep.json"
     deep.write_text("[" * 100000 + "]" * 100000)
     code, _, stderr = _run("ato_only", tmp_path, "--set", f"train.rolling_stock_file={deep}")
-    _expect_error(code, stderr, "deep.json", "nested too deeply", "train.rolling_stock_file")
+    _expect_error(code, stderr, "deep.json", "nested", "train.rolling_stock_file")
 
 
 def test_gap_between_block_sections(tmp_path, product_fmus):
