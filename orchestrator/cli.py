@@ -201,12 +201,20 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
+    from orchestrator.analysis.system_checks import check_railway_data
     from orchestrator.graph import build_graph
+    from orchestrator.run import DEFAULT_SCENARIO
+    from orchestrator.scenario import ScenarioManipulator, load_scenario
     from orchestrator.ssp import open_system
 
+    # everything a run would refuse before its first step: the SSD and its parameter sets, the
+    # FMUs' ports, connections, units, steps, the data files and the system's own scenario.json
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
-        build_graph(system)
+        graph = build_graph(system)
+        check_railway_data(graph)
+        if (system.folder / DEFAULT_SCENARIO).is_file():
+            ScenarioManipulator(load_scenario(system.folder / DEFAULT_SCENARIO), graph)
     finally:
         system.close()
     print(f"{args.target}: valid")

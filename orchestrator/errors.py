@@ -1,12 +1,43 @@
 """Errors the CLI turns into one line on stderr and exit code 2."""
+import os
+from typing import Dict
+
+#: extraction folder of an .ssp archive → the archive as the user named it (orchestrator/ssp.py
+#: registers each folder it unpacks); see :func:`shown_paths`
+_ARCHIVES: Dict[str, str] = {}
+
+
+def register_archive(folder, archive) -> None:
+    """Messages naming a file under ``folder`` name it ``<archive>!<member>`` from now on."""
+    _ARCHIVES[os.path.realpath(str(folder))] = str(archive)
+    _ARCHIVES[os.path.abspath(str(folder))] = str(archive)
+
+
+def forget_archive(folder) -> None:
+    _ARCHIVES.pop(os.path.realpath(str(folder)), None)
+    _ARCHIVES.pop(os.path.abspath(str(folder)), None)
+
+
+def shown_paths(text: str) -> str:
+    """``text`` with every path inside a registered extraction folder written as
+    ``<archive>!<member>`` (docs/interfaces.md, SSP conventions: the file the user gave, never
+    a temporary extraction path)."""
+    for folder in sorted(_ARCHIVES, key=len, reverse=True):   # longest first: nested folders
+        if folder in text:
+            text = text.replace(folder + os.sep, _ARCHIVES[folder] + "!").replace(folder, _ARCHIVES[folder])
+    return text
 
 
 class UserError(Exception):
     """Bad input from the user: a file, a parameter or a command-line argument.
 
     The message is complete on its own (it names what is wrong and where); the CLI prints it
-    as one line without a traceback.
+    as one line without a traceback. A path inside an unpacked .ssp is shown as
+    ``<archive>!<member>`` (:func:`shown_paths`), whoever raised the error.
     """
+
+    def __init__(self, message: str = "", *rest):
+        super().__init__(shown_paths(str(message)), *rest)
 
 
 class SimulationError(UserError):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import zipfile
 from dataclasses import dataclass, field
 from functools import reduce
 from pathlib import Path
@@ -22,6 +23,8 @@ TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
 
 
 def seconds_to_ticks(seconds: float, what: str) -> int:
+    if not math.isfinite(seconds * TICKS_PER_SECOND):
+        raise UserError(f"{what}: {seconds!r} s is not a finite number of seconds")
     ticks = round(seconds * TICKS_PER_SECOND)
     if ticks <= 0 or abs(ticks - seconds * TICKS_PER_SECOND) > 1e-3:
         raise UserError(f"{what}: {seconds!r} s is not a positive whole number of nanoseconds")
@@ -97,8 +100,10 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         for name, value in node.parameters.items():
             if name.endswith("_file"):
                 node.parameters[name] = resolve_data_file(value, system.folder)
+                _check_data_file(node, name, system.folder)
 
     edges = [_edge(system, nodes, conn) for conn in system.connections]
+    _check_one_driver(edges)
     base = _base_ticks(nodes, system.base_step_s, f"{system.ssd_path}: BaseStep")
     order, cycles = _order(list(nodes), edges)
     return SystemGraph(system.name, nodes, edges, order, base, cycles)
@@ -115,6 +120,48 @@ def resolve_data_file(value, system_folder: Path):
         if (folder / value).is_file():
             return str((folder / value).resolve())
     return value
+
+
+def _check_data_file(node: Node, name: str, system_folder: Path) -> None:
+    """A ``*_file`` parameter must name a file the FMU will find: resolved in the system
+    (absolute by now), absolute, relative to the working folder, or one of the FMU's own
+    resources/ — else an error naming where it was looked for first (the system's resources/;
+    inside an .ssp: ``<archive>!resources/<name>``), instead of the FMU failing later with
+    its own extraction folder in the message."""
+    value = node.parameters[name]
+    if not isinstance(value, str) or not value:
+        return                                   # the FMU's bundled default
+    if os.path.isabs(value):
+        if not os.path.isfile(value):
+            raise UserError(f"{value}: file not found ({node.name}.{name})")
+        return
+    if os.path.isfile(value) or _in_fmu_resources(node.fmu_path, value):
+        return
+    raise UserError(f"{Path(system_folder) / 'resources' / value}: file not found ({node.name}.{name} = "
+                    f"{value!r}: looked for in the system's resources/ and folder and in "
+                    f"{Path(node.fmu_path).name}'s resources/)")
+
+
+def _in_fmu_resources(fmu_path: str, value: str) -> bool:
+    member = "resources/" + Path(value).as_posix().lstrip("./")
+    try:
+        with zipfile.ZipFile(fmu_path) as archive:
+            return member in archive.namelist()
+    except (OSError, zipfile.BadZipFile):
+        return False
+
+
+def _check_one_driver(edges: List[Edge]) -> None:
+    """An input takes one connection: a second one ending at the same input is refused, with or
+    without ``suppressUnitConversion`` or a transformation (which value would it see?)."""
+    drivers: Dict[Tuple[str, str], Edge] = {}
+    for edge in edges:
+        key = (edge.target, edge.target_var.name)
+        first = drivers.setdefault(key, edge)
+        if first is not edge:
+            raise UserError(f"{edge.origin}: input {edge.target}.{edge.target_var.name} already has a "
+                            f"connection (from {first.source}.{first.source_var.name}, {first.origin}); "
+                            "an input takes exactly one")
 
 
 def graph_of(name: str, components: Sequence[Tuple[str, Interface, float]],
@@ -143,6 +190,7 @@ def graph_of(name: str, components: Sequence[Tuple[str, Interface, float]],
         _check_connection(src, svar, dst, dvar, origin)
         _check_transition(svar, transition, origin)
         edges.append(Edge(src.name, svar, dst.name, dvar, 1.0, 0.0, transition, origin))
+    _check_one_driver(edges)
     base = _base_ticks(nodes, base_step_s, f"{name}: base step")
     order, cycles = _order(list(nodes), edges)
     return SystemGraph(name, nodes, edges, order, base, cycles)
@@ -153,8 +201,12 @@ def _parse_value(var: Variable, raw, what: str):
         return raw
     try:
         if var.type == "Real":
+            if not math.isfinite(float(raw)):
+                raise ValueError
             return float(raw)
         if var.type == "Integer":
+            if not -2 ** 31 <= int(raw) < 2 ** 31:
+                raise ValueError
             return int(raw)
         if var.type == "Boolean":
             if raw.lower() not in ("true", "false", "1", "0"):

@@ -76,9 +76,10 @@ def run_system(system_path, options: RunOptions) -> RunResult:
         captures = _captures(graph, options.captures)
         out = Path(options.output_dir)
         out.mkdir(parents=True, exist_ok=True)
+        # the judges first: making them checks the system's data (a UserError before any FMU is loaded)
+        judges = list(options.summaries(graph)) if options.summaries is not None else []
         slaves = {name: make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
                   for name, node in graph.nodes.items()}
-        judges = list(options.summaries(graph)) if options.summaries is not None else []
         observers = _observers(out, recorded, interval_ticks, captures,
                                ProgressBar(stop_ticks, start_ticks) if options.progress else None, judges)
         manipulators = list(options.manipulators) + ([scenario] if scenario is not None else [])

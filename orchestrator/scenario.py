@@ -22,6 +22,7 @@ at that tick already steps with the new value.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -31,6 +32,8 @@ from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.protocols import Manipulator, MasterView
 
 ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
+INT32 = (-2 ** 31, 2 ** 31 - 1)      # an FMI 2.0 Integer is a C int (fmi2Integer)
+MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
 
 @dataclass(frozen=True)
@@ -54,10 +57,7 @@ def load_scenario(path) -> Scenario:
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: scenario file not found")
-    try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise UserError(f"{path}: not valid JSON ({error})") from None
+    doc = read_json(path)
     if not isinstance(doc, dict) or not isinstance(doc.get("events"), list):
         raise UserError(f"{path}: field events: a list of events is required")
     defaults = doc.get("defaultOpts", {}) if isinstance(doc.get("defaultOpts", {}), dict) else {}
@@ -68,8 +68,8 @@ def load_scenario(path) -> Scenario:
             raise UserError(f"{where}: an object is required")
         merged = {"model": defaults.get("model"), "variable": defaults.get("variable"), **item}
         time_s = merged.get("time")
-        if not isinstance(time_s, (int, float)) or isinstance(time_s, bool) or time_s < 0:
-            raise UserError(f"{where}.time: a time ≥ 0 in seconds is required, got {time_s!r}")
+        if not _is_number(time_s) or not 0 <= time_s <= MAX_TIME_S:
+            raise UserError(f"{where}.time: a finite time ≥ 0 in seconds is required, got {time_s!r}")
         for key in ("model", "variable"):
             if not isinstance(merged.get(key), str) or not merged[key]:
                 raise UserError(f"{where}.{key}: a name is required")
@@ -80,10 +80,28 @@ def load_scenario(path) -> Scenario:
             raise UserError(f"{where}.value: required for {action}")
         events.append(Event(float(time_s), merged["model"], merged["variable"], action, merged.get("value")))
     end = doc.get("end")
-    if end is not None and (not isinstance(end, (int, float)) or end <= 0):
-        raise UserError(f"{path}: field end: a positive time in seconds, got {end!r}")
+    if end is not None and (not _is_number(end) or not 0 < end <= MAX_TIME_S):
+        raise UserError(f"{path}: field end: a finite positive time in seconds is required, got {end!r}")
     events.sort(key=lambda e: e.time_s)          # stable: same-time events keep their file order
     return Scenario(path, str(doc.get("description", "")), events, None if end is None else float(end))
+
+
+def read_json(path: Path):
+    """A JSON document the orchestrator reads; anything that is not plain JSON (bad syntax, not
+    UTF-8, nested too deeply for the parser) is an error naming the file."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise UserError(f"{path}: not valid JSON ({error})") from None
+    except RecursionError:
+        raise UserError(f"{path}: not valid JSON (nested too deeply)") from None
+    except OSError as error:
+        raise UserError(f"{path}: cannot be read ({error.strerror})") from None
+
+
+def _is_number(value) -> bool:
+    """A finite JSON number (Python's json reads NaN, Infinity and -Infinity too)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 class ScenarioManipulator(Manipulator):
@@ -195,12 +213,15 @@ class ScenarioManipulator(Manipulator):
 def _typed(type_name: str, value, where: str):
     try:
         if type_name == "Real":
-            if isinstance(value, bool):
+            if isinstance(value, bool) or not math.isfinite(float(value)):
                 raise ValueError
             return float(value)
         if type_name == "Integer":
-            if isinstance(value, bool) or int(value) != float(value):
+            if isinstance(value, bool) or not math.isfinite(float(value)) or int(value) != float(value):
                 raise ValueError
+            if not INT32[0] <= int(value) <= INT32[1]:
+                raise UserError(f"{where}: {value!r} is outside the FMI Integer range "
+                                f"{INT32[0]}..{INT32[1]}")
             return int(value)
         if type_name == "Boolean":
             if isinstance(value, bool) or value in (0, 1):
@@ -208,6 +229,6 @@ def _typed(type_name: str, value, where: str):
             if isinstance(value, str) and value.lower() in ("true", "false"):
                 return value.lower() == "true"
             raise ValueError
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise UserError(f"{where}: {value!r} is not a {type_name} value") from None
     return value

@@ -11,17 +11,19 @@ naming the element; it is never silently ignored.
 """
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 from lxml import etree
 
-from orchestrator.errors import UserError, where
+from orchestrator.errors import UserError, forget_archive, register_archive, where
 from orchestrator.protocols import TRANSITIONS
 
 NS = {
@@ -99,6 +101,7 @@ class SystemDescription:
     def close(self) -> None:
         if self.temp_dir:
             shutil.rmtree(self.temp_dir, ignore_errors=True)
+            forget_archive(self.temp_dir)
             self.temp_dir = None
 
 
@@ -108,7 +111,7 @@ def safe_extract(archive_path: Path, dest: Path) -> None:
     try:
         archive = zipfile.ZipFile(archive_path)
     except zipfile.BadZipFile:
-        raise UserError(f"{archive_path}: not a zip archive") from None
+        raise UserError(f"{archive_path}: not a zip archive (or cut short)") from None
     except OSError as error:
         raise UserError(f"{archive_path}: cannot open ({error.strerror})") from None
     root = dest.resolve()
@@ -118,7 +121,32 @@ def safe_extract(archive_path: Path, dest: Path) -> None:
             if os.path.isabs(member) or not (target == root or root in target.parents):
                 raise UserError(f"{archive_path}: member {member!r} would be extracted outside "
                                 "the extraction folder (zip-slip); refusing the archive")
-        archive.extractall(dest)
+        for member in archive.infolist():
+            _extract_member(archive, member, dest, archive_path)
+
+
+def _extract_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, dest: Path, archive_path: Path) -> None:
+    """One member; a member that cannot be read (bad CRC, corrupt deflate stream, cut short)
+    is an error naming ``<archive>!<member>``."""
+    try:
+        archive.extract(member, dest)
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as error:
+        raise UserError(f"{archive_path}!{member.filename}: cannot be read from the archive "
+                        f"({error or type(error).__name__}); the archive is corrupt") from None
+
+
+def _unpack_archive(path: Path) -> str:
+    """Unpack an .ssp into a new temporary folder; from now on messages naming a file in it
+    name ``<archive>!<member>`` (orchestrator/errors.py, shown_paths)."""
+    temp_dir = tempfile.mkdtemp(prefix="railcosim_ssp_")
+    register_archive(temp_dir, path)
+    try:
+        safe_extract(path, Path(temp_dir))
+    except BaseException:
+        shutil.rmtree(temp_dir, ignore_errors=True)
+        forget_archive(temp_dir)
+        raise
+    return temp_dir
 
 
 # ---- schema validation -------------------------------------------------------------------------
@@ -151,7 +179,36 @@ def _local(element) -> str:
 
 def _float(element, attribute, default=None):
     value = element.get(attribute)
-    return default if value is None else float(value)
+    return default if value is None else _finite(value, element, attribute)
+
+
+def _finite(text: str, element, what: str) -> float:
+    """A number from the file that must be finite (the schemas' xs:double admits NaN and INF);
+    else an error naming file, line and ``what``."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = None
+    if value is None or not math.isfinite(value):
+        origin = where(element.getroottree().docinfo.URL, element.sourceline)
+        raise UserError(f"{origin}: {what} = {text!r} is not a finite number")
+    return value
+
+
+def _annotation_seconds(child, ssd_path: Path, attribute: str = "value") -> Tuple[float, str]:
+    """The ``value`` of a step annotation (rcs:StepSize, osp:StepSizeHint, rcs:BaseStep; the
+    ``baseStepSize`` of osp:FixedStepAlgorithm): a positive finite number of seconds, else an
+    error naming file, line and the annotation."""
+    origin = where(ssd_path, child.sourceline)
+    text = child.get(attribute)
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        value = None
+    if value is None or not math.isfinite(value) or value <= 0:
+        raise UserError(f"{origin}: {etree.QName(child).localname} {attribute} {text!r} is not a "
+                        "positive number of seconds")
+    return value, origin
 
 
 # ---- units ------------------------------------------------------------------------------------
@@ -195,7 +252,7 @@ def _read_parameter_set(parameter_set, path: Path, prefix: str) -> Tuple[List[Pa
         kind = _local(typed)
         origin = where(path, typed.sourceline)
         if kind == "Real":
-            value = float(typed.get("value"))
+            value = _finite(typed.get("value"), typed, f"Real parameter {name!r}")
         elif kind == "Integer":
             value = int(typed.get("value"))
         elif kind == "Boolean":
@@ -295,9 +352,9 @@ def _step_size(component, ssd_path: Path) -> Tuple[Optional[float], str]:
     for annotation in component.findall("ssd:Annotations/ssc:Annotation", NS):
         for child in annotation:
             if _local(child) == "StepSize" and annotation.get("type") == RCS_ANNOTATION:
-                ours = (float(child.get("value")), where(ssd_path, child.sourceline))
+                ours = _annotation_seconds(child, ssd_path)
             elif _local(child) == "StepSizeHint" and annotation.get("type") == OSP_ANNOTATION:
-                osp = (float(child.get("value")), where(ssd_path, child.sourceline))
+                osp = _annotation_seconds(child, ssd_path)
     chosen = ours or osp
     return (chosen[0], chosen[1]) if chosen else (None, where(ssd_path, component.sourceline))
 
@@ -316,17 +373,17 @@ def _transition(connection, ssd_path: Path) -> str:
     return "hold"
 
 
-def _base_step(experiment) -> Optional[float]:
+def _base_step(experiment, ssd_path: Path) -> Optional[float]:
     """The DefaultExperiment's base step: ``rcs:BaseStep``, else the baseStepSize of
     ``osp:Algorithm/osp:FixedStepAlgorithm`` (what libcosim reads); None when neither is given."""
     ours, osp = None, None
     for annotation in experiment.findall("ssd:Annotations/ssc:Annotation", NS):
         for child in annotation:
             if _local(child) == "BaseStep" and annotation.get("type") == RCS_ANNOTATION:
-                ours = float(child.get("value"))
+                ours = _annotation_seconds(child, ssd_path)[0]
             elif _local(child) == "Algorithm" and annotation.get("type") == OSP_ANNOTATION:
                 fixed = [a for a in child if _local(a) == "FixedStepAlgorithm" and a.get("baseStepSize")]
-                osp = float(fixed[0].get("baseStepSize")) if fixed else osp
+                osp = _annotation_seconds(fixed[0], ssd_path, "baseStepSize")[0] if fixed else osp
     return ours if ours is not None else osp
 
 
@@ -355,8 +412,7 @@ def open_system(path: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
     path = Path(path)
     temp_dir = None
     if path.is_file():
-        temp_dir = tempfile.mkdtemp(prefix="railcosim_ssp_")
-        safe_extract(path, Path(temp_dir))
+        temp_dir = _unpack_archive(path)
         folder = Path(temp_dir)
     elif path.is_dir():
         folder = path
@@ -367,6 +423,7 @@ def open_system(path: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
     except BaseException:
         if temp_dir:
             shutil.rmtree(temp_dir, ignore_errors=True)
+            forget_archive(temp_dir)
         raise
     system.temp_dir = temp_dir
     return system
@@ -386,6 +443,7 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
     for element in system.findall("ssd:Elements/ssd:Component", NS):
         origin = where(ssd_path, element.sourceline)
         name = element.get("name")
+        _check_unique_component(components, name, origin)
         kind = element.get("type", "application/x-fmu-sharedlibrary")
         if kind != "application/x-fmu-sharedlibrary":
             raise UserError(f"{origin}: component {name!r} of type {kind!r} is not supported")
@@ -432,12 +490,20 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
     if experiment is not None:
         start = _float(experiment, "startTime", 0.0)
         stop = _float(experiment, "stopTime")
-        base = _base_step(experiment)
+        base = _base_step(experiment, ssd_path)
     return SystemDescription(
         name=system.get("name") or root.get("name"), folder=folder, ssd_path=ssd_path,
         components=components, connections=connections, start_time=start, stop_time=stop,
         base_step_s=base, units=units,
         system_parameters=_read_bindings(system.find("ssd:ParameterBindings", NS), folder, ssd_path, units))
+
+
+def _check_unique_component(components: Dict[str, Component], name: str, origin: str) -> None:
+    """A component name names one component: a second one of the same name is refused (it would
+    silently replace the first, and its connections would reach the wrong FMU)."""
+    if name in components:
+        raise UserError(f"{origin}: component name {name!r} is used twice (first at "
+                        f"{components[name].origin}); component names must be unique")
 
 
 def _resolve_fmu(folder: Path, source: str, fmu_dirs) -> Optional[Path]:

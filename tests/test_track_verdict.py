@@ -56,7 +56,11 @@ def test_the_verdict_judges_the_real_train_length_not_a_shorter_one_given_to_the
     from orchestrator.ssp import open_system
 
     folder = str(product_fmus)
-    stock = {"rolling_stock_file": "freight_vl80.json"}
+    from fmus.data.loader import DATA
+
+    # the bundled file by its path: a bare "freight_vl80.json" is in neither the system nor the
+    # FMU's resources/ (the FMU would not find it; the graph refuses it)
+    stock = {"rolling_stock_file": str(DATA / "freight_vl80.json")}
     components, connections = train_and_ato(fmu_folder=folder, train_parameters=stock,
                                             ato_parameters={"cab_signal": "ALSN", **stock})
     chain, links = signal_chain(fmu_folder=folder)

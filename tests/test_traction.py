@@ -266,14 +266,15 @@ def test_bad_rolling_stock_file_through_the_cli(tmp_path, product_fmus, test_fmu
 def test_a_rejected_data_file_still_releases_the_fmu_library(tmp_path, product_fmus, test_fmus, monkeypatch):
     """pythonfmu answers a rejected file with fmi2Fatal; its library's interpreter state must
     still be released before exit, or the process aborts now and then at exit (SIGABRT, seen
-    in CI; valgrind shows the read of freed memory in the library's destructor)."""
+    in CI; valgrind shows the read of freed memory in the library's destructor). A bad data
+    file is now refused before any FMU is loaded (orchestrator/analysis/system_checks.py), so a
+    parameter below its minimum makes the facade refuse exitInitializationMode instead."""
     from orchestrator import fmu
     from orchestrator.errors import UserError
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     monkeypatch.setattr(fmu, "_LIVE_LIBRARIES", {})
-    bad = _write(tmp_path, "bad_stock.json", {"name": "x"})
-    folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"rolling_stock_file": str(bad)})
+    folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"mass_scale": 0.05})
     with pytest.raises(UserError):
         run_system(folder, RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "o", output_interval=1.0))
     assert len(fmu._LIVE_LIBRARIES) == 2 and set(fmu._LIVE_LIBRARIES.values()) == {0}

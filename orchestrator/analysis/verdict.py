@@ -582,5 +582,9 @@ def safety_verdict(summary: dict) -> Tuple[bool, str]:
 def railway_verdicts(graph: SystemGraph) -> list:
     """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
     headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
-    ``RunOptions.summaries``."""
+    ``RunOptions.summaries``. The system's railway data are checked first (a bad one is a
+    UserError before the run starts: orchestrator/analysis/system_checks.py)."""
+    from orchestrator.analysis.system_checks import check_railway_data
+
+    check_railway_data(graph)
     return [TrainVerdict(graph), ReceiverVerdict(graph)]

@@ -1,0 +1,127 @@
+"""Checks of a system's railway data made before a run (and by ``railcosim validate``): what the
+engine cannot check because it knows no railway (docs/architecture.md), and what the FMUs would
+find only at initialisation, or never.
+
+* every data file a component names (``line_file``, ``rolling_stock_file``, ``timetable_file``,
+  ``codes_file``) loads, with the same loaders and defaults the FMUs use; a file that does not
+  is an error naming the file and the field (a JSON document nested too deeply included);
+* the block sections of a line file follow each other without a gap: a stretch of track with
+  no track circuit is a place where no train is detected;
+* connected components that both take a line file (an ATO and the train it drives, a train and
+  its rail line, the rail line and its coder) run on one line: the same file, or files of
+  identical content.
+
+Every defect is a UserError (one line, exit 2; docs/scenarios.md, "Systems, parameter sets and
+scenarios: bad input").
+"""
+from __future__ import annotations
+
+import filecmp
+from pathlib import Path
+from typing import Callable, Dict, Optional
+
+import fmus
+from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, load_line,
+                              load_rolling_stock, load_timetable)
+from fmus.errors import FmuInputError
+from fmus.signalling import alsn
+from orchestrator.errors import UserError
+from orchestrator.graph import SystemGraph
+
+#: a relative data file the graph did not resolve in the system is one of the FMU's own
+#: resources/, which mirror the source tree (resources/fmus/data/shipped/…)
+FMU_RESOURCES_ROOT = Path(fmus.__file__).resolve().parent.parent
+SECTION_GAP_TOLERANCE_M = 1e-6
+
+
+def check_railway_data(graph: SystemGraph) -> None:
+    """Raise a UserError for the first defect of the system's data files (module docstring)."""
+    lines: Dict[str, Path] = {}
+    loaded: Dict[Path, Line] = {}
+    for name, node in graph.nodes.items():
+        if "line_file" not in node.interface.variables:
+            continue
+        path = _data_path(node.parameters.get("line_file"), DEFAULT_LINE)
+        if path is None:
+            continue
+        if path not in loaded:
+            loaded[path] = _load(load_line, path, f"{name}.line_file")
+            check_sections_contiguous(loaded[path])
+        lines[name] = path
+    for name, node in graph.nodes.items():
+        variables = node.interface.variables
+        if "rolling_stock_file" in variables:
+            path = _data_path(node.parameters.get("rolling_stock_file"), DEFAULT_ROLLING_STOCK)
+            if path is not None:
+                _load(load_rolling_stock, path, f"{name}.rolling_stock_file")
+        if "timetable_file" in variables and name in lines:
+            path = _data_path(node.parameters.get("timetable_file"), DEFAULT_TIMETABLE)
+            if path is not None:
+                _load(lambda p: load_timetable(p, loaded[lines[name]]), path, f"{name}.timetable_file")
+        if "codes_file" in variables:
+            path = _data_path(node.parameters.get("codes_file"), alsn.CODES_FILE)
+            if path is not None:
+                _load(alsn.load_transmitters, path, f"{name}.codes_file")
+    check_shared_lines(graph, lines)
+
+
+def check_sections_contiguous(line: Line) -> None:
+    """Block sections follow each other without a gap (the loader refuses overlaps)."""
+    for k in range(1, len(line.sections)):
+        previous, section = line.sections[k - 1], line.sections[k]
+        gap = section.start_m - previous.end_m
+        if gap > SECTION_GAP_TOLERANCE_M:
+            raise UserError(f"{line.path}: field block_sections[{k}].start_m: {section.start_m:g} m leaves a "
+                            f"{gap:g} m gap after block_sections[{k - 1}] (ends {previous.end_m:g} m); "
+                            "block sections must follow each other without a gap (no train is "
+                            "detected on track without a track circuit)")
+
+
+def check_shared_lines(graph: SystemGraph, lines: Dict[str, Path]) -> None:
+    """Components connected to each other that both take a line file run on the same line."""
+    for edge in graph.edges:
+        a, b = edge.source, edge.target
+        if a == b or a not in lines or b not in lines or _same_file(lines[a], lines[b]):
+            continue
+        first, second = sorted((a, b))
+        raise UserError(f"{edge.origin}: {first}.line_file ({_shown(graph, first, lines)}) and "
+                        f"{second}.line_file ({_shown(graph, second, lines)}) differ, but "
+                        f"{edge.source}.{edge.source_var.name} feeds {edge.target}.{edge.target_var.name}: "
+                        "connected components (an ATO and its train, a train and its rail line, "
+                        "the rail line and its coder) must run on one line file")
+
+
+# ---- helpers -------------------------------------------------------------------------------------
+def _data_path(value, default: Path) -> Optional[Path]:
+    """The file the FMU will open for a ``*_file`` parameter (resolved by the graph,
+    orchestrator/graph.py resolve_data_file); None when the orchestrator cannot see it."""
+    if not value:
+        return Path(default)
+    path = Path(str(value))
+    if path.is_absolute() or path.is_file():
+        return path
+    candidate = FMU_RESOURCES_ROOT / path
+    return candidate if candidate.is_file() else None
+
+
+def _load(loader: Callable, path: Path, what: str):
+    try:
+        return loader(path)
+    except FmuInputError as error:
+        raise UserError(f"{error} ({what})") from None
+    except RecursionError:
+        raise UserError(f"{path}: not valid JSON (nested too deeply) ({what})") from None
+    except UnicodeDecodeError:
+        raise UserError(f"{path}: not valid JSON (not UTF-8 text) ({what})") from None
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a == b or a.resolve() == b.resolve() or filecmp.cmp(a, b, shallow=False)
+    except OSError:
+        return False
+
+
+def _shown(graph: SystemGraph, name: str, lines: Dict[str, Path]) -> str:
+    value = graph.nodes[name].parameters.get("line_file")
+    return str(lines[name]) if value else f"the bundled default {Path(DEFAULT_LINE).name}"
