@@ -103,32 +103,15 @@ PortsOf = Callable[[Path, str], Optional[Ports]]
 _CONNECTOR_TYPES = ("Real", "Integer", "Boolean", "String")
 
 
-def committed_ports(folder: Path, source: str) -> Optional[Ports]:
-    """The committed contract manifest of a railcosim FMU (``fmus/<unit>/contract.json``, checked
-    against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
-    (``Traction.fmu`` → ``fmus/traction``); None for any other FMU. Independent of the build: the
-    shipped systems are written from it."""
-    import fmus
-    from orchestrator.build.contract import read_manifest
-
-    stem = Path(source).stem
-    manifest = Path(fmus.__file__).parent / re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower() / "contract.json"
-    return read_manifest(manifest) if stem and manifest.is_file() else None
-
-
 def fmu_ports(folder: Path, source: str) -> Optional[Ports]:
-    """The variables of the FMU a component will run (its modelDescription): the one at
-    ``folder / source``, else the one of that name in the build folder ``railcosim run`` also
-    looks in (``build/fmus/``, built with any --sections/--trains/--frame), else
-    :func:`committed_ports`; None when none knows the FMU (the SSD then declares no connectors)."""
-    from orchestrator.build.builder import default_build_dir
-    from orchestrator.build.contract import manifest_of
-    from orchestrator.cli import WORK_ROOT
+    """The variables of the FMU at ``folder / source`` (its modelDescription), or None when no
+    FMU is there (the SSD then declares no connectors: they are optional for our loader). The
+    shipped systems are written from the committed contract manifests instead
+    (orchestrator/analysis/systems.py), so their bytes do not depend on a build."""
+    from orchestrator.ports import manifest_of
 
-    for path in (Path(folder) / source, default_build_dir(WORK_ROOT) / Path(source).name):
-        if path.is_file():
-            return manifest_of(path)
-    return committed_ports(folder, source)
+    path = Path(folder) / source
+    return manifest_of(path) if path.is_file() else None
 
 
 def connectors_of(ports: Ports, connected_inputs: Sequence[str] = ()) -> List[Tuple[str, str, str, Optional[str]]]:
@@ -181,7 +164,7 @@ def write_ssd(folder: Path, name: str, components: Sequence[ComponentSpec],
               ports: PortsOf = fmu_ports) -> Path:
     """Write ``folder/SystemStructure.ssd``. Each component declares the connectors
     :func:`connectors_of` lists, from ``ports(folder, source)`` (default :func:`fmu_ports`: the
-    FMU it will run, else its committed manifest). The DefaultExperiment carries ``osp:FixedStepAlgorithm`` with the
+    FMU at the component's source). The DefaultExperiment carries ``osp:FixedStepAlgorithm`` with the
     base step (the given one or the gcd of the component steps) and, when given, ``rcs:BaseStep``.
     """
     folder.mkdir(parents=True, exist_ok=True)

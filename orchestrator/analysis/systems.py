@@ -29,18 +29,31 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
-from orchestrator.sspgen import ComponentSpec, ConnectionSpec, committed_ports
+import fmus
+from orchestrator.ports import read_manifest
+from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
 from orchestrator.sspgen import write_ssd as _write_ssd
 
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
 RAIL_TRAIN_LENGTH_M = 400.0     # the rail line's train_length default (fmus/rail_line/core.py RailSettings)
+
+
+def committed_ports(folder: Path, source: str) -> Optional[Ports]:
+    """The committed contract manifest of a railcosim FMU (``fmus/<unit>/contract.json``, checked
+    against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
+    (``Traction.fmu`` → ``fmus/traction``); None for any other FMU."""
+    stem = Path(source).stem
+    unit = re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower()
+    manifest = Path(fmus.__file__).parent / unit / "contract.json"
+    return read_manifest(manifest) if stem and manifest.is_file() else None
 
 
 def write_ssd(folder: Path, name: str, components, connections, **options) -> Path:

@@ -1,0 +1,46 @@
+"""An FMU's ports as a manifest: name → causality, variability, type, unit, min, max, start and,
+for an array, its shape (``u_tx`` with shape [8, 40]), read from its modelDescription.xml.
+
+The contract manifests (``fmus/<unit>/contract.json``, orchestrator/build/contract.py) and the
+connectors written into SSDs (orchestrator/sspgen.py) are both this form.
+"""
+from __future__ import annotations
+
+import json
+import re
+import zipfile
+from pathlib import Path
+from typing import Dict
+
+from lxml import etree
+
+_INDEX = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9,]+)\])?$")
+
+
+def manifest_of(fmu_path: Path) -> Dict[str, dict]:
+    with zipfile.ZipFile(fmu_path) as archive:
+        root = etree.fromstring(archive.read("modelDescription.xml"))
+    ports: Dict[str, dict] = {}
+    for sv in root.find("ModelVariables"):
+        typed = sv[0]
+        match = _INDEX.match(sv.get("name"))
+        base = match.group("base")
+        entry = {"causality": sv.get("causality", "local"), "variability": sv.get("variability", "continuous"),
+                 "type": etree.QName(typed).localname, "unit": typed.get("unit"),
+                 "min": typed.get("min"), "max": typed.get("max"), "start": typed.get("start")}
+        index = match.group("index")
+        if index:
+            shape = [int(i) for i in index.split(",")]
+            previous = ports.get(base)
+            if previous is not None:
+                entry["shape"] = [max(a, b) for a, b in zip(previous["shape"], shape)]
+                if entry["start"] != previous.get("start"):
+                    entry["start"] = previous["start"] if previous["start"] == "varies" else "varies"
+            else:
+                entry["shape"] = shape
+        ports[base] = entry
+    return ports
+
+
+def read_manifest(path: Path) -> Dict[str, dict]:
+    return json.loads(Path(path).read_text())
