@@ -137,10 +137,15 @@ def test_c_host_with_the_fmu_env_overrides(product_fmus, host_binary, tmp_path):
 @pytest.mark.parametrize("env, expected", [
     ({"PYTHONHOME": "/nonexistent/python"}, "Python could not start (PYTHONHOME /nonexistent/python)"),
     ({"RAILCOSIM_LIBPYTHON": "/nonexistent/libpython3.so"}, "cannot load libpython"),
-    ({"PYTHONPATH": "/nonexistent"}, "No module named"),
-], ids=["pythonhome", "libpython", "pythonpath"])
+    ({"PYTHONPATH": "{hidden}"}, "numpy hidden by this test"),
+], ids=["pythonhome", "libpython", "slave-import"])
 def test_a_python_that_cannot_run_the_fmu_is_a_logged_instantiation_failure(env, expected, product_fmus,
                                                                             host_binary, tmp_path):
+    # "slave-import": a PYTHONPATH whose numpy cannot be imported, so the FMU's slave cannot be
+    hidden = tmp_path / "hidden"
+    (hidden / "numpy").mkdir(parents=True)
+    (hidden / "numpy" / "__init__.py").write_text("raise ImportError('numpy hidden by this test')\n")
+    env = {key: value.replace("{hidden}", str(hidden)) for key, value in env.items()}
     proc = run_host(host_binary, host_arguments(product_fmus / "Traction.fmu", tmp_path / "fmu"),
                     clean_environment(**env))
     assert proc.returncode == 4, (proc.returncode, proc.stderr[-800:])   # fmi2Instantiate returned NULL
