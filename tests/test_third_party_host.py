@@ -101,6 +101,10 @@ def test_every_product_fmu_has_the_forwarding_binary(name, product_fmus, tmp_pat
 
 
 # ---- (c) a C host without any Python environment ----------------------------------------------------
+def test_the_c_host_calls_nothing_pythonfmu_specific(host_binary):
+    assert b"finalizePythonInterpreter" not in host_binary.read_bytes()
+
+
 @pytest.mark.parametrize("name", PRODUCT)
 def test_c_host_runs_each_fmu_20_times_without_python_environment(name, product_fmus, host_binary, tmp_path):
     arguments = host_arguments(product_fmus / f"{name}.fmu", tmp_path / "fmu")
