@@ -276,7 +276,7 @@ def make_parser() -> argparse.ArgumentParser:
     validate.add_argument("target")
     validate.set_defaults(func=cmd_validate)
 
-    env = sub.add_parser("fmu-env", help="environment a non-Python FMI host needs for our FMUs")
+    env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
     env.set_defaults(func=cmd_fmu_env)
     return parser
 

@@ -156,15 +156,24 @@ class FmuSlave(_ExtractedComponent):
     in_process = False
 
     def __init__(self, name: str, fmu_path: Path, interface: Interface, workdir: Path):
+        from fmpy import platform, sharedLibraryExtension
         from fmpy.fmi2 import FMU2Slave
 
         super().__init__(name, fmu_path, interface, workdir)
+        binary = f"binaries/{platform}/{interface.model_identifier}{sharedLibraryExtension}"
+        if not (self.unzip_dir / binary).is_file():
+            present = sorted(p.name for p in (self.unzip_dir / "binaries").glob("*") if p.is_dir())
+            raise UserError(f"{fmu_path}: no binary for {platform} ({binary} is missing; "
+                            f"binaries for: {', '.join(present) or 'none'})")
         self._fmu = FMU2Slave(guid=interface.guid, unzipDirectory=str(self.unzip_dir),
                               modelIdentifier=interface.model_identifier, instanceName=name)
         self._component = None
         self._fatal = False
-        _claim_library(self.unzip_dir)
-        self._holds_library = True
+        # a plain pythonfmu binary (a foreign FMU, or ours built without a C compiler) exports
+        # this; our forwarding binary does not need it (see free)
+        self._finalize = getattr(self._fmu.dll, "finalizePythonInterpreter", None)
+        if self._finalize is not None:
+            _claim_library(self.unzip_dir)
         self.messages: List[str] = []
         self.inputs: Dict[str, ValueBuffer] = {}
         self.outputs: Dict[str, ValueBuffer] = {}
@@ -263,34 +272,33 @@ class FmuSlave(_ExtractedComponent):
             self._call("terminate", self._fmu.fmi2Terminate)
 
     def free(self) -> None:
-        """Free the instance and release pythonfmu's interpreter state while it is still valid.
+        """Free the instance and unload its library; after fmi2Fatal neither (FMI 2.0 §2.1.3:
+        nothing more may be called on the instance, and pythonfmu would release its Python
+        references twice).
 
-        pythonfmu 0.7.0 keeps a global ``std::shared_ptr<PyState>`` and resets it from a
-        library destructor that runs at process exit *after* the C++ runtime destroyed that
-        global: the reset then reads and writes freed heap memory, which corrupts malloc's
-        free lists and, now and then, aborts the process (SIGABRT) later in exit. Calling the
-        library's exported ``finalizePythonInterpreter`` ourselves, once no instance of that
-        library is alive, empties the global first, so the destructors at exit have nothing
-        to release. This holds for a fatal instance too (valgrind showed the freed read at
-        exit after a data file was rejected in exitInitializationMode): its global is emptied
-        all the same, but the instance itself is neither freed nor its library unloaded —
-        after fmi2Fatal nothing may be called on it (FMI 2.0 §2.1.3), and pythonfmu would
-        release its Python references twice.
+        Our FMUs' forwarding binary releases pythonfmu 0.7.0's interpreter state itself when it
+        is unloaded or the process exits (docs/architecture.md, "Forwarding binary"), so the
+        host does nothing pythonfmu-specific. A plain pythonfmu binary (a foreign pythonfmu
+        FMU, or ours built without a C compiler) does not: it keeps a global
+        ``std::shared_ptr<PyState>`` that its own library destructor resets at process exit
+        *after* the C++ runtime destroyed it, reading and writing freed heap memory (an abort
+        now and then at exit). For such a library this method calls its exported
+        ``finalizePythonInterpreter`` once no instance of it is alive, including after a failed
+        fmi2Instantiate (pythonfmu creates the state before the instance) and after fmi2Fatal
+        (instance not freed, library not unloaded, but its global emptied all the same).
         """
         component, self._component = self._component, None
         if component is not None and not self._fatal:
             self._fmu.fmi2FreeInstance(component)
-        if not self._holds_library:
+        if self._fmu is None:
             return
-        self._holds_library = False
-        # also after a failed fmi2Instantiate: pythonfmu creates the state before the instance
-        finalize = getattr(self._fmu.dll, "finalizePythonInterpreter", None)
-        if finalize is not None and _release_library(self.unzip_dir):
-            finalize()
+        fmu, self._fmu = self._fmu, None
+        if self._finalize is not None and _release_library(self.unzip_dir):
+            self._finalize()
         if component is not None and self._fatal:
             return
         try:
-            self._fmu.freeLibrary()
+            fmu.freeLibrary()
         except Exception:
             pass
 
@@ -327,6 +335,7 @@ def _shared_callbacks():
     return _CALLBACKS[0][0]
 
 
+# instances alive per plain pythonfmu library (extraction folder), see FmuSlave.free
 def _claim_library(unzip_dir: Path) -> None:
     key = str(unzip_dir)
     _LIVE_LIBRARIES[key] = _LIVE_LIBRARIES.get(key, 0) + 1

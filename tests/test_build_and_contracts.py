@@ -68,7 +68,6 @@ for k in range(25):
 print('ok', len(slaves))
 for s in slaves:
     s.terminate(); s.fmi2FreeInstance(s.component)
-slaves[0].dll.finalizePythonInterpreter()  # the exit-time fix, as orchestrator.fmu.FmuSlave.free does
 """
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0 and "ok 25" in proc.stdout, proc.stderr[-500:]

@@ -1,8 +1,15 @@
-"""A non-Python FMI host (tests/host/fmi2_host.c, compiled here) runs Traction.fmu with its
-default parameters once the environment `railcosim fmu-env` prints is set (docs/third_party.md)."""
+"""Our FMUs in hosts that are not our orchestrator (docs/third_party.md).
+
+A non-Python host (tests/host/fmi2_host.c, compiled here: what fmusim or an S-function does)
+runs every product FMU with nothing set in its environment (no LD_PRELOAD, PYTHONHOME or
+PYTHONPATH) and exits 0 every time, thanks to the forwarding binary of every built FMU
+(orchestrator/build/forwarder/); fmpy.simulate_fmu runs each FMU three times in one process.
+"""
+import ctypes
 import os
 import shutil
 import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -10,43 +17,175 @@ import fmpy
 import pytest
 from fmpy import read_model_description
 
-from orchestrator.hostenv import host_environment
+from orchestrator.build.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
 
 HOST_SOURCE = Path(__file__).resolve().parent / "host" / "fmi2_host.c"
+PRODUCT = ("Traction", "AtoController", "WaysideCoder", "RailLine", "LocoReceiver")
+PYTHON_VARIABLES = ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH", "RAILCOSIM_LIBPYTHON")
+# every function of FMI 2.0 for co-simulation (FMI 2.0 §2.1, §4.2)
+FMI2_CS_FUNCTIONS = (
+    "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",
+    "fmi2FreeInstance", "fmi2SetupExperiment", "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode", "fmi2Terminate", "fmi2Reset", "fmi2GetReal", "fmi2GetInteger",
+    "fmi2GetBoolean", "fmi2GetString", "fmi2SetReal", "fmi2SetInteger", "fmi2SetBoolean",
+    "fmi2SetString", "fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
+    "fmi2SerializedFMUstateSize", "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate",
+    "fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+    "fmi2DoStep", "fmi2CancelStep", "fmi2GetStatus", "fmi2GetRealStatus", "fmi2GetIntegerStatus",
+    "fmi2GetBooleanStatus", "fmi2GetStringStatus")
 
 
-@pytest.fixture(scope="module")
-def host_binary(tmp_path_factory):
+def compile_host(dest: Path) -> Path:
     compiler = shutil.which("gcc") or shutil.which("cc")
     assert compiler, "a C compiler is part of this machine kind (docs/third_party.md)"
-    binary = tmp_path_factory.mktemp("host") / "fmi2_host"
+    binary = dest / "fmi2_host"
     headers = Path(fmpy.__file__).parent / "c-code"
     subprocess.run([compiler, "-O1", f"-I{headers}", "-o", str(binary), str(HOST_SOURCE), "-ldl"], check=True)
     return binary
 
 
-def _run(host_binary, fmu: Path, workdir: Path, env):
-    folder = workdir / "fmu"
-    with zipfile.ZipFile(fmu) as archive:
-        archive.extractall(folder)
+@pytest.fixture(scope="module")
+def host_binary(tmp_path_factory):
+    return compile_host(tmp_path_factory.mktemp("host"))
+
+
+def clean_environment(**extra):
+    env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
+    env.update(extra)
+    return env
+
+
+def host_arguments(fmu: Path, folder: Path, cycles: str = "1", steps: int = 4):
+    """Extract ``fmu`` into ``folder`` and give the host's arguments: a few steps at the FMU's
+    DefaultExperiment step (signal-chain FMUs refuse any other), full traction for Traction."""
+    if not folder.is_dir():
+        with zipfile.ZipFile(fmu) as archive:
+            archive.extractall(folder)
     md = read_model_description(str(fmu))
-    vr = {v.name: str(v.valueReference) for v in md.modelVariables}
-    binary = folder / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"
-    return subprocess.run([str(host_binary), str(binary), (folder / "resources").as_uri(), md.guid, "60", "0.5",
-                           vr["command"], "1.0", vr["x"], vr["v"]],
-                          capture_output=True, text=True, env=env, timeout=120, cwd=workdir)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    step = float(md.defaultExperiment.stepSize)
+    identifier = md.coSimulation.modelIdentifier
+    binary = folder / "binaries" / "linux64" / f"{identifier}.so"
+    if identifier == "Traction":
+        io = [f"{vr['command']}=1.0", str(vr["x"]), str(vr["v"])]
+        steps = 120   # one minute of full traction
+    else:
+        io = [str(v.valueReference) for v in md.modelVariables
+              if v.causality == "output" and v.type == "Real"][:3]
+    return [str(binary), (folder / "resources").as_uri(), md.guid, repr(steps * step), repr(step), cycles, *io]
 
 
-def test_traction_fmu_in_a_c_host_with_fmu_env(tmp_path, host_binary, product_fmus):
-    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH")}
-    env.update(host_environment())
-    proc = _run(host_binary, product_fmus / "Traction.fmu", tmp_path, env)
+def run_host(host_binary, arguments, env=None, timeout=180):
+    return subprocess.run([str(host_binary), *arguments], capture_output=True, text=True,
+                          env=env if env is not None else clean_environment(), timeout=timeout)
+
+
+# ---- (b) every built FMU carries the forwarding binary --------------------------------------------
+@pytest.mark.parametrize("name", PRODUCT)
+def test_every_product_fmu_has_the_forwarding_binary(name, product_fmus, tmp_path):
+    fmu = product_fmus / f"{name}.fmu"
+    with zipfile.ZipFile(fmu) as archive:
+        members = set(archive.namelist())
+        archive.extractall(tmp_path)
+    assert {f"binaries/linux64/{name}.so", f"binaries/linux64/{name}_pythonfmu.so", SETTINGS_MEMBER} <= members
+    settings = dict(line.split("=", 1) for line in (tmp_path / SETTINGS_MEMBER).read_text().splitlines())
+    assert set(settings) == {"LIBPYTHON", "PYTHONHOME", "PYTHONPATH"} and Path(settings["LIBPYTHON"]).is_file()
+    # loading runs nothing: the forwarder loads Python and pythonfmu at the first fmi2Instantiate
+    library = ctypes.CDLL(str(tmp_path / "binaries" / "linux64" / f"{name}.so"))
+    assert ctypes.c_char_p(ctypes.addressof(ctypes.c_char.in_dll(library, MARKER_SYMBOL))).value.startswith(
+        b"railcosim fmi2 forwarder")
+    assert [f for f in FMI2_CS_FUNCTIONS if not hasattr(library, f)] == []
+    assert not hasattr(library, "finalizePythonInterpreter")   # the host has nothing to call
+    assert b"finalizePythonInterpreter" in (tmp_path / "binaries" / "linux64" / f"{name}_pythonfmu.so").read_bytes()
+    assert read_model_description(str(fmu)).coSimulation.modelIdentifier == name
+
+
+# ---- (c) a C host without any Python environment ----------------------------------------------------
+def test_the_c_host_calls_nothing_pythonfmu_specific(host_binary):
+    assert b"finalizePythonInterpreter" not in host_binary.read_bytes()
+
+
+@pytest.mark.parametrize("name", PRODUCT)
+def test_c_host_runs_each_fmu_20_times_without_python_environment(name, product_fmus, host_binary, tmp_path):
+    arguments = host_arguments(product_fmus / f"{name}.fmu", tmp_path / "fmu")
+    outputs = set()
+    for run in range(20):
+        proc = run_host(host_binary, arguments)
+        assert proc.returncode == 0, f"run {run}: exit {proc.returncode}: {proc.stderr[-800:]}"
+        outputs.add(proc.stdout)
+    assert len(outputs) == 1 and outputs.pop().strip()
+    if name == "Traction":
+        x, v = (float(line.split()[1]) for line in proc.stdout.splitlines())
+        assert x > 900.0 and 15.0 < v < 25.0    # a minute of full traction from station A
+
+
+@pytest.mark.parametrize("cycles", ["2", "2r"])
+def test_c_host_instantiates_and_frees_twice_in_one_process(cycles, product_fmus, host_binary, tmp_path):
+    """"2": two instances one after the other; "2r": the library closed and opened between them
+    (the interpreter started by the first stays: CPython with numpy cannot start twice)."""
+    proc = run_host(host_binary, host_arguments(product_fmus / "Traction.fmu", tmp_path / "fmu", cycles))
     assert proc.returncode == 0, proc.stderr[-800:]
-    x, v = (float(line.split()[1]) for line in proc.stdout.split("\n") if line.strip())
-    assert x > 900.0 and 15.0 < v < 25.0    # a minute of full traction from station A
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 4 and lines[:2] == lines[2:]
 
 
-def test_without_libpython_preloaded_the_host_cannot_load_the_fmu(tmp_path, host_binary, product_fmus):
-    env = {k: v for k, v in os.environ.items() if k not in ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH")}
-    proc = _run(host_binary, product_fmus / "Traction.fmu", tmp_path, env)
-    assert proc.returncode != 0 and "undefined symbol" in proc.stderr
+def test_c_host_with_the_fmu_env_overrides(product_fmus, host_binary, tmp_path):
+    from orchestrator.hostenv import host_environment
+
+    proc = run_host(host_binary, host_arguments(product_fmus / "Traction.fmu", tmp_path / "fmu"),
+                    clean_environment(**host_environment()))
+    assert proc.returncode == 0, proc.stderr[-800:]
+
+
+# ---- (d) a Python that cannot start, or cannot import the slave: a logged failure -----------------
+@pytest.mark.parametrize("env, expected", [
+    ({"PYTHONHOME": "/nonexistent/python"}, "Python could not start (PYTHONHOME /nonexistent/python)"),
+    ({"RAILCOSIM_LIBPYTHON": "/nonexistent/libpython3.so"}, "cannot load libpython"),
+    ({"PYTHONPATH": "{hidden}"}, "numpy hidden by this test"),
+], ids=["pythonhome", "libpython", "slave-import"])
+def test_a_python_that_cannot_run_the_fmu_is_a_logged_instantiation_failure(env, expected, product_fmus,
+                                                                            host_binary, tmp_path):
+    # "slave-import": a PYTHONPATH whose numpy cannot be imported, so the FMU's slave cannot be
+    hidden = tmp_path / "hidden"
+    (hidden / "numpy").mkdir(parents=True)
+    (hidden / "numpy" / "__init__.py").write_text("raise ImportError('numpy hidden by this test')\n")
+    env = {key: value.replace("{hidden}", str(hidden)) for key, value in env.items()}
+    proc = run_host(host_binary, host_arguments(product_fmus / "Traction.fmu", tmp_path / "fmu"),
+                    clean_environment(**env))
+    assert proc.returncode == 4, (proc.returncode, proc.stderr[-800:])   # fmi2Instantiate returned NULL
+    assert "[host 4]" in proc.stderr and expected in proc.stderr, proc.stderr[-800:]
+
+
+# ---- (a) fmpy.simulate_fmu three times in one process ------------------------------------------------
+SIMULATE_THRICE = """
+import sys
+import fmpy
+from fmpy import read_model_description
+results = []
+for path in sys.argv[1:]:
+    md = read_model_description(path)
+    step = float(md.defaultExperiment.stepSize)
+    # fmpy's default: a fresh extraction per call, removed after it
+    result = fmpy.simulate_fmu(path, stop_time=3 * step, step_size=step, output_interval=step)
+    results.append(repr(result.tolist()))
+    print(path, len(result))
+print('distinct', len(set(results)))
+"""
+
+
+@pytest.mark.parametrize("name", PRODUCT)
+def test_simulate_fmu_three_times_in_one_process(name, product_fmus):
+    path = str(product_fmus / f"{name}.fmu")
+    proc = subprocess.run([sys.executable, "-c", SIMULATE_THRICE, path, path, path],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    assert "distinct 1" in proc.stdout
+
+
+def test_simulate_fmu_of_two_fmus_in_turn(product_fmus):
+    """The second FMU imports modules the first did not, after the first's folder is gone."""
+    traction, ato = (str(product_fmus / f"{n}.fmu") for n in ("Traction", "AtoController"))
+    proc = subprocess.run([sys.executable, "-c", SIMULATE_THRICE, traction, ato, traction],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    assert "distinct 2" in proc.stdout

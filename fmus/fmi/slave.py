@@ -250,9 +250,16 @@ class FrameSlave(Fmi2Slave):
 
     def resource_path(self, path: str) -> str:
         """A data file named by a parameter: absolute, or relative to the working folder, else
-        to this FMU's resources folder (where the bundled defaults live)."""
+        to this FMU's resources folder (where the bundled defaults live). A default inside the
+        imported ``fmus`` package (whose module-level paths point where this interpreter first
+        imported it: maybe another FMU's extraction, removed since) is this FMU's own copy."""
         import os
 
+        package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        if self.resources and os.path.isabs(path) and os.path.commonpath([path, package]) == package:
+            own = os.path.join(self.resources, "fmus", os.path.relpath(path, package))
+            if os.path.exists(own):
+                return own
         if os.path.isabs(path) or os.path.exists(path) or not self.resources:
             return path
         return os.path.join(self.resources, path)

@@ -1,0 +1,114 @@
+"""The FMU's own FMI binary: fmi2_forward.c compiled at `railcosim build` with the system C
+compiler and put in front of pythonfmu's library (docs/architecture.md, "Forwarding binary").
+
+``plan()`` decides once per build whether FMUs get it: a C compiler and this Python's headers
+are needed (else the FMUs stay plain pythonfmu FMUs and the build says so on stderr); this
+Python's shared libpython must exist (else a UserError naming where it looked). ``install``
+rewrites a built FMU: pythonfmu's ``binaries/linux64/<id>.so`` becomes ``<id>_pythonfmu.so``,
+the forwarder takes its name, and ``resources/railcosim_python.txt`` holds the Python the
+forwarder starts in a process that has none.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sysconfig
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Union
+
+from orchestrator.errors import UserError
+
+SOURCE = Path(__file__).resolve().with_name("fmi2_forward.c")
+SETTINGS_MEMBER = "resources/railcosim_python.txt"
+MARKER_SYMBOL = "railcosim_forwarder"
+PLATFORM = "linux64"
+
+
+@dataclass(frozen=True)
+class Forwarder:
+    compiler: str
+    settings: str          # the text of resources/railcosim_python.txt
+
+    def fingerprint(self) -> bytes:
+        """What an FMU's content hash must change with."""
+        return SOURCE.read_bytes() + self.settings.encode()
+
+
+@dataclass(frozen=True)
+class NoForwarder:
+    reason: str
+
+    def fingerprint(self) -> bytes:
+        return b"plain pythonfmu binary"
+
+
+def find_compiler() -> Optional[str]:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name:
+            found = shutil.which(name)
+            if found:
+                return found
+    return None
+
+
+def _fmi_headers() -> Path:
+    import fmpy
+
+    return Path(fmpy.__file__).resolve().parent / "c-code"
+
+
+def plan() -> Union[Forwarder, NoForwarder]:
+    import platform
+    import sys
+
+    if not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "AMD64"):
+        return NoForwarder(f"the forwarding binary is built for linux64 only, not {sys.platform}/{platform.machine()}")
+    compiler = find_compiler()
+    if compiler is None:
+        return NoForwarder("no C compiler (looked for $CC, cc, gcc, clang)")
+    include = sysconfig.get_config_var("INCLUDEPY") or ""
+    if not (Path(include) / "Python.h").is_file():
+        return NoForwarder(f"no Python.h in {include or '(sysconfig INCLUDEPY empty)'}")
+    from orchestrator.hostenv import fmu_python_settings
+
+    settings = "".join(f"{key}={value}\n" for key, value in fmu_python_settings().items())
+    return Forwarder(compiler, settings)
+
+
+def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
+    command = [forwarder.compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
+               f"-I{_fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
+               "-o", str(output), str(SOURCE), "-ldl", "-lpthread"]
+    proc = subprocess.run(command, capture_output=True, text=True)
+    if proc.returncode != 0:
+        first = (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[0]
+        raise UserError(f"compiling {SOURCE} with {forwarder.compiler} failed: {first}")
+
+
+def install(fmu_path: Path, model_identifier: str, forwarder: Forwarder) -> None:
+    """Put the forwarder in front of pythonfmu's linux64 binary inside ``fmu_path``."""
+    binary = f"binaries/{PLATFORM}/{model_identifier}.so"
+    renamed = f"binaries/{PLATFORM}/{model_identifier}_pythonfmu.so"
+    with tempfile.TemporaryDirectory(prefix="railcosim_forwarder_") as tmp:
+        compiled = Path(tmp) / f"{model_identifier}.so"
+        compile_forwarder(forwarder, compiled)
+        rewritten = Path(tmp) / "out.fmu"
+        with zipfile.ZipFile(fmu_path) as source, \
+                zipfile.ZipFile(rewritten, "w", zipfile.ZIP_DEFLATED) as target:
+            names = source.namelist()
+            if binary not in names:
+                raise RuntimeError(f"{fmu_path}: pythonfmu wrote no {binary}")
+            for info in source.infolist():
+                data = source.read(info)
+                if info.filename == binary:
+                    info.filename = renamed
+                if info.filename == SETTINGS_MEMBER:
+                    continue
+                target.writestr(info, data)
+            target.write(compiled, binary)
+            target.writestr(SETTINGS_MEMBER, forwarder.settings)
+        shutil.move(str(rewritten), fmu_path)

@@ -1,0 +1,307 @@
+/* railcosim's FMI 2.0 binary: a thin forwarder in front of pythonfmu's export library.
+ *
+ * pythonfmu 0.7.0's binary neither links libpython (every non-Python host had to LD_PRELOAD
+ * it) nor leaves a host's process exit alone: it starts CPython from a worker thread and
+ * releases it from a library destructor that runs after the C++ runtime already destroyed
+ * the state it releases (docs/architecture.md, docs/third_party.md). This library becomes
+ * binaries/linux64/<id>.so; pythonfmu's library travels beside it as <id>_pythonfmu.so.
+ *
+ * At the first fmi2Instantiate it
+ *   1. uses the process's Python if there is one (a Python host: fmpy, our orchestrator),
+ *      else loads libpython RTLD_GLOBAL (path: $RAILCOSIM_LIBPYTHON, else the build's, from
+ *      resources/railcosim_python.txt) and starts it itself with PyConfig, PYTHONHOME and
+ *      PYTHONPATH from the environment or else the build's defaults; a Python that cannot
+ *      start is an fmi2Instantiate returning NULL with a logged message, not an abort;
+ *   2. loads <id>_pythonfmu.so from its own folder (dladdr) and forwards every fmi2 function.
+ * pythonfmu then finds Python initialised and never starts or finalises one itself.
+ *
+ * Release: at unload (dlclose of this library or process exit) it empties pythonfmu's
+ * interpreter state through pythonfmu's finalizePythonInterpreter, before pythonfmu's own
+ * exit-time destructors run, and closes pythonfmu's library if no instance is alive. It never
+ * calls Py_FinalizeEx: CPython cannot be re-initialised once numpy was imported, several FMUs
+ * may share the interpreter it started, and measured exit behaviour is the same
+ * (docs/architecture.md). Build with -DRAILCOSIM_FINALIZE_AT_UNLOAD to finalise anyway.
+ */
+#define _GNU_SOURCE
+#include <Python.h>
+#include <dlfcn.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+
+/* marker checked by tests/test_third_party_host.py */
+FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 1";
+
+#define SETTINGS_FILE "railcosim_python.txt"
+
+/* ---- the Python C API, resolved at run time (libpython is not a link-time dependency) ---- */
+static int (*py_IsInitialized)(void);
+static void (*pyConfig_InitPythonConfig)(PyConfig *);
+static PyStatus (*pyConfig_SetBytesString)(PyConfig *, wchar_t **, const char *);
+static PyStatus (*py_InitializeFromConfig)(const PyConfig *);
+static void (*pyConfig_Clear)(PyConfig *);
+static int (*pyStatus_Exception)(PyStatus);
+static PyThreadState *(*pyEval_SaveThread)(void);
+#ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
+static void (*pyEval_RestoreThread)(PyThreadState *);
+static int (*py_FinalizeEx)(void);
+static PyThreadState *main_thread_state;
+#endif
+
+/* ---- pythonfmu's library --------------------------------------------------------------- */
+#define FMI2_FUNCTIONS(X) \
+    X(fmi2SetDebugLogging) X(fmi2Instantiate) X(fmi2FreeInstance) X(fmi2SetupExperiment) \
+    X(fmi2EnterInitializationMode) X(fmi2ExitInitializationMode) X(fmi2Terminate) X(fmi2Reset) \
+    X(fmi2GetReal) X(fmi2GetInteger) X(fmi2GetBoolean) X(fmi2GetString) \
+    X(fmi2SetReal) X(fmi2SetInteger) X(fmi2SetBoolean) X(fmi2SetString) \
+    X(fmi2GetFMUstate) X(fmi2SetFMUstate) X(fmi2FreeFMUstate) X(fmi2SerializedFMUstateSize) \
+    X(fmi2SerializeFMUstate) X(fmi2DeSerializeFMUstate) X(fmi2GetDirectionalDerivative) \
+    X(fmi2SetRealInputDerivatives) X(fmi2GetRealOutputDerivatives) X(fmi2DoStep) X(fmi2CancelStep) \
+    X(fmi2GetStatus) X(fmi2GetRealStatus) X(fmi2GetIntegerStatus) X(fmi2GetBooleanStatus) \
+    X(fmi2GetStringStatus)
+
+#define DECLARE(name) static name##TYPE *target_##name;
+FMI2_FUNCTIONS(DECLARE)
+
+static void (*target_finalize)(void);  /* pythonfmu's finalizePythonInterpreter */
+static void *pythonfmu_library;
+static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
+static enum { NOT_LOADED, LOADED, FAILED } state = NOT_LOADED;
+static char failure[2048];
+static long live_instances;
+
+static void release_at_unload(void);
+
+/* ---- the FMU's folder and its Python settings ------------------------------------------- */
+static void own_folder(char *out, size_t size) {
+    Dl_info info;
+    out[0] = '\0';
+    if (dladdr((void *)&own_folder, &info) && info.dli_fname) {
+        snprintf(out, size, "%s", info.dli_fname);
+        char *slash = strrchr(out, '/');
+        if (slash) *slash = '\0'; else snprintf(out, size, ".");
+    }
+}
+
+static void own_stem(char *out, size_t size) {
+    Dl_info info;
+    out[0] = '\0';
+    if (dladdr((void *)&own_folder, &info) && info.dli_fname) {
+        const char *base = strrchr(info.dli_fname, '/');
+        snprintf(out, size, "%s", base ? base + 1 : info.dli_fname);
+        char *dot = strstr(out, ".so");
+        if (dot) *dot = '\0';
+    }
+}
+
+/* one "KEY=value" line of resources/railcosim_python.txt (written by `railcosim build`) */
+static int setting(const char *folder, const char *key, char *out, size_t size) {
+    char path[4096];
+    snprintf(path, sizeof path, "%s/../../resources/%s", folder, SETTINGS_FILE);
+    FILE *file = fopen(path, "r");
+    if (!file) return 0;
+    char line[8192];
+    size_t key_len = strlen(key);
+    int found = 0;
+    while (!found && fgets(line, sizeof line, file)) {
+        if (strncmp(line, key, key_len) == 0 && line[key_len] == '=') {
+            line[strcspn(line, "\r\n")] = '\0';
+            snprintf(out, size, "%s", line + key_len + 1);
+            found = 1;
+        }
+    }
+    fclose(file);
+    return found;
+}
+
+static void fail(const char *format, ...) {
+    va_list args;
+    va_start(args, format);
+    vsnprintf(failure, sizeof failure, format, args);
+    va_end(args);
+    state = FAILED;
+}
+
+#define RESOLVE(handle, var, name) \
+    if (!(*(void **)&var = dlsym(handle, name))) { fail("libpython has no %s", name); return 0; }
+
+/* Python: the process's own, else the build's libpython started here */
+static int ensure_python(const char *folder) {
+    void *scope = RTLD_DEFAULT;
+    py_IsInitialized = (int (*)(void))dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    if (py_IsInitialized && py_IsInitialized()) return 1;  /* a Python host: leave it alone */
+    if (!py_IsInitialized) {
+        char library[4096] = "";
+        const char *chosen = getenv("RAILCOSIM_LIBPYTHON");
+        if (!chosen || !*chosen) {
+            if (!setting(folder, "LIBPYTHON", library, sizeof library)) {
+                fail("no libpython: %s/../../resources/%s is missing and RAILCOSIM_LIBPYTHON is not set",
+                     folder, SETTINGS_FILE);
+                return 0;
+            }
+            chosen = library;
+        }
+        scope = dlopen(chosen, RTLD_NOW | RTLD_GLOBAL);  /* never closed */
+        if (!scope) {
+            fail("cannot load libpython (set RAILCOSIM_LIBPYTHON to the Python the FMU was built with): %s",
+                 dlerror());
+            return 0;
+        }
+        RESOLVE(scope, py_IsInitialized, "Py_IsInitialized")
+        if (py_IsInitialized()) return 1;
+    }
+    RESOLVE(scope, pyConfig_InitPythonConfig, "PyConfig_InitPythonConfig")
+    RESOLVE(scope, pyConfig_SetBytesString, "PyConfig_SetBytesString")
+    RESOLVE(scope, py_InitializeFromConfig, "Py_InitializeFromConfig")
+    RESOLVE(scope, pyConfig_Clear, "PyConfig_Clear")
+    RESOLVE(scope, pyStatus_Exception, "PyStatus_Exception")
+    RESOLVE(scope, pyEval_SaveThread, "PyEval_SaveThread")
+#ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
+    RESOLVE(scope, pyEval_RestoreThread, "PyEval_RestoreThread")
+    RESOLVE(scope, py_FinalizeEx, "Py_FinalizeEx")
+#endif
+
+    PyConfig config;
+    pyConfig_InitPythonConfig(&config);
+    config.install_signal_handlers = 0;  /* the host's signals stay the host's */
+    config.parse_argv = 0;
+    char value[8192];
+    const char *home = getenv("PYTHONHOME");
+    PyStatus status = {0};
+    if ((!home || !*home) && setting(folder, "PYTHONHOME", value, sizeof value) && *value)
+        status = pyConfig_SetBytesString(&config, &config.home, value);
+    const char *path = getenv("PYTHONPATH");
+    if (!pyStatus_Exception(status) && (!path || !*path) && setting(folder, "PYTHONPATH", value, sizeof value) && *value)
+        status = pyConfig_SetBytesString(&config, &config.pythonpath_env, value);
+    if (!pyStatus_Exception(status)) status = py_InitializeFromConfig(&config);
+    pyConfig_Clear(&config);
+    if (pyStatus_Exception(status)) {
+        const char *shown = getenv("PYTHONHOME");
+        fail("Python could not start (PYTHONHOME %s): %s%s%s", shown && *shown ? shown : "from the FMU's resources",
+             status.func ? status.func : "", status.func ? ": " : "", status.err_msg ? status.err_msg : "unknown error");
+        return 0;
+    }
+#ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
+    main_thread_state =
+#endif
+    pyEval_SaveThread();  /* the GIL is free: pythonfmu takes it per call (PyGILState_Ensure) */
+    return 1;
+}
+
+static int load(void) {
+    char folder[4096], stem[512], library[4800];
+    own_folder(folder, sizeof folder);
+    own_stem(stem, sizeof stem);
+    if (!ensure_python(folder)) return 0;
+    snprintf(library, sizeof library, "%s/%s_pythonfmu.so", folder, stem);
+    pythonfmu_library = dlopen(library, RTLD_NOW | RTLD_LOCAL);
+    if (!pythonfmu_library) { fail("cannot load pythonfmu's library: %s", dlerror()); return 0; }
+#define RESOLVE_TARGET(name) *(void **)&target_##name = dlsym(pythonfmu_library, #name);
+    FMI2_FUNCTIONS(RESOLVE_TARGET)
+    *(void **)&target_finalize = dlsym(pythonfmu_library, "finalizePythonInterpreter");
+    if (!target_fmi2Instantiate) { fail("%s exports no fmi2Instantiate", library); return 0; }
+    /* registered after pythonfmu's own exit-time destructors, so it runs before them */
+    atexit(release_at_unload);
+    state = LOADED;
+    return 1;
+}
+
+static void release_at_unload(void) {
+    pthread_mutex_lock(&lock);
+    if (state == LOADED) {
+        if (target_finalize) target_finalize();  /* pythonfmu's global state emptied while it is valid */
+#ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
+        if (main_thread_state && live_instances == 0) {
+            pyEval_RestoreThread(main_thread_state);
+            py_FinalizeEx();
+            main_thread_state = NULL;
+        }
+#endif
+        if (live_instances == 0) {
+            dlclose(pythonfmu_library);
+            pythonfmu_library = NULL;
+            state = NOT_LOADED;
+        }
+    }
+    pthread_mutex_unlock(&lock);
+}
+
+/* ---- the FMI functions -------------------------------------------------------------------- */
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
+                              fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
+                              fmi2Boolean visible, fmi2Boolean loggingOn) {
+    pthread_mutex_lock(&lock);
+    int ready = state == LOADED || (state == NOT_LOADED && load());
+    pthread_mutex_unlock(&lock);
+    if (!ready) {
+        if (functions && functions->logger)
+            functions->logger(functions->componentEnvironment, instanceName, fmi2Fatal, "error", "%s", failure);
+        else
+            fprintf(stderr, "%s: %s\n", instanceName ? instanceName : "FMU", failure);
+        return NULL;
+    }
+    fmi2Component component = target_fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
+                                                     functions, visible, loggingOn);
+    if (component) {
+        pthread_mutex_lock(&lock);
+        live_instances++;
+        pthread_mutex_unlock(&lock);
+    }
+    return component;
+}
+
+void fmi2FreeInstance(fmi2Component c) {
+    if (!c || !target_fmi2FreeInstance) return;
+    target_fmi2FreeInstance(c);
+    pthread_mutex_lock(&lock);
+    live_instances--;
+    pthread_mutex_unlock(&lock);
+}
+
+#define FORWARD(name, params, args) \
+    fmi2Status name params { return target_##name ? target_##name args : fmi2Error; }
+
+FORWARD(fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[]),
+        (c, on, n, categories))
+FORWARD(fmi2SetupExperiment, (fmi2Component c, fmi2Boolean tolerance_defined, fmi2Real tolerance,
+        fmi2Real start, fmi2Boolean stop_defined, fmi2Real stop),
+        (c, tolerance_defined, tolerance, start, stop_defined, stop))
+FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
+FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
+FORWARD(fmi2Terminate, (fmi2Component c), (c))
+FORWARD(fmi2Reset, (fmi2Component c), (c))
+FORWARD(fmi2GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]), (c, vr, n, value))
+FORWARD(fmi2GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]), (c, vr, n, value))
+FORWARD(fmi2GetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]), (c, vr, n, value))
+FORWARD(fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]), (c, vr, n, value))
+FORWARD(fmi2SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]), (c, vr, n, value))
+FORWARD(fmi2SetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]), (c, vr, n, value))
+FORWARD(fmi2SetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]), (c, vr, n, value))
+FORWARD(fmi2SetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]), (c, vr, n, value))
+FORWARD(fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
+FORWARD(fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))
+FORWARD(fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
+FORWARD(fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size))
+FORWARD(fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size), (c, s, bytes, size))
+FORWARD(fmi2DeSerializeFMUstate, (fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s), (c, bytes, size, s))
+FORWARD(fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference unknown[], size_t n_unknown,
+        const fmi2ValueReference known[], size_t n_known, const fmi2Real dv_known[], fmi2Real dv_unknown[]),
+        (c, unknown, n_unknown, known, n_known, dv_known, dv_unknown))
+FORWARD(fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n,
+        const fmi2Integer order[], const fmi2Real value[]), (c, vr, n, order, value))
+FORWARD(fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n,
+        const fmi2Integer order[], fmi2Real value[]), (c, vr, n, order, value))
+FORWARD(fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior_state), (c, t, h, no_prior_state))
+FORWARD(fmi2CancelStep, (fmi2Component c), (c))
+FORWARD(fmi2GetStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Status *value), (c, kind, value))
+FORWARD(fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Real *value), (c, kind, value))
+FORWARD(fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Integer *value), (c, kind, value))
+FORWARD(fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Boolean *value), (c, kind, value))
+FORWARD(fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2String *value), (c, kind, value))

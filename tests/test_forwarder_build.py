@@ -1,0 +1,103 @@
+"""The forwarding binary at build time (orchestrator/build/forwarder/) and the FMUs without it:
+the fallback without a C compiler, a Python without a shared libpython, foreign (plain
+pythonfmu) FMUs in our orchestrator, an FMU without a binary for this platform."""
+import dataclasses
+import zipfile
+
+import pytest
+
+from conftest import FIXTURE_PACKAGE
+from fmus.sizes import BuildConfig
+from helpers import ComponentSpec, ConnectionSpec, railcosim, write_ssd
+from orchestrator import hostenv
+from orchestrator.build import forwarder as fwd
+from orchestrator.build.builder import UnitSpec, build_unit, content_hash
+from orchestrator.errors import UserError
+
+COUNTER = UnitSpec("testcounter", "rcs_testfmus.facade", "TestCounter")
+
+
+def test_without_a_c_compiler_the_build_says_so_once_and_builds_plain_fmus(monkeypatch):
+    monkeypatch.setattr(fwd, "find_compiler", lambda: None)
+    plan = fwd.plan()
+    assert isinstance(plan, fwd.NoForwarder) and "no C compiler" in plan.reason
+
+
+def test_a_python_without_shared_libpython_is_one_clear_error(monkeypatch, tmp_path):
+    missing = tmp_path / "libpython9.9.so"
+    monkeypatch.setattr(hostenv, "libpython_candidates", lambda: [missing])
+    with pytest.raises(UserError) as error:
+        fwd.plan()
+    message = str(error.value)
+    assert str(missing) in message and "\n" not in message and "--enable-shared" in message
+
+
+def test_the_content_hash_follows_the_forwarder_source_and_python_settings(monkeypatch, tmp_path):
+    plan = fwd.plan()
+    assert isinstance(plan, fwd.Forwarder)
+    before = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], plan)
+    other_settings = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE],
+                                  dataclasses.replace(plan, settings=plan.settings + "X=1\n"))
+    source = tmp_path / "fmi2_forward.c"
+    source.write_text(fwd.SOURCE.read_text() + "/* changed */\n")
+    monkeypatch.setattr(fwd, "SOURCE", source)
+    after = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], plan)
+    plain = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], fwd.NoForwarder("test"))
+    assert len({before, other_settings, after, plain}) == 4
+
+
+@pytest.fixture(scope="module")
+def plain_fmus(tmp_path_factory):
+    """A foreign FMU: TestCounter as a plain pythonfmu 0.7.0 FMU (no forwarder)."""
+    dest = tmp_path_factory.mktemp("plain")
+    build_unit(COUNTER, dest, BuildConfig(frame=4), extra_packages=[FIXTURE_PACKAGE],
+               forwarder=fwd.NoForwarder("test: plain pythonfmu FMU"))
+    return dest
+
+
+def test_the_plain_build_keeps_pythonfmus_binary(plain_fmus):
+    with zipfile.ZipFile(plain_fmus / "TestCounter.fmu") as archive:
+        names = set(archive.namelist())
+    assert "binaries/linux64/TestCounter.so" in names and "binaries/linux64/TestCounter_pythonfmu.so" not in names
+    assert fwd.SETTINGS_MEMBER not in names
+
+
+def _two_counters(folder, fmu):
+    write_ssd(folder, "two", [ComponentSpec("a", str(fmu), 0.001), ComponentSpec("b", str(fmu), 0.001)],
+              [ConnectionSpec("a.t_end", "b.u")], stop_time=0.05)
+    return folder
+
+
+def test_a_foreign_pythonfmu_fmu_runs_and_its_library_is_released(plain_fmus, tmp_path, monkeypatch):
+    """Foreign plain pythonfmu binaries keep the orchestrator's release (FmuSlave.free)."""
+    from orchestrator import fmu
+    from orchestrator.run import RunOptions, run_system
+
+    monkeypatch.setattr(fmu, "_LIVE_LIBRARIES", {})
+    folder = _two_counters(tmp_path / "sys", plain_fmus / "TestCounter.fmu")
+    run_system(folder, RunOptions(output_dir=tmp_path / "o", output_interval=0.01))
+    assert len(fmu._LIVE_LIBRARIES) == 1 and set(fmu._LIVE_LIBRARIES.values()) == {0}
+    code, _, stderr = railcosim("run", folder, "--no-build", "--output", tmp_path / "o2")
+    assert code == 0, stderr[-800:]
+
+
+def test_our_fmus_need_no_release_by_the_orchestrator(test_fmus, tmp_path, monkeypatch):
+    from orchestrator import fmu
+    from orchestrator.run import RunOptions, run_system
+
+    monkeypatch.setattr(fmu, "_LIVE_LIBRARIES", {})
+    folder = _two_counters(tmp_path / "sys", test_fmus / "TestCounter.fmu")
+    run_system(folder, RunOptions(output_dir=tmp_path / "o", output_interval=0.01))
+    assert fmu._LIVE_LIBRARIES == {}
+
+
+def test_an_fmu_without_a_binary_for_this_platform_is_one_line(test_fmus, tmp_path):
+    stripped = tmp_path / "TestCounter.fmu"
+    with zipfile.ZipFile(test_fmus / "TestCounter.fmu") as source, zipfile.ZipFile(stripped, "w") as target:
+        for info in source.infolist():
+            if not info.filename.startswith("binaries/linux64/"):
+                target.writestr(info, source.read(info))
+    folder = _two_counters(tmp_path / "sys", stripped)
+    code, _, stderr = railcosim("run", folder, "--no-build", "--output", tmp_path / "o")
+    assert code == 2 and len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr
+    assert "TestCounter.fmu: no binary for linux64" in stderr and "win64" in stderr
