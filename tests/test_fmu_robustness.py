@@ -461,7 +461,7 @@ def test_a_bad_rolling_stock_file_given_to_the_train_is_named(product_fmus, tmp_
         assert any(message.startswith(f"Traction: {path}: ") for message in session[-1]["log"]), session[-1]["log"]
 
 
-# ---- the value-reference table a C layer in front of pythonfmu would need ---------------------------
+# ---- the value-reference table (the forwarder's table is written from the modelDescription) ---------
 def test_value_reference_table_matches_the_model_description(product_fmus):
     from fmpy import read_model_description
 
