@@ -59,7 +59,7 @@ def test_the_plain_build_keeps_pythonfmus_binary(plain_fmus):
     with zipfile.ZipFile(plain_fmus / "TestCounter.fmu") as archive:
         names = set(archive.namelist())
     assert "binaries/linux64/TestCounter.so" in names and "binaries/linux64/TestCounter_pythonfmu.so" not in names
-    assert fwd.SETTINGS_MEMBER not in names
+    assert fwd.SETTINGS_MEMBER not in names and fwd.VALUE_REFERENCES_MEMBER not in names
 
 
 def _two_counters(folder, fmu):
@@ -101,3 +101,43 @@ def test_an_fmu_without_a_binary_for_this_platform_is_one_line(test_fmus, tmp_pa
     code, _, stderr = railcosim("run", folder, "--no-build", "--output", tmp_path / "o")
     assert code == 2 and len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr
     assert "TestCounter.fmu: no binary for linux64" in stderr and "win64" in stderr
+
+
+# ---- the value-reference table the forwarder checks get/set against --------------------------------
+def _table(text: str) -> dict:
+    lines = [line.split() for line in text.splitlines() if not line.startswith("#")]
+    return {words[0]: [int(w) for w in words[1:]] for words in lines}
+
+
+def test_the_value_reference_table_rules():
+    """Every variable under its FMI type (an Enumeration is Integer); settable: inputs,
+    parameters, initial exact/approx; never a constant, the independent variable or a
+    calculated output."""
+    xml = b"""<fmiModelDescription><ModelVariables>
+      <ScalarVariable name="p" valueReference="7" causality="parameter" variability="fixed"><Real start="1"/></ScalarVariable>
+      <ScalarVariable name="u" valueReference="3" causality="input"><Boolean start="false"/></ScalarVariable>
+      <ScalarVariable name="y" valueReference="1" causality="output" initial="calculated"><Real/></ScalarVariable>
+      <ScalarVariable name="y0" valueReference="2" causality="output" initial="exact"><Real start="0"/></ScalarVariable>
+      <ScalarVariable name="e" valueReference="4" causality="input"><Enumeration declaredType="E" start="1"/></ScalarVariable>
+      <ScalarVariable name="k" valueReference="5" variability="constant"><Integer start="2"/></ScalarVariable>
+      <ScalarVariable name="t" valueReference="0" causality="independent"><Real/></ScalarVariable>
+      <ScalarVariable name="s" valueReference="6" causality="local"><String start=""/></ScalarVariable>
+    </ModelVariables></fmiModelDescription>"""
+    assert _table(fwd.value_reference_text(xml)) == {
+        "Real": [0, 1, 2, 7], "Real:set": [2, 7], "Integer": [4, 5], "Integer:set": [4],
+        "Boolean": [3], "Boolean:set": [3], "String": [6], "String:set": []}
+
+
+def test_the_built_table_is_the_facades_value_reference_table(product_fmus):
+    """What the forwarder reads is what FrameSlave.value_reference_table() gives: every reference
+    per type; settable exactly the parameters and inputs."""
+    from fmus.loco_receiver.facade import LocoReceiver
+    from fmus.traction.facade import Traction
+
+    for facade in (Traction, LocoReceiver):
+        with zipfile.ZipFile(product_fmus / f"{facade.__name__}.fmu") as archive:
+            built = _table(archive.read(fwd.VALUE_REFERENCES_MEMBER).decode())
+        table = facade(instance_name="f", resources=None).value_reference_table()
+        for fmi_type, by_causality in table.items():
+            assert built[fmi_type] == sorted(vr for vrs in by_causality.values() for vr in vrs), (facade, fmi_type)
+            assert built[f"{fmi_type}:set"] == sorted(by_causality.get("parameter", []) + by_causality.get("input", []))

@@ -137,6 +137,20 @@ def test_c_host_with_the_fmu_env_overrides(product_fmus, host_binary, tmp_path):
     assert proc.returncode == 0, proc.stderr[-800:]
 
 
+def test_c_host_gets_fmi2error_for_a_bad_value_reference(product_fmus, host_binary, tmp_path):
+    """The forwarder's check in a non-Python host (its own variadic logger), with the table found
+    through a percent-encoded resource URI: every fmi2SetReal of an unknown reference is fmi2Error
+    with the logged message, nothing is set (the train stays at x0), and the run goes on to exit 0."""
+    arguments = host_arguments(product_fmus / "Traction.fmu", tmp_path / "fmu folder")
+    assert "%20" in arguments[1]
+    command, x, v = arguments[6:]
+    proc = run_host(host_binary, [*arguments[:6], "999999=1.0", x])
+    assert proc.returncode == 0, proc.stderr[-800:]
+    refused = [line for line in proc.stderr.splitlines() if "999999" in line]
+    assert len(refused) == 120 and set(refused) == {"[host 3] host: value reference 999999 is not a Real variable"}
+    assert proc.stdout.split() == [x, "400"]
+
+
 # ---- (d) a Python that cannot start, or cannot import the slave: a logged failure -----------------
 @pytest.mark.parametrize("env, expected", [
     ({"PYTHONHOME": "/nonexistent/python"}, "Python could not start (PYTHONHOME /nonexistent/python)"),

@@ -18,8 +18,9 @@ do for us:
   min/max): a bad input refuses the step before anything is computed, so the state is untouched;
 * the FMI call order (setupExperiment → enterInitializationMode → exitInitializationMode → doStep
   from the last communication point → terminate) and value references: an unknown reference is
-  refused without a Python exception, which pythonfmu 0.7.0 would turn into fmi2Fatal
-  (docs/interfaces.md, "Bad parameters, inputs and calls").
+  refused without a Python exception, which pythonfmu 0.7.0 would turn into fmi2Fatal. Our
+  FMUs' forwarding binary refuses such a call with fmi2Error before it gets here; this is the
+  backstop without it (docs/interfaces.md, "Bad parameters, inputs and calls").
 
 A port's start value is the core's settings default (``Port(..., start=settings.field)``), so
 a parameter's default is declared once, in the core.
@@ -451,8 +452,9 @@ class FrameSlave(Fmi2Slave):
         return self._get("Boolean", vrs)
 
     def value_reference_table(self) -> Dict[str, Dict[str, List[int]]]:
-        """Per FMI type, the value references by causality: what a C layer in front of this
-        facade needs to refuse an unknown reference with fmi2Error before Python is called."""
+        """Per FMI type, the value references by causality. The forwarding binary's table
+        (written at build from the modelDescription) is this table: every reference per type, and
+        the parameters and inputs as the settable ones (tests/test_forwarder_build.py)."""
         table: Dict[str, Dict[str, List[int]]] = {t: {} for t in _TYPE_CLASSES}
         port_of = {element: port for port in self.ports for element in port.element_names()}
         for vr, variable in self.vars.items():

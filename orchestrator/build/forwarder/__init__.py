@@ -5,8 +5,9 @@ compiler and put in front of pythonfmu's library (docs/architecture.md, "Forward
 are needed (else the FMUs stay plain pythonfmu FMUs and the build says so on stderr); this
 Python's shared libpython must exist (else a UserError naming where it looked). ``install``
 rewrites a built FMU: pythonfmu's ``binaries/linux64/<id>.so`` becomes ``<id>_pythonfmu.so``,
-the forwarder takes its name, and ``resources/railcosim_python.txt`` holds the Python the
-forwarder starts in a process that has none.
+the forwarder takes its name, ``resources/railcosim_python.txt`` holds the Python the
+forwarder starts in a process that has none, and ``resources/railcosim_value_references.txt``
+the value references it lets through to pythonfmu (``value_reference_text``).
 """
 from __future__ import annotations
 
@@ -24,6 +25,8 @@ from orchestrator.errors import UserError
 
 SOURCE = Path(__file__).resolve().with_name("fmi2_forward.c")
 SETTINGS_MEMBER = "resources/railcosim_python.txt"
+VALUE_REFERENCES_MEMBER = "resources/railcosim_value_references.txt"
+FMI_TYPES = ("Real", "Integer", "Boolean", "String")
 MARKER_SYMBOL = "railcosim_forwarder"
 PLATFORM = "linux64"
 
@@ -34,8 +37,10 @@ class Forwarder:
     settings: str          # the text of resources/railcosim_python.txt
 
     def fingerprint(self) -> bytes:
-        """What an FMU's content hash must change with."""
-        return SOURCE.read_bytes() + self.settings.encode()
+        """What an FMU's content hash must change with: the forwarder's source, this module
+        (it writes the value-reference table) and the Python settings. The table's content is
+        the modelDescription's, which the hashed sources already determine."""
+        return SOURCE.read_bytes() + Path(__file__).read_bytes() + self.settings.encode()
 
 
 @dataclass(frozen=True)
@@ -89,6 +94,39 @@ def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
         raise UserError(f"compiling {SOURCE} with {forwarder.compiler} failed: {first}")
 
 
+def value_reference_text(model_description: bytes) -> str:
+    """The forwarder's table (resources/railcosim_value_references.txt) from a modelDescription.xml.
+
+    One line per FMI type with every value reference of that type (``Real 0 1 2``; an
+    Enumeration is read and written as Integer), and one line ``<Type>:set`` with those
+    fmi2Set<Type> may write: FMI 2.0 allows a set of an input, a parameter, or a variable with
+    initial exact or approx, never of a constant, an independent variable or a calculated output.
+    """
+    from xml.etree import ElementTree
+
+    valid = {t: [] for t in FMI_TYPES}
+    settable = {t: [] for t in FMI_TYPES}
+    root = ElementTree.fromstring(model_description)
+    for variable in root.iter("ScalarVariable"):
+        kinds = [child.tag for child in variable if child.tag in (*FMI_TYPES, "Enumeration")]
+        if not kinds:
+            continue
+        fmi_type = "Integer" if kinds[0] == "Enumeration" else kinds[0]
+        vr = int(variable.get("valueReference"))
+        valid[fmi_type].append(vr)
+        causality = variable.get("causality", "local")
+        initial = variable.get("initial")
+        if variable.get("variability") != "constant" and causality != "independent" and (
+                causality in ("parameter", "input") or initial in ("exact", "approx")):
+            settable[fmi_type].append(vr)
+    lines = ["# railcosim_value_references 1: written by `railcosim build` from modelDescription.xml,"
+             " read by the FMU's forwarding binary (docs/architecture.md, \"Forwarding binary\")"]
+    for fmi_type in FMI_TYPES:
+        lines.append(" ".join([fmi_type, *map(str, sorted(valid[fmi_type]))]))
+        lines.append(" ".join([f"{fmi_type}:set", *map(str, sorted(settable[fmi_type]))]))
+    return "\n".join(lines) + "\n"
+
+
 def install(fmu_path: Path, model_identifier: str, forwarder: Forwarder) -> None:
     """Put the forwarder in front of pythonfmu's linux64 binary inside ``fmu_path``."""
     binary = f"binaries/{PLATFORM}/{model_identifier}.so"
@@ -102,13 +140,15 @@ def install(fmu_path: Path, model_identifier: str, forwarder: Forwarder) -> None
             names = source.namelist()
             if binary not in names:
                 raise RuntimeError(f"{fmu_path}: pythonfmu wrote no {binary}")
+            table = value_reference_text(source.read("modelDescription.xml"))  # before writestr moves the infos
             for info in source.infolist():
                 data = source.read(info)
                 if info.filename == binary:
                     info.filename = renamed
-                if info.filename == SETTINGS_MEMBER:
+                if info.filename in (SETTINGS_MEMBER, VALUE_REFERENCES_MEMBER):
                     continue
                 target.writestr(info, data)
             target.write(compiled, binary)
             target.writestr(SETTINGS_MEMBER, forwarder.settings)
+            target.writestr(VALUE_REFERENCES_MEMBER, table)
         shutil.move(str(rewritten), fmu_path)

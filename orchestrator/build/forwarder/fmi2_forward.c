@@ -15,6 +15,15 @@
  *   2. loads <id>_pythonfmu.so from its own folder (dladdr) and forwards every fmi2 function.
  * pythonfmu then finds Python initialised and never starts or finalises one itself.
  *
+ * Value references: pythonfmu cannot return fmi2Error (a Python exception is fmi2Fatal). Each
+ * instance keeps the valid value references per FMI type, read at fmi2Instantiate from
+ * resources/railcosim_value_references.txt under the resource location (written by
+ * `railcosim build` from the modelDescription). A get or set naming a reference that is not a
+ * variable of its type, or a set of one that cannot be set (an output, a calculated value), is
+ * answered fmi2Error with a message through the host's logger and never reaches pythonfmu, so the
+ * instance is untouched. Without the file the calls are forwarded unchecked
+ * (docs/interfaces.md, "Bad parameters, inputs and calls").
+ *
  * Release: at unload (dlclose of this library or process exit) it empties pythonfmu's
  * interpreter state through pythonfmu's finalizePythonInterpreter, before pythonfmu's own
  * exit-time destructors run, and closes pythonfmu's library if no instance is alive. It never
@@ -26,6 +35,7 @@
 #include <Python.h>
 #include <dlfcn.h>
 #include <pthread.h>
+#include <ctype.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,9 +44,10 @@
 #include "fmi2Functions.h"
 
 /* marker checked by tests/test_third_party_host.py */
-FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 1";
+FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 2";
 
 #define SETTINGS_FILE "railcosim_python.txt"
+#define VALUE_REFERENCES_FILE "railcosim_value_references.txt"
 
 /* ---- the Python C API, resolved at run time (libpython is not a link-time dependency) ---- */
 static int (*py_IsInitialized)(void);
@@ -230,6 +241,156 @@ static void release_at_unload(void) {
     pthread_mutex_unlock(&lock);
 }
 
+/* ---- per instance: its name, the host's callbacks and its valid value references ---------- */
+enum { REAL, INTEGER, BOOLEAN, STRING, TYPES };
+static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "String"};
+static const char *const articles[TYPES] = {"a", "an", "a", "a"};
+
+typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
+
+typedef struct Instance {
+    struct Instance *next;
+    fmi2Component component;
+    char name[256];
+    fmi2CallbackFunctions callbacks;   /* a copy: the host's struct need not outlive the call */
+    int checked;                       /* 0: the table was not read, calls are forwarded as they are */
+    Bitmap valid[TYPES];               /* every variable of the type */
+    Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
+} Instance;
+
+static Instance *instances;            /* a short list, guarded by table_lock */
+static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static int bitmap_add(Bitmap *map, unsigned long vr) {
+    if (vr >= map->size) {
+        size_t bytes = vr / 8 + 1, old = map->size / 8;
+        if (bytes < 2 * old) bytes = 2 * old;
+        unsigned char *grown = realloc(map->bits, bytes);
+        if (!grown) return 0;
+        memset(grown + old, 0, bytes - old);
+        map->bits = grown;
+        map->size = bytes * 8;
+    }
+    map->bits[vr / 8] |= (unsigned char)(1u << (vr % 8));
+    return 1;
+}
+
+static int bitmap_has(const Bitmap *map, fmi2ValueReference vr) {
+    return vr < map->size && (map->bits[vr / 8] >> (vr % 8)) & 1;
+}
+
+static void free_instance_entry(Instance *entry) {
+    for (int t = 0; t < TYPES; t++) { free(entry->valid[t].bits); free(entry->settable[t].bits); }
+    free(entry);
+}
+
+/* the local folder of a file: URI (file:///a%20b, file:/a, file://localhost/a), else 0 */
+static int uri_folder(const char *uri, char *out, size_t size) {
+    if (!uri || strncmp(uri, "file:", 5) != 0) return 0;
+    const char *p = uri + 5;
+    if (strncmp(p, "//localhost/", 12) == 0) p += 11;
+    else if (strncmp(p, "///", 3) == 0) p += 2;
+    else if (p[0] == '/' && p[1] == '/') return 0;  /* another host */
+    size_t k = 0;
+    for (; *p && k + 1 < size; p++) {
+        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
+            char hex[3] = {p[1], p[2], 0};
+            out[k++] = (char)strtol(hex, NULL, 16);
+            p += 2;
+        } else {
+            out[k++] = *p;
+        }
+    }
+    out[k] = '\0';
+    while (k > 1 && out[k - 1] == '/') out[--k] = '\0';
+    return k > 0;
+}
+
+/* resources/railcosim_value_references.txt: whitespace-separated words; a word naming a table
+ * ("Real", "Real:set", ...) makes the numbers after it that table's value references; '#'
+ * starts a comment line. Returns 0 if the file cannot be read. */
+static int read_value_references(const char *resource_location, Instance *entry) {
+    char folder[4096], path[4400];
+    if (!uri_folder(resource_location, folder, sizeof folder)) {  /* no usable location: the FMU's own */
+        own_folder(folder, sizeof folder);
+        strncat(folder, "/../../resources", sizeof folder - strlen(folder) - 1);
+    }
+    snprintf(path, sizeof path, "%s/%s", folder, VALUE_REFERENCES_FILE);
+    FILE *file = fopen(path, "r");
+    if (!file) return 0;
+    Bitmap *current = NULL;
+    char word[64];
+    int c = getc(file), ok = 1;
+    while (ok && c != EOF) {
+        if (isspace(c)) { c = getc(file); continue; }
+        if (c == '#') { while (c != EOF && c != '\n') c = getc(file); continue; }
+        size_t len = 0;
+        while (c != EOF && !isspace(c)) { if (len + 1 < sizeof word) word[len++] = (char)c; c = getc(file); }
+        word[len] = '\0';
+        if (isdigit((unsigned char)word[0])) {
+            if (current) ok = bitmap_add(current, strtoul(word, NULL, 10));
+            continue;
+        }
+        current = NULL;
+        for (int t = 0; t < TYPES; t++) {
+            size_t n = strlen(type_names[t]);
+            if (strncmp(word, type_names[t], n) == 0)
+                current = word[n] == '\0' ? &entry->valid[t] : strcmp(word + n, ":set") == 0 ? &entry->settable[t] : NULL;
+            if (current) break;
+        }
+    }
+    fclose(file);
+    return ok;
+}
+
+static Instance *find_instance(fmi2Component c) {
+    pthread_mutex_lock(&table_lock);
+    Instance *entry = instances;
+    while (entry && entry->component != c) entry = entry->next;
+    pthread_mutex_unlock(&table_lock);
+    return entry;  /* lives until fmi2FreeInstance of c, which the host does not call meanwhile */
+}
+
+static void log_error(const Instance *entry, const char *text) {
+    if (!entry->callbacks.logger) return;
+    char escaped[1024];  /* the logger takes a printf format */
+    size_t k = 0;
+    for (const char *p = text; *p && k + 2 < sizeof escaped; p++) {
+        if (*p == '%') escaped[k++] = '%';
+        escaped[k++] = *p;
+    }
+    escaped[k] = '\0';
+    entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Error, "logStatusError", escaped);
+}
+
+/* fmi2Error, logged, at the first value reference that is not a variable of `type` (or, setting,
+ * one that cannot be set); fmi2OK when all are, or when the instance has no table */
+static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[], size_t n, int type, int setting) {
+    if (n == 0) return fmi2OK;
+    Instance *entry = find_instance(c);
+    if (!entry || !entry->checked) return fmi2OK;
+    char text[600];
+    if (!vr) {
+        snprintf(text, sizeof text, "%s: fmi2%s%s with %zu value references and no array",
+                 entry->name, setting ? "Set" : "Get", type_names[type], n);
+        log_error(entry, text);
+        return fmi2Error;
+    }
+    const Bitmap *allowed = setting ? &entry->settable[type] : &entry->valid[type];
+    for (size_t i = 0; i < n; i++) {
+        if (bitmap_has(allowed, vr[i])) continue;
+        if (setting && bitmap_has(&entry->valid[type], vr[i]))
+            snprintf(text, sizeof text, "%s: value reference %u is %s %s variable that cannot be set (not an input or parameter)",
+                     entry->name, (unsigned)vr[i], articles[type], type_names[type]);
+        else
+            snprintf(text, sizeof text, "%s: value reference %u is not %s %s variable",
+                     entry->name, (unsigned)vr[i], articles[type], type_names[type]);
+        log_error(entry, text);
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
 /* ---- the FMI functions -------------------------------------------------------------------- */
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
@@ -253,12 +414,30 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         pthread_mutex_lock(&lock);
         live_instances++;
         pthread_mutex_unlock(&lock);
+        Instance *entry = calloc(1, sizeof *entry);
+        if (entry) {  /* without memory for it: forwarded unchecked */
+            entry->component = component;
+            snprintf(entry->name, sizeof entry->name, "%s", instanceName ? instanceName : "FMU");
+            if (functions) entry->callbacks = *functions;
+            entry->checked = read_value_references(fmuResourceLocation, entry);
+            pthread_mutex_lock(&table_lock);
+            entry->next = instances;
+            instances = entry;
+            pthread_mutex_unlock(&table_lock);
+        }
     }
     return component;
 }
 
 void fmi2FreeInstance(fmi2Component c) {
     if (!c || !target_fmi2FreeInstance) return;
+    pthread_mutex_lock(&table_lock);
+    Instance **link = &instances;
+    while (*link && (*link)->component != c) link = &(*link)->next;
+    Instance *entry = *link;
+    if (entry) *link = entry->next;
+    pthread_mutex_unlock(&table_lock);
+    if (entry) free_instance_entry(entry);
     target_fmi2FreeInstance(c);
     pthread_mutex_lock(&lock);
     live_instances--;
@@ -277,14 +456,22 @@ FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2Terminate, (fmi2Component c), (c))
 FORWARD(fmi2Reset, (fmi2Component c), (c))
-FORWARD(fmi2GetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]), (c, vr, n, value))
-FORWARD(fmi2GetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]), (c, vr, n, value))
-FORWARD(fmi2GetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]), (c, vr, n, value))
-FORWARD(fmi2GetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]), (c, vr, n, value))
-FORWARD(fmi2SetReal, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]), (c, vr, n, value))
-FORWARD(fmi2SetInteger, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]), (c, vr, n, value))
-FORWARD(fmi2SetBoolean, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]), (c, vr, n, value))
-FORWARD(fmi2SetString, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]), (c, vr, n, value))
+/* get and set: every value reference checked first (check_references) */
+#define CHECKED(name, type, setting, params) \
+    fmi2Status name params { \
+        if (!target_##name) return fmi2Error; \
+        if (check_references(c, vr, n, type, setting) != fmi2OK) return fmi2Error; \
+        return target_##name(c, vr, n, value); \
+    }
+
+CHECKED(fmi2GetReal, REAL, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]))
+CHECKED(fmi2GetInteger, INTEGER, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]))
+CHECKED(fmi2GetBoolean, BOOLEAN, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]))
+CHECKED(fmi2GetString, STRING, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]))
+CHECKED(fmi2SetReal, REAL, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]))
+CHECKED(fmi2SetInteger, INTEGER, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]))
+CHECKED(fmi2SetBoolean, BOOLEAN, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]))
+CHECKED(fmi2SetString, STRING, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]))
 FORWARD(fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
 FORWARD(fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))
 FORWARD(fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
