@@ -93,6 +93,8 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         system = open_system(Path(system_path), list(options.fmu_dirs))
     except Interrupted as stop:
         _interrupted_before_start(out, Path(system_path).stem, stop)
+    except OSError as error:            # a .ssp extracted into a full temp folder
+        raise _os_error(error) from None
     try:
         flag.check("before the run started")
         graph = _load_graph(system, options)
@@ -485,12 +487,18 @@ def _raise_failure(outcome: _Outcome, problems: List[str], out: Path) -> None:
     if isinstance(failure, Interrupted):
         raise Interrupted(failure.signum, f"{failure.where}; results so far in {out}"
                           + (f"; {also}" if also else ""))
+    if isinstance(failure, OSError):    # e.g. the temp folder full while an FMU is extracted
+        failure = _os_error(failure)
     if failure is not None:
         if also and isinstance(failure, UserError):
             raise type(failure)(f"{failure}; {also}")
         raise failure
     if also:
         raise UserError(also)
+
+
+def _os_error(error: OSError) -> UserError:
+    return UserError(f"{error.filename or 'a file'}: {error.strerror or error}")
 
 
 def _write_json(path: Path, data: dict) -> None:
