@@ -303,7 +303,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"railcosim: error: {message}", file=sys.stderr)
         return 2
     except Interrupted as stop:
-        print(f"railcosim: {' '.join(str(stop).split())}", file=sys.stderr)
+        try:     # after SIGHUP the terminal may be gone: the exit code still tells
+            print(f"railcosim: {' '.join(str(stop).split())}", file=sys.stderr)
+        except OSError:
+            pass
         return stop.exit_code
     except KeyboardInterrupt:   # outside a run (build, report, inspect): nothing half-written to keep
         print("railcosim: interrupted", file=sys.stderr)

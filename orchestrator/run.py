@@ -273,7 +273,8 @@ class OutputFolder:
             self.path.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as error:
-            raise UserError(f"{label}: cannot create the results folder ({error.strerror or error})") from None
+            what = "the results folder" if not self.path.is_dir() else f"its lock file {LOCK_FILE}"
+            raise UserError(f"{label}: cannot create {what} ({error.strerror or error})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -317,7 +318,10 @@ class OutputFolder:
 def _interrupted_before_start(out: OutputFolder, system_name: str, stop: Interrupted) -> None:
     """A signal before the components were made: the folder gets this run's summary (nothing
     simulated), then :class:`Interrupted` is raised."""
-    out.claim()
+    try:
+        out.claim()
+    except UserError as error:          # the folder is another run's (or cannot be made): leave it
+        raise Interrupted(stop.signum, f"{stop.where}; nothing written ({error})") from None
     try:
         summary = {"system": system_name, "sim_time_s": 0.0, "wall_time_s": 0.0, "realtime_factor": None,
                    "completed": False, "interrupted": stop.signal_name, "error": str(stop)}
