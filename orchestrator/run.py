@@ -173,13 +173,15 @@ def _stop_time(system: SystemDescription, options: RunOptions,
                scenario: Optional[ScenarioManipulator]) -> float:
     """--stop-time, else the scenario's end, else the SSD's DefaultExperiment stopTime."""
     if options.stop_time is not None:
-        stop = options.stop_time
+        stop, origin = options.stop_time, "--stop-time"
     elif scenario is not None and scenario.scenario.end_s:
-        stop = scenario.scenario.end_s
+        stop, origin = scenario.scenario.end_s, f"{scenario.scenario.path}: field end"
     else:
-        stop = system.stop_time
+        stop, origin = system.stop_time, f"{system.ssd_path}: DefaultExperiment stopTime"
     if stop is None:
         raise UserError(f"{system.ssd_path}: no stop time (give --stop-time or a DefaultExperiment stopTime)")
+    if not (math.isfinite(stop) and abs(stop) <= MAX_TIME_S):
+        raise UserError(f"{origin} {stop!r}: must be a finite number of seconds up to {MAX_TIME_S:g}")
     if stop <= system.start_time:
         raise UserError(f"--stop-time {stop}: must be after the start time {system.start_time}")
     return stop

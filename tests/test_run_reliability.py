@@ -341,6 +341,16 @@ def test_non_finite_or_huge_times_are_refused(tmp_path, option, value):
     assert not (tmp_path / "out").exists()
 
 
+def test_a_scenario_ending_at_infinity_is_refused(tmp_path, test_fmus, private_tmp):
+    scenario = tmp_path / "scenario.json"
+    scenario.write_text('{"events": [], "end": Infinity}')        # Python's json reads it
+    code, _, stderr = railcosim("run", _pair(tmp_path, test_fmus), "--no-build", "--output", tmp_path / "out",
+                                "--scenario", scenario)
+    _one_error_line(code, stderr, "scenario.json: field end inf", "finite number of seconds")
+    assert not (tmp_path / "out").exists()
+    _no_leftovers(private_tmp)
+
+
 @pytest.mark.parametrize("option,value", [("--frame", "100000"), ("--sections", "65"), ("--trains", "0"),
                                           ("--trains", "17")])
 def test_build_sizes_are_bounded(tmp_path, option, value):
