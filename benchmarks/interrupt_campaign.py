@@ -61,10 +61,14 @@ def main():
     parser.add_argument("--system", default="ato_only")
     parser.add_argument("--signal", default="INT", choices=["INT", "TERM", "HUP"])
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--min-instant", type=float, default=0.0)
+    parser.add_argument("--max-instant", type=float, default=None,
+                        help="draw the instants in 0..this many seconds (default: a whole run's duration)")
     args = parser.parse_args()
     signum = getattr(signal, f"SIG{args.signal}")
     rng = random.Random(args.seed)
     codes = collections.Counter()
+    unusual = collections.Counter()            # last stderr line of exits other than 0 and 128+n
     own_summary = interrupted_summary = torn = leftovers = finished_first = 0
     began = time.monotonic()
     with tempfile.TemporaryDirectory() as work:
@@ -75,21 +79,28 @@ def main():
             t0 = time.monotonic()
             subprocess.run(_command(args.system, out), env=_environment(work), capture_output=True, check=True)
             durations.append(time.monotonic() - t0)
-        duration = statistics.median(durations)
+        duration = statistics.median(durations) if args.max_instant is None else args.max_instant
         for k in range(args.runs):
             tmpdir = work / f"tmp{k}"
             tmpdir.mkdir()
-            instant = rng.uniform(0.0, duration)
+            instant = rng.uniform(args.min_instant, duration)
             started = time.time()
             proc = subprocess.Popen(_command(args.system, out), env=_environment(tmpdir),
                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
             time.sleep(instant)
             if proc.poll() is None:
                 proc.send_signal(signum)
-            proc.communicate()
+            _, stderr = proc.communicate()
             codes[proc.returncode] += 1
+            if proc.returncode not in (0, 128 + signum):
+                lines = stderr.decode(errors="replace").strip().splitlines()
+                unusual[f"{proc.returncode}: {lines[-1] if lines else '(no message)'}"] += 1
             summary_path = out / "summary.json"
-            if summary_path.is_file() and summary_path.stat().st_mtime >= started:
+            own = summary_path.is_file() and summary_path.stat().st_mtime >= started
+            if not own and proc.returncode in (0, 128 + signum):
+                lines = stderr.decode(errors="replace").strip().splitlines()
+                unusual[f"{proc.returncode} without summary: {lines[-1] if lines else '(no message)'}"] += 1
+            if own:
                 own_summary += 1
                 summary = json.loads(summary_path.read_text())
                 if summary.get("completed") is False and summary.get("interrupted") == f"SIG{args.signal}":
@@ -101,9 +112,11 @@ def main():
             leftovers += len(left)
     wall = time.monotonic() - began
     print(f"{args.runs} runs of `railcosim run {args.system}` (FMI), SIG{args.signal} at a uniform instant in "
-          f"0-{duration:.1f} s: exit codes {dict(sorted(codes.items()))}; this run's summary.json present "
+          f"{args.min_instant:g}-{duration:.1f} s: exit codes {dict(sorted(codes.items()))}; this run's summary.json present "
           f"{own_summary}/{args.runs} (completed false + interrupted {interrupted_summary}, finished before the "
           f"signal {finished_first}); torn results rows {torn}; temp entries left {leftovers}; {wall / 60:.1f} min")
+    for line, count in unusual.most_common():
+        print(f"  {count} x exit {line}")
     expected = 128 + signum
     ok = set(codes) <= {expected, 0} and own_summary == args.runs and torn == 0 and leftovers == 0
     return 0 if ok else 1

@@ -94,15 +94,20 @@ def cmd_build(args) -> int:
 
 
 def cmd_run(args) -> int:
-    """A signal from here on (imports and the build included) stops the run in order."""
+    """A signal from here on (imports and the build included) stops the run in order; the
+    handlers stay until the process has exited (orchestrator/interrupts.py hold_until_exit)."""
     from orchestrator import interrupts
 
-    with interrupts.deferred() as flag:
+    if _ENDS_WITH_PROCESS:
+        flag = interrupts.hold_until_exit()
         status = _run_command(args)
-        if flag is not None and flag.signum:   # after the run's files were complete
-            print(f"railcosim: {interrupts.signal_name(flag.signum)} after the run completed; "
-                  f"its results are complete in {args.output}", file=sys.stderr)
-            return 128 + flag.signum
+    else:                                   # main() called from Python: its handlers come back
+        with interrupts.deferred() as flag:
+            status = _run_command(args)
+    if flag is not None and flag.signum:   # after the run's files were complete
+        print(f"railcosim: {interrupts.signal_name(flag.signum)} after the run completed; "
+              f"its results are complete in {args.output}", file=sys.stderr)
+        return 128 + flag.signum
     return status
 
 
@@ -318,7 +323,14 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 0
 
 
+#: the command line's process ends with the command (entry_point), so the run's signal handlers
+#: may stay until it has exited
+_ENDS_WITH_PROCESS = False
+
+
 def entry_point() -> None:
+    global _ENDS_WITH_PROCESS
+    _ENDS_WITH_PROCESS = True
     status = main()
     sys.stdout.flush()
     sys.stderr.flush()

@@ -71,6 +71,24 @@ def _record(signum, frame) -> None:
         FLAG.signum = signum
 
 
+def hold_until_exit() -> Optional[InterruptFlag]:
+    """Install the recording handlers for the rest of the process (a command line that ends
+    when the run ends): a signal while the interpreter finalises — unloading the FMUs takes
+    a while — is recorded and changes nothing, where Python's own handlers would turn it into
+    a traceback or a death by the signal after the results were complete. Later
+    :func:`deferred` uses nest inside it. None outside the main thread."""
+    global _depth
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    if _depth == 0:
+        FLAG.signum = 0
+        FLAG.count = 0
+        for signum in HANDLED:
+            _previous[signum] = signal.signal(signum, _record)
+    _depth += 1
+    return FLAG
+
+
 @contextmanager
 def deferred() -> Iterator[Optional[InterruptFlag]]:
     """While inside, SIGINT/SIGTERM/SIGHUP only set :data:`FLAG`; the previous handlers are put

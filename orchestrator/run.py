@@ -275,7 +275,8 @@ class OutputFolder:
             self.path.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as error:
-            what = "the results folder" if not self.path.is_dir() else f"its lock file {LOCK_FILE}"
+            made = error.filename is not None and Path(error.filename).name == LOCK_FILE
+            what = f"its lock file {LOCK_FILE}" if made else "the results folder"
             raise UserError(f"{label}: cannot create {what} ({error.strerror or error})") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
