@@ -1,7 +1,8 @@
 """`railcosim` command line: build, run, inspect, validate, fmu-env.
 
-Bad input → one line on stderr, exit code 2, no traceback. Ctrl-C → results so far are
-written, exit code 130. The process exits with its own status every time (the pythonfmu
+Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
+SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
+129 (docs/reliability.md). The process exits with its own status every time (the pythonfmu
 exit-time abort is avoided at its cause, see orchestrator/fmu.py FmuSlave.free).
 """
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import List, Optional
 
 from orchestrator.errors import UserError
+from orchestrator.interrupts import Interrupted
 
 # A checkout (the README's editable install) runs its committed ssp/ and builds into its own
 # build/ wherever the command is started; an installed wheel has no checkout, so it builds into
@@ -21,6 +23,9 @@ IN_CHECKOUT = (PACKAGE_PARENT / "pyproject.toml").is_file() and (PACKAGE_PARENT 
 WORK_ROOT = PACKAGE_PARENT if IN_CHECKOUT else Path.cwd()
 SSP_ROOT = PACKAGE_PARENT / "ssp" if IN_CHECKOUT else WORK_ROOT / "build" / "ssp"
 DEFAULT_SYSTEM = "free_run"
+#: build sizes the CLI accepts (fmus/sizes.py has no limit of its own): a frame of 4096 samples
+#: is 1 s at 4 kHz, and every FMU holds K×M×N-sized arrays, so larger sizes only build for ages
+MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
 
 
 class _Parser(argparse.ArgumentParser):
@@ -71,9 +76,10 @@ def cmd_build(args) -> int:
     from fmus.sizes import BuildConfig
     from orchestrator.build.packing import pack_systems
 
-    for label, value in (("--sections", args.sections), ("--trains", args.trains), ("--frame", args.frame)):
-        if value < 1:
-            raise UserError(f"{label} {value}: must be at least 1")
+    for label, value, most in (("--sections", args.sections, MAX_SECTIONS), ("--trains", args.trains, MAX_TRAINS),
+                               ("--frame", args.frame, MAX_FRAME)):
+        if not 1 <= value <= most:
+            raise UserError(f"{label} {value}: must be from 1 to {most}")
     config = BuildConfig(args.sections, args.trains, args.frame)
     dest = Path(args.dest) if args.dest else _build_dir()
     results = build_all(dest, config, force=args.force)
@@ -88,6 +94,24 @@ def cmd_build(args) -> int:
 
 
 def cmd_run(args) -> int:
+    """A signal from here on (imports and the build included) stops the run in order; the
+    handlers stay until the process has exited (orchestrator/interrupts.py hold_until_exit)."""
+    from orchestrator import interrupts
+
+    if _ENDS_WITH_PROCESS:
+        flag = interrupts.hold_until_exit()
+        status = _run_command(args)
+    else:                                   # main() called from Python: its handlers come back
+        with interrupts.deferred() as flag:
+            status = _run_command(args)
+    if flag is not None and flag.signum:   # after the run's files were complete
+        print(f"railcosim: {interrupts.signal_name(flag.signum)} after the run completed; "
+              f"its results are complete in {args.output}", file=sys.stderr)
+        return 128 + flag.signum
+    return status
+
+
+def _run_command(args) -> int:
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
 
@@ -244,7 +268,9 @@ def make_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a system (folder or .ssp); default: free_run")
     run.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name")
     run.add_argument("--stop-time", type=float, help="seconds (default: the SSD's stopTime)")
-    run.add_argument("--output", default="results", help="results folder (default results/)")
+    run.add_argument("--output", default="results",
+                     help="results folder (default results/); locked while the run uses it, and an "
+                          "earlier run's files in it are replaced")
     run.add_argument("--set", action="append", metavar="COMP.VAR=VALUE", help="override a parameter")
     run.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
     run.add_argument("--output-interval", type=float, default=None,
@@ -289,8 +315,14 @@ def main(argv: Optional[List[str]] = None) -> int:
         message = " ".join(str(error).split())
         print(f"railcosim: error: {message}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("railcosim: interrupted; results so far are written", file=sys.stderr)
+    except Interrupted as stop:
+        try:     # after SIGHUP the terminal may be gone: the exit code still tells
+            print(f"railcosim: {' '.join(str(stop).split())}", file=sys.stderr)
+        except OSError:
+            pass
+        return stop.exit_code
+    except KeyboardInterrupt:   # outside a run (build, report, inspect): nothing half-written to keep
+        print("railcosim: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:   # e.g. `railcosim inspect X | head`: the reader left, nothing to report
         import os
@@ -299,7 +331,14 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 0
 
 
+#: the command line's process ends with the command (entry_point), so the run's signal handlers
+#: may stay until it has exited
+_ENDS_WITH_PROCESS = False
+
+
 def entry_point() -> None:
+    global _ENDS_WITH_PROCESS
+    _ENDS_WITH_PROCESS = True
     status = main()
     sys.stdout.flush()
     sys.stderr.flush()

@@ -25,9 +25,10 @@ from typing import Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.interrupts import NEVER, InterruptFlag
 from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, StepRecord, Transition
 
-__all__ = ["ALGORITHMS", "Algorithm", "Link", "Master"]
+__all__ = ["ALGORITHMS", "Algorithm", "Link", "Master", "shutdown_slaves"]
 
 #: schedules of distinct tick phases kept (a general multi-rate layout past that is planned per tick)
 _MAX_PLANS = 4096
@@ -135,10 +136,13 @@ class _Component:
 
 class Master:
     """Steps the slaves of a graph from start to stop; observers and manipulators plug in
-    (orchestrator/protocols.py)."""
+    (orchestrator/protocols.py). ``interrupt`` is the flag the signal handlers set
+    (orchestrator/interrupts.py): it is tested between components while initialising and once
+    per tick, and a set flag stops the run with :class:`~orchestrator.interrupts.Interrupted`."""
 
     def __init__(self, graph: SystemGraph, slaves: Mapping[str, Slave], algorithm: Algorithm = "gauss-seidel",
-                 observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = ()):
+                 observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
+                 interrupt: InterruptFlag = NEVER):
         if algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm must be one of {ALGORITHMS}")
         self.graph = graph
@@ -148,6 +152,7 @@ class Master:
         self.manipulators = list(manipulators)
         self.steps_taken = {name: 0 for name in graph.nodes}
         self.time_ticks = 0
+        self.interrupt = interrupt
         self._components = {name: _Component(name, slaves[name], graph.nodes[name].step_ticks)
                             for name in graph.order}
 
@@ -248,7 +253,9 @@ class Master:
     def initialize(self, start_time_s: float, stop_time_s: Optional[float]) -> None:
         components = [self._components[name] for name in self.graph.order]
         inputs, outputs = self._buffer_layout
+        check = self.interrupt.check
         for component in components:
+            check("during initialisation")
             slave, name = component.slave, component.name
             slave.instantiate()
             slave.bind(inputs[name], outputs[name])
@@ -275,10 +282,12 @@ class Master:
             component.slave.write_inputs()
             component.slave.read_outputs()
         for component in components:
+            check("during initialisation")
             component.slave.exit_initialization()
             component.slave.read_outputs()
             for link in component.tracked_links:
                 link.source_updated(start_time_s)
+        check("during initialisation")
         self.time_ticks = round(start_time_s * TICKS_PER_SECOND)
         for manipulator in self.manipulators:
             manipulator.bound(self)
@@ -342,7 +351,10 @@ class Master:
         observers = self.observers
         gather, step, conclude = self._gather, self._step, self._conclude
         tick = self.time_ticks
+        interrupt = self.interrupt
         while tick < stop_ticks:
+            if interrupt.signum:      # a signal arrived: stop between two macro steps
+                break
             for manipulator in manipulators:
                 manipulator.before_tick(self, tick)
             time_s = tick / TICKS_PER_SECOND
@@ -367,22 +379,31 @@ class Master:
                 for observer in observers:
                     observer.after_tick(self, record)
         self.fresh_all()           # the final state, for summaries and whoever reads it next
+        interrupt.check(f"at t = {self.time_s:g} s")
 
     def shutdown(self) -> List[str]:
         """Terminate and free every slave, whatever happened; returns the problems met."""
-        problems = []
-        for name in self.graph.order:
-            slave = self.slaves[name]
-            try:
-                slave.terminate()
-            except Exception as error:
-                problems.append(str(error))
-            try:
-                slave.free()
-            except Exception as error:
-                problems.append(f"{name}: freeInstance failed: {error}")
-        return problems
+        return shutdown_slaves(self.graph.order, self.slaves)
 
     @property
     def time_s(self) -> float:
         return self.time_ticks / TICKS_PER_SECOND
+
+
+def shutdown_slaves(order: Sequence[str], slaves: Mapping[str, Slave]) -> List[str]:
+    """Terminate and free the slaves of ``order`` that exist (also those of a run that failed
+    before its master was made), whatever happened; returns the problems met."""
+    problems = []
+    for name in order:
+        slave = slaves.get(name)
+        if slave is None:
+            continue
+        try:
+            slave.terminate()
+        except Exception as error:
+            problems.append(str(error))
+        try:
+            slave.free()
+        except Exception as error:
+            problems.append(f"{name}: freeInstance failed: {error}")
+    return problems

@@ -8,6 +8,10 @@ read from the slaves on demand).
   Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (docs/interfaces.md,
   "Time and frames").
 * ProgressBar: a terminal progress line on stderr.
+
+A results file that cannot be written (no space left, no permission, a read-only file system,
+a name too long, a folder in its place) stops the run with :class:`ResultsWriteError`: one line
+naming the file and the reason (docs/reliability.md, "Full disks and write errors").
 """
 from __future__ import annotations
 
@@ -26,6 +30,30 @@ from orchestrator.graph import TICKS_PER_SECOND
 from orchestrator.protocols import MasterView, Observer, StepRecord
 
 _ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
+
+
+class ResultsWriteError(UserError):
+    """A results file could not be written; the run stops, what could be written is kept."""
+
+
+def cannot_write(path: Path, error: OSError) -> ResultsWriteError:
+    reason = error.strerror or str(error) or type(error).__name__
+    return ResultsWriteError(f"{path}: cannot write ({reason})")
+
+
+def open_for_writing(path: Path):
+    try:
+        return open(path, "w", newline="")
+    except OSError as error:
+        raise cannot_write(path, error) from None
+
+
+def close_file(path: Path, handle) -> None:
+    """Flush and close; a failed flush still closes the descriptor (and is reported)."""
+    try:
+        handle.close()
+    except OSError as error:
+        raise cannot_write(path, error) from None
 
 
 def scalar_outputs(interface) -> List[str]:
@@ -60,9 +88,12 @@ class Recorder(Observer):
     def started(self, master: MasterView, step: StepRecord) -> None:
         self._slots = [master.output_slot(c, v) for c, v in self.variables]
         self._components = sorted({c for c, _ in self.variables})
-        self._file = open(self.path, "w", newline="")
+        self._file = open_for_writing(self.path)
         self._writer = csv.writer(self._file)
-        self._writer.writerow(["time"] + [f"{c}.{v}" for c, v in self.variables])
+        try:
+            self._writer.writerow(["time"] + [f"{c}.{v}" for c, v in self.variables])
+        except OSError as error:
+            raise cannot_write(self.path, error) from None
         self._write(master, step.tick)
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
@@ -76,16 +107,18 @@ class Recorder(Observer):
         for buffer, index in self._slots:
             value = buffer.values[index]
             row.append(repr(float(value)) if buffer.type == "Real" else str(int(value)))
-        self._writer.writerow(row)
-        self.rows_written += 1
-        if self.rows_written % 100 == 0:
-            self._file.flush()
+        try:    # whole rows only reach the file: a row is written, the buffer flushed per 100 rows
+            self._writer.writerow(row)
+            self.rows_written += 1
+            if self.rows_written % 100 == 0:
+                self._file.flush()
+        except OSError as error:
+            raise cannot_write(self.path, error) from None
 
     def close(self) -> None:
-        if self._file is not None:
-            self._file.flush()
-            self._file.close()
-            self._file = None
+        handle, self._file = self._file, None
+        if handle is not None:
+            close_file(self.path, handle)
 
 
 @dataclass
@@ -141,8 +174,11 @@ class WaveformCapture(Observer):
         self._buffer = slots[0][0]
         self._index = np.array([i for _, i in slots])
         self._step_ticks = master.graph.nodes[self.request.component].step_ticks
-        self._file = open(self.path, "w", newline="")
-        self._file.write(f"time,{self.request.component}.{self.request.port}\n")
+        self._file = open_for_writing(self.path)
+        try:
+            self._file.write(f"time,{self.request.component}.{self.request.port}\n")
+        except OSError as error:
+            raise cannot_write(self.path, error) from None
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
         if self.request.component not in step.stepped:
@@ -157,12 +193,15 @@ class WaveformCapture(Observer):
         times = (start_ticks * n + np.arange(n) * self._step_ticks) / (n * TICKS_PER_SECOND)
         values = self._buffer.values[self._index]
         keep = (times >= self.request.t0) & (times < self.request.t1)
-        np.savetxt(self._file, np.column_stack([times[keep], values[keep]]), delimiter=",", fmt="%.17g")
+        try:
+            np.savetxt(self._file, np.column_stack([times[keep], values[keep]]), delimiter=",", fmt="%.17g")
+        except OSError as error:
+            raise cannot_write(self.path, error) from None
 
     def close(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        handle, self._file = self._file, None
+        if handle is not None:
+            close_file(self.path, handle)
 
 
 class ProgressBar(Observer):

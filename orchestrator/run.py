@@ -2,11 +2,16 @@
 
 Results (docs/interfaces.md, "Results"): results.csv (recorder), capture_*.csv (waveform
 windows), metadata.json and summary.json. They are written whether the run ends, fails or is
-interrupted; a failure is re-raised after the files are complete.
+interrupted (SIGINT, SIGTERM, SIGHUP); a failure is re-raised after the files are complete.
+The output folder is locked for the run and holds one run only (docs/reliability.md).
 """
 from __future__ import annotations
 
+import fcntl
 import json
+import math
+import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,18 +19,24 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from threadpoolctl import threadpool_limits
 
+from orchestrator import interrupts
 from orchestrator.errors import UserError
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.master import Master
-from orchestrator.observers import CaptureRequest, ProgressBar, Recorder, WaveformCapture, scalar_outputs
-from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, SummaryObserver
+from orchestrator.interrupts import InterruptFlag, Interrupted
+from orchestrator.master import Master, shutdown_slaves
+from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
+                                    scalar_outputs)
+from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
 from orchestrator.ssp import SystemDescription, load_parameter_set, open_system
 
 
 DEFAULT_OUTPUT_INTERVAL_S = 0.1
 DEFAULT_SCENARIO = "scenario.json"           # a shipped system's own timed events
+#: the longest time a run may name (--stop-time, --output-interval): 11.6 days of simulated
+#: time; integer-nanosecond sample instants of the longest frames stay within 64 bits
+MAX_TIME_S = 1e6
 
 
 @dataclass
@@ -48,6 +59,8 @@ class RunOptions:
     #: observers that judge the run and contribute sections to summary.json, made from the
     #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
+    #: one line per capture window or scenario event beyond the stop time (default: stderr)
+    warn: Callable[[str], None] = field(default_factory=lambda: _stderr_warning)
 
 
 @dataclass
@@ -60,12 +73,30 @@ class RunResult:
 
 
 def run_system(system_path, options: RunOptions) -> RunResult:
-    """Load a system, run it and write its results. The result files are written whether the
-    run ends, fails or is interrupted (Ctrl-C); a failure is raised after they are complete."""
+    """Load a system, run it and write its results.
+
+    While it runs, SIGINT, SIGTERM and SIGHUP only set a flag (orchestrator/interrupts.py);
+    the run stops at the next safe point and raises :class:`Interrupted` once its files are
+    written. The output folder is locked for the run and holds this run only
+    (:class:`OutputFolder`). Once the folder is claimed the result files are written whether
+    the run ends, fails or is interrupted; a failure is raised after they are complete
+    (docs/reliability.md)."""
+    with interrupts.deferred() as flag:
+        return _run_system(system_path, options, flag if flag is not None else interrupts.NEVER)
+
+
+def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunResult:
     _check_options(options)
-    system = open_system(Path(system_path), list(options.fmu_dirs))
-    workdir = new_workdir()
+    out = OutputFolder(Path(options.output_dir))
     try:
+        flag.check("before the run started")
+        system = open_system(Path(system_path), list(options.fmu_dirs))
+    except Interrupted as stop:
+        _interrupted_before_start(out, Path(system_path).stem, stop)
+    except OSError as error:            # a .ssp extracted into a full temp folder
+        raise _os_error(error) from None
+    try:
+        flag.check("before the run started")
         graph = _load_graph(system, options)
         scenario = _scenario(system, graph, options)
         stop_s = _stop_time(system, options, scenario)
@@ -74,30 +105,52 @@ def run_system(system_path, options: RunOptions) -> RunResult:
         interval_ticks = _output_interval_ticks(graph, options)
         recorded = _recorded(graph, options.record)
         captures = _captures(graph, options.captures)
-        out = Path(options.output_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        # the judges first: making them checks the system's data (a UserError before any FMU is loaded)
+        _warn_beyond_stop(options, scenario, captures, stop_s)
+        # the judges before the folder and the FMUs: making them checks the system's data files
+        # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
         judges = list(options.summaries(graph)) if options.summaries is not None else []
-        slaves = {name: make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
-                  for name, node in graph.nodes.items()}
-        observers = _observers(out, recorded, interval_ticks, captures,
-                               ProgressBar(stop_ticks, start_ticks) if options.progress else None, judges)
-        manipulators = list(options.manipulators) + ([scenario] if scenario is not None else [])
-        master = Master(graph, slaves, options.algorithm, observers, manipulators)
-        outcome = _run(master, system.start_time, stop_s, stop_ticks, options.blas_threads)
-        summary = _summary(graph, master.time_s - system.start_time, outcome, judges, scenario)
-        _write_results(out, summary, _metadata(system, graph, options, stop_s, master, interval_ticks))
-        _raise_failure(outcome)
-        return RunResult(graph, summary, dict(master.steps_taken), master.time_s, out)
-    finally:
-        remove_workdir(workdir)
+        flag.check("before the run started")
+    except Interrupted as stop:
         system.close()
+        _interrupted_before_start(out, system.name, stop)
+    except BaseException:
+        system.close()
+        raise
+    workdir: Optional[Path] = None
+    try:
+        out.claim()                       # from here on the folder holds this run's files
+        workdir = new_workdir()
+        setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
+                       ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
+                       judges)
+        outcome = _run(setup, system.start_time, stop_s, stop_ticks, options.blas_threads)
+        master = outcome.master
+        end_s = master.time_s if master is not None and master.time_ticks >= start_ticks else system.start_time
+        sim_time = end_s - system.start_time
+        summary = _summary(graph, sim_time, outcome, scenario)
+        metadata = _metadata(system, graph, options, stop_s, outcome.steps_taken, interval_ticks)
+        problems = _write_results(out.path, summary, metadata)
+        if flag.signum and outcome.failure is None:
+            # the signal came while the files were closed or written: the run says so
+            outcome.failure = Interrupted(flag.signum, "while the results were written")
+            summary = _summary(graph, sim_time, outcome, scenario)
+            problems = _write_results(out.path, summary, None) + problems
+        _raise_failure(outcome, problems, out.path)
+        return RunResult(graph, summary, dict(outcome.steps_taken), end_s, out.path)
+    finally:
+        if workdir is not None:
+            remove_workdir(workdir)
+        system.close()
+        out.release()
 
 
 # ---- options and loading -------------------------------------------------------------------------
 def _check_options(options: RunOptions) -> None:
     if options.algorithm not in ALGORITHMS:
         raise UserError(f"--algorithm {options.algorithm}: choose {' or '.join(ALGORITHMS)}")
+    for label, value in (("--stop-time", options.stop_time), ("--output-interval", options.output_interval)):
+        if value is not None and not (math.isfinite(value) and abs(value) <= MAX_TIME_S):
+            raise UserError(f"{label} {value!r}: must be a finite number of seconds up to {MAX_TIME_S:g}")
     if options.output_interval is not None and options.output_interval <= 0:
         raise UserError(f"--output-interval {options.output_interval}: must be positive")
 
@@ -124,13 +177,15 @@ def _stop_time(system: SystemDescription, options: RunOptions,
                scenario: Optional[ScenarioManipulator]) -> float:
     """--stop-time, else the scenario's end, else the SSD's DefaultExperiment stopTime."""
     if options.stop_time is not None:
-        stop = options.stop_time
+        stop, origin = options.stop_time, "--stop-time"
     elif scenario is not None and scenario.scenario.end_s:
-        stop = scenario.scenario.end_s
+        stop, origin = scenario.scenario.end_s, f"{scenario.scenario.path}: field end"
     else:
-        stop = system.stop_time
+        stop, origin = system.stop_time, f"{system.ssd_path}: DefaultExperiment stopTime"
     if stop is None:
         raise UserError(f"{system.ssd_path}: no stop time (give --stop-time or a DefaultExperiment stopTime)")
+    if not (math.isfinite(stop) and abs(stop) <= MAX_TIME_S):
+        raise UserError(f"{origin} {stop!r}: must be a finite number of seconds up to {MAX_TIME_S:g}")
     if stop <= system.start_time:
         raise UserError(f"--stop-time {stop}: must be after the start time {system.start_time}")
     return stop
@@ -177,6 +232,112 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Tuple[CaptureReq
     return captures
 
 
+def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulator],
+                      captures: List[Tuple[CaptureRequest, List[str]]], stop_s: float) -> None:
+    """One warning line on stderr per capture window and per scenario event the run never
+    reaches (they are kept out of the results, not refused: the same file serves shorter runs)."""
+    for request, _ in captures:
+        if request.t0 >= stop_s:
+            options.warn(f"--capture {request.component}.{request.port}@{request.t0:g}:{request.t1:g}: "
+                         f"the window starts at or after the stop time {stop_s:g} s; its file stays empty")
+    if scenario is not None:
+        for event in scenario.scenario.events:
+            if event.time_s >= stop_s:
+                options.warn(f"{scenario.scenario.path}: event at t = {event.time_s:g} s on "
+                             f"{event.component}.{event.variable} is at or after the stop time "
+                             f"{stop_s:g} s; not applied")
+
+
+def _stderr_warning(message: str) -> None:
+    print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
+
+
+# ---- the output folder ---------------------------------------------------------------------------
+#: what a run (and `railcosim report` into the run folder) writes; a run removes these before it
+#: starts, so the folder never mixes two runs. Nothing else in the folder is touched.
+RUN_FILES = ("results.csv", "summary.json", "metadata.json")
+RUN_PATTERNS = ("capture_*.csv",)
+REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png")
+LOCK_FILE = ".railcosim.lock"
+
+
+class OutputFolder:
+    """A run's results folder: locked while the run uses it (``flock`` on ``.railcosim.lock``,
+    so a second run into it fails at once) and cleared of an earlier run's files before this
+    run writes (docs/reliability.md, "One run per folder"). The run writes in place, so
+    ``tail -f results.csv`` follows it live."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self._lock_fd: Optional[int] = None
+
+    def claim(self) -> None:
+        if self._lock_fd is not None:
+            return
+        label = f"--output {self.path}"
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            fd = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as error:
+            made = error.filename is not None and Path(error.filename).name == LOCK_FILE
+            what = f"its lock file {LOCK_FILE}" if made else "the results folder"
+            raise UserError(f"{label}: cannot create {what} ({error.strerror or error})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.read(fd, 32).decode(errors="replace").strip()
+            os.close(fd)
+            raise UserError(f"{label}: in use by another run"
+                            + (f" (process {holder})" if holder.isdigit() else "")
+                            + "; choose another --output or wait for it to end") from None
+        self._lock_fd = fd
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError:
+            pass                          # the pid only makes the message above nicer
+        try:
+            self._clear()
+        except OSError as error:
+            self.release()
+            raise UserError(f"{label}: cannot remove an earlier run's "
+                            f"{Path(error.filename or '?').name} ({error.strerror or error})") from None
+
+    def _clear(self) -> None:
+        """Remove the files an earlier run (or its report) wrote: regular files only — a
+        results.csv that is a symlink or a named pipe was put there on purpose and is
+        written through."""
+        names = list(RUN_FILES) + list(REPORT_FILES)
+        for pattern in RUN_PATTERNS:
+            names.extend(p.name for p in self.path.glob(pattern))
+        for name in names:
+            path = self.path / name
+            if path.is_file() and not path.is_symlink():
+                path.unlink()
+
+    def release(self) -> None:
+        """Unlock (the lock file stays: removing it could let two runs lock different files)."""
+        fd, self._lock_fd = self._lock_fd, None
+        if fd is not None:
+            os.close(fd)
+
+
+def _interrupted_before_start(out: OutputFolder, system_name: str, stop: Interrupted) -> None:
+    """A signal before the components were made: the folder gets this run's summary (nothing
+    simulated), then :class:`Interrupted` is raised."""
+    try:
+        out.claim()
+    except UserError as error:          # the folder is another run's (or cannot be made): leave it
+        raise Interrupted(stop.signum, f"{stop.where}; nothing written ({error})") from None
+    try:
+        summary = {"system": system_name, "sim_time_s": 0.0, "wall_time_s": 0.0, "realtime_factor": None,
+                   "completed": False, "interrupted": stop.signal_name, "error": str(stop)}
+        problems = _write_results(out.path, summary, None)
+    finally:
+        out.release()
+    _raise_failure(_Outcome(0.0, stop, [], None, {}), problems, out.path)
+
+
 # ---- observers, the run, the results -------------------------------------------------------------
 def _observers(out: Path, recorded: List[tuple], interval_ticks: int,
                captures: List[Tuple[CaptureRequest, List[str]]], progress: Optional[ProgressBar],
@@ -195,35 +356,76 @@ def _observers(out: Path, recorded: List[tuple], interval_ticks: int,
 
 
 @dataclass
+class _Setup:
+    """What :func:`_run` makes the components, observers and master from."""
+
+    graph: SystemGraph
+    options: RunOptions
+    workdir: Path
+    out: Path
+    recorded: List[tuple]
+    interval_ticks: int
+    captures: List[Tuple[CaptureRequest, List[str]]]
+    progress: Optional[ProgressBar]
+    scenario: Optional[ScenarioManipulator]
+    flag: InterruptFlag
+    judges: Sequence[SummaryObserver]
+
+
+@dataclass
 class _Outcome:
     wall_s: float                       # stepping time, initialisation included
-    failure: Optional[BaseException]    # what stopped the run (Ctrl-C included), if anything
-    problems: List[str]                 # what terminating and freeing the slaves met
+    failure: Optional[BaseException]    # what stopped the run (an interruption included), if anything
+    problems: List[str]                 # what closing the files and shutting the slaves down met
+    master: Optional[Master]
+    steps_taken: Dict[str, int]
+    judges: Sequence[SummaryObserver] = ()
 
 
-def _run(master: Master, start_s: float, stop_s: float, stop_ticks: int, blas_threads: int) -> _Outcome:
-    """Bind, initialise and step; whatever happens, close the observers and shut the slaves
-    down, so the results so far can be written."""
+def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_threads: int) -> _Outcome:
+    """Make the slaves, bind, initialise and step; whatever happens (a failure, a signal, a
+    write error), close every observer and shut every slave made down, so the results so far
+    can be written."""
     began = time.perf_counter()
     failure: Optional[BaseException] = None
+    graph, options, flag = setup.graph, setup.options, setup.flag
+    slaves: Dict[str, Slave] = {}
+    observers: List[Observer] = []
+    judges = setup.judges
+    master: Optional[Master] = None
     try:
         # the cores' matrices are small (≤ 60 states): a second BLAS thread only spins and
         # takes the other core from the process (measured 1.8× slower model generation)
         with threadpool_limits(limits=blas_threads, user_api="blas"):
+            for name, node in graph.nodes.items():
+                flag.check("during initialisation")
+                slaves[name] = make_slave(name, Path(node.fmu_path), node.interface, setup.workdir,
+                                          options.in_process)
+            observers = _observers(setup.out, setup.recorded, setup.interval_ticks, setup.captures,
+                                   setup.progress, judges)
+            manipulators = list(options.manipulators) + ([setup.scenario] if setup.scenario is not None else [])
+            master = Master(graph, slaves, options.algorithm, observers, manipulators, interrupt=flag)
             master.bind()
             master.initialize(start_s, stop_s)
             master.run_until(stop_ticks)
-    except BaseException as error:  # includes Ctrl-C: results so far are still written
+    except BaseException as error:  # a failure or an interruption: results so far are still written
         failure = error
-    finally:
-        wall = time.perf_counter() - began
-        for observer in master.observers:
+    wall = time.perf_counter() - began
+    problems: List[str] = []
+    for observer in observers:       # every one, even when an earlier one cannot close its file
+        try:
             observer.close()
-        problems = master.shutdown()
-    return _Outcome(wall, failure, problems)
+        except Exception as error:
+            if failure is None:
+                failure = error
+            elif str(error) != str(failure):
+                problems.append(str(error))
+    problems.extend(shutdown_slaves(graph.order, slaves))
+    steps = dict(master.steps_taken) if master is not None else {name: 0 for name in graph.nodes}
+    return _Outcome(wall, failure, problems, master, steps, judges)
 
 
-def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome, judges: Sequence[SummaryObserver],
+def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
              scenario: Optional[ScenarioManipulator]) -> dict:
     """summary.json: the run's own keys, then each judge's section, then the scenario's."""
     wall, failure = outcome.wall_s, outcome.failure
@@ -233,10 +435,11 @@ def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome, judges: Seq
         "wall_time_s": wall,
         "realtime_factor": sim_time / wall if wall > 0 else None,
         "completed": failure is None,
+        "interrupted": failure.signal_name if isinstance(failure, Interrupted) else None,
     }
     if failure is not None:
         summary["error"] = str(failure) or type(failure).__name__
-    for judge in judges:
+    for judge in outcome.judges:
         summary.update(judge.summary_section())
     if scenario is not None:
         summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
@@ -244,7 +447,7 @@ def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome, judges: Seq
     return summary
 
 
-def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, master: Master,
+def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, steps_taken: Dict[str, int],
               interval_ticks: int) -> dict:
     return {
         "system": graph.name,
@@ -265,7 +468,7 @@ def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, mast
                 "generation_tool": node.interface.generation_tool,
                 "version": node.interface.version,
                 "step_size_s": node.step_ticks / TICKS_PER_SECOND,
-                "steps_taken": master.steps_taken[name],
+                "steps_taken": steps_taken[name],
                 "parameters": {k: v for k, v in node.parameters.items()},
                 "seeds": {k: v for k, v in node.parameters.items() if "seed" in k.lower()},
             } for name, node in graph.nodes.items()
@@ -273,19 +476,53 @@ def _metadata(system, graph: SystemGraph, options: RunOptions, stop: float, mast
     }
 
 
-def _write_results(out: Path, summary: dict, metadata: dict) -> None:
-    """summary.json and metadata.json (results.csv and the captures are streamed as the run goes)."""
-    _write_json(out / "summary.json", summary)
-    _write_json(out / "metadata.json", metadata)
+def _write_results(out: Path, summary: dict, metadata: Optional[dict]) -> List[str]:
+    """summary.json and metadata.json (results.csv and the captures are streamed as the run
+    goes), each whole or not at all; returns what could not be written."""
+    problems = []
+    for name, data in (("summary.json", summary), ("metadata.json", metadata)):
+        if data is None:
+            continue
+        try:
+            _write_json(out / name, data)
+        except OSError as error:
+            problems.append(str(cannot_write(out / name, error)))
+    return problems
 
 
-def _raise_failure(outcome: _Outcome) -> None:
-    """Once the results are written: what stopped the run, else what shutting down met."""
-    if outcome.failure is not None:
-        raise outcome.failure
-    if outcome.problems:
-        raise UserError("; ".join(outcome.problems))
+def _raise_failure(outcome: _Outcome, problems: List[str], out: Path) -> None:
+    """Once the results are written: what stopped the run, else what closing, shutting down or
+    writing met — with the files that could not be written."""
+    failure = outcome.failure
+    also = "; ".join(outcome.problems + problems)
+    if isinstance(failure, Interrupted):
+        raise Interrupted(failure.signum, f"{failure.where}; results so far in {out}"
+                          + (f"; {also}" if also else ""))
+    if isinstance(failure, OSError):    # e.g. the temp folder full while an FMU is extracted
+        failure = _os_error(failure)
+    if failure is not None:
+        if also and isinstance(failure, UserError):
+            raise type(failure)(f"{failure}; {also}")
+        raise failure
+    if also:
+        raise UserError(also)
+
+
+def _os_error(error: OSError) -> UserError:
+    return UserError(f"{error.filename or 'a file'}: {error.strerror or error}")
 
 
 def _write_json(path: Path, data: dict) -> None:
-    path.write_text(json.dumps(data, indent=2, default=str) + "\n")
+    """Write beside, then rename: a reader sees the old file or the new one, never half of one."""
+    text = json.dumps(data, indent=2, default=str) + "\n"
+    temp = path.with_name(f".{path.name}.tmp")
+    try:
+        with open(temp, "w") as handle:
+            handle.write(text)
+        os.replace(temp, path)
+    except BaseException:
+        try:
+            temp.unlink()
+        except OSError:
+            pass
+        raise

@@ -411,14 +411,14 @@ def open_system(path: Path, fmu_dirs: List[Path] = ()) -> SystemDescription:
     """Load a system from a folder holding SystemStructure.ssd or from a .ssp archive."""
     path = Path(path)
     temp_dir = None
-    if path.is_file():
-        temp_dir = _unpack_archive(path)
-        folder = Path(temp_dir)
-    elif path.is_dir():
-        folder = path
-    else:
+    if not path.is_file() and not path.is_dir():
         raise UserError(f"{path}: no such system (give a folder with SystemStructure.ssd or a .ssp file)")
-    try:
+    try:  # the extraction folder goes whatever fails while opening (a refused or corrupt archive too)
+        if path.is_file():
+            temp_dir = _unpack_archive(path)
+            folder = Path(temp_dir)
+        else:
+            folder = path
         system = read_ssd(folder / "SystemStructure.ssd", folder, fmu_dirs)
     except BaseException:
         if temp_dir:

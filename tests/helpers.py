@@ -19,10 +19,18 @@ def read_csv(path: Path):
     return header, data
 
 
-def railcosim(*args, cwd=None):
-    """Run the CLI as a user does; returns (exit code, stdout, stderr). The CLI is this
-    checkout's (its root first on PYTHONPATH), whatever checkout an editable install points at."""
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+def cli_environment(**extra) -> dict:
+    """The environment of a CLI subprocess: this checkout's orchestrator first on the path (not
+    whichever copy is installed), plus ``extra`` (e.g. a private TMPDIR)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    env.update({key: str(value) for key, value in extra.items()})
+    return env
+
+
+def railcosim(*args, cwd=None, env=None, **popen):
+    """Run the CLI as a user does (this checkout's code); returns (exit code, stdout, stderr)."""
     proc = subprocess.run([sys.executable, "-m", "orchestrator", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600, env=env)
+                          env=cli_environment(**(env or {})), capture_output=True, text=True, timeout=600,
+                          **popen)
     return proc.returncode, proc.stdout, proc.stderr

@@ -1,6 +1,9 @@
-"""Pack a shipped system folder and the FMUs it names into one .ssp archive."""
+"""Pack a shipped system folder and the FMUs it names into one .ssp archive (atomically:
+written to a temporary file in the same folder, then renamed over the old archive)."""
 from __future__ import annotations
 
+import os
+import tempfile
 import zipfile
 from pathlib import Path
 from typing import List
@@ -17,13 +20,24 @@ def pack_system(folder: Path, fmu_dir: Path, dest: Path) -> Path:
     sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component") if c.get("source")]
     target = dest / f"{folder.name}.ssp"
     dest.mkdir(parents=True, exist_ok=True)
-    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as archive:
-        for path in sorted(folder.rglob("*")):
-            if path.is_file() and "__pycache__" not in path.parts:
-                archive.write(path, path.relative_to(folder).as_posix())
-        for source in sorted(set(sources)):
-            if not (folder / source).is_file():
-                archive.write(fmu_dir / Path(source).name, source)
+    # written beside and renamed into place: a reader of the .ssp (a run started meanwhile)
+    # sees the old archive or the new one, never a half-written zip
+    handle, temp_name = tempfile.mkstemp(prefix=f".{folder.name}.", suffix=".ssp.tmp", dir=dest)
+    os.close(handle)
+    temp = Path(temp_name)
+    try:
+        with zipfile.ZipFile(temp, "w", zipfile.ZIP_DEFLATED) as archive:
+            for path in sorted(folder.rglob("*")):
+                if path.is_file() and "__pycache__" not in path.parts:
+                    archive.write(path, path.relative_to(folder).as_posix())
+            for source in sorted(set(sources)):
+                if not (folder / source).is_file():
+                    archive.write(fmu_dir / Path(source).name, source)
+        os.chmod(temp, 0o644)             # mkstemp makes it private; an archive is for everyone
+        os.replace(temp, target)
+    except BaseException:
+        temp.unlink(missing_ok=True)
+        raise
     return target
 
 
