@@ -17,7 +17,7 @@ pytest.importorskip("libcosimpy")
 
 RUNNER = Path(__file__).resolve().parent / "host" / "peer_run.py"
 # systems whose parameters name data files of their own (resources/ of the system): libcosim passes a
-# String parameter as written, and the FMU, which never sees the system's folder, does not find them
+# String parameter as written; the FMU finds the file in its own resources, where packing copies it
 OWN_DATA_FILES = ("following", "same_block", "joints_at_speed", "freight_ac", "als_en_following",
                   "fire_dqpsk_following")
 
@@ -85,22 +85,17 @@ def test_libcosim_reproduces_railcosim_jacobi(tmp_path, packed, system, stop_s):
     assert code == 0, f"libcosim exited {code} after writing its results: {err}"
 
 
-@pytest.mark.parametrize("system", ["als_en", "fire_dqpsk", "faults"])
+@pytest.mark.parametrize("system", ["als_en", "fire_dqpsk", "faults", *OWN_DATA_FILES])
 def test_libcosim_loads_and_steps_the_other_shipped_systems(tmp_path, packed, system):
-    """The shipped systems without data files of their own load and step in libcosim as written
-    (ato_only and free_run run in full above)."""
-    code, out, err = _peer("libcosim", packed / f"{system}.ssp", 1.0, 0.5, tmp_path / "libcosim.csv", ["rx.level"])
-    assert "5 components, 1 s simulated" in out, err
+    """Every other shipped system loads and steps in libcosim as written (ato_only and free_run run
+    in full above), those with data files of their own too: the packed FMUs carry the system's
+    data files in their resources (orchestrator/build/packing.py)."""
+    receiver = "rx1" if "following" in system or system == "same_block" else "rx"
+    code, out, err = _peer("libcosim", packed / f"{system}.ssp", 1.0, 0.5, tmp_path / "libcosim.csv",
+                           [f"{receiver}.level"])
+    assert "file not found" not in err
+    assert "components, 1 s simulated" in out, err
     assert code == 0, f"libcosim exited {code} after stepping: {err}"
-
-
-@pytest.mark.xfail(strict=True, reason="a system's own data files (resources/ of the SSP) are named by String "
-                   "parameters relative to the system folder; libcosim passes them as written and the FMU, "
-                   "which never sees that folder, does not find them (docs/interfaces.md#ssp-conventions)")
-def test_libcosim_runs_a_system_with_data_files_of_its_own(tmp_path, packed):
-    code, out, err = _peer("libcosim", packed / "joints_at_speed.ssp", 0.5, 0.5, tmp_path / "libcosim.csv")
-    assert "throat_line.json: file not found" not in err
-    assert code == 0 and "0.5 s simulated" in out, err
 
 
 def test_own_data_files_are_what_the_list_above_says():

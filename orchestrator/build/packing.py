@@ -1,5 +1,10 @@
 """Pack a shipped system folder and the FMUs it names into one .ssp archive (atomically:
-written to a temporary file in the same folder, then renamed over the old archive)."""
+written to a temporary file in the same folder, then renamed over the old archive).
+
+A system's own data files (its ``resources/``) are also copied into the ``resources/`` of each
+FMU inside the archive. Our runner resolves a relative data-file parameter against the system
+(docs/interfaces.md, "Data files"); another engine (libcosim, FMPy) passes the String as written,
+and the FMU then finds the file in its own resources (docs/third_party.md)."""
 from __future__ import annotations
 
 import os
@@ -30,15 +35,35 @@ def pack_system(folder: Path, fmu_dir: Path, dest: Path) -> Path:
             for path in sorted(folder.rglob("*")):
                 if path.is_file() and "__pycache__" not in path.parts:
                     archive.write(path, path.relative_to(folder).as_posix())
+            data_files = sorted(p for p in (folder / "resources").glob("*")
+                                if p.is_file() and p.suffix != ".fmu")
             for source in sorted(set(sources)):
                 if not (folder / source).is_file():
-                    archive.write(fmu_dir / Path(source).name, source)
+                    _write_fmu(archive, fmu_dir / Path(source).name, source, data_files)
         os.chmod(temp, 0o644)             # mkstemp makes it private; an archive is for everyone
         os.replace(temp, target)
     except BaseException:
         temp.unlink(missing_ok=True)
         raise
     return target
+
+
+def _write_fmu(archive: zipfile.ZipFile, fmu: Path, member: str, data_files: List[Path]) -> None:
+    """The FMU as ``member``, with the system's data files added to its resources (the system's
+    copy replaces a bundled file of the same name, as our runner would choose it)."""
+    if not data_files:
+        archive.write(fmu, member)
+        return
+    added = {f"resources/{path.name}": path for path in data_files}
+    with tempfile.SpooledTemporaryFile(max_size=64 << 20) as buffer:
+        with zipfile.ZipFile(fmu) as source, zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as copy:
+            for info in source.infolist():
+                if info.filename not in added:
+                    copy.writestr(info, source.read(info))
+            for name, path in added.items():
+                copy.write(path, name)
+        buffer.seek(0)
+        archive.writestr(zipfile.ZipInfo.from_file(fmu, member), buffer.read(), zipfile.ZIP_STORED)
 
 
 def pack_systems(ssp_root: Path, fmu_dir: Path, dest: Path) -> List[Path]:
