@@ -340,6 +340,9 @@ def entry_point() -> None:
     global _ENDS_WITH_PROCESS
     _ENDS_WITH_PROCESS = True
     status = main()
+    from orchestrator.interrupts import ignore_until_exit
+
+    ignore_until_exit()
     sys.stdout.flush()
     sys.stderr.flush()
     sys.exit(status)

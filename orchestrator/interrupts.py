@@ -112,3 +112,14 @@ def deferred() -> Iterator[Optional[InterruptFlag]]:
             for signum, handler in _previous.items():
                 signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
             _previous.clear()
+
+
+def ignore_until_exit() -> None:
+    """Once a held run's command has returned: ignore the handled signals for the rest of the
+    process. The interpreter's finalisation puts SIG_DFL back for every signal with a Python
+    handler and then unloads the FMUs for a few hundred milliseconds: a signal then killed the
+    process after its results were complete (SIG_IGN is left as it is; blocking would not do,
+    a process-wide signal goes to any thread that does not block it, numpy's included)."""
+    if _depth > 0 and threading.current_thread() is threading.main_thread():
+        for signum in HANDLED:
+            signal.signal(signum, signal.SIG_IGN)

@@ -232,6 +232,24 @@ def test_signal_to_a_run_through_fmi(tmp_path, product_fmus, private_tmp, signum
     _no_leftovers(private_tmp, out)
 
 
+def test_a_signal_while_the_process_exits_changes_nothing(tmp_path, test_fmus, private_tmp):
+    """stdout to a pipe is flushed at exit: its first line comes while the interpreter finalises
+    and unloads the FMUs, when Python has put SIG_DFL back (killed by SIGINT before the fix)."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", str(_pair(tmp_path, test_fmus)),
+                             "--no-build", "--output", str(out)], env=cli_environment(TMPDIR=private_tmp),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.readline()
+    for _ in range(20):
+        if proc.poll() is not None:
+            break
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.01)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 0, stderr
+    assert json.loads((out / "summary.json").read_text())["completed"] is True
+
+
 # ---- one run per folder ------------------------------------------------------------------------------
 def test_a_second_run_into_a_folder_in_use_fails_at_once(tmp_path, product_fmus, private_tmp):
     out = tmp_path / "out"
