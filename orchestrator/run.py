@@ -20,7 +20,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.interrupts import InterruptFlag, Interrupted
@@ -513,8 +513,10 @@ def _os_error(error: OSError) -> UserError:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    """Write beside, then rename: a reader sees the old file or the new one, never half of one."""
-    text = json.dumps(data, indent=2, default=str) + "\n"
+    """Write beside, then rename: a reader sees the old file or the new one, never half of one.
+    Paths inside an unpacked .ssp are written ``<archive>!<member>`` (the extraction folder is
+    gone once the run ends)."""
+    text = shown_paths(json.dumps(data, indent=2, default=str)) + "\n"
     temp = path.with_name(f".{path.name}.tmp")
     try:
         with open(temp, "w") as handle:
