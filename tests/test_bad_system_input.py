@@ -212,8 +212,9 @@ def _line(tmp_path, name="line.json", **change) -> Path:
 
 
 def test_missing_data_file_inside_an_ssp_names_the_archive(tmp_path, product_fmus):
-    archive = tmp_path / "ato_only.ssp"
-    shutil.copy(REPO / "build" / "ato_only.ssp", archive)
+    from orchestrator.build.packing import pack_system
+
+    archive = pack_system(REPO / "ssp" / "ato_only", product_fmus, tmp_path)   # as `railcosim build` packs it
     code, _, stderr = _run(archive, tmp_path, "--set", "train.line_file=missing.json")
     _expect_error(code, stderr, f"{archive}!resources/missing.json: file not found", "train.line_file")
 
