@@ -77,9 +77,14 @@ def hold_until_exit() -> Optional[InterruptFlag]:
     a while — is recorded and changes nothing, where Python's own handlers would turn it into
     a traceback or a death by the signal after the results were complete. Later
     :func:`deferred` uses nest inside it. None outside the main thread."""
-    global _depth
     if threading.current_thread() is not threading.main_thread():
         return None
+    return _install()
+
+
+def _install() -> InterruptFlag:
+    """The recording handlers, installed by the outermost user (which also clears the flag)."""
+    global _depth
     if _depth == 0:
         FLAG.signum = 0
         FLAG.count = 0
@@ -98,14 +103,9 @@ def deferred() -> Iterator[Optional[InterruptFlag]]:
     if threading.current_thread() is not threading.main_thread():
         yield None
         return
-    if _depth == 0:
-        FLAG.signum = 0
-        FLAG.count = 0
-        for signum in HANDLED:
-            _previous[signum] = signal.signal(signum, _record)
-    _depth += 1
+    flag = _install()
     try:
-        yield FLAG
+        yield flag
     finally:
         _depth -= 1
         if _depth == 0:
