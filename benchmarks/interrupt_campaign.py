@@ -69,7 +69,7 @@ def main():
     rng = random.Random(args.seed)
     codes = collections.Counter()
     unusual = collections.Counter()            # last stderr line of exits other than 0 and 128+n
-    own_summary = interrupted_summary = torn = leftovers = finished_first = 0
+    own_summary = interrupted_summary = torn = leftovers = finished_first = before_start = 0
     began = time.monotonic()
     with tempfile.TemporaryDirectory() as work:
         work = Path(work)
@@ -97,7 +97,9 @@ def main():
                 unusual[f"{proc.returncode}: {lines[-1] if lines else '(no message)'}"] += 1
             summary_path = out / "summary.json"
             own = summary_path.is_file() and summary_path.stat().st_mtime >= started
-            if not own and proc.returncode in (0, 128 + signum):
+            if not own and proc.returncode == 128 + signum and b"before the command started" in stderr:
+                before_start += 1           # still loading Python and railcosim: no run, nothing written
+            elif not own and proc.returncode in (0, 128 + signum):
                 lines = stderr.decode(errors="replace").strip().splitlines()
                 unusual[f"{proc.returncode} without summary: {lines[-1] if lines else '(no message)'}"] += 1
             if own:
@@ -114,11 +116,11 @@ def main():
     print(f"{args.runs} runs of `railcosim run {args.system}` (FMI), SIG{args.signal} at a uniform instant in "
           f"{args.min_instant:g}-{duration:.1f} s: exit codes {dict(sorted(codes.items()))}; this run's summary.json present "
           f"{own_summary}/{args.runs} (completed false + interrupted {interrupted_summary}, finished before the "
-          f"signal {finished_first}); torn results rows {torn}; temp entries left {leftovers}; {wall / 60:.1f} min")
+          f"signal {finished_first}; interrupted before the command started, nothing written: {before_start}); torn results rows {torn}; temp entries left {leftovers}; {wall / 60:.1f} min")
     for line, count in unusual.most_common():
         print(f"  {count} x exit {line}")
     expected = 128 + signum
-    ok = set(codes) <= {expected, 0} and own_summary == args.runs and torn == 0 and leftovers == 0
+    ok = set(codes) <= {expected, 0} and own_summary + before_start == args.runs and torn == 0 and leftovers == 0
     return 0 if ok else 1
 
 
