@@ -37,6 +37,21 @@ def _environment(tmpdir):
     return env
 
 
+def _before_command(code: int, signum: int, stderr: str) -> bool:
+    """The signal came before `railcosim run` had installed its handlers: while the interpreter
+    started (site's .pth files: a KeyboardInterrupt traceback with no railcosim frame, exit 1 or
+    death by the signal) or while railcosim loaded (one line, exit 128 + n)."""
+    if code == 128 + signum:
+        return stderr.strip() in ("railcosim: interrupted",
+                                  "railcosim: interrupted before the command started; nothing was written")
+    return code in (1, -signum) and "orchestrator" not in stderr and (
+        "KeyboardInterrupt" in stderr or not stderr.strip())
+
+
+def _start_phase(code: int, stderr: str) -> str:
+    return "railcosim loading (exit 130, one line)" if code > 1 else f"interpreter start-up (exit {code})"
+
+
 def _torn_rows(path: Path) -> int:
     if not path.is_file():
         return 0
@@ -70,6 +85,7 @@ def main():
     codes = collections.Counter()
     unusual = collections.Counter()            # last stderr line of exits other than 0 and 128+n
     own_summary = interrupted_summary = torn = leftovers = finished_first = before_start = 0
+    starts = collections.Counter()
     began = time.monotonic()
     with tempfile.TemporaryDirectory() as work:
         work = Path(work)
@@ -91,16 +107,20 @@ def main():
             if proc.poll() is None:
                 proc.send_signal(signum)
             _, stderr = proc.communicate()
-            codes[proc.returncode] += 1
-            if proc.returncode not in (0, 128 + signum):
-                lines = stderr.decode(errors="replace").strip().splitlines()
-                unusual[f"{proc.returncode}: {lines[-1] if lines else '(no message)'}"] += 1
             summary_path = out / "summary.json"
             own = summary_path.is_file() and summary_path.stat().st_mtime >= started
-            if not own and proc.returncode == 128 + signum and b"before the command started" in stderr:
+            text = stderr.decode(errors="replace")
+            lines = text.strip().splitlines()
+            if not own and _before_command(proc.returncode, signum, text):
                 before_start += 1           # still loading Python and railcosim: no run, nothing written
-            elif not own and proc.returncode in (0, 128 + signum):
-                lines = stderr.decode(errors="replace").strip().splitlines()
+                starts[_start_phase(proc.returncode, text)] += 1
+                run_started = False
+            else:
+                codes[proc.returncode] += 1
+                run_started = True
+            if run_started and proc.returncode not in (0, 128 + signum):
+                unusual[f"{proc.returncode}: {lines[-1] if lines else '(no message)'}"] += 1
+            elif run_started and not own:
                 unusual[f"{proc.returncode} without summary: {lines[-1] if lines else '(no message)'}"] += 1
             if own:
                 own_summary += 1
@@ -114,9 +134,11 @@ def main():
             leftovers += len(left)
     wall = time.monotonic() - began
     print(f"{args.runs} runs of `railcosim run {args.system}` (FMI), SIG{args.signal} at a uniform instant in "
-          f"{args.min_instant:g}-{duration:.1f} s: exit codes {dict(sorted(codes.items()))}; this run's summary.json present "
+          f"{args.min_instant:g}-{duration:.1f} s: exit codes of the runs that had started {dict(sorted(codes.items()))}; this run's summary.json present "
           f"{own_summary}/{args.runs} (completed false + interrupted {interrupted_summary}, finished before the "
           f"signal {finished_first}; interrupted before the command started, nothing written: {before_start}); torn results rows {torn}; temp entries left {leftovers}; {wall / 60:.1f} min")
+    for phase, count in starts.most_common():
+        print(f"  {count} x before the command started, during {phase}")
     for line, count in unusual.most_common():
         print(f"  {count} x exit {line}")
     expected = 128 + signum
