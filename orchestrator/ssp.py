@@ -130,7 +130,10 @@ def _extract_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, dest: Pat
     is an error naming ``<archive>!<member>``."""
     try:
         archive.extract(member, dest)
-    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as error:
+    except NotImplementedError:   # zipfile's answer to a compression method it has no codec for
+        raise UserError(f"{archive_path}!{member.filename}: compressed with a method this Python "
+                        f"cannot read (zip method {member.compress_type}); repack it with deflate") from None
+    except (zipfile.BadZipFile, zlib.error, EOFError) as error:
         raise UserError(f"{archive_path}!{member.filename}: cannot be read from the archive "
                         f"({error or type(error).__name__}); the archive is corrupt") from None
 
