@@ -1,6 +1,7 @@
 """The user documentation: written for users, and its links lead somewhere.
 
-docs/*.md (except docs/changelog.md, which is the place for history) must not read as a
+docs/*.md (except docs/changelog.md, which is the place for history, and the transient
+docs/_pending_*.md notes for the integrator) must not read as a
 development log or point at files a repository reader cannot open; every relative link to a
 docs page from docs/ or README.md must name an existing file and, with #anchor, an existing
 heading (GitHub's slug rules). Each failure lists file:line for every offence.
@@ -28,12 +29,17 @@ LINK = re.compile(r"\]\(\s*(?P<target>[^)\s]+?\.md)(?:#(?P<anchor>[^)\s]*))?\s*\
 PLAIN = re.compile(r"(?<![\w/.-])docs/(?P<target>[\w.-]+\.md)(?:#(?P<anchor>[\w\-%]+))?")
 
 
+def _published():
+    """docs pages a reader sees: not the helpers' docs/_pending_*.md notes for the integrator."""
+    return sorted(p for p in DOCS.glob("*.md") if not p.name.startswith("_pending_"))
+
+
 def user_pages():
-    return sorted(p for p in DOCS.glob("*.md") if p.name != "changelog.md")
+    return [p for p in _published() if p.name != "changelog.md"]
 
 
 def linking_pages():
-    return sorted(DOCS.glob("*.md")) + [ROOT / "README.md"]
+    return _published() + [ROOT / "README.md"]
 
 
 def _outside_code_fences(path):
