@@ -138,9 +138,10 @@ def _run_command(args) -> int:
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
           f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
           f"results in {result.output_dir}")
+    from orchestrator.analysis.verdict import stop_text
+
     for train in summary["trains"]:
-        stops = ", ".join(f"{s['station']} {s['arrival_deviation_s']:+.1f} s / {s['stop_error_m']:+.2f} m"
-                          for s in train.get("stops", []) if s.get("arrival_deviation_s") is not None)
+        stops = ", ".join(stop_text(s) for s in train.get("stops", []))
         atp = (f"; ATP interventions {train['atp_interventions']}, SPAD {train['signals_passed_at_danger']}"
                if "atp_interventions" in train else "")
         print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
