@@ -182,7 +182,7 @@ def write_ato_only(root: Path = SSP_ROOT) -> Path:
 FOLLOWER_TIMETABLE = {"train": "passenger 103 (following)",
                       "stops": [{"station": "A", "departure_s": 430},
                                 {"station": "C", "arrival_s": 1380}]}
-LEADER_HALT_S = (810.0, 810.0 + 50.0 + 180.0)   # full service brake from (≈15.5 km, 100 km/h) → released at
+LEADER_HALT_S = (830.0, 830.0 + 50.0 + 180.0)   # full service brake from (≈15.7 km, 100 km/h): stands ≈50 s + 180 s
 # the two trains cannot both stand at A (400 m) at t = 0: the leader starts ahead at "A east",
 # its head 500 m further on, clear of the follower by 112 m (check_placements)
 LEADER_ORIGIN = ("A east", 900.0)
@@ -194,7 +194,7 @@ SIDINGS_TRACK_END_M = 20600.0
 SIDINGS_LIMIT = {"start_m": 19800, "passenger_kmh": 40, "freight_kmh": 40}
 LEADER_TIMETABLE = {"train": "passenger 101 (leader)", "stops": [
     {"station": LEADER_ORIGIN[0], "departure_s": 60}, {"station": "B", "arrival_s": 515, "departure_s": 575},
-    {"station": SIDINGS[0], "arrival_s": 1120}]}
+    {"station": SIDINGS[0], "arrival_s": 1100}]}
 FOLLOWING_STOP_TIME_S = 1700.0
 
 
