@@ -9,10 +9,11 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
 * ``ato_only`` — the same train and ATO without the signal chain (ATP on line limits): the
   fast system for timetable and energy studies.
 * ``following`` — two trains six minutes apart (the follower does not stop at B); the leader stops in block section 7 for
-  three minutes (its scenario.json); the follower runs on green, yellow, red-yellow, stops
-  before the red signal and resumes.
+  three minutes (its scenario.json), then runs through C to sidings beyond the last block
+  signal; the follower runs on green, yellow, red-yellow, stops before the red signal, resumes
+  and arrives at C.
 * ``faults`` — the free run with a transmitter failure, a broken rail and an open feed
-  injected and repaired by its scenario.json.
+  injected and repaired by its scenario.json; the late train still reaches C.
 * ``joints_at_speed`` — 160 km/h through a station throat: three short track circuits inside one
   block (joints without signals).
 * ``freight_ac`` — a heavy freight train, AC 25 kV, ALSN 25 Hz.
@@ -23,7 +24,9 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
   and ``following`` with the digital systems.
 
 Every train's initial placement is checked here (:func:`check_placements`): on the line, tail
-included, and no two trains overlapping (the rail line refuses both at initialisation).
+included, and no two trains overlapping (checked again before every run:
+orchestrator/analysis/system_checks.py). Train lengths come from the rolling-stock files
+(:func:`stock_length_m`).
 """
 from __future__ import annotations
 
