@@ -138,9 +138,10 @@ def _run_command(args) -> int:
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
           f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
           f"results in {result.output_dir}")
+    from orchestrator.analysis.verdict import stop_text
+
     for train in summary["trains"]:
-        stops = ", ".join(f"{s['station']} {s['arrival_deviation_s']:+.1f} s / {s['stop_error_m']:+.2f} m"
-                          for s in train.get("stops", []) if s.get("arrival_deviation_s") is not None)
+        stops = ", ".join(stop_text(s) for s in train.get("stops", []))
         atp = (f"; ATP interventions {train['atp_interventions']}, SPAD {train['signals_passed_at_danger']}"
                if "atp_interventions" in train else "")
         print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
@@ -245,6 +246,31 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def cmd_new(args) -> int:
+    """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md)."""
+    from orchestrator.analysis.new_system import new_system
+
+    path = new_system(Path(args.name), Path(args.line), args.timetable, args.rolling_stock, args.system,
+                      args.trains, args.traction, _build_dir())
+    print(f"wrote {path.parent} (SystemStructure.ssd, line.ssv, resources/); run it with: railcosim run {args.name}")
+    return 0
+
+
+def add_new_command(sub) -> None:
+    new = sub.add_parser("new", help="write a system folder from your line, timetable(s) and rolling stock")
+    new.add_argument("name", help="folder to write (must not exist yet)")
+    new.add_argument("--line", required=True, metavar="FILE", help="line file (JSON, docs/interfaces.md)")
+    new.add_argument("--timetable", required=True, action="append", metavar="FILE",
+                     help="timetable file; give one per train (train j starts at its first station)")
+    new.add_argument("--rolling-stock", metavar="FILE",
+                     help="rolling-stock file for every train (default: the bundled passenger train; "
+                          "freight_vl80 for --traction ac)")
+    new.add_argument("--system", default="ALSN", help="cab signalling: ALSN (default), ALS-EN or FIRE_DQPSK")
+    new.add_argument("--trains", type=int, help="number of trains (default: one per --timetable)")
+    new.add_argument("--traction", help="dc, ac or none (default: the line's electrification; must agree)")
+    new.set_defaults(func=cmd_new)
+
+
 def cmd_fmu_env(args) -> int:
     from orchestrator.hostenv import host_environment
 
@@ -301,6 +327,8 @@ def make_parser() -> argparse.ArgumentParser:
     validate = sub.add_parser("validate", help="check an FMU or a system")
     validate.add_argument("target")
     validate.set_defaults(func=cmd_validate)
+
+    add_new_command(sub)
 
     env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
     env.set_defaults(func=cmd_fmu_env)

@@ -1,4 +1,4 @@
-"""Acceptance of the shipped systems (issue 8; docs/scenarios.md): no signal passed at danger,
+"""Acceptance of the shipped systems (docs/scenarios.md): no signal passed at danger,
 no wrong-side failure, timetables kept, the following and fault scenarios end where they must.
 The long runs are shortened where the behaviour under test is over, and run in process (the
 same facades without FMI; the FMI path is exercised by the shorter runs in test_ato.py,
@@ -11,9 +11,13 @@ import pytest
 from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S
 from helpers import read_csv
+from orchestrator.analysis.systems import stock_length_m
 from orchestrator.cli import SSP_ROOT
 from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
+
+
+LENGTH_M = stock_length_m()        # the passenger train of the shipped systems (its rolling-stock file)
 
 
 def _run(tmp_path, product_fmus, system, stop_time, record=None):
@@ -31,7 +35,7 @@ def _no_danger(summary, emergency_allowed=False):
     assert summary["receivers"], "no receiver judged"
     for receiver in summary["receivers"]:
         assert receiver["wrong_side_failures"] == 0, receiver
-        assert receiver["unsafe_indications"] == 0, receiver     # judged against the track (issue 22)
+        assert receiver["unsafe_indications"] == 0, receiver     # judged against the track
 
 
 def _on_time(train, stations):
@@ -49,25 +53,34 @@ def test_free_run_keeps_the_timetable_to_15_s_and_stops_to_half_a_metre(tmp_path
 
 
 @pytest.mark.parametrize("system", ["following", "als_en_following", "fire_dqpsk_following"])
-def test_following_the_follower_gets_green_yellow_red_yellow_and_stops_before_the_red_signal(tmp_path, product_fmus,
-                                                                                          system):
-    summary, col = _run(tmp_path, product_fmus, system, 1200.0,
+def test_following_the_follower_stops_before_the_red_signal_and_reaches_c_once_the_line_clears(tmp_path, product_fmus,
+                                                                                                system):
+    summary, col = _run(tmp_path, product_fmus, system, 1600.0,
                         ["leader.x", "follower.x", "follower.v", "follower_ato.atp_aspect"])
     _no_danger(summary)
-    assert [e["t"] for e in summary["scenario"]["events_applied"]] == [810.0, 1040.0]
+    assert [e["t"] for e in summary["scenario"]["events_applied"]] == [830.0, 1060.0]
     follower = next(t for t in summary["trains"] if t["name"] == "follower")
     approach = [a["aspect"] for a in follower["aspects"] if 8000.0 < a["x"] < 15200.0]
     sequence = ["green", "yellow", "red-yellow"]
     assert any(approach[i:i + 3] == sequence for i in range(len(approach))), approach
     # it stops before signal 9 (15.2 km) while the leader's tail is still in section 7 ...
     signal_m = 15200.0
-    standing = np.flatnonzero((col["follower.v"] < 0.01) & (col["follower.x"] > 12800.0))
+    # (standing anywhere from 12.8 km up to C's approach: standing beyond the signal would be caught)
+    standing = np.flatnonzero((col["follower.v"] < 0.01) & (col["follower.x"] > 12800.0)
+                              & (col["follower.x"] < 18000.0))
     assert standing.size
     assert col["follower.x"][standing].max() < signal_m
-    assert col["leader.x"][standing[0]] - 400.0 < 17600.0
-    # ... and goes again once the line clears, on a yellow
+    assert 15200.0 < col["leader.x"][standing[0]] - LENGTH_M < 17600.0
+    # ... goes again only once the leader's tail has left section 7 (the signal cleared) ...
     assert col["follower.x"][-1] > signal_m
-    assert col["follower_ato.atp_aspect"][standing[-1] + 1] == sig.YELLOW
+    assert col["leader.x"][standing[-1] + 1] - LENGTH_M > 17600.0
+    # ... and reaches C: the leader runs through C to the sidings beyond the last signal, off
+    # every track circuit (docs/scenarios.md, following)
+    stops = {s["station"]: s for s in follower["stops"]}
+    assert stops["C"]["reached"] and abs(stops["C"]["stop_error_m"]) <= 0.5, stops
+    leader = next(t for t in summary["trains"] if t["name"] == "leader")
+    assert [(s["station"], s["reached"]) for s in leader["stops"]] == [("B", True), ("C sidings", True)]
+    assert col["leader.x"][-1] - LENGTH_M > 20000.0
 
 
 def test_faults_each_end_in_a_restrictive_state_within_the_latency(tmp_path, product_fmus):
@@ -148,7 +161,7 @@ def test_same_block_the_follower_waits_for_a_code_while_the_leader_stands_in_its
     _no_danger(summary)
     for receiver in summary["receivers"]:
         assert receiver["unsafe_indications"] == 0, receiver
-    leader_tail_m = col["leader.x"] - 400.0
+    leader_tail_m = col["leader.x"] - LENGTH_M
     in_circuit = leader_tail_m < 2600.0
     permissive = np.isin(col["rx2.aspect"], [sig.GREEN, sig.YELLOW, sig.RED_YELLOW]) & (col["rx2.code_valid"] > 0.5)
     assert in_circuit.any() and not permissive[in_circuit].any()

@@ -1,4 +1,4 @@
-"""The verdict against the track (issue 22; docs/scenarios.md, "Results: summary.json"): a
+"""The verdict against the track (docs/scenarios.md, "Results: summary.json"): a
 receiver showing more than the real occupancy allows by the block rules is an unsafe
 indication, even when it shows exactly what the coder sent (then it is no wrong-side failure)."""
 import json

@@ -235,6 +235,10 @@ def verdict_table(summary: dict) -> str:
         for stop in train.get("stops", []):
             sched = stop.get("scheduled_arrival_s")
             dev = stop.get("arrival_deviation_s")
+            if not stop.get("reached", True):      # missed, or the run ended before it
+                lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
+                             f"{'' if sched is None else f'{sched:.0f}':>11s} {'not reached':>9s}")
+                continue
             lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
                          f"{'' if sched is None else f'{sched:.0f}':>11s} {stop.get('arrival_s', 0):9.1f} "
                          f"{'' if dev is None else f'{dev:+.1f}':>7s} {stop.get('stop_error_m', 0):+10.2f}")

@@ -9,7 +9,11 @@ find only at initialisation, or never.
   no track circuit is a place where no train is detected;
 * connected components that both take a line file (an ATO and the train it drives, a train and
   its rail line, the rail line and its coder) run on one line: the same file, or files of
-  identical content.
+  identical content;
+* every train (Traction component) starts on its line, tail included (its length is the one in
+  its rolling-stock file), and no two trains on one rail line overlap at t = 0;
+* a rail line's ``train_length[j]`` is the length in the rolling-stock file of the train on its
+  slot j: a different one is a warning (the rail line would shunt a train of another length).
 
 Every defect is a UserError (one line, exit 2; docs/scenarios.md, "Systems, parameter sets and
 scenarios: bad input").
@@ -17,12 +21,13 @@ scenarios: bad input").
 from __future__ import annotations
 
 import filecmp
+import sys
 from pathlib import Path
 from typing import Callable, Dict, Optional
 
 import fmus
-from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, load_line,
-                              load_rolling_stock, load_timetable)
+from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
+                              load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.signalling import alsn
 from orchestrator.errors import UserError
@@ -32,11 +37,15 @@ from orchestrator.graph import SystemGraph
 #: resources/, which mirror the source tree (resources/fmus/data/shipped/…)
 FMU_RESOURCES_ROOT = Path(fmus.__file__).resolve().parent.parent
 SECTION_GAP_TOLERANCE_M = 1e-6
+LENGTH_TOLERANCE_M = 0.5        # a rail line's train_length against the rolling-stock file's
+TRAIN_MODEL = "Traction"
 
 
-def check_railway_data(graph: SystemGraph) -> None:
-    """Raise a UserError for the first defect of the system's data files (module docstring)."""
+def check_railway_data(graph: SystemGraph, warn: Optional[Callable[[str], None]] = None) -> None:
+    """Raise a UserError for the first defect of the system's data files (module docstring);
+    ``warn`` (default: one line on stderr) gets what is suspicious but runs."""
     lines: Dict[str, Path] = {}
+    stocks: Dict[str, RollingStock] = {}
     loaded: Dict[Path, Line] = {}
     for name, node in graph.nodes.items():
         if "line_file" not in node.interface.variables:
@@ -53,7 +62,7 @@ def check_railway_data(graph: SystemGraph) -> None:
         if "rolling_stock_file" in variables:
             path = _data_path(node.parameters.get("rolling_stock_file"), DEFAULT_ROLLING_STOCK)
             if path is not None:
-                _load(load_rolling_stock, path, f"{name}.rolling_stock_file")
+                stocks[name] = _load(load_rolling_stock, path, f"{name}.rolling_stock_file")
         if "timetable_file" in variables and name in lines:
             path = _data_path(node.parameters.get("timetable_file"), DEFAULT_TIMETABLE)
             if path is not None:
@@ -63,6 +72,8 @@ def check_railway_data(graph: SystemGraph) -> None:
             if path is not None:
                 _load(alsn.load_transmitters, path, f"{name}.codes_file")
     check_shared_lines(graph, lines)
+    check_placements(graph, {name: loaded[path] for name, path in lines.items()}, stocks,
+                     warn or _stderr_warning)
 
 
 def check_sections_contiguous(line: Line) -> None:
@@ -91,6 +102,40 @@ def check_shared_lines(graph: SystemGraph, lines: Dict[str, Path]) -> None:
                         "the rail line and its coder) must run on one line file")
 
 
+def check_placements(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[str, RollingStock],
+                     warn: Callable[[str], None]) -> None:
+    """Every train on its line at t = 0, tail included; no two trains of one rail line
+    overlapping; each rail line's ``train_length[j]`` the length of the train on slot j."""
+    spans = {}                      # train → (tail, head) at t = 0
+    for name, node in graph.nodes.items():
+        if node.interface.model_identifier != TRAIN_MODEL or name not in stocks or name not in lines:
+            continue
+        head_m, length_m, line = float(_parameter(node, "x0", 0.0)), stocks[name].length_m, lines[name]
+        tail_m = head_m - length_m
+        if tail_m < 0.0 or head_m > line.length_m:
+            where = f"its tail at {tail_m:g} m is before the line start" if tail_m < 0.0 else "its head is beyond the line end"
+            raise UserError(f"{node.origin}: train {name!r} (head x0 = {head_m:g} m, {length_m:g} m long in "
+                            f"{_stock_name(node)}) is not on its line {Path(line.path).name} "
+                            f"(0..{line.length_m:g} m): {where}; place its head (x0) from {length_m:g} m to "
+                            f"{line.length_m:g} m")
+        spans[name] = (tail_m, head_m)
+    for rail, node in graph.nodes.items():
+        slots = sorted((int(e.target_var.name[len("x_head["):-1]), e.source) for e in graph.edges
+                       if e.target == rail and e.target_var.name.startswith("x_head[") and e.source in spans)
+        for slot, train in slots:
+            given = _parameter(node, f"train_length[{slot}]", None)
+            length_m = spans[train][1] - spans[train][0]
+            if given is not None and abs(float(given) - length_m) > LENGTH_TOLERANCE_M:
+                warn(f"{rail}.train_length[{slot}] = {float(given):g} m, but train {train!r} on that slot is "
+                     f"{length_m:g} m long ({_stock_name(graph.nodes[train])}): the rail line shunts a train of "
+                     f"another length; set {rail}.train_length[{slot}] = {length_m:g}")
+        placed = sorted((spans[train][0], spans[train][1], train) for _, train in slots)
+        for (_, head_m, behind), (tail_m, _, ahead) in zip(placed, placed[1:]):
+            if tail_m <= head_m:
+                raise UserError(f"{node.origin}: trains {behind!r} (head {head_m:g} m) and {ahead!r} (tail "
+                                f"{tail_m:g} m) overlap at t = 0 on rail line {rail!r}; place them apart (x0)")
+
+
 # ---- helpers -------------------------------------------------------------------------------------
 def _data_path(value, default: Path) -> Optional[Path]:
     """The file the FMU will open for a ``*_file`` parameter (resolved by the graph,
@@ -102,6 +147,23 @@ def _data_path(value, default: Path) -> Optional[Path]:
         return path
     candidate = FMU_RESOURCES_ROOT / path
     return candidate if candidate.is_file() else None
+
+
+def _parameter(node, name: str, default):
+    """A parameter as the FMU will read it: the system's value, else the FMU's start value."""
+    if name in node.parameters:
+        return node.parameters[name]
+    var = node.interface.variables.get(name)
+    return default if var is None or var.start is None else var.start
+
+
+def _stock_name(node) -> str:
+    value = node.parameters.get("rolling_stock_file")
+    return f"{Path(str(value)).name}" if value else f"the bundled default {Path(DEFAULT_ROLLING_STOCK).name}"
+
+
+def _stderr_warning(message: str) -> None:
+    print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
 
 
 def _load(loader: Callable, path: Path, what: str):

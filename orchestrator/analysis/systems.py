@@ -9,10 +9,11 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
 * ``ato_only`` — the same train and ATO without the signal chain (ATP on line limits): the
   fast system for timetable and energy studies.
 * ``following`` — two trains six minutes apart (the follower does not stop at B); the leader stops in block section 7 for
-  three minutes (its scenario.json); the follower runs on green, yellow, red-yellow, stops
-  before the red signal and resumes.
+  three minutes (its scenario.json), then runs through C to sidings beyond the last block
+  signal; the follower runs on green, yellow, red-yellow, stops before the red signal, resumes
+  and arrives at C.
 * ``faults`` — the free run with a transmitter failure, a broken rail and an open feed
-  injected and repaired by its scenario.json.
+  injected and repaired by its scenario.json; the late train still reaches C.
 * ``joints_at_speed`` — 160 km/h through a station throat: three short track circuits inside one
   block (joints without signals).
 * ``freight_ac`` — a heavy freight train, AC 25 kV, ALSN 25 Hz.
@@ -23,7 +24,9 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
   and ``following`` with the digital systems.
 
 Every train's initial placement is checked here (:func:`check_placements`): on the line, tail
-included, and no two trains overlapping (the rail line refuses both at initialisation).
+included, and no two trains overlapping (checked again before every run:
+orchestrator/analysis/system_checks.py). Train lengths come from the rolling-stock files
+(:func:`stock_length_m`).
 """
 from __future__ import annotations
 
@@ -43,7 +46,6 @@ from orchestrator.sspgen import write_ssd as _write_ssd
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
-RAIL_TRAIN_LENGTH_M = 400.0     # the rail line's train_length default (fmus/rail_line/core.py RailSettings)
 
 
 def committed_ports(folder: Path, source: str) -> Optional[Ports]:
@@ -68,9 +70,16 @@ def _shipped_json(name: str) -> dict:
     return json.loads((DATA / name).read_text())
 
 
-def stock_length_m(stock_file: str = "passenger_chs7.json") -> float:
-    """A train's length from its rolling-stock file (a bundled one)."""
-    return float(_shipped_json(stock_file)["length_m"])
+def stock_length_m(stock_file=None) -> float:
+    """A train's length from its rolling-stock file: a bundled one by name, or a path (None or
+    empty: the bundled default, as the FMUs read it). The one source of every train length a
+    system carries (the rail line's ``train_length[j]``; the Traction and ATO read the same file)."""
+    from fmus.data.loader import DATA, DEFAULT_ROLLING_STOCK, load_rolling_stock
+
+    if not stock_file:
+        return float(load_rolling_stock(DEFAULT_ROLLING_STOCK).length_m)
+    path = Path(stock_file)
+    return float(load_rolling_stock(path if path.is_file() else DATA / path).length_m)
 
 
 def check_placements(line: dict, trains: Sequence[Tuple[str, float, float]]) -> None:
@@ -121,13 +130,19 @@ CHAIN_PORTS = ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")
 
 def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sections: int = 8, frame: int = 40,
                  fmu_folder: str = "resources", coder: Dict[str, object] = None, rail: Dict[str, object] = None,
-                 receiver: Dict[str, object] = None):
+                 receiver: Dict[str, object] = None, stocks: Optional[Sequence] = None,
+                 parameter_file: Optional[str] = None):
     """Coder → rail line → one receiver per train (``rx``, or ``rx1``, ``rx2`` … for several) →
-    its ATO, and each train's position back into the rail line (train j on slot j)."""
+    its ATO, and each train's position back into the rail line (train j on slot j). The rail
+    line's ``train_length[j]`` is the length in train j's rolling-stock file (``stocks[j-1]``,
+    default the bundled default stock), so the rail line shunts the train the Traction moves.
+    ``parameter_file``: an .ssv the coder and the rail line also bind (e.g. the line file)."""
     step = frame / SIGNAL_FS_HZ                  # a signal FMU steps one frame
+    stocks = list(stocks) if stocks is not None else [None] * len(trains)
+    lengths = {f"train_length[{j}]": stock_length_m(stock) for j, stock in enumerate(stocks, start=1)}
     components = [
-        ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", step, dict(coder or {})),
-        ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", step, dict(rail or {})),
+        ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", step, dict(coder or {}), parameter_file),
+        ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", step, {**lengths, **(rail or {})}, parameter_file),
     ]
     connections = [ConnectionSpec(f"coder.u_tx[{k},{n}]", f"rail.u_tx[{k},{n}]")
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
@@ -158,37 +173,49 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
             {"cab_signal": "digital", "decoding_latency": round(allowance, 3)})
 
 
-def write_free_run(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "free_run") -> Path:
-    coder, rail, receiver, ato = cab_settings(system)
-    components, connections = train_and_ato(ato_parameters=ato)
-    chain, links = signal_chain(coder=coder, rail=rail, receiver=receiver)
-    return write_ssd(root / name, name, chain + components, connections + links, stop_time=1100.0)
-
-
 def write_ato_only(root: Path = SSP_ROOT) -> Path:
     components, connections = train_and_ato(ato_parameters={"cab_signal": "off"})
     return write_ssd(root / "ato_only", "ato_only", components, connections, stop_time=1100.0)
 
 
 # following: the leader stops in block section 7 (15.2-17.6 km) for three minutes (the system's
-# scenario.json); the follower, six minutes behind and not stopping at B, runs up to it
+# scenario.json); the follower, six minutes behind and not stopping at B, runs up to it, waits
+# before the red signal and goes on to C once the leader has cleared the line: the leader runs
+# through C to the sidings beyond the last block signal (Н3, 20.0 km), off every track circuit
 FOLLOWER_TIMETABLE = {"train": "passenger 103 (following)",
                       "stops": [{"station": "A", "departure_s": 430},
                                 {"station": "C", "arrival_s": 1380}]}
-LEADER_HALT_S = (810.0, 810.0 + 50.0 + 180.0)   # full service brake from (≈15.5 km, 100 km/h) → released at
+LEADER_HALT_S = (830.0, 830.0 + 50.0 + 180.0)   # full service brake from (≈15.7 km, 100 km/h): stands ≈50 s + 180 s
 # the two trains cannot both stand at A (400 m) at t = 0: the leader starts ahead at "A east",
-# its head 500 m further on, clear of the follower by 100 m (check_placements)
+# its head 500 m further on, clear of the follower by 112 m (check_placements)
 LEADER_ORIGIN = ("A east", 900.0)
+# where the leader ends: sidings 500 m beyond the last block signal (its tail 112 m past it), on
+# 600 m of track added to this system's copy of the line without track circuits (no code: the
+# cab shows white, 40 km/h), entered at 40 km/h from just beyond C's stopping point
+SIDINGS = ("C sidings", 20500.0)
+SIDINGS_TRACK_END_M = 20600.0
+SIDINGS_LIMIT = {"start_m": 19800, "passenger_kmh": 40, "freight_kmh": 40}
 LEADER_TIMETABLE = {"train": "passenger 101 (leader)", "stops": [
     {"station": LEADER_ORIGIN[0], "departure_s": 60}, {"station": "B", "arrival_s": 515, "departure_s": 575},
-    {"station": "C", "arrival_s": 1015}]}
+    {"station": SIDINGS[0], "arrival_s": 1100}]}
+FOLLOWING_STOP_TIME_S = 1700.0
+
+
+def following_line() -> dict:
+    """The default line with the leader's origin ("A east") and the sidings beyond Н3."""
+    line = _with_station(_shipped_json("default_line.json"), *LEADER_ORIGIN,
+                         "A east: where the leader of the following systems starts, ahead of the follower at A")
+    line = _with_station(line, *SIDINGS, f"{SIDINGS[0]}: sidings beyond the last block signal "
+                         f"(track without track circuits from 20.0 to {SIDINGS_TRACK_END_M / 1000:g} km, 40 km/h)")
+    line["length_m"] = SIDINGS_TRACK_END_M
+    line["speed_limits"] = line["speed_limits"] + [SIDINGS_LIMIT]
+    return line
 
 
 def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "following") -> Path:
-    line = _with_station(_shipped_json("default_line.json"), *LEADER_ORIGIN,
-                         "A east: where the leader of the following systems starts, ahead of the follower at A")
-    check_placements(line, [("leader", LEADER_ORIGIN[1], RAIL_TRAIN_LENGTH_M),
-                            ("follower", _stop_m(line, "A"), RAIL_TRAIN_LENGTH_M)])
+    line = following_line()
+    length_m = stock_length_m()
+    check_placements(line, [("leader", LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "A"), length_m)])
     files = {"line_file": "following_line.json"}
     coder, rail, receiver, ato = cab_settings(system)
     leader, leader_links = train_and_ato("leader", "leader_ato", train_parameters={**files, "x0": LEADER_ORIGIN[1]},
@@ -198,7 +225,8 @@ def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "fo
     chain, links = signal_chain((("leader", "leader_ato"), ("follower", "follower_ato")),
                                 coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
     folder = root / name
-    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links, stop_time=1600.0)
+    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
+                     stop_time=FOLLOWING_STOP_TIME_S)
     resources = folder / "resources"
     resources.mkdir(exist_ok=True)
     _write_json(resources / "following_line.json", line)
@@ -207,10 +235,10 @@ def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "fo
     halt, release = LEADER_HALT_S
     scenario = {
         "description": "The leader stops in block section 7 (15.2-17.6 km) for three minutes: its ATO's command is "
-                       "overridden by a full service brake, then released. The follower, six minutes behind and not "
-                       "stopping at B, "
-                       "receives green, yellow, red-yellow, stops before the red signal at 15.2 km "
-                       "and resumes when the line clears.",
+                       "overridden by a full service brake, then released; it then runs through C to the sidings "
+                       "beyond the last block signal (20.5 km), clearing the line. The follower, six minutes behind "
+                       "and not stopping at B, receives green, yellow, red-yellow, stops before the red signal at "
+                       "15.2 km, resumes when the line clears and arrives at C.",
         "events": [
             {"time": halt, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
             {"time": release, "model": "leader", "variable": "command", "action": "reset"},
@@ -237,8 +265,20 @@ FAULT_EVENTS = [
 ]
 
 
+# the faults delay the train by about 280 s: it reaches C at about 1300 s
+FAULTS_STOP_TIME_S = 1500.0
+
+
+def write_free_run(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "free_run",
+                   stop_time: float = 1100.0) -> Path:
+    coder, rail, receiver, ato = cab_settings(system)
+    components, connections = train_and_ato(ato_parameters=ato)
+    chain, links = signal_chain(coder=coder, rail=rail, receiver=receiver)
+    return write_ssd(root / name, name, chain + components, connections + links, stop_time=stop_time)
+
+
 def write_faults(root: Path = SSP_ROOT) -> Path:
-    path = write_free_run(root, name="faults")
+    path = write_free_run(root, name="faults", stop_time=FAULTS_STOP_TIME_S)
     scenario = {
         "description": "Faults on the free run, each followed by its repair: the feed of section 1 fails under "
                        "the train (code lost, 100-130 s); the main then the reserve code transmitter fail (no code "
@@ -313,8 +353,9 @@ def write_freight_ac(root: Path = SSP_ROOT) -> Path:
     components, connections = train_and_ato(
         train_parameters={**files, **stock, "x0": FREIGHT_ORIGIN_M},
         ato_parameters={**ato, **files, **stock, "timetable_file": "freight_timetable.json"})
-    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files, "train_length[1]": length_m},
-                                receiver={**receiver, "train_category": "freight", "carrier": 25.0})
+    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files},
+                                receiver={**receiver, "train_category": "freight", "carrier": 25.0},
+                                stocks=[stock["rolling_stock_file"]])
     path = write_ssd(folder, "freight_ac", chain + components, connections + links, stop_time=1900.0)
     _write_json(folder / "resources" / "default_line_ac.json", line)
     _write_json(folder / "resources" / "freight_vl80.json", _shipped_json("freight_vl80.json"))
@@ -336,8 +377,8 @@ SAME_BLOCK_FOLLOWER_TIMETABLE = {"train": "passenger 113 (behind it)", "stops": 
 def write_same_block(root: Path = SSP_ROOT) -> Path:
     line = _with_station(_shipped_json("default_line.json"), *SAME_BLOCK_LEADER_ORIGIN,
                          "2 km: where the leader of the same_block system stands, in the follower's track circuit")
-    check_placements(line, [("leader", SAME_BLOCK_LEADER_ORIGIN[1], RAIL_TRAIN_LENGTH_M),
-                            ("follower", _stop_m(line, "A"), RAIL_TRAIN_LENGTH_M)])
+    check_placements(line, [("leader", SAME_BLOCK_LEADER_ORIGIN[1], stock_length_m()),
+                            ("follower", _stop_m(line, "A"), stock_length_m())])
     files = {"line_file": "same_block_line.json"}
     coder, rail, receiver, ato = cab_settings("ALSN")
     leader, leader_links = train_and_ato(

@@ -2,8 +2,9 @@
 
 A train is a Traction component. When an AtoController drives it (its ``command`` output is
 connected to the train's ``command`` input), the train's entry also carries the ATP/ATO
-verdict: overspeed, interventions, signals passed at danger, every timetable stop reached
-(arrival time and deviation, stop error) and every change of the aspect the ATP acted upon.
+verdict: overspeed, interventions, signals passed at danger, every timetabled stop after the
+origin (reached: arrival time and deviation, stop error; or ``reached: false`` with its
+scheduled arrival) and every change of the aspect the ATP acted upon.
 """
 from __future__ import annotations
 
@@ -125,13 +126,30 @@ class TrainVerdict(_OutputJudge):
 
     def _record_stop(self, train: _Train, stop_index: int) -> None:
         arrival = float(self._value(train.ato, "arrival_time"))
-        entry = {"station": None, "scheduled_arrival_s": None, "arrival_s": arrival,
-                 "arrival_deviation_s": None, "stop_error_m": float(self._value(train.ato, "stop_error"))}
+        entry = {"station": None, "reached": True, "scheduled_arrival_s": None, "arrival_s": arrival,
+                 "arrival_deviation_s": None, "stop_error_m": float(self._value(train.ato, "stop_error")),
+                 "stop_index": stop_index}
         if 0 < stop_index <= len(train.timetable):
             stop = train.timetable[stop_index - 1]
             entry.update(station=stop.station, scheduled_arrival_s=stop.arrival_s,
                          arrival_deviation_s=arrival - stop.arrival_s if stop.arrival_s is not None else None)
         train.stops.append(entry)
+
+    @staticmethod
+    def stops_of(train: _Train) -> List[dict]:
+        """Every timetabled stop after the origin, in timetable order: the arrival recorded when
+        the train reached it, else ``reached: false`` with its scheduled arrival (the stop was
+        missed, or the run ended first); then any arrival beyond the timetable."""
+        reached = {entry["stop_index"]: entry for entry in train.stops}
+        stops = []
+        for index, stop in enumerate(train.timetable[1:], start=2):
+            entry = reached.pop(index, None)
+            if entry is None:
+                entry = {"station": stop.station, "reached": False, "scheduled_arrival_s": stop.arrival_s,
+                         "arrival_s": None, "arrival_deviation_s": None, "stop_error_m": None}
+            stops.append({k: v for k, v in entry.items() if k != "stop_index"})
+        stops += [{k: v for k, v in entry.items() if k != "stop_index"} for _, entry in sorted(reached.items())]
+        return stops
 
     def _record_aspect(self, train: _Train, tick: int, aspect: int) -> None:
 
@@ -158,7 +176,7 @@ class TrainVerdict(_OutputJudge):
                     signals_passed_at_danger=int(self._value(train.ato, "signals_passed_at_danger")),
                     # standing past a departure time without a permissive cab code (docs/ato.md)
                     departure_hold_s=float(self._value(train.ato, "departure_hold")),
-                    stops=train.stops, aspects=train.aspects)
+                    stops=self.stops_of(train), aspects=train.aspects)
             entries.append(entry)
         return entries
 
@@ -563,6 +581,24 @@ def transmitted_indication(system, code: int, category: str):
     """What a coder's raw ``code_tx`` means; None for no code (the system's reading)."""
     command = system.command_of_code(code)
     return None if command is None else system.indication(command, category)
+
+
+def stop_text(stop: dict) -> str:
+    """One stop of a train's summary entry as the CLI and the report show it:
+    ``B +0.0 s / -0.16 m``, or ``C not reached (due 1015 s)``."""
+    station = stop.get("station")
+    if not stop.get("reached", True):
+        due = stop.get("scheduled_arrival_s")
+        return f"{station} not reached" + ("" if due is None else f" (due {due:.0f} s)")
+    deviation = stop.get("arrival_deviation_s")
+    timing = f"{deviation:+.1f} s" if deviation is not None else f"at {stop.get('arrival_s', 0.0):.1f} s"
+    return f"{station} {timing} / {stop.get('stop_error_m', 0.0):+.2f} m"
+
+
+def missed_stops(summary: dict) -> List[Tuple[str, str]]:
+    """(train, station) of every timetabled stop a run did not reach."""
+    return [(train["name"], stop.get("station")) for train in summary.get("trains", [])
+            for stop in train.get("stops", []) if not stop.get("reached", True)]
 
 
 def safety_verdict(summary: dict) -> Tuple[bool, str]:

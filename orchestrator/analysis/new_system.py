@@ -1,0 +1,160 @@
+"""``railcosim new NAME``: a system folder of one's own from a line file, timetables and a
+rolling-stock file (docs/your_own_system.md).
+
+The folder holds what ``railcosim run NAME`` needs:
+
+* ``SystemStructure.ssd`` — the signal chain (wayside coder → rail line → one locomotive receiver
+  per train) and per train its Traction and ATO, written with orchestrator/sspgen.py the way the
+  shipped systems are (orchestrator/analysis/systems.py);
+* ``line.ssv`` — one SSP parameter set holding ``line_file``, bound by every component that
+  reads the line (coder, rail line, every train and ATO): one line for the whole system;
+* ``resources/`` — copies of the data files (the line, each train's timetable, the rolling stock).
+
+Each train starts standing at its timetable's first station (its head at the stopping point);
+the rail line's train lengths come from the rolling-stock file; the receivers are tuned to the
+line's ALSN carrier and to the stock's category. Everything a run would refuse is refused here
+first, in one line naming the file and the field.
+"""
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock,
+                              load_timetable)
+from fmus.errors import FmuInputError
+from fmus.signalling.cab_systems import DIGITAL
+from orchestrator.analysis.system_checks import check_sections_contiguous
+from orchestrator.analysis.systems import (cab_settings, check_placements, committed_ports, signal_chain,
+                                           train_and_ato)
+from orchestrator.errors import UserError
+from orchestrator.sspgen import fmu_ports, write_ssd, write_ssv
+
+CAB_SYSTEMS = ("ALSN", *sorted(DIGITAL))
+TRACTION = {"dc": "DC3000", "ac": "AC25000", "none": "none"}
+#: the stock a train gets without --rolling-stock, by traction (bundled files)
+DEFAULT_STOCK = {"dc": Path(DEFAULT_ROLLING_STOCK), "ac": DATA / "freight_vl80.json",
+                 "none": Path(DEFAULT_ROLLING_STOCK)}
+LINE_PARAMETER_SET = "line.ssv"
+#: seconds the run goes on after the last scheduled arrival
+STOP_MARGIN_S = 120.0
+
+
+@dataclass
+class Sizes:
+    """The built FMUs' array sizes: block sections K, trains M, samples per frame N."""
+    sections: int
+    trains: int
+    frame: int
+
+
+def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
+    """K, M, N of the rail line FMU in ``fmu_dir`` (``railcosim build --sections/--trains/
+    --frame``), else of the committed contract (8, 2, 40)."""
+    fmu = Path(fmu_dir) / "RailLine.fmu" if fmu_dir else None
+    ports = fmu_ports(fmu.parent, fmu.name) if fmu is not None and fmu.is_file() else None
+    if ports is None:
+        ports = committed_ports(Path("."), "RailLine.fmu")
+    k, n = ports["u_tx"]["shape"]
+    return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
+
+
+def _load(loader, path: Path, option: str):
+    try:
+        return loader(path)
+    except FmuInputError as error:
+        raise UserError(f"{option}: {error}") from None
+
+
+def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
+               rolling_stock_file: Optional[Path] = None, system: str = "ALSN", trains: Optional[int] = None,
+               traction: Optional[str] = None, fmu_dir: Optional[Path] = None) -> Path:
+    """Write the system folder (module docstring); its SSD path. Bad input is a UserError."""
+    folder = Path(folder)
+    if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+        raise UserError(f"{folder}: already exists; give a new name (railcosim new never overwrites)")
+    if system not in CAB_SYSTEMS:
+        raise UserError(f"--system {system}: choose one of {', '.join(CAB_SYSTEMS)}")
+    timetable_files = [Path(p) for p in timetable_files]
+    count = len(timetable_files) if trains is None else trains
+    if count != len(timetable_files):
+        raise UserError(f"--trains {count}: give one --timetable per train ({len(timetable_files)} given); "
+                        "each train starts at its own timetable's first station")
+    sizes = built_sizes(fmu_dir)
+    if not 1 <= count <= sizes.trains:
+        raise UserError(f"--trains {count}: the FMUs are built for 1 to {sizes.trains} trains "
+                        f"(railcosim build --trains {count})")
+    line: Line = _load(load_line, Path(line_file), "--line")
+    try:
+        check_sections_contiguous(line)
+    except UserError as error:
+        raise UserError(f"--line: {error}") from None
+    if len(line.sections) > sizes.sections:
+        raise UserError(f"--line: {line.path} has {len(line.sections)} block sections; the FMUs are built for "
+                        f"{sizes.sections} (railcosim build --sections {len(line.sections)})")
+    traction = traction or next(k for k, v in TRACTION.items() if v == line.electrification)
+    if traction not in TRACTION:
+        raise UserError(f"--traction {traction}: choose one of {', '.join(TRACTION)}")
+    if TRACTION[traction] != line.electrification:
+        raise UserError(f"--traction {traction}: {line.path} field electrification.system is "
+                        f"{line.electrification!r}; the traction must be the line's")
+    stock_path = Path(rolling_stock_file) if rolling_stock_file else DEFAULT_STOCK[traction]
+    stock: RollingStock = _load(load_rolling_stock, stock_path, "--rolling-stock")
+    if stock.electrical_system not in ("none", line.electrification) and line.electrification != "none":
+        raise UserError(f"--rolling-stock: {stock_path} (field electrical.system {stock.electrical_system!r}) "
+                        f"cannot run on {line.path} (electrification {line.electrification!r})")
+    timetables = [_load(lambda p: load_timetable(p, line), path, "--timetable") for path in timetable_files]
+    carriers = sorted({s.carrier_hz for s in line.sections})
+    if system == "ALSN" and len(carriers) > 1:
+        raise UserError(f"--line: {line.path} field block_sections[].carrier_hz: the sections use "
+                        f"{', '.join(f'{c:g}' for c in carriers)} Hz; one receiver is tuned to one carrier")
+    names = [("train", "ato")] if count == 1 else [(f"train{j}", f"ato{j}") for j in range(1, count + 1)]
+    origins = [timetable[0].stop_m for timetable in timetables]
+    try:
+        check_placements({"length_m": line.length_m},
+                         [(name, x0, stock.length_m) for (name, _), x0 in zip(names, origins)])
+    except ValueError as error:
+        raise UserError(f"--timetable: each train stands at its first station at t = 0: {error}") from None
+    resource_names = [Path(line_file).name, stock_path.name, *(p.name for p in timetable_files)]
+    if len(set(resource_names)) != len(resource_names):
+        raise UserError(f"--line, --timetable, --rolling-stock: files of one name ({', '.join(resource_names)}) "
+                        "would overwrite each other in resources/; rename them")
+
+    coder, rail, receiver, ato = cab_settings(system)
+    receiver = {**receiver, "train_category": stock.category}
+    if system == "ALSN":
+        receiver["carrier"] = float(carriers[0])
+    stock_parameters = {"rolling_stock_file": stock_path.name}
+    components, connections = [], []
+    for (train, ato_name), x0, timetable_path in zip(names, origins, timetable_files):
+        parts, links = train_and_ato(train, ato_name, train_parameters={**stock_parameters, "x0": float(x0)},
+                                     ato_parameters={**ato, **stock_parameters, "timetable_file": timetable_path.name})
+        for part in parts:
+            part.parameter_file = LINE_PARAMETER_SET
+        components += parts
+        connections += links
+    chain, links = signal_chain(names, sections=sizes.sections, frame=sizes.frame, coder=coder, rail=rail,
+                                receiver=receiver, stocks=[stock_path] * count, parameter_file=LINE_PARAMETER_SET)
+    stop_time = max(stop.arrival_s or stop.departure_s or 0.0 for timetable in timetables for stop in timetable)
+    folder.mkdir(parents=True, exist_ok=True)
+    resources = folder / "resources"
+    resources.mkdir(exist_ok=True)
+    for source in [Path(line_file), stock_path, *timetable_files]:
+        shutil.copyfile(source, resources / source.name)
+    write_ssv(folder / LINE_PARAMETER_SET, "line", {"line_file": Path(line_file).name})
+
+    def ports(_, source: str):
+        return built_ports(fmu_dir, source)
+
+    return write_ssd(folder, folder.name, chain + components, connections + links,
+                     stop_time=float(stop_time) + STOP_MARGIN_S, ports=ports)
+
+
+def built_ports(fmu_dir: Optional[Path], source: str):
+    """An FMU's ports from the build folder when it is built there, else its committed contract."""
+    if fmu_dir is not None and (Path(fmu_dir) / Path(source).name).is_file():
+        return fmu_ports(Path(fmu_dir), Path(source).name)
+    return committed_ports(Path("."), source)
+
