@@ -93,8 +93,9 @@ def cmd_build(args) -> int:
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
     _write_shipped_systems()
-    for packed in pack_systems(SSP_ROOT, dest, dest.parent):
-        print(f"packed {packed}")
+    repacked: List[Path] = []
+    for archive in pack_systems(SSP_ROOT, dest, dest.parent, force=args.force, repacked=repacked):
+        print(f"{'packed    ' if archive in repacked else 'up to date'} {archive}")
     return 0
 
 

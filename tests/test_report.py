@@ -15,10 +15,10 @@ def test_report_of_a_run_with_a_coil_capture(tmp_path, product_fmus):
     assert "SPAD 0" in stdout
 
 
-def test_capturing_a_frame_array_without_its_row_is_one_clear_line(tmp_path, product_fmus):
+def test_capturing_a_port_that_is_not_a_frame_is_one_clear_line(tmp_path, product_fmus):
     code, _, stderr = railcosim("run", "free_run", "--output", tmp_path / "run", "--no-build", "--in-process",
-                                "--stop-time", "1", "--capture", "rail.e_coil@0:1")
-    assert code == 2 and "name the row, e.g. rail.e_coil[1]" in stderr and "Traceback" not in stderr
+                                "--stop-time", "1", "--capture", "rx.level@0:1")
+    assert code == 2 and "--capture rx.level: no such frame output" in stderr and "Traceback" not in stderr
 
 
 def test_report_names_a_folder_that_is_not_a_run(tmp_path):

@@ -74,8 +74,17 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     capture = _coil_capture(run_dir, output, components, at_s)
     if capture:
         written.append(capture)
+    elif at_s is not None:
+        _notice(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
+                f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
     return written
+
+
+def _notice(message: str) -> None:
+    import sys
+
+    print(f"railcosim: warning: {message}", file=sys.stderr)
 
 
 def _line_of(components: Dict[str, dict], ato: Optional[str]):
