@@ -431,7 +431,7 @@ def _stderr_warning(message: str) -> None:
 #: starts, so the folder never mixes two runs. Nothing else in the folder is touched.
 RUN_FILES = ("results.csv", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
-REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png")
+REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
 LOCK_FILE = ".railcosim.lock"
 
 
