@@ -369,7 +369,8 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
     if summary.get("receivers"):
         from orchestrator.analysis.verdict import safety_verdict
 
-        others.append(("safety", safety_verdict(summary)[1]))
+        verdict = safety_verdict(summary)[1]
+        others.append(("safety", verdict[len("safety: "):] if verdict.startswith("safety: ") else verdict))
     return stops, others
 
 
