@@ -197,7 +197,12 @@ def _speed_distance(output: Path, results, trains, components) -> Path:
             if below.any():
                 ax.plot(x, np.where(below, permitted, np.nan), color="darkred", ls=":", lw=1.2,
                         label="ATP permitted speed below it (cab signal)")
-            ax.plot(x, results[f"{ato}.v_ceiling"] * 3.6, color="tab:blue", ls=":", lw=0.9, label="ATO ceiling")
+            # ato.v_ceiling holds the line limit and the cab-signal ceiling, not the targets: under
+            # a yellow aspect (no ceiling, a target at the next signal) it is the line limit, and
+            # a red-yellow → yellow → red-yellow sequence would draw a spike to it. The ATO never
+            # runs above the ATP's permitted speed, so that caps what is drawn.
+            ax.plot(x, np.minimum(results[f"{ato}.v_ceiling"] * 3.6, permitted), color="tab:blue", ls=":",
+                    lw=0.9, label="ATO ceiling (at most the ATP permitted speed)")
             top = max(top, float(np.nanmax(static[np.isfinite(static)], initial=0.0)) * 3.6)
             aspects = results[f"{ato}.atp_aspect"].astype(int)
             _aspect_band(ax, x, aspects, top * 1.08, top * 1.14)
