@@ -11,6 +11,7 @@ import fcntl
 import json
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -202,6 +203,9 @@ def check_system(system_path, options: RunOptions) -> List[str]:
             plan = _plan(system, options, attempt)
         except UserError as error:          # no graph: nothing further can be checked
             return _note(problems, error)
+        if plan.stop_s is not None:         # what a run would warn about, said the same way
+            _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
+            _warn_rounded_stop(options, system, plan)
         _initialise_only(plan, system, options, problems)
     finally:
         system.close()
@@ -213,6 +217,11 @@ def _note(problems: List[str], error: BaseException) -> List[str]:
     if text not in problems:
         problems.append(text)
     return problems
+
+
+def _before_origin(problem: str) -> str:
+    """A problem without its closing ``(component.parameter)``."""
+    return re.sub(r"\s*\([\w.]+\)$", "", problem)
 
 
 class _Checked:
@@ -234,7 +243,11 @@ class _Checked:
             getattr(self._slave, method)(*args)
         except Exception as error:
             self.failed = True
-            _note(self._problems, error)
+            # a data file the checks before already named (``… (ato.line_file)``) is the same
+            # problem seen again by the component: said once
+            text = " ".join(str(error).split())
+            if not any(_before_origin(seen) in text for seen in self._problems):
+                _note(self._problems, error)
 
     def instantiate(self) -> None:                # instantiated once, before the master is made
         if not self._instantiated:
