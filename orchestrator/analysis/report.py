@@ -164,9 +164,16 @@ def _line_marks(ax, line) -> None:
             ax.axvline(section.end_m / 1000.0, color="0.6", lw=0.6)
             ax.text(section.end_m / 1000.0, 0.015, f" {section.signal}", fontsize=7, ha="left", va="bottom",
                     color="0.3", transform=marks)
+    # a station name goes up a row when it would touch the one before (A and "A east" 500 m apart)
+    km_per_char = 0.012 * line.length_m / 1000.0
+    row_ends: List[float] = []
     for station in line.stations:
-        ax.axvline(station.stop_m / 1000.0, color="purple", lw=0.8, ls="-.")
-        ax.text(station.stop_m / 1000.0, 1.01, station.name, color="purple", ha="center", va="bottom",
+        at_km = station.stop_m / 1000.0
+        half = 0.5 * km_per_char * (len(station.name) + 1)
+        row = next((k for k, end in enumerate(row_ends) if at_km - half > end), len(row_ends))
+        row_ends[row:row + 1] = [at_km + half]
+        ax.axvline(at_km, color="purple", lw=0.8, ls="-.")
+        ax.text(at_km, 1.01 + 0.07 * row, station.name, color="purple", ha="center", va="bottom",
                 transform=marks, fontweight="bold")
 
 
