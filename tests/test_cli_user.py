@@ -133,3 +133,12 @@ def test_captures_write_exact_sample_times_and_take_a_whole_2d_port(tmp_path, pr
     assert expected[1] == "0.50025"
     assert [r[1] for r in whole[1:]] == [r[1] for r in row[1:]]
     assert any(float(r[1]) != 0.0 for r in row[1:])
+
+
+def test_sample_times_are_decimals_of_the_integer_clock():
+    from orchestrator.observers import sample_times
+
+    assert sample_times(100_000_000_000, 10_000_000, 40)[:3] == ["100", "100.00025", "100.0005"]
+    assert sample_times(-500_000_000, 10_000_000, 40)[:2] == ["-0.5", "-0.49975"]
+    # a sample instant between two nanoseconds: the shortest decimal of the nearest float
+    assert sample_times(0, 10_000_000, 3) == ["0.0", repr(0.01 / 3), repr(0.02 / 3)]
