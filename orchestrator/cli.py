@@ -30,7 +30,12 @@ MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2 (argparse prints usage on two)
-        raise UserError(f"{self.prog}: {message}")
+        # main() says "railcosim: error:" once; a subcommand's parser names the subcommand
+        where = self.prog.partition(" ")[2]
+        if message.startswith("the following arguments are required: command"):
+            commands = next(a for a in self._actions if isinstance(a, argparse._SubParsersAction)).choices
+            message = f"no command given; choose one of {', '.join(commands)} (railcosim COMMAND -h for help)"
+        raise UserError(f"{where}: {message}" if where else message)
 
 
 def _build_dir() -> Path:
@@ -88,8 +93,9 @@ def cmd_build(args) -> int:
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
     _write_shipped_systems()
-    for packed in pack_systems(SSP_ROOT, dest, dest.parent):
-        print(f"packed {packed}")
+    repacked: List[Path] = []
+    for archive in pack_systems(SSP_ROOT, dest, dest.parent, force=args.force, repacked=repacked):
+        print(f"{'packed    ' if archive in repacked else 'up to date'} {archive}")
     return 0
 
 
@@ -111,28 +117,38 @@ def cmd_run(args) -> int:
     return status
 
 
-def _run_command(args) -> int:
-    from orchestrator.analysis.verdict import railway_verdicts
-    from orchestrator.run import RunOptions, run_system
-
-    system = _system_path(args.system)
+def _overrides(args) -> dict:
     overrides = {}
     for item in args.set or []:
         key, sep, value = item.partition("=")
         if not sep or "." not in key:
             raise UserError(f"--set {item}: expected COMPONENT.VARIABLE=VALUE")
         overrides[key.strip()] = value.strip()
+    return overrides
+
+
+def _run_options(args, **more):
+    """The options `run` and `validate` share (validate checks what run would meet)."""
+    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.run import RunOptions
+
+    return RunOptions(
+        stop_time=args.stop_time, overrides=_overrides(args), param_sets=args.param_set or [],
+        output_interval=args.output_interval, captures=args.capture or [], record=args.record,
+        algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
+        scenario=args.scenario, default_scenario=not args.no_scenario, summaries=railway_verdicts, **more)
+
+
+def _run_command(args) -> int:
+    from orchestrator.run import run_system
+
+    system = _system_path(args.system)
+    _overrides(args)                # a malformed --set is refused before the build
     if not args.no_build:
         from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
-    options = RunOptions(
-        stop_time=args.stop_time, output_dir=Path(args.output), overrides=overrides,
-        param_sets=args.param_set or [], output_interval=args.output_interval,
-        captures=args.capture or [], algorithm=args.algorithm, in_process=args.in_process,
-        fmu_dirs=[_build_dir()], record=args.record, scenario=args.scenario,
-        default_scenario=not args.no_scenario, summaries=railway_verdicts,
-        progress=sys.stderr.isatty())
+    options = _run_options(args, output_dir=Path(args.output), progress=sys.stderr.isatty())
     result = run_system(system, options)
     summary = result.summary
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
@@ -226,22 +242,16 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
-    from orchestrator.analysis.system_checks import check_railway_data
-    from orchestrator.graph import build_graph
-    from orchestrator.run import DEFAULT_SCENARIO
-    from orchestrator.scenario import ScenarioManipulator, load_scenario
-    from orchestrator.ssp import open_system
+    from orchestrator.run import check_system
 
-    # everything a run would refuse before its first step: the SSD and its parameter sets, the
-    # FMUs' ports, connections, units, steps, the data files and the system's own scenario.json
-    system = open_system(_system_path(args.target), [_build_dir()])
-    try:
-        graph = build_graph(system)
-        check_railway_data(graph)
-        if (system.folder / DEFAULT_SCENARIO).is_file():
-            ScenarioManipulator(load_scenario(system.folder / DEFAULT_SCENARIO), graph)
-    finally:
-        system.close()
+    # everything a run with these options would refuse before its first step: the SSD and its
+    # parameter sets, the FMUs' ports, connections, units, steps, the data files, the scenario,
+    # and each component instantiated and initialised with its parameters (as run does)
+    problems = check_system(_system_path(args.target), _run_options(args))
+    for problem in problems:
+        print(f"railcosim: error: {problem}", file=sys.stderr)
+    if problems:
+        return 2
     print(f"{args.target}: valid")
     return 0
 
@@ -279,6 +289,30 @@ def cmd_fmu_env(args) -> int:
     return 0
 
 
+def _add_run_setup_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of `run` that decide what is made before the first step (`validate` takes
+    them too, to check a run with them)."""
+    parser.add_argument("--stop-time", type=float,
+                        help="seconds (default: the scenario's end, else the SSD's stopTime); a time "
+                             "between two base steps ends the run at the next one, with a warning")
+    parser.add_argument("--set", action="append", metavar="COMP.VAR=VALUE",
+                        help="override a parameter (or an input no connection feeds)")
+    parser.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
+    parser.add_argument("--output-interval", type=float, default=None,
+                        help="seconds (default 0.1, rounded up to a multiple of the base step)")
+    parser.add_argument("--capture", action="append", metavar="COMP.PORT@T0:T1",
+                        help="full-rate capture of a frame output: a row (rail.e_coil[1]) or a whole port "
+                             "(rail.e_coil: one column per row)")
+    parser.add_argument("--record", action="append", metavar="COMP.VAR",
+                        help="record only these outputs (default: all scalar outputs)")
+    parser.add_argument("--algorithm", default="gauss-seidel", choices=["gauss-seidel", "jacobi"])
+    parser.add_argument("--in-process", action="store_true",
+                        help="run the facades in this interpreter without FMI (reference, debugging)")
+    parser.add_argument("--scenario", metavar="FILE",
+                        help="timed events (JSON, OSP-like; docs/scenarios.md); default: the system's scenario.json")
+    parser.add_argument("--no-scenario", action="store_true", help="ignore the system's own scenario.json")
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -293,25 +327,11 @@ def make_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="run a system (folder or .ssp); default: free_run")
     run.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name")
-    run.add_argument("--stop-time", type=float, help="seconds (default: the SSD's stopTime)")
     run.add_argument("--output", default="results",
                      help="results folder (default results/); locked while the run uses it, and an "
                           "earlier run's files in it are replaced")
-    run.add_argument("--set", action="append", metavar="COMP.VAR=VALUE", help="override a parameter")
-    run.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
-    run.add_argument("--output-interval", type=float, default=None,
-                     help="seconds (default 0.1, rounded up to a multiple of the base step)")
-    run.add_argument("--capture", action="append", metavar="COMP.PORT@T0:T1",
-                     help="full-rate capture of a frame output")
-    run.add_argument("--record", action="append", metavar="COMP.VAR",
-                     help="record only these outputs (default: all scalar outputs)")
-    run.add_argument("--algorithm", default="gauss-seidel", choices=["gauss-seidel", "jacobi"])
-    run.add_argument("--in-process", action="store_true",
-                     help="run the facades in this interpreter without FMI (reference, debugging)")
+    _add_run_setup_arguments(run)
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
-    run.add_argument("--scenario", metavar="FILE",
-                     help="timed events (JSON, OSP-like; docs/scenarios.md); default: the system's scenario.json")
-    run.add_argument("--no-scenario", action="store_true", help="ignore the system's own scenario.json")
     run.set_defaults(func=cmd_run)
 
     report = sub.add_parser("report", help="pictures and the verdict table of a finished run")
@@ -324,8 +344,10 @@ def make_parser() -> argparse.ArgumentParser:
     inspect.add_argument("target")
     inspect.set_defaults(func=cmd_inspect)
 
-    validate = sub.add_parser("validate", help="check an FMU or a system")
-    validate.add_argument("target")
+    validate = sub.add_parser("validate", help="check an FMU, or a system as run would before its first step "
+                                               "(every problem, one line each)")
+    validate.add_argument("target", help="an .fmu, or a system (folder, .ssp archive or shipped system name)")
+    _add_run_setup_arguments(validate)
     validate.set_defaults(func=cmd_validate)
 
     add_new_command(sub)

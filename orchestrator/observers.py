@@ -6,7 +6,8 @@ read from the slaves on demand).
   and flushed as the run goes, so a failed run keeps everything computed before it failed).
 * WaveformCapture: every sample of a frame output port inside a time window → capture CSV.
   Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (docs/interfaces.md,
-  "Time and frames").
+  "Time and frames"), written as an exact decimal from the integer clock. A whole 2-D port
+  (``rail.e_coil``) gives one column per row.
 * ProgressBar: a terminal progress line on stderr.
 
 A results file that cannot be written (no space left, no permission, a read-only file system,
@@ -141,8 +142,9 @@ class CaptureRequest:
             raise UserError(f"--capture {text}: T1 must be after T0")
         return cls(match.group("comp"), match.group("port"), t0, t1)
 
-    def elements(self, interface) -> List[str]:
-        """Element names of the frame, in sample order."""
+    def elements(self, interface) -> List[List[str]]:
+        """Element names of the frame, one list per captured row in sample order: one row for a
+        1-D port or a named row (``e_coil[1]``), every row for a whole 2-D port (``e_coil``)."""
         if "[" in self.port:
             prefix = self.port[:-1] + ","
         else:
@@ -151,50 +153,83 @@ class CaptureRequest:
                  and interface.variables[n].causality == "output"]
         if not names:
             raise UserError(f"--capture {self.component}.{self.port}: no such frame output")
-        if any("," in n[len(prefix):-1] for n in names):
-            raise UserError(f"--capture {self.component}.{self.port}: a frame array with rows; name the row, "
-                            f"e.g. {self.component}.{self.port}[1]")
-        return sorted(names, key=lambda n: int(n[len(prefix):-1]))
+        indices = [tuple(int(i) for i in n[len(prefix):-1].split(",")) for n in names]
+        if len({len(i) for i in indices}) != 1 or len(indices[0]) > 2:
+            raise UserError(f"--capture {self.component}.{self.port}: not a frame port or one row of one")
+        by_row: Dict[int, List[Tuple[int, str]]] = {}
+        for index, name in zip(indices, names):
+            row, sample = index if len(index) == 2 else (0, index[0])
+            by_row.setdefault(row, []).append((sample, name))
+        return [[name for _, name in sorted(samples)] for _, samples in sorted(by_row.items())]
+
+    def columns(self, elements: List[List[str]]) -> List[str]:
+        """The CSV's value columns: the port (or the row named), or ``port[j]`` per row of a
+        whole 2-D port."""
+        if "[" in self.port or "," not in elements[0][0]:
+            return [f"{self.component}.{self.port}"]
+        return [f"{self.component}.{self.port}[{j}]" for j in range(1, len(elements) + 1)]
+
+
+def sample_times(start_ticks: int, step_ticks: int, n: int) -> List[str]:
+    """The N sample instants of the frame from doStep(start, step), as decimal seconds written
+    from the integer clock: start + k·step/N ticks, exact (no float rounding) when a whole
+    number of nanoseconds, else the shortest decimal of the nearest float."""
+    numerators = start_ticks * n + np.arange(n, dtype=np.int64) * step_ticks
+    if np.all(numerators % n == 0):
+        ticks = numerators // n
+        whole, nanos = np.divmod(np.abs(ticks), TICKS_PER_SECOND)
+        text = np.char.add(np.char.mod("%d.", whole), np.char.zfill(np.char.mod("%d", nanos), 9))
+        text = np.char.rstrip(np.char.rstrip(text, "0"), ".")
+        return list(np.char.add(np.where(ticks < 0, "-", ""), text))
+    return [repr(float(t)) for t in numerators / (n * TICKS_PER_SECOND)]
 
 
 class WaveformCapture(Observer):
-    """Every sample of one frame output inside a time window."""
+    """Every sample of one frame output (one row, or every row of a 2-D port) inside a time
+    window; times are exact sample instants (:func:`sample_times`)."""
 
-    def __init__(self, path: Path, request: CaptureRequest, elements: List[str]):
+    def __init__(self, path: Path, request: CaptureRequest, elements: List[List[str]]):
         self.path = Path(path)
         self.request = request
         self.elements = elements
         self._file = None
 
     def outputs_needed(self) -> Dict[str, List[str]]:
-        return {self.request.component: list(self.elements)}
+        return {self.request.component: [e for row in self.elements for e in row]}
 
     def started(self, master: MasterView, step: StepRecord) -> None:
-        slots = [master.output_slot(self.request.component, e) for e in self.elements]
-        self._buffer = slots[0][0]
-        self._index = np.array([i for _, i in slots])
+        slots = [[master.output_slot(self.request.component, e) for e in row] for row in self.elements]
+        self._buffer = slots[0][0][0]
+        self._index = np.array([[i for _, i in row] for row in slots])      # (rows, N)
         self._step_ticks = master.graph.nodes[self.request.component].step_ticks
         self._file = open_for_writing(self.path)
         try:
-            self._file.write(f"time,{self.request.component}.{self.request.port}\n")
+            self._file.write(",".join(["time"] + self.request.columns(self.elements)) + "\n")
         except OSError as error:
             raise cannot_write(self.path, error) from None
 
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
         if self.request.component not in step.stepped:
             return
-        start_ticks = step.tick - master.graph.base_ticks
-        step_start = start_ticks / TICKS_PER_SECOND
-        if step_start + self._step_ticks / TICKS_PER_SECOND <= self.request.t0 or step_start >= self.request.t1:
+        start_ticks = step.tick - master.graph.base_ticks      # the step began one base step ago
+        t0_ticks = round(self.request.t0 * TICKS_PER_SECOND)
+        t1_ticks = round(self.request.t1 * TICKS_PER_SECOND)
+        if start_ticks + self._step_ticks <= t0_ticks or start_ticks >= t1_ticks:
             return
         master.fresh(self.request.component)
-        n = len(self._index)
-        # exact sample instants: (start·N + k·h) / (N·1e9), integers until the one division
-        times = (start_ticks * n + np.arange(n) * self._step_ticks) / (n * TICKS_PER_SECOND)
-        values = self._buffer.values[self._index]
-        keep = (times >= self.request.t0) & (times < self.request.t1)
+        n = self._index.shape[1]
+        # sample k at (start·N + k·h) / N ticks: compared and written in integers
+        numerators = start_ticks * n + np.arange(n, dtype=np.int64) * self._step_ticks
+        keep = (numerators >= t0_ticks * n) & (numerators < t1_ticks * n)
+        if not keep.any():
+            return
+        times = np.array(sample_times(start_ticks, self._step_ticks, n))[keep]
+        values = np.char.mod("%.17g", np.asarray(self._buffer.values[self._index], dtype=float)[:, keep])
+        lines = times
+        for row in values:
+            lines = np.char.add(np.char.add(lines, ","), row)
         try:
-            np.savetxt(self._file, np.column_stack([times[keep], values[keep]]), delimiter=",", fmt="%.17g")
+            self._file.write("\n".join(lines) + "\n")
         except OSError as error:
             raise cannot_write(self.path, error) from None
 

@@ -11,6 +11,7 @@ import fcntl
 import json
 import math
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -97,18 +98,9 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         raise _os_error(error) from None
     try:
         flag.check("before the run started")
-        graph = _load_graph(system, options)
-        scenario = _scenario(system, graph, options)
-        stop_s = _stop_time(system, options, scenario)
-        start_ticks = round(system.start_time * TICKS_PER_SECOND)
-        stop_ticks = round(stop_s * TICKS_PER_SECOND)
-        interval_ticks = _output_interval_ticks(graph, options)
-        recorded = _recorded(graph, options.record)
-        captures = _captures(graph, options.captures)
-        _warn_beyond_stop(options, scenario, captures, stop_s)
-        # the judges before the folder and the FMUs: making them checks the system's data files
-        # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
-        judges = list(options.summaries(graph)) if options.summaries is not None else []
+        plan = _plan(system, options, _raise)
+        _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
+        _warn_rounded_stop(options, system, plan)
         flag.check("before the run started")
     except Interrupted as stop:
         system.close()
@@ -116,6 +108,10 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     except BaseException:
         system.close()
         raise
+    graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
+    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    stop_ticks = round(stop_s * TICKS_PER_SECOND)
+    interval_ticks, recorded, captures = plan.interval_ticks, plan.recorded, plan.captures
     workdir: Optional[Path] = None
     try:
         out.claim()                       # from here on the folder holds this run's files
@@ -145,6 +141,174 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
 
 
 # ---- options and loading -------------------------------------------------------------------------
+@dataclass
+class _Plan:
+    """What a run is made from, decided before any component exists (each part a UserError
+    when the system, its data or the options are wrong)."""
+
+    graph: SystemGraph
+    scenario: Optional[ScenarioManipulator] = None
+    stop_s: Optional[float] = None
+    interval_ticks: Optional[int] = None
+    recorded: List[tuple] = field(default_factory=list)
+    captures: List[Tuple[CaptureRequest, List[str]]] = field(default_factory=list)
+    judges: Sequence[SummaryObserver] = ()
+
+
+def _raise(step: Callable[[], object]):
+    return step()
+
+
+def _plan(system: SystemDescription, options: RunOptions,
+          attempt: Callable[[Callable[[], object]], object]) -> _Plan:
+    """The graph (needed by everything after it), then each further part through ``attempt``:
+    a run lets the first problem raise (:func:`_raise`); :func:`check_system` notes each one
+    and goes on with what it can still check."""
+    graph = _load_graph(system, options)
+    plan = _Plan(graph)
+    attempt(lambda: _refuse_connected_overrides(graph, options.overrides))
+    plan.scenario = attempt(lambda: _scenario(system, graph, options))
+    plan.stop_s = attempt(lambda: _stop_time(system, options, plan.scenario))
+    plan.interval_ticks = attempt(lambda: _output_interval_ticks(graph, options))
+    plan.recorded = attempt(lambda: _recorded(graph, options.record)) or []
+    plan.captures = attempt(lambda: _captures(graph, options.captures)) or []
+    # the judges before the folder and the FMUs: making them checks the system's data files
+    # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
+    if options.summaries is not None:
+        plan.judges = attempt(lambda: list(options.summaries(graph))) or []
+    return plan
+
+
+def check_system(system_path, options: RunOptions) -> List[str]:
+    """Every problem a run of this system with these options would meet before its first step
+    (``railcosim validate``): the options, the system and its parameter sets, the scenario,
+    the data files, and each component instantiated, given its parameters and initialised
+    together as a run does. One line per problem; empty when the run would start."""
+    problems: List[str] = []
+
+    def attempt(step):
+        try:
+            return step()
+        except UserError as error:
+            _note(problems, error)
+            return None
+
+    attempt(lambda: _check_options(options))
+    try:
+        system = open_system(Path(system_path), list(options.fmu_dirs))
+    except (UserError, OSError) as error:
+        return _note(problems, _os_error(error) if isinstance(error, OSError) else error)
+    try:
+        try:
+            plan = _plan(system, options, attempt)
+        except UserError as error:          # no graph: nothing further can be checked
+            return _note(problems, error)
+        if plan.stop_s is not None:         # what a run would warn about, said the same way
+            _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
+            _warn_rounded_stop(options, system, plan)
+        _initialise_only(plan, system, options, problems)
+    finally:
+        system.close()
+    return problems
+
+
+def _note(problems: List[str], error: BaseException) -> List[str]:
+    text = " ".join(str(error).split()) or type(error).__name__
+    if text not in problems:
+        problems.append(text)
+    return problems
+
+
+def _before_origin(problem: str) -> str:
+    """A problem without its closing ``(component.parameter)``."""
+    return re.sub(r"\s*\([\w.]+\)$", "", problem)
+
+
+class _Checked:
+    """A slave as ``railcosim validate`` drives it: a lifecycle call that fails is noted, not
+    raised, and the component's later calls are skipped, so the initialisation goes on and
+    every component's problem is seen (the others get the values a run would give them)."""
+
+    def __init__(self, slave: Slave, problems: List[str]):
+        self._slave, self._problems, self.failed = slave, problems, False
+        self._instantiated = False
+
+    def __getattr__(self, name):                  # inputs, outputs and whatever else is read
+        return getattr(self._slave, name)
+
+    def _call(self, method: str, *args) -> None:
+        if self.failed:
+            return
+        try:
+            getattr(self._slave, method)(*args)
+        except Exception as error:
+            self.failed = True
+            # a data file the checks before already named (``… (ato.line_file)``) is the same
+            # problem seen again by the component: said once
+            text = " ".join(str(error).split())
+            if not any(_before_origin(seen) in text for seen in self._problems):
+                _note(self._problems, error)
+
+    def instantiate(self) -> None:                # instantiated once, before the master is made
+        if not self._instantiated:
+            self._instantiated = True
+            self._call("instantiate")
+
+    def bind(self, inputs, outputs) -> None:
+        self._slave.bind(inputs, outputs)
+
+    def setup_experiment(self, start_time, stop_time) -> None:
+        self._call("setup_experiment", start_time, stop_time)
+
+    def set_values(self, values) -> None:
+        self._call("set_values", values)
+
+    def enter_initialization(self) -> None:
+        self._call("enter_initialization")
+
+    def exit_initialization(self) -> None:
+        self._call("exit_initialization")
+
+    def write_inputs(self) -> None:
+        self._call("write_inputs")
+
+    def read_outputs(self, types=None) -> None:
+        self._call("read_outputs", types)
+
+    def do_step(self, time_s, step_s) -> None:
+        raise AssertionError("validate never steps")
+
+    def terminate(self) -> None:
+        self._slave.terminate()
+
+    def free(self) -> None:
+        self._slave.free()
+
+
+def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str]) -> None:
+    """Instantiate every component, then bind and initialise them together as a run does
+    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written."""
+    workdir = new_workdir()
+    slaves: Dict[str, Slave] = {}
+    try:
+        def make(name, node):
+            slave = _Checked(make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process),
+                             problems)
+            slave.instantiate()
+            return slave
+
+        try:
+            with threadpool_limits(limits=options.blas_threads, user_api="blas"):
+                _start(plan.graph, options, slaves, make, list(plan.judges), plan.scenario, interrupts.NEVER,
+                       system.start_time, plan.stop_s, ready=lambda: not any(s.failed for s in slaves.values()))
+        except Exception as error:
+            _note(problems, error)
+    finally:
+        for problem in shutdown_slaves(plan.graph.order, slaves):
+            _note(problems, UserError(problem))
+        remove_workdir(workdir)
+
+
 def _check_options(options: RunOptions) -> None:
     if options.algorithm not in ALGORITHMS:
         raise UserError(f"--algorithm {options.algorithm}: choose {' or '.join(ALGORITHMS)}")
@@ -160,6 +324,17 @@ def _load_graph(system: SystemDescription, options: RunOptions) -> SystemGraph:
     files resolved by the graph: graph.resolve_data_file)."""
     extra = [v for name in options.param_sets for v in load_parameter_set(system, name)]
     return build_graph(system, options.overrides, extra)
+
+
+def _refuse_connected_overrides(graph: SystemGraph, overrides: Dict[str, str]) -> None:
+    """A --set on an input a connection feeds would be overwritten at the first exchange."""
+    fed = {(edge.target, edge.target_var.name): edge for edge in graph.edges}
+    for key in overrides:
+        edge = fed.get(tuple(key.split(".", 1)))
+        if edge is not None:
+            raise UserError(f"--set {key}: this input is fed by the connection from "
+                            f"{edge.source}.{edge.source_var.name}, which overrides any value set; "
+                            f"set a parameter, or use a scenario event (docs/scenarios.md)")
 
 
 def _scenario(system: SystemDescription, graph: SystemGraph,
@@ -248,6 +423,18 @@ def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulato
                              f"{stop_s:g} s; not applied")
 
 
+def _warn_rounded_stop(options: RunOptions, system: SystemDescription, plan: _Plan) -> None:
+    """The master steps in whole base steps: a stop time between two of them ends the run at
+    the next one, said in one warning line."""
+    base = plan.graph.base_ticks
+    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    span = round(plan.stop_s * TICKS_PER_SECOND) - start_ticks
+    if span % base:
+        end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
+        options.warn(f"stop time {plan.stop_s:g} s is not a whole number of base steps "
+                     f"({base / TICKS_PER_SECOND:g} s) after the start; the run ends at {end_s:g} s")
+
+
 def _stderr_warning(message: str) -> None:
     print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
 
@@ -257,7 +444,7 @@ def _stderr_warning(message: str) -> None:
 #: starts, so the folder never mixes two runs. Nothing else in the folder is touched.
 RUN_FILES = ("results.csv", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
-REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png")
+REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
 LOCK_FILE = ".railcosim.lock"
 
 
@@ -382,6 +569,25 @@ class _Outcome:
     judges: Sequence[SummaryObserver] = ()
 
 
+def _start(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
+           make: Callable[[str, object], Slave], observers: List[Observer],
+           scenario: Optional[ScenarioManipulator], flag: InterruptFlag, start_s: float,
+           stop_s: Optional[float], ready: Callable[[], bool] = lambda: True) -> Optional[Master]:
+    """Make every component (into ``slaves``, so that whatever was made is shut down), then the
+    master; bind and initialise. ``ready`` false after the components are made: no master
+    (validate: a component that cannot be instantiated)."""
+    for name, node in graph.nodes.items():
+        flag.check("during initialisation")
+        slaves[name] = make(name, node)
+    if not ready():
+        return None
+    manipulators = list(options.manipulators) + ([scenario] if scenario is not None else [])
+    master = Master(graph, slaves, options.algorithm, observers, manipulators, interrupt=flag)
+    master.bind()
+    master.initialize(start_s, stop_s)
+    return master
+
+
 def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_threads: int) -> _Outcome:
     """Make the slaves, bind, initialise and step; whatever happens (a failure, a signal, a
     write error), close every observer and shut every slave made down, so the results so far
@@ -393,20 +599,17 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     observers: List[Observer] = []
     judges = setup.judges
     master: Optional[Master] = None
+
+    def make(name: str, node) -> Slave:
+        return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
+
     try:
         # the cores' matrices are small (≤ 60 states): a second BLAS thread only spins and
         # takes the other core from the process (measured 1.8× slower model generation)
         with threadpool_limits(limits=blas_threads, user_api="blas"):
-            for name, node in graph.nodes.items():
-                flag.check("during initialisation")
-                slaves[name] = make_slave(name, Path(node.fmu_path), node.interface, setup.workdir,
-                                          options.in_process)
             observers = _observers(setup.out, setup.recorded, setup.interval_ticks, setup.captures,
                                    setup.progress, judges)
-            manipulators = list(options.manipulators) + ([setup.scenario] if setup.scenario is not None else [])
-            master = Master(graph, slaves, options.algorithm, observers, manipulators, interrupt=flag)
-            master.bind()
-            master.initialize(start_s, stop_s)
+            master = _start(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s)
             master.run_until(stop_ticks)
     except BaseException as error:  # a failure or an interruption: results so far are still written
         failure = error

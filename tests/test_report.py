@@ -1,4 +1,13 @@
-"""railcosim report: pictures and the verdict table of a finished run; bad run folders give one line."""
+"""railcosim report: pictures, the verdict table and report.html of a finished run; bad run
+folders give one line."""
+import json
+import shutil
+import subprocess
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+
 from helpers import railcosim
 
 
@@ -13,12 +22,96 @@ def test_report_of_a_run_with_a_coil_capture(tmp_path, product_fmus):
         assert (tmp_path / "pictures" / name).stat().st_size > 10_000, name
     assert "receiver rx (ALSN, train train)" in stdout and "wrong-side failures 0" in stdout
     assert "SPAD 0" in stdout
+    _check_html(tmp_path / "pictures", json.loads((run / "summary.json").read_text()))
 
 
-def test_capturing_a_frame_array_without_its_row_is_one_clear_line(tmp_path, product_fmus):
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.rows, self.table = [], {}, None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "img":
+            self.images.append(attrs["src"])
+        elif tag == "table":
+            self.table = attrs.get("id")
+        elif tag == "tr" and "verdict" in (attrs.get("class") or "").split():
+            self.rows[self.table] = self.rows.get(self.table, 0) + 1
+
+
+def _check_html(folder, summary):
+    """report.html names every picture written, each decodes, and the tables have one row per
+    verdict item: each timetabled stop, each train's supervision, each receiver, the safety line."""
+    import matplotlib.image
+
+    page = _Page()
+    page.feed((folder / "report.html").read_text(encoding="utf-8"))
+    assert sorted(page.images) == sorted(p.name for p in folder.glob("*.png"))
+    for name in page.images:
+        assert matplotlib.image.imread(folder / name).shape[0] > 200, name
+    trains = summary["trains"]
+    assert page.rows.get("stops", 0) == sum(len(t.get("stops", [])) for t in trains)
+    assert page.rows["judgements"] == (sum("atp_interventions" in t for t in trains)
+                                       + sum(t.get("min_headway_m") is not None for t in trains)
+                                       + len(summary.get("receivers", [])) + bool(summary.get("receivers")))
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser:                       # where a browser is installed: it renders the page
+        shot = folder / "screenshot.png"
+        subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", f"--screenshot={shot}",
+                        "--window-size=1280,2400", (folder / "report.html").as_uri()],
+                       capture_output=True, timeout=120)
+        image = matplotlib.image.imread(shot)
+        assert image.shape[:2] == (2400, 1280) and np.ptp(image[..., :3]) > 0.5   # not a blank page
+
+
+def test_report_html_lists_every_stop_missed_ones_included(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from orchestrator.analysis.report import write_html
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    fig.savefig(tmp_path / "energy.png")
+    plt.close(fig)
+    stop = {"station": "B", "scheduled_arrival_s": 515.0, "arrival_s": 516.5, "arrival_deviation_s": 1.5,
+            "stop_error_m": -0.2}
+    summary = {"system": "s<1>", "sim_time_s": 900.0, "realtime_factor": 5.0, "completed": True, "trains": [
+        {"name": "leader", "stops": [stop], "atp_interventions": 0, "emergency_brakings": 0,
+         "signals_passed_at_danger": 0},
+        {"name": "follower", "stops": [stop, {"station": "C", "scheduled_arrival_s": 1015.0, "reached": False}],
+         "atp_interventions": 1, "emergency_brakings": 0, "signals_passed_at_danger": 0, "min_headway_m": 812.0}],
+        "receivers": [{"receiver": "rx", "system": "ALSN", "train": "leader", "wrong_side_failures": 0}]}
+    write_html(tmp_path / "report.html", summary, [tmp_path / "energy.png"])
+    _check_html(tmp_path, summary)
+    text = (tmp_path / "report.html").read_text()
+    assert "<h1>s&lt;1&gt;</h1>" in text and text.count("not reached") == 1 and "+1.5" in text
+
+
+def test_static_speed_profile_follows_the_line_file_with_tail_hold_and_braking_curves():
+    from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
+    from orchestrator.analysis.report import static_speed_profile
+
+    line, stock = load_line(DEFAULT_LINE), load_rolling_stock(DEFAULT_ROLLING_STOCK)
+    x = np.arange(0.0, line.length_m + 1.0, 1.0)
+    static, curves, decel = static_speed_profile(line, {"atp_decel": 0.5}, x)
+    assert decel == 0.5
+    kmh = static * 3.6
+    # 80 km/h to 1200 m, 140 once the tail has cleared it, 120 from 2900 m at the head
+    assert kmh[1199] == pytest.approx(80) and kmh[int(1200 + stock.length_m) - 1] == pytest.approx(80)
+    assert kmh[int(1200 + stock.length_m) + 1] == pytest.approx(140) and kmh[2900] == pytest.approx(120)
+    # a braking curve at 0.5 m/s² down to each lower limit, never above the static profile
+    d = 2900.0 - x[2700]
+    assert curves[2700] == pytest.approx(np.sqrt((120 / 3.6) ** 2 + 2 * 0.5 * d))
+    assert np.all(curves <= static) and np.all(np.diff(curves[2000:2900]) <= 1e-12)
+
+
+def test_capturing_a_port_that_is_not_a_frame_is_one_clear_line(tmp_path, product_fmus):
     code, _, stderr = railcosim("run", "free_run", "--output", tmp_path / "run", "--no-build", "--in-process",
-                                "--stop-time", "1", "--capture", "rail.e_coil@0:1")
-    assert code == 2 and "name the row, e.g. rail.e_coil[1]" in stderr and "Traceback" not in stderr
+                                "--stop-time", "1", "--capture", "rx.level@0:1")
+    assert code == 2 and "--capture rx.level: no such frame output" in stderr and "Traceback" not in stderr
 
 
 def test_report_names_a_folder_that_is_not_a_run(tmp_path):

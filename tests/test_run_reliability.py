@@ -442,7 +442,7 @@ def test_packing_replaces_the_archive_atomically(tmp_path, test_fmus):
     reader.start()
     try:
         for _ in range(8):
-            pack_system(folder, test_fmus, dest)
+            pack_system(folder, test_fmus, dest, force=True)
     finally:
         stop.set()
         reader.join()

@@ -1,17 +1,20 @@
-"""``railcosim report RUN_DIR``: pictures and a verdict table of a finished run (issue 8).
+"""``railcosim report RUN_DIR``: pictures and a verdict table of a finished run.
 
 Reads what every run writes (results.csv, summary.json, metadata.json, capture_*.csv) and
 the line and timetables the run's components used, and writes into RUN_DIR (or --output):
 
-* ``speed_distance.png`` — per train: speed over distance with the ATP's permitted speed and
-  the ATO's ceiling, the aspect the ATP acted on as a coloured band, block signals, stations,
-  and the gradient profile below;
+* ``speed_distance.png`` — per train: speed over distance with the ATP's static permitted
+  speed and braking curves (computed from the line file, :func:`static_speed_profile`), the
+  recorded permitted speed where the cab signal holds it lower, the ATO's ceiling, the aspect
+  the ATP acted on as a coloured band (keyed in the legend), block signals, stations, and the
+  gradient profile below;
 * ``time_distance.png`` — every train's path against its timetable (scheduled arrivals and
   departures as markers);
 * ``coil_emf.png`` — the captured coil EMF around a chosen time (``--at``; default the
   middle of the capture) and the receiver band-pass output computed from it with the
   receiver's own filter design (needs a run with ``--capture rail.e_coil@T0:T1``);
 * ``energy.png`` — each train's energy over time;
+* ``report.html`` — the verdict tables and the pictures on one page, for a browser;
 
 and prints the verdict as a short text table.
 """
@@ -20,7 +23,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -74,8 +77,18 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     capture = _coil_capture(run_dir, output, components, at_s)
     if capture:
         written.append(capture)
+    elif at_s is not None:
+        _notice(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
+                f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
+    written.append(write_html(output / "report.html", summary, written))
     return written
+
+
+def _notice(message: str) -> None:
+    import sys
+
+    print(f"railcosim: warning: {message}", file=sys.stderr)
 
 
 def _line_of(components: Dict[str, dict], ato: Optional[str]):
@@ -85,43 +98,138 @@ def _line_of(components: Dict[str, dict], ato: Optional[str]):
     return load_line(params.get("line_file") or DEFAULT_LINE)
 
 
+#: how each aspect the ATP acted on is drawn in the band above the speed curves: (face, hatch
+#: colour); red-yellow is the two lights, a yellow band hatched red
+ASPECT_STYLES = {"white": ("#e8e8e8", None), "red": ("#d62728", None), "red-yellow": ("#ffd700", "#d62728"),
+                 "yellow": ("#ffd700", None), "green": ("#2ca02c", None)}
+
+
+def _ato_of(components: Dict[str, dict], ato: Optional[str]) -> dict:
+    return components.get(ato, {}).get("parameters", {}) if ato else {}
+
+
+def static_speed_profile(line, params: dict, x_m: np.ndarray):
+    """The ATP's static permitted speed along ``x_m`` (m/s) from the line file: the line limit
+    for the train's category, held until the tail has cleared a lower limit
+    (fmus/ato_controller/atp.py, ``Atp.static_limit``), and beneath it the braking curves
+    v = sqrt(v_t² + 2·a·(x_t − x)) down to each lower limit x_t, with the ATP's supervision
+    deceleration a (parameter ``atp_decel``, default 0.7 × the stock's service deceleration,
+    as the ATO controller sets it). Returns (static, with_curves, a)."""
+    from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
+
+    stock = load_rolling_stock(params.get("rolling_stock_file") or DEFAULT_ROLLING_STOCK)
+    category = params.get("train_category") or stock.category
+    decel = float(params.get("atp_decel") or 0.0) or 0.7 * stock.service_decel
+    starts = np.array(line.limit_starts + [np.inf])
+    limits = np.array(line.limits_mps[category])
+    static = np.full(x_m.shape, np.inf)
+    tail = x_m - stock.length_m
+    for k, limit in enumerate(limits):          # a limit applies where the train overlaps its stretch
+        overlaps = (starts[k] <= x_m) & (starts[k + 1] > tail)
+        static = np.where(overlaps, np.minimum(static, limit), static)
+    curves = static.copy()
+    for k in range(1, len(limits)):
+        if limits[k] < limits[k - 1]:
+            ahead = x_m < starts[k]
+            reach = np.sqrt(limits[k] ** 2 + 2.0 * decel * np.clip(starts[k] - x_m, 0.0, None))
+            curves = np.where(ahead, np.minimum(curves, reach), curves)
+    return static, curves, decel
+
+
+def _aspect_band(ax, x, aspects: np.ndarray, bottom: float, top: float) -> None:
+    for code, name in ASPECT_BY_CODE.items():
+        mask = aspects == code
+        if mask.any():
+            face, hatch = ASPECT_STYLES[name]
+            ax.fill_between(x, bottom, top, where=mask, step="post", lw=0, facecolor=face,
+                            edgecolor=hatch or face, hatch="////" if hatch else None)
+
+
+def _aspect_key(ax, aspects: np.ndarray) -> list:
+    from matplotlib.patches import Patch
+
+    shown = [ASPECT_BY_CODE[c] for c in sorted(ASPECT_BY_CODE) if (aspects == c).any()]
+    return [Patch(facecolor=ASPECT_STYLES[n][0], edgecolor=ASPECT_STYLES[n][1] or ASPECT_STYLES[n][0],
+                  hatch="////" if ASPECT_STYLES[n][1] else None, label=f"aspect: {n}") for n in shown]
+
+
+def _line_marks(ax, line) -> None:
+    """Block signals (grey, named at the foot) and stations (purple, named above the panel),
+    so that no name sits on another or under the legend."""
+    from matplotlib.transforms import blended_transform_factory
+
+    marks = blended_transform_factory(ax.transData, ax.transAxes)
+    for section in line.sections:
+        if section.signal:
+            ax.axvline(section.end_m / 1000.0, color="0.6", lw=0.6)
+            ax.text(section.end_m / 1000.0, 0.015, f" {section.signal}", fontsize=7, ha="left", va="bottom",
+                    color="0.3", transform=marks)
+    # a station name goes up a row when it would touch the one before (A and "A east" 500 m apart)
+    km_per_char = 0.012 * line.length_m / 1000.0
+    row_ends: List[float] = []
+    for station in line.stations:
+        at_km = station.stop_m / 1000.0
+        half = 0.5 * km_per_char * (len(station.name) + 1)
+        row = next((k for k, end in enumerate(row_ends) if at_km - half > end), len(row_ends))
+        row_ends[row:row + 1] = [at_km + half]
+        ax.axvline(at_km, color="purple", lw=0.8, ls="-.")
+        ax.text(at_km, 1.01 + 0.07 * row, station.name, color="purple", ha="center", va="bottom",
+                transform=marks, fontweight="bold")
+
+
 def _speed_distance(output: Path, results, trains, components) -> Path:
     import matplotlib.pyplot as plt
 
     line = _line_of(components, trains[0].get("ato"))
-    fig, axes = plt.subplots(len(trains) + 1, 1, figsize=(11, 3.2 * len(trains) + 2), sharex=True,
+    fig, axes = plt.subplots(len(trains) + 1, 1, figsize=(12, 3.6 * len(trains) + 2), sharex=True,
                              gridspec_kw={"height_ratios": [3] * len(trains) + [1]})
     axes = np.atleast_1d(axes)
+    grid_m = np.arange(0.0, line.length_m + 1.0, 1.0)
     for ax, train in zip(axes, trains):
         name, ato = train["name"], train.get("ato")
         x = results[f"{name}.x"] / 1000.0
-        ax.plot(x, results[f"{name}.v"] * 3.6, "k-", lw=1.2, label="speed")
+        speed = results[f"{name}.v"] * 3.6
+        ax.plot(x, speed, "k-", lw=1.3, label="speed")
+        top = max(float(np.nanmax(speed, initial=0.0)), 10.0)
+        key = []
         if ato and f"{ato}.v_atp" in results:
-            ax.plot(x, np.minimum(results[f"{ato}.v_atp"] * 3.6, 400), "r--", lw=0.9, label="ATP permitted")
-            ax.plot(x, np.minimum(results[f"{ato}.v_ceiling"] * 3.6, 400), "b:", lw=0.9, label="ATO ceiling")
+            static, curves, decel = static_speed_profile(line, _ato_of(components, ato), grid_m)
+            ax.plot(grid_m / 1000.0, static * 3.6, "r-", lw=1.0, label="static permitted speed (line limits)")
+            ax.plot(grid_m / 1000.0, np.where(curves < static, curves, np.nan) * 3.6, "r--", lw=0.9,
+                    label=f"braking curves to lower limits ({decel:.2f} m/s²)")
+            # what the cab signal adds: the recorded permitted speed where it is below the line's
+            permitted = results[f"{ato}.v_atp"] * 3.6
+            line_curve = np.interp(results[f"{name}.x"], grid_m, curves) * 3.6
+            below = permitted < line_curve - 1.0
+            if below.any():
+                ax.plot(x, np.where(below, permitted, np.nan), color="darkred", ls=":", lw=1.2,
+                        label="ATP permitted speed below it (cab signal)")
+            # ato.v_ceiling holds the line limit and the cab-signal ceiling, not the targets: under
+            # a yellow aspect (no ceiling, a target at the next signal) it is the line limit, and
+            # a red-yellow → yellow → red-yellow sequence would draw a spike to it. The ATO never
+            # runs above the ATP's permitted speed, so that caps what is drawn.
+            ax.plot(x, np.minimum(results[f"{ato}.v_ceiling"] * 3.6, permitted), color="tab:blue", ls=":",
+                    lw=0.9, label="ATO ceiling (at most the ATP permitted speed)")
+            top = max(top, float(np.nanmax(static[np.isfinite(static)], initial=0.0)) * 3.6)
             aspects = results[f"{ato}.atp_aspect"].astype(int)
-            top = ax.get_ylim()[1] if ax.get_ylim()[1] > 10 else 170
-            for code, colour in ((c, ASPECT_COLOURS[n]) for c, n in ASPECT_BY_CODE.items()):
-                mask = aspects == code
-                if mask.any():
-                    ax.fill_between(x, top * 0.96, top, where=mask, color=colour, step="post", lw=0)
-        for section in line.sections:
-            ax.axvline(section.end_m / 1000.0, color="0.6", lw=0.6)
-            ax.text(section.end_m / 1000.0, 2, section.signal, fontsize=7, ha="right", color="0.3")
-        for station in line.stations:
-            ax.axvline(station.stop_m / 1000.0, color="purple", lw=0.8, ls="-.")
-            ax.text(station.stop_m / 1000.0, 10, station.name, color="purple")
-        ax.set_ylabel(f"{name}: km/h")
-        ax.legend(loc="lower right", fontsize=8)
+            _aspect_band(ax, x, aspects, top * 1.08, top * 1.14)
+            key = _aspect_key(ax, aspects)
+        ax.set_ylim(0.0, top * 1.15)
+        _line_marks(ax, line)
+        ax.set_ylabel("speed (km/h)")
+        handles, _ = ax.get_legend_handles_labels()
+        ax.legend(handles=handles + key, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+                  borderaxespad=0.0, title=name if "train" in name.lower() else f"train {name}", title_fontsize=9, alignment="left")
         ax.grid(alpha=0.3)
     ax = axes[-1]
     starts = [g / 1000.0 for g in line.gradient_starts] + [line.length_m / 1000.0]
     grades = list(line.gradient_permille)
     ax.step(starts, grades + grades[-1:], where="post", color="brown")
-    ax.set_ylabel("gradient ‰")
+    ax.set_ylabel("gradient (‰)")
     ax.set_xlabel("distance (km)")
     ax.grid(alpha=0.3)
-    fig.suptitle("Speed over distance: ATP permitted speed, aspect acted on (band), signals, stations, gradient")
+    fig.suptitle("Speed over distance: static permitted speed and braking curves (ATP), ATO ceiling, "
+                 "aspect acted on (band), signals, stations, gradient", fontsize=10)
     return _save(fig, output / "speed_distance.png")
 
 
@@ -165,6 +273,7 @@ def _energy(output: Path, results, trains) -> Path:
     ax.set_ylabel("energy (kWh)")
     ax.grid(alpha=0.3)
     ax.legend()
+    ax.set_title("Energy from the line per train (drawn − returned by regenerative braking)")
     return _save(fig, output / "energy.png")
 
 
@@ -225,6 +334,109 @@ def _receiver_band_pass(params: dict):
 
     system = cab_systems.DIGITAL.get(str(params.get("system", "ALSN")))
     return receiver_band_pass(receiver_settings(system, params), system)
+
+
+# ---- report.html ---------------------------------------------------------------------------------
+CAPTIONS = {
+    "speed_distance.png": "Speed over distance per train: the static permitted speed from the line file and "
+                          "the ATP's braking curves to each lower limit, the ATP's permitted speed where the cab "
+                          "signal holds it lower, the ATO's ceiling, the aspect acted on (band), block signals, "
+                          "stations and the gradient.",
+    "time_distance.png": "Time–distance: each train's path against its timetable (circles: scheduled arrivals "
+                         "and departures).",
+    "energy.png": "Energy from the line per train (drawn − returned).",
+    "coil_emf.png": "Captured coil EMF and the receiver's band-pass output computed from it.",
+}
+
+
+def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]]:
+    """The verdict as table rows: one per timetabled stop of each train (train, station,
+    scheduled arrival, arrival, deviation, stop error, result), then one per further judgement
+    (what, verdict): each train's supervision, headway, each receiver, the safety verdict."""
+    stops, others = [], []
+    for train in summary.get("trains", []):
+        for stop in train.get("stops", []):
+            missed = stop.get("reached") is False
+            sched, arrival = stop.get("scheduled_arrival_s"), stop.get("arrival_s")
+            dev, error = stop.get("arrival_deviation_s"), stop.get("stop_error_m")
+            stops.append([train["name"], str(stop.get("station")), "" if sched is None else f"{sched:.0f}",
+                          "" if missed or arrival is None else f"{arrival:.1f}",
+                          "" if missed or dev is None else f"{dev:+.1f}",
+                          "" if missed or error is None else f"{error:+.2f}",
+                          "not reached" if missed else "reached"])
+        if "atp_interventions" in train:
+            others.append((f"train {train['name']}: supervision",
+                           f"energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
+                           f"{train.get('max_overspeed_kmh', 0):.1f} km/h, ATP interventions "
+                           f"{train['atp_interventions']}, emergency brakings {train['emergency_brakings']}, "
+                           f"SPAD {train['signals_passed_at_danger']}"))
+        if train.get("min_headway_m") is not None:
+            others.append((f"train {train['name']}: headway",
+                           f"min. headway to the train ahead {train['min_headway_m']:.0f} m"))
+    for rx in summary.get("receivers", []):
+        others.append((f"receiver {rx['receiver']} ({rx['system']}, train {rx['train']})",
+                       f"decoded {rx.get('decoded_codes', '?')}, errors {rx.get('code_errors', '?')}, "
+                       f"wrong-side failures {rx['wrong_side_failures']}, unsafe indications "
+                       f"{rx.get('unsafe_indications', '?')}"))
+    if summary.get("receivers"):
+        from orchestrator.analysis.verdict import safety_verdict
+
+        verdict = safety_verdict(summary)[1]
+        others.append(("safety", verdict[len("safety: "):] if verdict.startswith("safety: ") else verdict))
+    return stops, others
+
+
+def write_html(path: Path, summary: dict, pictures: Sequence[Path]) -> Path:
+    """report.html beside the pictures: the run, the verdict tables and every picture."""
+    from html import escape
+
+    stops, others = verdict_items(summary)
+    head = ("train", "station", "scheduled arrival (s)", "arrival (s)", "deviation (s)", "stop error (m)", "result")
+    rows = "\n".join("<tr class=\"verdict{}\">{}</tr>".format(
+        " missed" if row[-1] == "not reached" else "",
+        "".join(f"<td>{escape(cell)}</td>" for cell in row)) for row in stops)
+    more = "\n".join(f"<tr class=\"verdict\"><th scope=\"row\">{escape(what)}</th><td>{escape(text)}</td></tr>"
+                      for what, text in others)
+    figures = "\n".join(
+        f"<figure><img src=\"{escape(p.name)}\" alt=\"{escape(p.stem)}\">"
+        f"<figcaption>{escape(CAPTIONS.get(p.name, p.name))}</figcaption></figure>"
+        for p in pictures if p.suffix == ".png")
+    scenario = summary.get("scenario")
+    lines = [f"{summary.get('sim_time_s', 0):.1f} s simulated, "
+             f"{summary.get('realtime_factor') or 0:.1f}× real time, completed: {summary.get('completed')}"]
+    if summary.get("error"):
+        lines.append(f"stopped: {summary['error']}")
+    if scenario:
+        lines.append(f"scenario: {len(scenario['events_applied'])} events applied ({scenario['file']})")
+    text = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>railcosim report: {escape(str(summary.get('system')))}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; max-width: 1300px; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1.5em; }}
+th, td {{ border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; }}
+thead th {{ background: #eee; }}
+tr.missed td {{ background: #fdd; }}
+figure {{ margin: 1.5em 0; }} img {{ max-width: 100%; }}
+</style></head>
+<body>
+<h1>{escape(str(summary.get('system')))}</h1>
+{"".join(f"<p>{escape(line)}</p>" for line in lines)}
+<h2>Stops</h2>
+<table id="stops"><thead><tr>{"".join(f"<th>{h}</th>" for h in head)}</tr></thead>
+<tbody>
+{rows}
+</tbody></table>
+<h2>Supervision and safety</h2>
+<table id="judgements"><tbody>
+{more}
+</tbody></table>
+<h2>Pictures</h2>
+{figures}
+</body></html>
+"""
+    path.write_text(text, encoding="utf-8")
+    return path
 
 
 def verdict_table(summary: dict) -> str:
