@@ -40,6 +40,8 @@ MAX_DECEL_MPS2 = 5.0
 # a measured speed below −this is impossible, not noise at standstill (docs/ato.md, "Measurement faults")
 NEGATIVE_SPEED_TOLERANCE_MPS = 0.2
 MIN_BRAKE_SHARE = 0.02
+# below this the train stands (a tachometer's resolution; the arrival test uses the same)
+STANDSTILL_MPS = 1e-3
 CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
 # two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
@@ -341,6 +343,12 @@ class AtoCore:
             self._arrive(t, x)
             return -s.hold_brake, MODE_STANDSTILL
 
+        if self._standing_at_stop_target(x, v, atp):
+            # standing before a signal at danger (or on red): hold the brake until the target
+            # moves; releasing it would alternate traction and braking and creep towards the signal
+            out.v_ceiling_mps = 0.0
+            return -s.hold_brake, MODE_STANDSTILL
+
         t_run = t - self.timetable[self.stage].departure_s
         guide = self.strategy.guide(t_run, x, v, out.schedule_deviation_s)
         deviation = t_run - guide.t_ref_s
@@ -354,6 +362,17 @@ class AtoCore:
         if braking is not None:
             return braking
         return self._follow(x, v, atp, guide, deviation, ceiling, flat_out)
+
+    def _standing_at_stop_target(self, x: float, v: float, atp) -> bool:
+        """Standing with a stop target other than the stop point (a signal at danger less the
+        stop margin, a stop on red) no more than ``stop_window`` ahead of the head, or behind it.
+        Farther short of it the train moves up (and brakes for it as for any target)."""
+        if v > STANDSTILL_MPS:
+            return False
+        window = self.settings.stop_window_m
+        return atp.stop_now or any(
+            target.speed_mps <= 0.0 and not target.is_stop_point and target.position_m - x <= window
+            for target in self._targets(x, v, atp))
 
     def _drive_flat_out(self, atp, deviation: float) -> bool:
         """The book's recovery rule: late by more than the threshold, or late when a restrictive
