@@ -187,7 +187,22 @@ class AtoCore:
                 targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0)))
         if atp_result.stop_now:
             targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + 0.5, 0.0))
+        targets.extend(self._aspect_driving(x, atp_result)[1])
         return targets
+
+    def _aspect_driving(self, x: float, atp_result) -> Tuple[float, List[BrakingTarget]]:
+        """How the ATO itself drives under the ALSN aspect the ATP acts upon (the book's МИИТ
+        reactions, fmus/signalling/aspects.py ``ALSN_DRIVING_KMH``): the top of its band and its
+        own target at the exit signal, below the supervised speeds."""
+        if self.settings.cab_signal != "ALSN":
+            return _INF, []
+        band, at_signal = sig.alsn_driving_mps(self.category, atp_result.aspect)
+        targets = []
+        if at_signal is not None and at_signal > 0.0:
+            k = self.atp.section_of(x)
+            if k is not None:
+                targets.append(BrakingTarget(self.atp.exit_signal_m(k), at_signal))
+        return (_INF if band is None else band), targets
 
     def _predict(self, x: float, v: float):
         """Head position and speed one brake lead time ahead at the measured acceleration: the
@@ -356,7 +371,8 @@ class AtoCore:
         out.v_ref_mps = guide.v_ref_mps
         flat_out = self._drive_flat_out(atp, deviation)
 
-        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps)
+        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps,
+                      self._aspect_driving(x, atp)[0])
         out.v_ceiling_mps = max(ceiling, 0.0)
         braking = self._brake_for_targets(t, x, v, atp, stop.stop_m)
         if braking is not None:
