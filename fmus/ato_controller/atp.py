@@ -93,7 +93,50 @@ class AtpResult:
     stop_now: bool = False               # red: the ATO must stop the train
 
 
+@dataclass
+class VigilanceDevice:
+    """Periodic driver-vigilance check with its emergency valve (ALSN's ДКСВ/ЭПК; docs/ato.md,
+    "Vigilance device"). While a checked aspect is shown, a warning starts ``period_s`` after the
+    last acknowledgement (or after the check became active); unanswered for ``answer_s`` it
+    applies the emergency brake. An acknowledgement is a press: the input's rising edge (a held
+    handle answers once), at any time it restarts the period."""
+
+    period_s: float = 30.0
+    answer_s: float = 7.0
+    next_check_s: float = _INF
+    warning_since_s: Optional[float] = None
+    brakings: int = 0
+    _pressed_before: bool = False
+
+    @property
+    def warning(self) -> bool:
+        return self.warning_since_s is not None
+
+    def step(self, t: float, checked: bool, pressed: bool, ato_answers: bool) -> bool:
+        """Advance to ``t``; True when the check went unanswered (apply the emergency brake)."""
+        press = pressed and not self._pressed_before
+        self._pressed_before = pressed
+        if not checked or self.period_s <= 0.0:
+            self.next_check_s, self.warning_since_s = _INF, None
+            return False
+        if self.next_check_s == _INF:
+            self.next_check_s = t + self.period_s
+        if press or (ato_answers and self.warning):
+            self.next_check_s, self.warning_since_s = t + self.period_s, None
+            return False
+        if self.warning_since_s is None and t + 1e-9 >= self.next_check_s:
+            self.warning_since_s = t
+        if self.warning and t - self.warning_since_s + 1e-9 >= self.answer_s:
+            self.brakings += 1
+            self.next_check_s, self.warning_since_s = t + self.period_s, None
+            return True
+        return False
+
+
 class Atp:
+    #: the vigilance device (attach_vigilance); None: no periodic check
+    vigilance: Optional[VigilanceDevice] = None
+
     def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
                  supervision_decel_mps2: float, decoding_latency_s: float):
         if cab_signal not in CAB_SIGNAL_MODES:
@@ -278,3 +321,24 @@ class Atp:
         elif v <= permitted:
             self.service_active = False
         return SERVICE_INTERVENTION if self.service_active else NO_INTERVENTION
+
+    # ---- vigilance device -------------------------------------------------------------------
+    def attach_vigilance(self, period_s: float, answer_s: float) -> None:
+        """Fit the periodic vigilance check (period 0: none). Checked aspects:
+        fmus/signalling/aspects.py ``VIGILANCE_ASPECTS``; no check without a cab signal."""
+        if not period_s >= 0:
+            raise FmuInputError(f"parameter vigilance_period: must not be negative, got {period_s}")
+        if not answer_s > 0:
+            raise FmuInputError(f"parameter vigilance_answer: must be positive, got {answer_s}")
+        self.vigilance = VigilanceDevice(period_s, answer_s)
+
+    def check_vigilance(self, t: float, aspect: int, code_valid: bool, pressed: bool, ato_answers: bool) -> None:
+        """One step of the vigilance device, before :meth:`supervise`: an unanswered check
+        applies the emergency brake (held until standstill, counted as an emergency braking)."""
+        if self.vigilance is None:
+            return
+        shown = int(aspect) if code_valid else sig.WHITE
+        checked = self.mode != "off" and shown in sig.VIGILANCE_ASPECTS
+        if self.vigilance.step(t, checked, pressed, ato_answers):
+            self._emergency()
+

@@ -82,6 +82,11 @@ class AtoSettings:
     # a freight pneumatic brake (20.5 s); an EP brake (1.75–2.5 s) stops within 0.2 m without it,
     # and the prediction costs about 1 ms per ATO step on the final approach (issue 4: 200 µs)
     predictive_stop_lead_s: float = 5.0
+    # vigilance device (docs/ato.md, "Vigilance device"): ДКСВ-1-Д checks every 30–40 s
+    # (docs/sources.md#vigilance-device), we take 30 s; the answer window 7 s [U]; 0: no device
+    vigilance_period_s: float = 30.0
+    vigilance_answer_s: float = 7.0
+    ato_acknowledges: bool = True         # the ATO answers each check while it drives
 
 
 @dataclass
@@ -105,6 +110,8 @@ class AtoOutputs:
     mode_changes: int = 0                 # traction/coast/brake changes while running
     stage: int = 0
     departure_hold_s: float = 0.0         # time standing past a departure time for want of a permissive cab code
+    vigilance_warning: bool = False       # a vigilance check awaits its acknowledgement
+    vigilance_brakings: int = 0           # emergency brakings for an unanswered check
 
 
 class AtoCore:
@@ -131,6 +138,7 @@ class AtoCore:
             raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
                                 f"supervision deceleration {a_atp} m/s²")
         self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s)
+        self.atp.attach_vigilance(s.vigilance_period_s, s.vigilance_answer_s)
         planner = StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps)
         self.plans = []
         for k in range(len(timetable) - 1):
@@ -237,13 +245,15 @@ class AtoCore:
 
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
-             v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
+             v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0,
+             vigilance_ack: bool = False) -> AtoOutputs:
         self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks)
         if self.fault is not None:
             return self._fail_safe(t)
         self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
+        self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
         command, mode = self._drive(t, h, x, v, atp, permissive)
@@ -313,6 +323,9 @@ class AtoCore:
         out.signals_passed_at_danger = self.atp.signals_passed_at_danger
         out.max_overspeed_mps = max(self.atp.max_overspeed_mps, 0.0)
         out.stage = self.stage
+        vigilance = self.atp.vigilance
+        if vigilance is not None:
+            out.vigilance_warning, out.vigilance_brakings = vigilance.warning, vigilance.brakings
         return out
 
     def _drive(self, t: float, h: float, x: float, v: float, atp, permissive: bool):

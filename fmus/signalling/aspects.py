@@ -86,6 +86,10 @@ SOURCES: Dict[Tuple[str, str, int], str] = {
     ("driving", "high_speed", RED_YELLOW): "as passenger [U]",
 }
 
+#: aspects under which the driver's vigilance is checked periodically (ALSN: yellow, red-yellow, red
+#: and white, docs/sources.md#alsn-decoder-rules; none on green)
+VIGILANCE_ASPECTS = (YELLOW, RED_YELLOW, RED, WHITE)
+
 _RANK = {RED: 0, WHITE: 1, RED_YELLOW: 2, YELLOW: 3, GREEN: 4}
 
 
