@@ -32,10 +32,10 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 from fmus.signalling import aspects as sig
-from fmus.data.loader import Line
+from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
@@ -136,6 +136,8 @@ class VigilanceDevice:
 class Atp:
     #: the vigilance device (attach_vigilance); None: no periodic check
     vigilance: Optional[VigilanceDevice] = None
+    #: temporary restrictions set while running (set_event_restrictions), besides the line file's
+    event_restrictions: Tuple[TemporaryRestriction, ...] = ()
 
     def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
                  supervision_decel_mps2: float, decoding_latency_s: float):
@@ -227,6 +229,7 @@ class Atp:
                   v_permitted: float, v_target: float, free_blocks: int) -> AtpResult:
         result = AtpResult()
         c = self.line_constraints(x, v)
+        c.add(self.restriction_constraints(x, v))
         k = self.section_of(x)
         acted_aspect = sig.GREEN
         if self.mode != "off":
@@ -341,4 +344,30 @@ class Atp:
         checked = self.mode != "off" and shown in sig.VIGILANCE_ASPECTS
         if self.vigilance.step(t, checked, pressed, ato_answers):
             self._emergency()
+
+    # ---- temporary speed restrictions -------------------------------------------------------
+    def set_event_restrictions(self, restrictions) -> None:
+        """The restrictions set while running (the FMU's ``tsr_*`` inputs), replacing the last set."""
+        self.event_restrictions = tuple(restrictions)
+
+    def restrictions(self) -> Tuple[TemporaryRestriction, ...]:
+        """Every temporary restriction this train keeps: the line file's for its category, then
+        those set while running."""
+        line_file = self.__dict__.get("_line_restrictions")
+        if line_file is None:
+            line_file = self.__dict__["_line_restrictions"] = tuple(self.line.restrictions_for(self.category))
+        return line_file + self.event_restrictions
+
+    def restriction_speed_at(self, x: float) -> float:
+        """The lowest restriction in force at the head (held until the tail clears its end); inf: none."""
+        tail = x - self.length_m
+        return min((r.speed_mps for r in self.restrictions() if r.start_m <= x and tail < r.end_m), default=_INF)
+
+    def restriction_constraints(self, x: float, v: float) -> Constraints:
+        """A restriction is a ceiling from the head reaching its start until the tail has cleared
+        its end (the tail rule of the line's limits), and a target at its start when ahead."""
+        c = Constraints(self.restriction_speed_at(x))
+        reach = x + v * v / (2.0 * self.decel) + 200.0
+        c.targets.extend(Target(r.start_m, r.speed_mps) for r in self.restrictions() if x < r.start_m <= reach)
+        return c
 

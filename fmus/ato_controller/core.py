@@ -18,7 +18,7 @@ import numpy as np
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
-from fmus.data.loader import Line, RollingStock, TimetableStop
+from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
@@ -46,6 +46,18 @@ CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after s
 # two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
 FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
+# inside a temporary restriction the ATO drives traction–coast between v_limit − 8 km/h and its
+# ceiling (the ATO book's МИИТ rule, docs/sources.md#temporary-speed-restrictions)
+RESTRICTION_BAND_MPS = 8.0 * MPS_PER_KMH
+# temporary restrictions the FMU can be given while running (its tsr_* input slots)
+TSR_SLOTS = 4
+
+
+def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
+    """The restrictions in force among the FMU's ``tsr_*`` slots: speed > 0 and end > start."""
+    return [TemporaryRestriction(float(a), float(b), float(v), name=f"tsr[{k + 1}]")
+            for k, (a, b, v) in enumerate(zip(np.ravel(starts_m), np.ravel(ends_m), np.ravel(speeds_mps)))
+            if v > 0.0 and b > a]
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,6 +174,7 @@ class AtoCore:
         self.restricted = False
         self.recovering = False
         self.creeping = False
+        self.band_coasting = False            # coasting down through a restriction's band
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
@@ -463,6 +476,9 @@ class AtoCore:
         if atp.stop_now:
             return self.controllers.brake(x, v, self.a_plan), MODE_BRAKE
         v_set = min(cruise, ceiling)
+        band = self._restriction_band(x, v, v_set, ceiling)
+        if band is not None:
+            return band
         if deviation < -s.early_threshold_s and not self.creeping:
             # well ahead (e.g. a heavy train running away down a grade): hold the programme speed,
             # braking if need be (ЭР200 rule "well ahead → drop one grade", docs/sources.md#ato-timetable-following)
@@ -474,6 +490,27 @@ class AtoCore:
             command = min(self.controllers.hold(x, v, ceiling, may_brake=True), 0.0)
             return command, MODE_BRAKE if command < 0 else MODE_COAST
         return self._hold(x, v, v_set, may_brake=v > ceiling)
+
+    def _restriction_band(self, x: float, v: float, v_set: float, ceiling: float):
+        """Inside a temporary restriction that binds the set speed: traction up to the ceiling,
+        then coast down to v_limit − 8 km/h (the book's traction–coast band); None otherwise."""
+        limit = self.atp.restriction_speed_at(x)
+        if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - 1e-6):
+            self.band_coasting = False
+            return None
+        if v >= v_set - 0.05:
+            self.band_coasting = True
+        elif v <= limit - RESTRICTION_BAND_MPS:
+            self.band_coasting = False
+        if self.band_coasting and v <= ceiling:
+            self.controllers.coasting = True
+            return 0.0, MODE_COAST
+        return None
+
+    def set_restrictions(self, restrictions) -> None:
+        """Temporary restrictions set while running (the FMU's ``tsr_*`` inputs, scenario
+        events): the ATP supervises them and the ATO brakes for them; not in the programmes."""
+        self.atp.set_event_restrictions(restrictions)
 
     def _hold(self, x: float, v: float, v_set: float, may_brake: bool):
         command = self.controllers.hold(x, v, v_set, may_brake=may_brake)

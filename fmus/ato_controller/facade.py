@@ -4,7 +4,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FrameSlave, Port, line_file_port
-from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, AtoCore, AtoSettings
+from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions
 
 
 class AtoController(FrameSlave):
@@ -61,6 +61,14 @@ class AtoController(FrameSlave):
             Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
+            # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
+            # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
+            Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
+                 description="temporary restriction: where the head must be at tsr_speed"),
+            Port("tsr_end", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
+                 description="temporary restriction: held until the tail has cleared this point"),
+            Port("tsr_speed", "input", unit="m/s", start=0.0, min=0.0, max=MAX_SPEED_MPS, shape=(TSR_SLOTS,),
+                 description="temporary restriction speed; 0: slot unused"),
             Port("vigilance_ack", "input", "Boolean", start=False,
                  description="driver's vigilance acknowledgement (a press: false → true answers a check)"),
             Port("command", "output", unit="1", min=-1.0, max=1.0,
@@ -117,6 +125,7 @@ class AtoController(FrameSlave):
     def step_core(self, current_time, step_size):
         io = self.io
         core = self.core
+        core.set_restrictions(event_restrictions(io["tsr_start"], io["tsr_end"], io["tsr_speed"]))
         self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
                               bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
                               int(io["free_blocks"]), bool(io["vigilance_ack"])))
