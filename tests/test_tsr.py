@@ -173,3 +173,30 @@ def test_a_bad_restrict_event_names_the_field(tmp_path, event, field):
     with pytest.raises(UserError) as error:
         load_scenario(path)
     assert f"field {field}:" in str(error.value) and "\n" not in str(error.value)
+
+
+# ---- through the FMUs, the CLI and the report ----------------------------------------------------
+def test_a_restrict_event_through_the_fmu_is_kept_and_drawn_in_the_report(tmp_path, product_fmus):
+    from helpers import railcosim, read_csv
+    from orchestrator.analysis.report import _line_of, restrictions_drawn
+
+    scenario = tmp_path / "tsr.json"
+    scenario.write_text(json.dumps({"events": [
+        {"time": 100, "model": "ato", "action": "restrict", "start_m": 5000, "end_m": 6000, "speed_kmh": 40}]}))
+    out = tmp_path / "run"
+    code, _, stderr = railcosim("run", "ato_only", "--output", out, "--no-build", "--scenario", scenario,
+                                "--stop-time", "700")
+    assert code == 0, stderr
+    header, data = read_csv(out / "results.csv")
+    x, v = data[:, header.index("train.x")], data[:, header.index("train.v")]
+    assert v[_inside(x)].size and v[_inside(x)].max() <= 40 * KMH
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trains"][0]["atp_interventions"] == 0
+    code, _, stderr = railcosim("report", out)
+    assert code == 0, stderr
+    assert (out / "speed_distance.png").is_file()
+    metadata = json.loads((out / "metadata.json").read_text())
+    components = metadata["components"]
+    drawn = restrictions_drawn(_line_of(components, "ato"), components, "ato",
+                               summary["scenario"]["events_applied"])
+    assert drawn == [(5.0, 6.0, pytest.approx(40.0), "set at 100 s")]
