@@ -76,3 +76,25 @@ def test_closed_loop_without_acknowledgement_ends_in_an_emergency_brake_under_ye
     first_emergency = t[np.argmax(mode == 5)]
     assert withheld.ato.out.vigilance_brakings >= 1
     assert first_emergency == pytest.approx(first_checked + PERIOD_S + ANSWER_S, abs=1.0)
+
+
+@pytest.mark.parametrize("press_at_s, brakings", [(None, 1), (33.0, 0)])
+def test_the_fmus_acknowledgement_input_answers_the_check(tmp_path, product_fmus, press_at_s, brakings):
+    """ato_only with an ALSN cab signal and no receiver: white (no code) from the start, so the
+    check runs; the ATO does not answer. Unanswered: the emergency brake at 37 s; a press
+    (vigilance_ack false → true at 33 s) answers it and the next warning comes at 63 s."""
+    import json
+
+    from helpers import railcosim
+
+    events = [] if press_at_s is None else [{"time": press_at_s, "model": "ato", "variable": "vigilance_ack",
+                                             "action": "set", "value": True}]
+    scenario = tmp_path / "press.json"
+    scenario.write_text(json.dumps({"events": events}))
+    out = tmp_path / "run"
+    code, _, stderr = railcosim("run", "ato_only", "--output", out, "--no-build", "--stop-time", "65",
+                                "--scenario", scenario, "--set", "ato.cab_signal=ALSN",
+                                "--set", "ato.ato_acknowledges=false")
+    assert code == 0, stderr
+    (train,) = json.loads((out / "summary.json").read_text())["trains"]
+    assert train["emergency_brakings"] == brakings
