@@ -30,6 +30,7 @@ to 15 km/h at 210 km/h [S]) it applies the emergency brake until standstill.
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import List, Optional, Tuple
@@ -350,13 +351,14 @@ class Atp:
         """The restrictions set while running (the FMU's ``tsr_*`` inputs), replacing the last set."""
         self.event_restrictions = tuple(restrictions)
 
+    @functools.cached_property
+    def line_restrictions(self) -> Tuple[TemporaryRestriction, ...]:
+        """The line file's temporary restrictions for this train's category."""
+        return tuple(self.line.restrictions_for(self.category))
+
     def restrictions(self) -> Tuple[TemporaryRestriction, ...]:
-        """Every temporary restriction this train keeps: the line file's for its category, then
-        those set while running."""
-        line_file = self.__dict__.get("_line_restrictions")
-        if line_file is None:
-            line_file = self.__dict__["_line_restrictions"] = tuple(self.line.restrictions_for(self.category))
-        return line_file + self.event_restrictions
+        """Every temporary restriction this train keeps: the line file's, then those set while running."""
+        return self.line_restrictions + self.event_restrictions
 
     def restriction_speed_at(self, x: float) -> float:
         """The lowest restriction in force at the head (held until the tail clears its end); inf: none."""
