@@ -49,6 +49,9 @@ def test_the_ato_drives_its_band_under_red_yellow_and_60_at_the_yellow_exit():
     x, v, aspect = result.column("x"), result.column("v"), result.column("aspect")
     under_ry = aspect == sig.RED_YELLOW
     assert under_ry.any() and v[under_ry].max() <= 60 * KMH + 0.05
+    # traction–coast: the band is driven by coasting down from its top (МИИТ 60…42 km/h)
+    assert (result.column("mode")[under_ry] == 2).any()
+    assert sig.ALSN_BAND_BOTTOM_KMH["passenger"][sig.RED_YELLOW] == 42.0
     # at the yellow section's exit (12 800 m, signal Ч2) the ATO is down to its 60 km/h
     k = np.argmax(x >= 12800.0)
     assert v[k] <= 60 * KMH + 0.05

@@ -476,7 +476,7 @@ class AtoCore:
         if atp.stop_now:
             return self.controllers.brake(x, v, self.a_plan), MODE_BRAKE
         v_set = min(cruise, ceiling)
-        band = self._restriction_band(x, v, v_set, ceiling)
+        band = self._restriction_band(x, v, v_set, ceiling, atp)
         if band is not None:
             return band
         if deviation < -s.early_threshold_s and not self.creeping:
@@ -491,16 +491,23 @@ class AtoCore:
             return command, MODE_BRAKE if command < 0 else MODE_COAST
         return self._hold(x, v, v_set, may_brake=v > ceiling)
 
-    def _restriction_band(self, x: float, v: float, v_set: float, ceiling: float):
-        """Inside a temporary restriction that binds the set speed: traction up to the ceiling,
-        then coast down to v_limit − 8 km/h (the book's traction–coast band); None otherwise."""
+    def _restriction_band(self, x: float, v: float, v_set: float, ceiling: float, atp):
+        """Inside a temporary restriction, or under an aspect with a driving band (КЖ), that
+        binds the set speed: traction up to the ceiling, then coast down to the band's bottom
+        (v_limit − 8 km/h; КЖ 42 km/h: the book's traction–coast bands); None otherwise."""
         limit = self.atp.restriction_speed_at(x)
+        bottom = limit - RESTRICTION_BAND_MPS
+        if self.settings.cab_signal == "ALSN":
+            top, aspect_bottom = sig.alsn_driving_mps(self.category, atp.aspect)[0], \
+                sig.alsn_band_bottom_mps(self.category, atp.aspect)
+            if top is not None and aspect_bottom is not None and top < limit:
+                limit, bottom = top, aspect_bottom
         if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - 1e-6):
             self.band_coasting = False
             return None
         if v >= v_set - 0.05:
             self.band_coasting = True
-        elif v <= limit - RESTRICTION_BAND_MPS:
+        elif v <= bottom:
             self.band_coasting = False
         if self.band_coasting and v <= ceiling:
             self.controllers.coasting = True

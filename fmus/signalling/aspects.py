@@ -68,6 +68,12 @@ ALSN_DRIVING_KMH: Dict[str, Dict[int, Tuple[Optional[float], Optional[float]]]] 
     "high_speed": {YELLOW: (None, 60.0), RED_YELLOW: (60.0, 0.0)},
 }
 
+# category → aspect → bottom of the ATO's traction–coast band (km/h): МИИТ's КЖ band 60…42 km/h
+# ("42" as printed, reading uncertain) [S]; freight and high-speed the same 18 km/h depth [U]
+ALSN_BAND_BOTTOM_KMH: Dict[str, Dict[int, float]] = {
+    "passenger": {RED_YELLOW: 42.0}, "freight": {RED_YELLOW: 32.0}, "high_speed": {RED_YELLOW: 42.0},
+}
+
 #: (table, category, aspect) → where each speed comes from (docs/ato.md shows it beside the value)
 SOURCES: Dict[Tuple[str, str, int], str] = {
     **{("supervised", c, GREEN): "line limit (docs/sources.md#alsn-carriers-and-aspects) [S]" for c in TRAIN_CATEGORIES},
@@ -108,3 +114,10 @@ def alsn_driving_mps(category: str, aspect: int) -> Tuple[Optional[float], Optio
     asks nothing of the ATO beyond the supervised speeds."""
     band, at_signal = ALSN_DRIVING_KMH[category].get(int(aspect), (None, None))
     return (None if band is None else band / 3.6, None if at_signal is None else at_signal / 3.6)
+
+
+def alsn_band_bottom_mps(category: str, aspect: int) -> Optional[float]:
+    """Bottom of the ATO's traction–coast band under the aspect (m/s), None: no band."""
+    bottom = ALSN_BAND_BOTTOM_KMH[category].get(int(aspect))
+    return None if bottom is None else bottom / 3.6
+
