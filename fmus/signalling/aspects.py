@@ -87,7 +87,7 @@ SOURCES: Dict[Tuple[str, str, int], str] = {
     ("driving", "passenger", YELLOW): "ATO book §9, МИИТ: 60 km/h by the end of the block [S]",
     ("driving", "passenger", RED_YELLOW): "ATO book §9, МИИТ: band 60…42 km/h, then stop [S]",
     ("driving", "freight", YELLOW): "the supervised 50 km/h [U]",
-    ("driving", "freight", RED_YELLOW): "band top 50 km/h [U], then stop [S]",
+    ("driving", "freight", RED_YELLOW): "band 50…32 km/h (the passenger depth) [U], then stop [S]",
     ("driving", "high_speed", YELLOW): "as passenger [U]",
     ("driving", "high_speed", RED_YELLOW): "as passenger [U]",
 }
