@@ -10,7 +10,7 @@ import pytest
 from benchmarks.harness.closed_loop import run_closed_loop
 from fmus.ato_controller.atp import NO_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import MODE_COAST, RESTRICTION_BAND_MPS, AtoCore, AtoSettings
-from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, TemporaryRestriction, load_line, load_rolling_stock,
+from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, TemporaryRestriction, load_line, load_rolling_stock,
                               load_timetable)
 from fmus.errors import FmuInputError
 from fmus.traction.core import TractionCore
@@ -200,3 +200,28 @@ def test_a_restrict_event_through_the_fmu_is_kept_and_drawn_in_the_report(tmp_pa
     drawn = restrictions_drawn(_line_of(components, "ato"), components, "ato",
                                summary["scenario"]["events_applied"])
     assert drawn == [(5.0, 6.0, pytest.approx(40.0), "set at 100 s")]
+
+
+def test_after_a_restriction_the_ato_runs_at_the_permitted_speed_until_on_time():
+    """The book's recovery: late when a restriction clears → maximum permitted speed (full
+    traction, no coasting) until back on schedule, also once less than 16 s late."""
+    line = load_line()
+    stock = load_rolling_stock(DEFAULT_ROLLING_STOCK)
+    ato = AtoCore(line, stock, load_timetable(DEFAULT_TIMETABLE, line), DEFAULT_TIMETABLE, "passenger",
+                  AtoSettings(cab_signal="off"))
+    train = TractionCore(stock, line, x0_m=400.0)
+    state, rows = train.out, []
+    for k in range(int(560.0 / 0.5)):
+        t = k * 0.5
+        if t == 100.0:
+            ato.set_restrictions([TemporaryRestriction(7000.0, 7400.0, 70 * KMH)])
+        out = ato.step(t, 0.5, state.x_m, state.v_mps)
+        rows.append((state.x_m, out.mode, out.schedule_deviation_s))
+        state = train.step(t, 0.5, out.command, out.emergency_brake)
+    x, mode, deviation = np.array(rows).T
+    cleared = x > 7400.0 + TRAIN_LENGTH_M
+    first = np.argmax(cleared)
+    assert 0.0 < deviation[first] < 30.0
+    late = cleared & (np.arange(x.size) >= first) & (np.maximum.accumulate(deviation[::-1])[::-1] > 0.5)
+    recovering = late & (x < 9000.0)              # before braking for B
+    assert recovering.sum() > 20 and not (mode[recovering] == MODE_COAST).any()

@@ -395,7 +395,7 @@ class AtoCore:
         deviation = t_run - guide.t_ref_s
         out.schedule_deviation_s = deviation
         out.v_ref_mps = guide.v_ref_mps
-        flat_out = self._drive_flat_out(atp, deviation)
+        flat_out = self._drive_flat_out(atp, deviation, self.atp.restriction_speed_at(x) < _INF)
 
         ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps,
                       self._aspect_driving(x, atp)[0])
@@ -416,15 +416,15 @@ class AtoCore:
             target.speed_mps <= 0.0 and not target.is_stop_point and target.position_m - x <= window
             for target in self._targets(x, v, atp))
 
-    def _drive_flat_out(self, atp, deviation: float) -> bool:
+    def _drive_flat_out(self, atp, deviation: float, in_restriction: bool = False) -> bool:
         """The book's recovery rule: late by more than the threshold, or late when a restrictive
-        cab signal clears, drive at the maximum permitted speed until back on schedule."""
-        if self.settings.cab_signal != "off":
-            if atp.aspect != sig.GREEN:
-                self.restricted = True
-            elif self.restricted:
-                self.restricted = False
-                self.recovering = deviation > 0.0
+        cab signal or a temporary restriction clears, drive at the maximum permitted speed until
+        back on schedule."""
+        if in_restriction or (self.settings.cab_signal != "off" and atp.aspect != sig.GREEN):
+            self.restricted = True
+        elif self.restricted:
+            self.restricted = False
+            self.recovering = deviation > 0.0
         if self.recovering and deviation <= 0.0:
             self.recovering = False
         return self.recovering or deviation > self.settings.late_threshold_s
