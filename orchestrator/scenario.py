@@ -12,7 +12,10 @@ scenario format (issue 8; docs/scenarios.md):
 * ``set`` (OSP: ``override``, accepted too) — the variable takes ``value`` from ``time`` on,
   whatever its link delivers; on an output, every consumer (and the recorder) sees ``value``;
 * ``bias`` — ``value`` is added to what the link (or, unconnected, the start value) delivers;
-* ``reset`` — back to the link's value (or the start value).
+* ``reset`` — back to the link's value (or the start value);
+* ``restrict`` — a temporary speed restriction for an ATO controller: ``start_m``, ``end_m``,
+  ``speed_kmh`` and optionally ``until`` (s, when it is lifted); it takes the component's next
+  ``tsr_*`` input slot (4 per component).
 
 Parameters are fixed once a run starts (our FMUs' parameters have variability fixed): set them
 with ``--set`` or a parameter set instead; an event on one is an error naming it. Events are
@@ -32,6 +35,10 @@ from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.protocols import Manipulator, MasterView
 
 ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
+# a temporary speed restriction for an ATO controller (expanded into set/reset events on its
+# tsr_start/tsr_end/tsr_speed input slots: docs/scenarios.md, docs/ato.md)
+RESTRICT = "restrict"
+TSR_SLOTS = 4                        # fmus/ato_controller/core.py TSR_SLOTS
 INT32 = (-2 ** 31, 2 ** 31 - 1)      # an FMI 2.0 Integer is a C int (fmi2Integer)
 MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
@@ -62,6 +69,7 @@ def load_scenario(path) -> Scenario:
         raise UserError(f"{path}: field events: a list of events is required")
     defaults = doc.get("defaultOpts", {}) if isinstance(doc.get("defaultOpts", {}), dict) else {}
     events = []
+    slots: Dict[str, int] = {}          # restriction slots used per component
     for index, item in enumerate(doc["events"]):
         where = f"{path}: field events[{index}]"
         if not isinstance(item, dict):
@@ -70,12 +78,17 @@ def load_scenario(path) -> Scenario:
         time_s = merged.get("time")
         if not _is_number(time_s) or not 0 <= time_s <= MAX_TIME_S:
             raise UserError(f"{where}.time: a finite time ≥ 0 in seconds is required, got {time_s!r}")
-        for key in ("model", "variable"):
+        restrict = str(merged.get("action", "")).lower() == RESTRICT
+        for key in ("model",) if restrict else ("model", "variable"):
             if not isinstance(merged.get(key), str) or not merged[key]:
                 raise UserError(f"{where}.{key}: a name is required")
+        if restrict:
+            events.extend(_restriction_events(merged, float(time_s), where, slots))
+            continue
         action = ACTIONS.get(str(merged.get("action", "")).lower())
         if action is None:
-            raise UserError(f"{where}.action: {merged.get('action')!r} is not one of set, override, bias, reset")
+            raise UserError(f"{where}.action: {merged.get('action')!r} is not one of set, override, bias, reset, "
+                            f"{RESTRICT}")
         if action != "reset" and "value" not in merged:
             raise UserError(f"{where}.value: required for {action}")
         events.append(Event(float(time_s), merged["model"], merged["variable"], action, merged.get("value")))
@@ -84,6 +97,36 @@ def load_scenario(path) -> Scenario:
         raise UserError(f"{path}: field end: a finite positive time in seconds is required, got {end!r}")
     events.sort(key=lambda e: e.time_s)          # stable: same-time events keep their file order
     return Scenario(path, str(doc.get("description", "")), events, None if end is None else float(end))
+
+
+def _restriction_events(item: dict, time_s: float, where: str, slots: Dict[str, int]) -> List[Event]:
+    """A ``restrict`` event: a temporary speed restriction given to an ATO controller, as
+    ``set`` events on its next free ``tsr_*`` input slot (speed in m/s), and ``reset`` events
+    lifting it at ``until`` when given."""
+    values = {}
+    for key in ("start_m", "end_m", "speed_kmh"):
+        value = item.get(key)
+        if not _is_number(value) or value < 0:
+            raise UserError(f"{where}.{key}: a finite number ≥ 0 is required, got {value!r}")
+        values[key] = float(value)
+    if values["end_m"] <= values["start_m"]:
+        raise UserError(f"{where}.end_m: {values['end_m']:g} is not after start_m {values['start_m']:g}")
+    if values["speed_kmh"] <= 0:
+        raise UserError(f"{where}.speed_kmh: must be positive, got {values['speed_kmh']:g}")
+    until = item.get("until")
+    if until is not None and (not _is_number(until) or not time_s < until <= MAX_TIME_S):
+        raise UserError(f"{where}.until: a time after the event's time ({time_s:g} s) is required, got {until!r}")
+    model = item["model"]
+    slot = slots[model] = slots.get(model, 0) + 1
+    if slot > TSR_SLOTS:
+        raise UserError(f"{where}: at most {TSR_SLOTS} restrictions per component ({model} has {TSR_SLOTS} "
+                        f"tsr_* input slots)")
+    settings = (("tsr_start", values["start_m"]), ("tsr_end", values["end_m"]),
+                ("tsr_speed", values["speed_kmh"] / 3.6))
+    events = [Event(time_s, model, f"{name}[{slot}]", "set", value) for name, value in settings]
+    if until is not None:
+        events += [Event(float(until), model, f"{name}[{slot}]", "reset") for name, _ in settings]
+    return events
 
 
 def read_json(path: Path):

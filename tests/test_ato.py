@@ -106,7 +106,7 @@ def test_red_yellow_code_loss_keeps_the_stop_at_that_signal():
     lost = atp.supervise(1.0, 4015.0, 15.0, sig.WHITE, False, 0, 0, 0)
     assert any(t.signal and t.position_m == 5200.0 for t in lost.constraints.targets)
     assert lost.permitted_mps <= math.sqrt(2 * 0.63 * (5200 - 4015)) + 1e-9
-    assert lost.ceiling_mps <= 60 * KMH + 1e-9 and lost.aspect == sig.RED_YELLOW
+    assert lost.ceiling_mps <= 80 * KMH + 1e-9 and lost.aspect == sig.RED_YELLOW
     # longer than the decoding latency: the no-code rules are added (white's 40 km/h)
     later = atp.supervise(5.5, 4090.0, 11.0, sig.WHITE, False, 0, 0, 0)
     assert any(t.signal and t.position_m == 5200.0 for t in later.constraints.targets)

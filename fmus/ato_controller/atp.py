@@ -30,12 +30,13 @@ to 15 km/h at 210 km/h [S]) it applies the emergency brake until standstill.
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 from fmus.signalling import aspects as sig
-from fmus.data.loader import Line
+from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
@@ -93,7 +94,52 @@ class AtpResult:
     stop_now: bool = False               # red: the ATO must stop the train
 
 
+@dataclass
+class VigilanceDevice:
+    """Periodic driver-vigilance check with its emergency valve (ALSN's ДКСВ/ЭПК; docs/ato.md,
+    "Vigilance device"). While a checked aspect is shown, a warning starts ``period_s`` after the
+    last acknowledgement (or after the check became active); unanswered for ``answer_s`` it
+    applies the emergency brake. An acknowledgement is a press: the input's rising edge (a held
+    handle answers once), at any time it restarts the period."""
+
+    period_s: float = 30.0
+    answer_s: float = 7.0
+    next_check_s: float = _INF
+    warning_since_s: Optional[float] = None
+    brakings: int = 0
+    _pressed_before: bool = False
+
+    @property
+    def warning(self) -> bool:
+        return self.warning_since_s is not None
+
+    def step(self, t: float, checked: bool, pressed: bool, ato_answers: bool) -> bool:
+        """Advance to ``t``; True when the check went unanswered (apply the emergency brake)."""
+        press = pressed and not self._pressed_before
+        self._pressed_before = pressed
+        if not checked or self.period_s <= 0.0:
+            self.next_check_s, self.warning_since_s = _INF, None
+            return False
+        if self.next_check_s == _INF:
+            self.next_check_s = t + self.period_s
+        if press or (ato_answers and self.warning):
+            self.next_check_s, self.warning_since_s = t + self.period_s, None
+            return False
+        if self.warning_since_s is None and t + 1e-9 >= self.next_check_s:
+            self.warning_since_s = t
+        if self.warning and t - self.warning_since_s + 1e-9 >= self.answer_s:
+            self.brakings += 1
+            self.next_check_s, self.warning_since_s = t + self.period_s, None
+            return True
+        return False
+
+
 class Atp:
+    #: the vigilance device (attach_vigilance); None: no periodic check
+    vigilance: Optional[VigilanceDevice] = None
+    #: temporary restrictions set while running (set_event_restrictions), besides the line file's
+    event_restrictions: Tuple[TemporaryRestriction, ...] = ()
+
     def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
                  supervision_decel_mps2: float, decoding_latency_s: float):
         if cab_signal not in CAB_SIGNAL_MODES:
@@ -184,6 +230,7 @@ class Atp:
                   v_permitted: float, v_target: float, free_blocks: int) -> AtpResult:
         result = AtpResult()
         c = self.line_constraints(x, v)
+        c.add(self.restriction_constraints(x, v))
         k = self.section_of(x)
         acted_aspect = sig.GREEN
         if self.mode != "off":
@@ -278,3 +325,51 @@ class Atp:
         elif v <= permitted:
             self.service_active = False
         return SERVICE_INTERVENTION if self.service_active else NO_INTERVENTION
+
+    # ---- vigilance device -------------------------------------------------------------------
+    def attach_vigilance(self, period_s: float, answer_s: float) -> None:
+        """Fit the periodic vigilance check (period 0: none). Checked aspects:
+        fmus/signalling/aspects.py ``VIGILANCE_ASPECTS``; no check without a cab signal."""
+        if not period_s >= 0:
+            raise FmuInputError(f"parameter vigilance_period: must not be negative, got {period_s}")
+        if not answer_s > 0:
+            raise FmuInputError(f"parameter vigilance_answer: must be positive, got {answer_s}")
+        self.vigilance = VigilanceDevice(period_s, answer_s)
+
+    def check_vigilance(self, t: float, aspect: int, code_valid: bool, pressed: bool, ato_answers: bool) -> None:
+        """One step of the vigilance device, before :meth:`supervise`: an unanswered check
+        applies the emergency brake (held until standstill, counted as an emergency braking)."""
+        if self.vigilance is None:
+            return
+        shown = int(aspect) if code_valid else sig.WHITE
+        checked = self.mode != "off" and shown in sig.VIGILANCE_ASPECTS
+        if self.vigilance.step(t, checked, pressed, ato_answers):
+            self._emergency()
+
+    # ---- temporary speed restrictions -------------------------------------------------------
+    def set_event_restrictions(self, restrictions) -> None:
+        """The restrictions set while running (the FMU's ``tsr_*`` inputs), replacing the last set."""
+        self.event_restrictions = tuple(restrictions)
+
+    @functools.cached_property
+    def line_restrictions(self) -> Tuple[TemporaryRestriction, ...]:
+        """The line file's temporary restrictions for this train's category."""
+        return tuple(self.line.restrictions_for(self.category))
+
+    def restrictions(self) -> Tuple[TemporaryRestriction, ...]:
+        """Every temporary restriction this train keeps: the line file's, then those set while running."""
+        return self.line_restrictions + self.event_restrictions
+
+    def restriction_speed_at(self, x: float) -> float:
+        """The lowest restriction in force at the head (held until the tail clears its end); inf: none."""
+        tail = x - self.length_m
+        return min((r.speed_mps for r in self.restrictions() if r.start_m <= x and tail < r.end_m), default=_INF)
+
+    def restriction_constraints(self, x: float, v: float) -> Constraints:
+        """A restriction is a ceiling from the head reaching its start until the tail has cleared
+        its end (the tail rule of the line's limits), and a target at its start when ahead."""
+        c = Constraints(self.restriction_speed_at(x))
+        reach = x + v * v / (2.0 * self.decel) + 200.0
+        c.targets.extend(Target(r.start_m, r.speed_mps) for r in self.restrictions() if x < r.start_m <= reach)
+        return c
+

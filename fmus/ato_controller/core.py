@@ -18,7 +18,7 @@ import numpy as np
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
-from fmus.data.loader import Line, RollingStock, TimetableStop
+from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
@@ -40,10 +40,24 @@ MAX_DECEL_MPS2 = 5.0
 # a measured speed below −this is impossible, not noise at standstill (docs/ato.md, "Measurement faults")
 NEGATIVE_SPEED_TOLERANCE_MPS = 0.2
 MIN_BRAKE_SHARE = 0.02
+# below this the train stands (a tachometer's resolution; the arrival test uses the same)
+STANDSTILL_MPS = 1e-3
 CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
 # two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
 FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
+# inside a temporary restriction the ATO drives traction–coast between v_limit − 8 km/h and its
+# ceiling (the ATO book's МИИТ rule, docs/sources.md#temporary-speed-restrictions)
+RESTRICTION_BAND_MPS = 8.0 * MPS_PER_KMH
+# temporary restrictions the FMU can be given while running (its tsr_* input slots)
+TSR_SLOTS = 4
+
+
+def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
+    """The restrictions in force among the FMU's ``tsr_*`` slots: speed > 0 and end > start."""
+    return [TemporaryRestriction(float(a), float(b), float(v), name=f"tsr[{k + 1}]")
+            for k, (a, b, v) in enumerate(zip(np.ravel(starts_m), np.ravel(ends_m), np.ravel(speeds_mps)))
+            if v > 0.0 and b > a]
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +94,11 @@ class AtoSettings:
     # a freight pneumatic brake (20.5 s); an EP brake (1.75–2.5 s) stops within 0.2 m without it,
     # and the prediction costs about 1 ms per ATO step on the final approach (issue 4: 200 µs)
     predictive_stop_lead_s: float = 5.0
+    # vigilance device (docs/ato.md, "Vigilance device"): ДКСВ-1-Д checks every 30–40 s
+    # (docs/sources.md#vigilance-device), we take 30 s; the answer window 7 s [U]; 0: no device
+    vigilance_period_s: float = 30.0
+    vigilance_answer_s: float = 7.0
+    ato_acknowledges: bool = True         # the ATO answers each check while it drives
 
 
 @dataclass
@@ -103,6 +122,8 @@ class AtoOutputs:
     mode_changes: int = 0                 # traction/coast/brake changes while running
     stage: int = 0
     departure_hold_s: float = 0.0         # time standing past a departure time for want of a permissive cab code
+    vigilance_warning: bool = False       # a vigilance check awaits its acknowledgement
+    vigilance_brakings: int = 0           # emergency brakings for an unanswered check
 
 
 class AtoCore:
@@ -129,6 +150,7 @@ class AtoCore:
             raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
                                 f"supervision deceleration {a_atp} m/s²")
         self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s)
+        self.atp.attach_vigilance(s.vigilance_period_s, s.vigilance_answer_s)
         planner = StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps)
         self.plans = []
         for k in range(len(timetable) - 1):
@@ -152,6 +174,7 @@ class AtoCore:
         self.restricted = False
         self.recovering = False
         self.creeping = False
+        self.band_coasting = False            # coasting down through a restriction's band
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
@@ -185,7 +208,22 @@ class AtoCore:
                 targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0)))
         if atp_result.stop_now:
             targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + 0.5, 0.0))
+        targets.extend(self._aspect_driving(x, atp_result)[1])
         return targets
+
+    def _aspect_driving(self, x: float, atp_result) -> Tuple[float, List[BrakingTarget]]:
+        """How the ATO itself drives under the ALSN aspect the ATP acts upon (the book's МИИТ
+        reactions, fmus/signalling/aspects.py ``ALSN_DRIVING_KMH``): the top of its band and its
+        own target at the exit signal, below the supervised speeds."""
+        if self.settings.cab_signal != "ALSN":
+            return _INF, []
+        band, at_signal = sig.alsn_driving_mps(self.category, atp_result.aspect)
+        targets = []
+        if at_signal is not None and at_signal > 0.0:
+            k = self.atp.section_of(x)
+            if k is not None:
+                targets.append(BrakingTarget(self.atp.exit_signal_m(k), at_signal))
+        return (_INF if band is None else band), targets
 
     def _predict(self, x: float, v: float):
         """Head position and speed one brake lead time ahead at the measured acceleration: the
@@ -220,13 +258,15 @@ class AtoCore:
 
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
-             v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0) -> AtoOutputs:
+             v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0,
+             vigilance_ack: bool = False) -> AtoOutputs:
         self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks)
         if self.fault is not None:
             return self._fail_safe(t)
         self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
+        self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
         command, mode = self._drive(t, h, x, v, atp, permissive)
@@ -296,6 +336,9 @@ class AtoCore:
         out.signals_passed_at_danger = self.atp.signals_passed_at_danger
         out.max_overspeed_mps = max(self.atp.max_overspeed_mps, 0.0)
         out.stage = self.stage
+        vigilance = self.atp.vigilance
+        if vigilance is not None:
+            out.vigilance_warning, out.vigilance_brakings = vigilance.warning, vigilance.brakings
         return out
 
     def _drive(self, t: float, h: float, x: float, v: float, atp, permissive: bool):
@@ -341,29 +384,47 @@ class AtoCore:
             self._arrive(t, x)
             return -s.hold_brake, MODE_STANDSTILL
 
+        if self._standing_at_stop_target(x, v, atp):
+            # standing before a signal at danger (or on red): hold the brake until the target
+            # moves; releasing it would alternate traction and braking and creep towards the signal
+            out.v_ceiling_mps = 0.0
+            return -s.hold_brake, MODE_STANDSTILL
+
         t_run = t - self.timetable[self.stage].departure_s
         guide = self.strategy.guide(t_run, x, v, out.schedule_deviation_s)
         deviation = t_run - guide.t_ref_s
         out.schedule_deviation_s = deviation
         out.v_ref_mps = guide.v_ref_mps
-        flat_out = self._drive_flat_out(atp, deviation)
+        flat_out = self._drive_flat_out(atp, deviation, self.atp.restriction_speed_at(x) < _INF)
 
-        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps)
+        ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps,
+                      self._aspect_driving(x, atp)[0])
         out.v_ceiling_mps = max(ceiling, 0.0)
         braking = self._brake_for_targets(t, x, v, atp, stop.stop_m)
         if braking is not None:
             return braking
         return self._follow(x, v, atp, guide, deviation, ceiling, flat_out)
 
-    def _drive_flat_out(self, atp, deviation: float) -> bool:
+    def _standing_at_stop_target(self, x: float, v: float, atp) -> bool:
+        """Standing with a stop target other than the stop point (a signal at danger less the
+        stop margin, a stop on red) no more than ``stop_window`` ahead of the head, or behind it.
+        Farther short of it the train moves up (and brakes for it as for any target)."""
+        if v > STANDSTILL_MPS:
+            return False
+        window = self.settings.stop_window_m
+        return atp.stop_now or any(
+            target.speed_mps <= 0.0 and not target.is_stop_point and target.position_m - x <= window
+            for target in self._targets(x, v, atp))
+
+    def _drive_flat_out(self, atp, deviation: float, in_restriction: bool = False) -> bool:
         """The book's recovery rule: late by more than the threshold, or late when a restrictive
-        cab signal clears, drive at the maximum permitted speed until back on schedule."""
-        if self.settings.cab_signal != "off":
-            if atp.aspect != sig.GREEN:
-                self.restricted = True
-            elif self.restricted:
-                self.restricted = False
-                self.recovering = deviation > 0.0
+        cab signal or a temporary restriction clears, drive at the maximum permitted speed until
+        back on schedule."""
+        if in_restriction or (self.settings.cab_signal != "off" and atp.aspect != sig.GREEN):
+            self.restricted = True
+        elif self.restricted:
+            self.restricted = False
+            self.recovering = deviation > 0.0
         if self.recovering and deviation <= 0.0:
             self.recovering = False
         return self.recovering or deviation > self.settings.late_threshold_s
@@ -415,6 +476,9 @@ class AtoCore:
         if atp.stop_now:
             return self.controllers.brake(x, v, self.a_plan), MODE_BRAKE
         v_set = min(cruise, ceiling)
+        band = self._restriction_band(x, v, v_set, ceiling, atp)
+        if band is not None:
+            return band
         if deviation < -s.early_threshold_s and not self.creeping:
             # well ahead (e.g. a heavy train running away down a grade): hold the programme speed,
             # braking if need be (ЭР200 rule "well ahead → drop one grade", docs/sources.md#ato-timetable-following)
@@ -426,6 +490,34 @@ class AtoCore:
             command = min(self.controllers.hold(x, v, ceiling, may_brake=True), 0.0)
             return command, MODE_BRAKE if command < 0 else MODE_COAST
         return self._hold(x, v, v_set, may_brake=v > ceiling)
+
+    def _restriction_band(self, x: float, v: float, v_set: float, ceiling: float, atp):
+        """Inside a temporary restriction, or under an aspect with a driving band (КЖ), that
+        binds the set speed: traction up to the ceiling, then coast down to the band's bottom
+        (v_limit − 8 km/h; КЖ 42 km/h: the book's traction–coast bands); None otherwise."""
+        limit = self.atp.restriction_speed_at(x)
+        bottom = limit - RESTRICTION_BAND_MPS
+        if self.settings.cab_signal == "ALSN":
+            top, aspect_bottom = sig.alsn_driving_mps(self.category, atp.aspect)[0], \
+                sig.alsn_band_bottom_mps(self.category, atp.aspect)
+            if top is not None and aspect_bottom is not None and top < limit:
+                limit, bottom = top, aspect_bottom
+        if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - 1e-6):
+            self.band_coasting = False
+            return None
+        if v >= v_set - 0.05:
+            self.band_coasting = True
+        elif v <= bottom:
+            self.band_coasting = False
+        if self.band_coasting and v <= ceiling:
+            self.controllers.coasting = True
+            return 0.0, MODE_COAST
+        return None
+
+    def set_restrictions(self, restrictions) -> None:
+        """Temporary restrictions set while running (the FMU's ``tsr_*`` inputs, scenario
+        events): the ATP supervises them and the ATO brakes for them; not in the programmes."""
+        self.atp.set_event_restrictions(restrictions)
 
     def _hold(self, x: float, v: float, v_set: float, may_brake: bool):
         command = self.controllers.hold(x, v, v_set, may_brake=may_brake)

@@ -4,7 +4,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FrameSlave, Port, line_file_port
-from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, AtoCore, AtoSettings
+from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions
 
 
 class AtoController(FrameSlave):
@@ -44,6 +44,12 @@ class AtoController(FrameSlave):
                  description="standing at most this far short of the stop point counts as arrived"),
             Port("decoding_latency", "parameter", unit="s", start=s.decoding_latency_s, min=0.0,
                  description="receiver latency the ATP allows after passing a signal"),
+            Port("vigilance_period", "parameter", unit="s", start=s.vigilance_period_s, min=0.0,
+                 description="vigilance check period under yellow, red-yellow, red and white; 0: no device"),
+            Port("vigilance_answer", "parameter", unit="s", start=s.vigilance_answer_s, min=0.001,
+                 description="a vigilance warning unanswered this long applies the emergency brake"),
+            Port("ato_acknowledges", "parameter", "Boolean", start=s.ato_acknowledges,
+                 description="the ATO answers each vigilance check while it drives"),
             # the measurements: an impossible value is a fault the ATP answers with the emergency
             # brake (core.py), never a refused step (docs/ato.md, "Measurement faults")
             Port("x", "input", unit="m", start=0.0, description="head position", bad_input="unit"),
@@ -55,6 +61,16 @@ class AtoController(FrameSlave):
             Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
+            # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
+            # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
+            Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
+                 description="temporary restriction: where the head must be at tsr_speed"),
+            Port("tsr_end", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
+                 description="temporary restriction: held until the tail has cleared this point"),
+            Port("tsr_speed", "input", unit="m/s", start=0.0, min=0.0, max=MAX_SPEED_MPS, shape=(TSR_SLOTS,),
+                 description="temporary restriction speed; 0: slot unused"),
+            Port("vigilance_ack", "input", "Boolean", start=False,
+                 description="driver's vigilance acknowledgement (a press: false → true answers a check)"),
             Port("command", "output", unit="1", min=-1.0, max=1.0,
                  description=">0 traction share, <0 brake share (to traction.command)"),
             Port("emergency_brake", "output", "Boolean", start=False),
@@ -77,6 +93,10 @@ class AtoController(FrameSlave):
             Port("stage", "output", "Integer", start=0, description="timetable stage (0 = first stop to second)"),
             Port("departure_hold", "output", unit="s",
                  description="time standing past a departure time without a valid permissive cab code"),
+            Port("vigilance_warning", "output", "Boolean", start=False,
+                 description="a vigilance check awaits its acknowledgement"),
+            Port("vigilance_brakings", "output", "Integer", start=0,
+                 description="emergency brakings for an unanswered vigilance check"),
         ]
 
     _fault_logged = None      # the input whose fault was last logged
@@ -95,7 +115,8 @@ class AtoController(FrameSlave):
             atp_decel_mps2=p("atp_decel"), speed_margin_mps=p("speed_margin"), stop_margin_m=p("stop_margin"),
             k1=p("k1"), k2=p("k2"), late_threshold_s=p("late_threshold"), early_threshold_s=p("early_threshold"),
             min_dwell_s=p("min_dwell"), stop_window_m=p("stop_window"),
-            decoding_latency_s=p("decoding_latency"))
+            decoding_latency_s=p("decoding_latency"), vigilance_period_s=p("vigilance_period"),
+            vigilance_answer_s=p("vigilance_answer"), ato_acknowledges=bool(p("ato_acknowledges")))
         return AtoCore(line, stock, timetable, timetable_path, p("train_category") or stock.category, settings)
 
     def publish_initial_outputs(self):
@@ -104,9 +125,10 @@ class AtoController(FrameSlave):
     def step_core(self, current_time, step_size):
         io = self.io
         core = self.core
+        core.set_restrictions(event_restrictions(io["tsr_start"], io["tsr_end"], io["tsr_speed"]))
         self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
                               bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
-                              int(io["free_blocks"])))
+                              int(io["free_blocks"]), bool(io["vigilance_ack"])))
         fault = core.fault[0] if core.fault else None
         if fault != self._fault_logged:                 # once per fault, not every step
             if core.fault:
@@ -129,5 +151,6 @@ _OUTPUT_FIELDS = (
     ("emergency_brakings", "emergency_brakings"), ("signals_passed_at_danger", "signals_passed_at_danger"),
     ("max_overspeed", "max_overspeed_mps"), ("stop_index", "stop_index"), ("arrival_time", "arrival_time_s"),
     ("stop_error", "stop_error_m"), ("mode_changes", "mode_changes"), ("stage", "stage"),
-    ("departure_hold", "departure_hold_s"),
+    ("departure_hold", "departure_hold_s"), ("vigilance_warning", "vigilance_warning"),
+    ("vigilance_brakings", "vigilance_brakings"),
 )

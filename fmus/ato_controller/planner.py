@@ -101,6 +101,10 @@ class StagePlanner:
             # a limit holds from its start (head) until the tail has left it
             inside = (s >= starts[k]) & (s < starts[k + 1] + length)
             static[inside] = np.minimum(static[inside], limit)
+        for restriction in line.restrictions_for(self.category):
+            # the line file's temporary restrictions are planned like limits (same tail rule)
+            inside = (s >= restriction.start_m) & (s < restriction.end_m + length)
+            static[inside] = np.minimum(static[inside], restriction.speed_mps)
         return np.maximum(static - self.margin, 0.5)
 
     def ceiling(self, s: np.ndarray, static: np.ndarray) -> np.ndarray:

@@ -123,6 +123,18 @@ class BlockSection:
 
 
 @dataclass(frozen=True)
+class TemporaryRestriction:
+    """A temporary speed restriction (warning): from the head reaching ``start_m`` until the tail
+    has cleared ``end_m``, at most ``speed_mps``, for the listed train categories."""
+
+    start_m: float
+    end_m: float
+    speed_mps: float
+    categories: Tuple[str, ...] = ("passenger", "freight", "high_speed")
+    name: str = ""
+
+
+@dataclass(frozen=True)
 class Station:
     name: str
     stop_m: float
@@ -145,6 +157,7 @@ class Line:
         # dry or frozen bed, docs/rail_line.md: above it the shunt-mode level hardly changes)
         self.max_ballast_ohm_km = float(document.get("max_ballast_ohm_km", DEFAULT_MAX_BALLAST_OHM_KM))
         self._check(document)
+        self.restrictions = self._restrictions(document.get("temporary_restrictions", []))
         # blocks: a block ends at a section with a signal at its exit; a section with no signal
         # ("signal": "") is a track circuit inside a block (a station throat) — the line end
         # always closes the last block
@@ -202,6 +215,23 @@ class Line:
         for k, c in enumerate(document["curves"]):
             if c["end_m"] <= c["start_m"] or c["end_m"] > self.length_m:
                 _fail(p, f"curves[{k}].end_m", "must be after start_m and within the line")
+
+    def _restrictions(self, items) -> List[TemporaryRestriction]:
+        restrictions = []
+        for k, item in enumerate(items):
+            start, end = float(item["start_m"]), float(item["end_m"])
+            if end <= start:
+                _fail(self.path, f"temporary_restrictions[{k}].end_m", f"{end:g} is not after start_m {start:g}")
+            if end > self.length_m:
+                _fail(self.path, f"temporary_restrictions[{k}].end_m", f"{end:g} is beyond the line end {self.length_m:g}")
+            categories = tuple(item.get("categories", TemporaryRestriction.categories))
+            restrictions.append(TemporaryRestriction(start, end, item["speed_kmh"] * MPS_PER_KMH, categories,
+                                                     item.get("name", "")))
+        return restrictions
+
+    def restrictions_for(self, category: str) -> List[TemporaryRestriction]:
+        """The temporary restrictions a train of ``category`` must keep."""
+        return [r for r in self.restrictions if category in r.categories]
 
     def _build_profile(self) -> None:
         """Cumulative integrals of gradient (‰) and curve resistance (N/kN) at breakpoints, so

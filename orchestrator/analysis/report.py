@@ -71,7 +71,8 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     trains = [t for t in summary.get("trains", []) if f"{t['name']}.x" in results]
     written = []
     if trains:
-        written.append(_speed_distance(output, results, trains, components))
+        written.append(_speed_distance(output, results, trains, components,
+                                       summary.get("scenario", {}).get("events_applied", [])))
         written.append(_time_distance(output, results, trains, components))
         written.append(_energy(output, results, trains))
     capture = _coil_capture(run_dir, output, components, at_s)
@@ -177,7 +178,7 @@ def _line_marks(ax, line) -> None:
                 transform=marks, fontweight="bold")
 
 
-def _speed_distance(output: Path, results, trains, components) -> Path:
+def _speed_distance(output: Path, results, trains, components, summary_events=()) -> Path:
     import matplotlib.pyplot as plt
 
     line = _line_of(components, trains[0].get("ato"))
@@ -216,6 +217,7 @@ def _speed_distance(output: Path, results, trains, components) -> Path:
             key = _aspect_key(ax, aspects)
         ax.set_ylim(0.0, top * 1.15)
         _line_marks(ax, line)
+        _draw_restrictions(ax, line, components, ato, summary_events)
         ax.set_ylabel("speed (km/h)")
         handles, _ = ax.get_legend_handles_labels()
         ax.legend(handles=handles + key, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
@@ -231,6 +233,38 @@ def _speed_distance(output: Path, results, trains, components) -> Path:
     fig.suptitle("Speed over distance: static permitted speed and braking curves (ATP), ATO ceiling, "
                  "aspect acted on (band), signals, stations, gradient", fontsize=10)
     return _save(fig, output / "speed_distance.png")
+
+
+def restrictions_drawn(line, components, ato: Optional[str], events) -> List[tuple]:
+    """(start km, end km, speed km/h, label) of every temporary restriction the ATO ``ato`` was
+    given: the line file's for its train category, and the scenario's ``restrict`` events (its
+    ``tsr_*`` slots as set, ``t`` the time set)."""
+    params = components.get(ato, {}).get("parameters", {}) if ato else {}
+    category = params.get("train_category") or None
+    drawn = [(r.start_m / 1000.0, r.end_m / 1000.0, r.speed_mps * 3.6, r.name or "restriction")
+             for r in (line.restrictions_for(category) if category else line.restrictions)]
+    slots: Dict[str, dict] = {}
+    for event in events:
+        variable = str(event.get("variable", ""))
+        if event.get("model") != ato or not variable.startswith("tsr_") or "[" not in variable:
+            continue
+        name, slot = variable.split("[", 1)
+        entry = slots.setdefault(slot, {"t": event.get("t", 0.0)})
+        entry[name] = event.get("value") if event.get("action") == "set" else None
+        if entry.get("tsr_start") is not None and entry.get("tsr_end") is not None and entry.get("tsr_speed"):
+            drawn.append((entry["tsr_start"] / 1000.0, entry["tsr_end"] / 1000.0, entry["tsr_speed"] * 3.6,
+                          f"set at {entry['t']:.0f} s"))
+            slots.pop(slot)
+    return drawn
+
+
+def _draw_restrictions(ax, line, components, ato: Optional[str], events) -> None:
+    """Temporary restrictions as hatched bars at their speed over their extent (head positions)."""
+    for k, (start, end, speed, label) in enumerate(restrictions_drawn(line, components, ato, events)):
+        ax.fill_between([start, end], 0.0, speed, color="tab:orange", alpha=0.12, hatch="//", lw=0,
+                        label="temporary restriction" if k == 0 else None)
+        ax.plot([start, end], [speed, speed], color="tab:orange", lw=1.4)
+        ax.text(start, speed + 2.0, f"{speed:.0f} km/h {label}", fontsize=7, color="tab:orange")
 
 
 def _time_distance(output: Path, results, trains, components) -> Path:
