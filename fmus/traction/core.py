@@ -68,7 +68,7 @@ def natural_characteristic_start(speeds: List[float], forces: List[float]) -> Op
 class EffortCurve:
     """The effort table at a catenary voltage U (docs/traction.md#effort-and-catenary-voltage).
 
-    The table holds at the nominal voltage U_n. Below its transition speed v_t it is the limit
+    The table holds at the stock's rated voltage U_n (RATED_VOLTAGE_V). Below its transition speed v_t it is the limit
     set by the starting current and adhesion, which the voltage does not change; from v_t on it
     is the motors' natural characteristic. At a given motor current (so a given effort) a
     series motor's speed is proportional to the voltage at its terminals, which on DC is the
