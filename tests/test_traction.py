@@ -15,7 +15,8 @@ KMH = 1 / 3.6
 
 
 def _line_variant(tmp_path, name="flat", **changes):
-    doc = json.loads(DEFAULT_LINE.read_text())
+    ac = changes.get("electrification", {}).get("system") == "AC25000"
+    doc = json.loads((DATA / "default_line_ac.json" if ac else DEFAULT_LINE).read_text())   # 25 Hz carriers on AC
     doc.update(changes)
     path = tmp_path / f"{name}.json"
     path.write_text(json.dumps(doc, ensure_ascii=False))
@@ -31,7 +32,8 @@ def _flat_line(tmp_path, grade=0.0, ac=False):
 def _ideal_brake_stock(decel):
     """No resistance, no rotating mass, an instantaneous brake of exactly `decel` at full command."""
     stock = load_rolling_stock(DATA / "emu_er2.json")
-    return dataclasses.replace(stock, resistance_terms=[(1.0, 1e-12, 0.0, 0.0)], starting_resistance=0.0,
+    return dataclasses.replace(stock, resistance_terms=[(1.0, 1e-12, 0.0, 0.0)], idle_resistance_terms=None,
+                               starting_resistance=0.0,
                                gamma=0.0, brake_delay_s=0.0, brake_time_constant_s=0.0,
                                service_decel=decel, auxiliary_w=0.0)
 
@@ -102,7 +104,8 @@ def test_core_matches_a_tight_solve_ivp_reference(tmp_path):
         f_e = min(now, ref.electric_brake_force(v)) if now > 0 else 0.0
         f_t = share_t * ref.max_traction_force(v)
         target = max(delayed - f_e, 0.0)
-        a = (f_t - f_e - f_p - ref.main_resistance(v) - ref.path_resistance(x)) / ref.m_eff
+        resistance = ref.main_resistance(v) if share_t > 0 else ref.coasting_resistance(v)
+        a = (f_t - f_e - f_p - resistance - ref.path_resistance(x)) / ref.m_eff
         return [v, a, (target - f_p) / stock.brake_time_constant_s, f_t * v / stock.efficiency + stock.auxiliary_w]
 
     def stopped(time, y):

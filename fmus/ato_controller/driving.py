@@ -160,5 +160,5 @@ class Controllers:
         """Brake command for a total deceleration ``decel_mps2`` (resistance and grade help)."""
         tr = self.train
         self.coasting = True
-        natural = float(tr.resistance(v)) + tr.path_accel_at(x)
+        natural = float(tr.coasting_resistance(v)) + tr.path_accel_at(x)
         return -min(max((decel_mps2 - natural) / tr.service_decel, 0.0), 1.0)

@@ -148,10 +148,10 @@ class StagePlanner:
             braking_part = np.clip((switch_energy - energy) / (a_brake * ds), 0.0, 1.0)
             start = np.minimum(braked, np.maximum(energy, switch_energy))
             rest = (1.0 - braking_part) * ds
-            half = np.sqrt(2.0 * (start + 0.5 * rest * (tr.resistance(np.sqrt(2.0 * start)) + path[i])).clip(0.0))
+            half = np.sqrt(2.0 * (start + 0.5 * rest * (tr.coasting_resistance(np.sqrt(2.0 * start)) + path[i])).clip(0.0))
             # on a down-grade coasting speeds the train up, so going backwards the curve falls,
             # never below Vf (there the train would have to brake while coasting downhill)
-            coasted = np.maximum(start + rest * (tr.resistance(half) + path[i]), switch_energy)
+            coasted = np.maximum(start + rest * (tr.coasting_resistance(half) + path[i]), switch_energy)
             g = np.sqrt(2.0 * np.where(braked > switch_energy, coasted, braked))
             g = np.minimum(g, ceiling[i])
             envelope[:, i] = g
@@ -179,11 +179,11 @@ class StagePlanner:
             p = path[i]
             e = 0.5 * speed * speed
             a_t = tr.max_traction(speed) - tr.resistance(speed) - p
-            a_c = -tr.resistance(speed) - p
+            a_c = -tr.coasting_resistance(speed) - p
             v_half_t = np.sqrt(2.0 * (e + 0.5 * ds * a_t).clip(0.0))
             v_half_c = np.sqrt(2.0 * (e + 0.5 * ds * a_c).clip(0.0))
             v_trac = np.sqrt(2.0 * (e + ds * (tr.max_traction(v_half_t) - tr.resistance(v_half_t) - p)).clip(0.0))
-            v_coast = np.sqrt(2.0 * (e + ds * (-tr.resistance(v_half_c) - p)).clip(0.0))
+            v_coast = np.sqrt(2.0 * (e + ds * (-tr.coasting_resistance(v_half_c) - p)).clip(0.0))
             below = speed < cruise_mps - 1e-9
             nxt = np.where(below | (v_coast < cruise_mps), np.minimum(v_trac, cruise_mps), v_coast)
             nxt = np.minimum(nxt, envelope[:, i + 1])

@@ -97,10 +97,10 @@ class NominalBrake:
             # decimetre over a stop); the brake force at mid-step from its exponential
             force_mid = pipeline.relax(force, target, 0.5 * h)
             force_end = pipeline.relax(force, target, h)
-            decel = electric + force_mid + train.resistance(v_k) + path_accel(x_k)
+            decel = electric + force_mid + train.coasting_resistance(v_k) + path_accel(x_k)
             v_mid = np.maximum(v_k - 0.5 * h * decel, 0.0)
             decel = np.maximum(np.minimum(demand, train.electric_brake(v_mid)) + force_mid
-                               + train.resistance(v_mid) + path_accel(x_k + 0.5 * h * v_mid), 1e-6)
+                               + train.coasting_resistance(v_mid) + path_accel(x_k + 0.5 * h * v_mid), 1e-6)
             force = force_end
             v_next = v_k - decel * h
             stopping = moving & (v_next <= 0.0)

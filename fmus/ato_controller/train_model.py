@@ -27,6 +27,8 @@ class NominalTrain:
         self.speeds = np.arange(0.0, stock.max_speed_mps + 10.0, SPEED_STEP_MPS)
         self.traction_accel = np.array([core.max_traction_force(v) for v in self.speeds]) / core.m_eff
         self.resistance_accel = np.array([core.main_resistance(v) for v in self.speeds]) / core.m_eff
+        # coasting and braking: the locomotive's idle resistance (docs/traction.md#resistance)
+        self.coasting_resistance_accel = np.array([core.coasting_resistance(v) for v in self.speeds]) / core.m_eff
         self.electric_brake_accel = np.array([core.electric_brake_force(v) for v in self.speeds]) / core.m_eff
         self.service_decel = stock.service_decel
         self._core = core
@@ -35,7 +37,12 @@ class NominalTrain:
         return np.interp(v, self.speeds, self.traction_accel)
 
     def resistance(self, v):
+        """Main resistance under traction [m/s²]."""
         return np.interp(v, self.speeds, self.resistance_accel)
+
+    def coasting_resistance(self, v):
+        """Main resistance with no tractive effort (coasting, braking) [m/s²]."""
+        return np.interp(v, self.speeds, self.coasting_resistance_accel)
 
     def electric_brake(self, v):
         return np.interp(v, self.speeds, self.electric_brake_accel)

@@ -290,9 +290,23 @@ class Line:
         return next((s for s in self.stations if s.name == name), None)
 
 
+def _check_carrier_against_traction(document: dict, path: Path) -> None:
+    """A 50 Hz ALSN carrier cannot be told from the traction current's own 50 Hz fundamental on
+    an AC line, so such a pairing is refused (docs/sources.md#alsn-carriers-and-aspects, row 1)."""
+    if document["electrification"]["system"] != "AC25000":
+        return
+    for k, section in enumerate(document["block_sections"]):
+        if section["carrier_hz"] == 50:
+            _fail(path, f"block_sections[{k}].carrier_hz",
+                  "a 50 Hz ALSN carrier cannot be used under 50 Hz AC traction (electrification.system "
+                  "AC25000); use 25 or 75 Hz")
+
+
 def load_line(path=DEFAULT_LINE) -> Line:
     path = Path(path)
-    return Line(load_json(path, "line.schema.json"), path)
+    document = load_json(path, "line.schema.json")
+    _check_carrier_against_traction(document, path)
+    return Line(document, path)
 
 
 # ---- rolling stock -----------------------------------------------------------------------------
@@ -341,6 +355,9 @@ class RollingStock:
     power_factor: float
     starting_resistance: float   # N/kN near standstill (roller bearings, ПТР 28/(q0+7))
     path: Path
+    # (weight share, a, b, c) with no tractive effort (coasting, braking): a unit's
+    # resistance_idle where given, else its resistance
+    idle_resistance_terms: Optional[List[Tuple[float, float, float, float]]] = None
 
 
 def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
@@ -350,18 +367,19 @@ def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
     powered = sum(u["count"] * u["mass_t"] for u in doc["units"] if u["powered"]) * 1000.0
     if powered <= 0:
         _fail(path, "units", "no powered vehicle")
-    terms, start_res = [], 0.0
+    terms, idle_terms, start_res = [], [], 0.0
     for k, u in enumerate(doc["units"]):
         share = u["count"] * u["mass_t"] * 1000.0 / total
-        r = u["resistance"]
         q0 = u["mass_t"] / u["axles"]
-        a, b, c = r["a"], r["b"], r["c"]
-        if "per_axle_load" in r:
-            p0, p1, p2 = r["per_axle_load"]
-            a, b, c = a + p0 / q0, b + p1 / q0, c + p2 / q0
-        if a <= 0:
-            _fail(path, f"units[{k}].resistance.a", "main resistance must be positive")
-        terms.append((share, a, b, c))
+        for key, into in (("resistance", terms), ("resistance_idle" if "resistance_idle" in u else "resistance", idle_terms)):
+            r = u[key]
+            a, b, c = r["a"], r["b"], r["c"]
+            if "per_axle_load" in r:
+                p0, p1, p2 = r["per_axle_load"]
+                a, b, c = a + p0 / q0, b + p1 / q0, c + p2 / q0
+            if a <= 0:
+                _fail(path, f"units[{k}].{key}.a", "main resistance must be positive")
+            into.append((share, a, b, c))
         start_res += share * 28.0 / (q0 + 7.0)
     speeds, forces = _curve(doc["traction"]["effort_kn"], path, "traction.effort_kn")
     eb = doc.get("electric_brake")
@@ -383,7 +401,7 @@ def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
         emergency_decel=float(pb["emergency_decel_mps2"]), brake_delay_s=float(pb["delay_s"]),
         brake_time_constant_s=float(pb["time_constant_s"]), brake_steps=int(pb.get("steps", 7)),
         electrical_system=electrical["system"], power_factor=float(electrical.get("power_factor", 1.0)),
-        starting_resistance=start_res, path=path)
+        starting_resistance=start_res, path=path, idle_resistance_terms=idle_terms)
 
 
 # ---- timetable ---------------------------------------------------------------------------------

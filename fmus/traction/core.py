@@ -4,14 +4,16 @@ Equation of motion (ПТР form, SI):
 
     m·(1+γ)·dv/dt = F_t(v, command) − F_e(v) − F_p(t) − W(v) − m·g·(i + w_r)/1000
 
-* F_t: traction share × min(effort curve F(v), adhesion ψ(v)·m_powered·g); zero above the
-  vehicle's maximum speed.
+* F_t: traction share × min(effort curve F_U(v), adhesion ψ(v)·m_powered·g); zero above the
+  vehicle's maximum speed. F_U is the effort table at the catenary voltage U (EffortCurve).
 * F_e: electric brake (rheostatic or regenerative), immediate, covers the brake demand first.
 * F_p: pneumatic brake, a state: it follows (brake demand delayed by the application
   delay − electric brake force) with a first-order build-up, dF_p/dt = (target − F_p)/T
   (brake_pipeline.py, shared with the ATO's nominal copy).
 * W(v): main resistance Σ share_k·(a + bV + cV²)·m·g/1000 (V in km/h, coefficients in N/kN),
-  starting resistance 28/(q0+7) N/kN only as a breakaway threshold at standstill.
+  under traction the units' traction formulas, with no tractive effort (coasting, braking)
+  their idle formulas (ПТР: a locomotive's idle resistance is higher); starting resistance
+  28/(q0+7) N/kN only as a breakaway threshold at standstill.
 * i + w_r: gradient (‰) and curve resistance 700/R (N/kN), averaged over the train length.
 
 Integration: classical RK4 on (x, v, F_p, energy drawn, energy returned) with sub-steps no longer
@@ -44,6 +46,67 @@ def _interp(xs: List[float], ys: List[float], x: float) -> float:
     k = bisect.bisect_right(xs, x) - 1
     x0 = xs[k]
     return ys[k] + (ys[k + 1] - ys[k]) * (x - x0) / (xs[k + 1] - x0)
+
+
+#: the voltage at which a rolling-stock file's effort table holds, per electrical system
+RATED_VOLTAGE_V = {"DC3000": 3000.0, "AC25000": 25000.0}
+#: relative spread of F·v within which the end of an effort table counts as the constant-power
+#: (natural) characteristic of the motors
+CONSTANT_POWER_TOLERANCE = 0.01
+
+
+def natural_characteristic_start(speeds: List[float], forces: List[float]) -> Optional[int]:
+    """Index of the first point of the effort table's constant-power tail (F·v within 1 % of the
+    last point's), or None when the table ends in fewer than two such points (docs/traction.md)."""
+    power = speeds[-1] * forces[-1]
+    k = len(speeds) - 1
+    while k > 0 and speeds[k - 1] > 0 and abs(speeds[k - 1] * forces[k - 1] - power) <= CONSTANT_POWER_TOLERANCE * power:
+        k -= 1
+    return k if k < len(speeds) - 1 and power > 0 else None
+
+
+class EffortCurve:
+    """The effort table at a catenary voltage U (docs/traction.md#effort-and-catenary-voltage).
+
+    The table holds at the stock's rated voltage U_n (RATED_VOLTAGE_V). Below its transition speed v_t it is the limit
+    set by the starting current and adhesion, which the voltage does not change; from v_t on it
+    is the motors' natural characteristic. At a given motor current (so a given effort) a
+    series motor's speed is proportional to the voltage at its terminals, which on DC is the
+    catenary voltage and on AC the rectified secondary voltage, itself proportional to the
+    catenary voltage at the top regulation zone; so the natural characteristic at U is
+    F_n(v·U_n/U), and
+
+        F_U(v) = min(F_limit(v), F_natural(v·U_n/U))
+        F_limit(v) = F(min(v, v_t))                    (the current limit held above v_t)
+        F_natural(w) = F(w) for w ≥ v_t, max(F(w), F(v_t)·v_t/w) below (the hyperbola)
+
+    which is the table itself at U = U_n. A table without a constant-power tail does not
+    depend on the voltage."""
+
+    def __init__(self, speeds: List[float], forces: List[float], voltage_ratio: float):
+        self.speeds, self.forces = list(speeds), list(forces)
+        k = natural_characteristic_start(self.speeds, self.forces)
+        self.scaled = k is not None and voltage_ratio != 1.0
+        if self.scaled:
+            self.v_t = self.speeds[k]
+            self.f_t = self.forces[k]
+            self.speed_factor = 1.0 / voltage_ratio            # U_n/U
+
+    def __call__(self, v: float) -> float:
+        if not self.scaled:
+            return _interp(self.speeds, self.forces, v)
+        v_t, f_t = self.v_t, self.f_t
+        limit = _interp(self.speeds, self.forces, v) if v < v_t else f_t
+        w = v * self.speed_factor
+        natural = _interp(self.speeds, self.forces, w)
+        if w < v_t:
+            natural = max(natural, f_t * v_t / w) if w > 0.0 else math.inf
+        return min(limit, natural)
+
+
+def _train_poly(terms, scale: float):
+    """(a, b, c) of the train's specific resistance in N/kN (V in km/h): the units' mass-weighted sum."""
+    return tuple(sum(share * coefs[k] for share, *coefs in terms) * scale for k in range(3))
 
 
 @dataclass
@@ -96,14 +159,19 @@ class TractionCore:
         self.powered_mass_kg = stock.powered_mass_kg * mass_scale
         self.m_eff = self.mass_kg * (1.0 + stock.gamma)
         self.weight_kn = self.mass_kg * STANDARD_GRAVITY_MPS2 / 1000.0    # N per (N/kN)
-        self.resistance_poly = tuple(
-            sum(share * coef for share, *coefs in stock.resistance_terms for coef in [coefs[k]]) * resistance_scale
-            for k in range(3))
+        self.traction_resistance_poly = _train_poly(stock.resistance_terms, resistance_scale)
+        # no tractive effort (coasting, braking): a locomotive's idle formula (ПТР, docs/traction.md#resistance)
+        self.idle_resistance_poly = _train_poly(stock.idle_resistance_terms or stock.resistance_terms, resistance_scale)
+        self.resistance_poly = self.idle_resistance_poly
         self.breakaway_n_per_kn = stock.starting_resistance * resistance_scale
         self.voltage_v = pantograph_voltage_v if pantograph_voltage_v > 0 else line.nominal_voltage_v
         if stock.electrical_system != "none" and self.voltage_v <= 0:
             raise FmuInputError("parameter pantograph_voltage_v: an electric train needs a positive voltage")
         self.power_factor = stock.power_factor if stock.electrical_system == "AC25000" else 1.0
+        # the effort table holds at the stock's rated voltage (docs/traction.md#effort-and-catenary-voltage)
+        rated_v = RATED_VOLTAGE_V.get(stock.electrical_system)
+        self.effort = EffortCurve(stock.effort_speeds, stock.effort_forces,
+                                  self.voltage_v / rated_v if rated_v else 1.0)
         self.max_substep_s = max_substep_s
         self.x, self.v = float(x0_m), float(v0_mps)
         self.energy_drawn = 0.0
@@ -124,7 +192,7 @@ class TractionCore:
         vk = v * KMH_PER_MPS
         p0, p1, p2, p3, p4 = stock.adhesion
         adhesion = (p0 + p1 / (p2 + p3 * vk) + p4 * vk) * self.powered_mass_kg * STANDARD_GRAVITY_MPS2
-        return min(_interp(stock.effort_speeds, stock.effort_forces, v), adhesion)
+        return min(self.effort(v), adhesion)
 
     def electric_brake_force(self, v: float) -> float:
         if self.stock.ebrake_kind is None:
@@ -132,7 +200,16 @@ class TractionCore:
         return _interp(self.stock.ebrake_speeds, self.stock.ebrake_forces, v)
 
     def main_resistance(self, v: float) -> float:
-        a, b, c = self.resistance_poly
+        """Main resistance [N] under traction (the units' traction formulas)."""
+        return self._resistance(v, self.traction_resistance_poly)
+
+    def coasting_resistance(self, v: float) -> float:
+        """Main resistance [N] with no tractive effort: coasting and braking (idle formulas)."""
+        return self._resistance(v, self.idle_resistance_poly)
+
+    def _resistance(self, v: float, poly=None) -> float:
+        """Main resistance [N] in the present mode (``poly`` None), or with ``poly``."""
+        a, b, c = poly or self.resistance_poly
         vk = v * KMH_PER_MPS
         return (a + b * vk + c * vk * vk) * self.weight_kn
 
@@ -145,7 +222,7 @@ class TractionCore:
         brakes = self.brake_pipeline
         f_t = self._share_t * self.max_traction_force(v)
         f_e = brakes.electric(v)
-        net = f_t - f_e - f_p - self.main_resistance(v) - self.path_resistance(x)
+        net = f_t - f_e - f_p - self._resistance(v) - self.path_resistance(x)
         df_p = brakes.build_up_rate(f_p, brakes.pneumatic_target(f_e))
         drawn = f_t * v / self.stock.efficiency + self.stock.auxiliary_w
         returned = f_e * v * self.stock.ebrake_efficiency if self.stock.ebrake_kind == "regenerative" else 0.0
@@ -161,6 +238,7 @@ class TractionCore:
             command = max(-1.0, min(1.0, command))
             out.commands_clamped += 1
         self._share_t = command if command > 0.0 and not emergency else 0.0
+        self.resistance_poly = self.traction_resistance_poly if self._share_t > 0.0 else self.idle_resistance_poly
         share_b = -command if command < 0.0 else 0.0
         self.brake_pipeline.command(time_s, share_b * self.m_eff * self.stock.service_decel, bool(emergency))
         out.notch = math.ceil(self._share_t * self.stock.notches - 1e-9) if self._share_t > 0 else 0
@@ -253,7 +331,7 @@ class TractionCore:
         gradient = self.line.mean_gradient(self.x, length)
         curve = self.line.mean_curve_resistance(self.x, length)
         driving = self._share_t * self.max_traction_force(0.0) - gradient * self.weight_kn  # downhill helps
-        holding = (self.breakaway_n_per_kn + curve) * self.weight_kn + self.main_resistance(0.0) + max(f0, f_end)
+        holding = (self.breakaway_n_per_kn + curve) * self.weight_kn + self._resistance(0.0) + max(f0, f_end)
         self.energy_drawn += dt * self.stock.auxiliary_w
         self.brake_force = f_end
         if driving > holding:
