@@ -97,4 +97,4 @@ def test_the_fmus_acknowledgement_input_answers_the_check(tmp_path, product_fmus
                                 "--set", "ato.ato_acknowledges=false")
     assert code == 0, stderr
     (train,) = json.loads((out / "summary.json").read_text())["trains"]
-    assert train["emergency_brakings"] == brakings
+    assert train["emergency_brakings"] == brakings and train["vigilance_brakings"] == brakings

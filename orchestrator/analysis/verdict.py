@@ -30,7 +30,7 @@ TRAIN_MODEL = "Traction"
 ATO_MODEL = "AtoController"
 TRAIN_OUTPUTS = ("energy", "x")
 ATO_OUTPUTS = ("stop_index", "arrival_time", "stop_error", "atp_aspect", "max_overspeed", "atp_interventions",
-               "emergency_brakings", "signals_passed_at_danger", "departure_hold")
+               "emergency_brakings", "vigilance_brakings", "signals_passed_at_danger", "departure_hold")
 
 
 @dataclass
@@ -173,6 +173,8 @@ class TrainVerdict(_OutputJudge):
                     max_overspeed_kmh=float(self._value(train.ato, "max_overspeed")) * KMH_PER_MPS,
                     atp_interventions=int(self._value(train.ato, "atp_interventions")),
                     emergency_brakings=int(self._value(train.ato, "emergency_brakings")),
+                    # of those, the ones for an unanswered vigilance check (docs/ato.md#vigilance-device)
+                    vigilance_brakings=int(self._value(train.ato, "vigilance_brakings")),
                     signals_passed_at_danger=int(self._value(train.ato, "signals_passed_at_danger")),
                     # standing past a departure time without a permissive cab code (docs/ato.md)
                     departure_hold_s=float(self._value(train.ato, "departure_hold")),
