@@ -64,6 +64,10 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
+# inertia of the locomotive ALSN equipment (docs/sources.md#receiver-inertia-and-latencies: 5.5 s,
+# the joints paper; the thesis' "about 6 s" for an aspect change): the display holds the code
+# shown through a loss of code shorter than this, counted from the last cycle supporting it
+EQUIPMENT_INERTIA_S = 5.5
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
 
@@ -80,6 +84,7 @@ class ReceiverSettings:
     agc_recovery_db_per_s: float = 10.0
     pick_up_v: float = 0.12                # relay picks up above this envelope (input-referred)
     drop_out_v: float = 0.08
+    inertia_s: float = 0.0                 # 0: EQUIPMENT_INERTIA_S; the longest code loss the display bridges
 
 
 @dataclass
@@ -116,6 +121,8 @@ class LocoReceiverCore:
                             ("pick_up", s.pick_up_v), ("drop_out", s.drop_out_v)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
+        if s.inertia_s < 0:
+            raise FmuInputError(f"parameter inertia: must not be negative, got {s.inertia_s}")
         if s.drop_out_v >= s.pick_up_v:
             raise FmuInputError(f"parameter drop_out: {s.drop_out_v} V must be below pick_up {s.pick_up_v} V")
         if bandwidth >= 2 * carrier_hz:
@@ -136,6 +143,7 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
+        self.inertia_s = s.inertia_s if s.inertia_s > 0 else EQUIPMENT_INERTIA_S
         self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
         # decoder state
         self._last_edge_s: Optional[float] = None
@@ -155,6 +163,7 @@ class LocoReceiverCore:
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
         self._supported_s: Optional[float] = None   # last cycle no more restrictive than the code shown
+        self._contradicted = False      # a valid more restrictive cycle since then (not shown yet)
         self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
         self._publish_speeds()
@@ -312,6 +321,9 @@ class LocoReceiverCore:
         self._last_valid_s = time_s
         if out.code_valid and sig.restrictiveness(code) >= sig.restrictiveness(out.aspect):
             self._supported_s = time_s        # a cycle no more restrictive than the code shown
+            self._contradicted = False
+        elif out.code_valid:
+            self._contradicted = True
         # compare with what is shown, or after a loss of code with the last code shown (as the
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
@@ -340,6 +352,7 @@ class LocoReceiverCore:
         out = self.out
         if not (out.code_valid and out.aspect == code):
             self._supported_s = self._last_valid_s
+            self._contradicted = False
         out.aspect = code
         out.code_valid = True
         self._last_shown = code
@@ -358,11 +371,9 @@ class LocoReceiverCore:
         out = self.out
         quiet = now_s - (self._last_edge_s if self._last_edge_s is not None else self._started_s)
         stale = now_s - (self._last_valid_s if self._last_valid_s is not None else self._started_s)
-        # cycles of a more restrictive code that cannot be shown yet (not clean, not confirmed)
-        # do not keep the code shown alive: without this an impulse-noise study run showed З
-        # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
-        unsupported = out.code_valid and self._supported_s is not None and \
-            now_s - self._supported_s > alsn.CODE_TIMEOUT_S
+        # the decoder loses the code after 2 s without an edge or a valid cycle (kpt.h) and
+        # starts afresh; the display holds what it shows (the equipment's inertia) until no
+        # cycle has supported it for `inertia` — then no code: white, or red after red-yellow
         lost = quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S
         if lost:
             self._pending = None
@@ -370,11 +381,15 @@ class LocoReceiverCore:
                 self._cycle_start_s = None
                 self._short = 0
             self._previous_cycle = alsn.NO_CODE
-        if lost or unsupported:
-            # no code: white, or red after red-yellow
-            if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
-                out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
+        unsupported_s = now_s - self._supported_s if self._supported_s is not None else 0.0
+        # valid cycles of a more restrictive code that cannot be shown yet (not clean, not
+        # confirmed) end the hold after 2 s: without this an impulse-noise study run showed З
+        # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
+        expired = unsupported_s > self.inertia_s or (self._contradicted and unsupported_s > alsn.CODE_TIMEOUT_S)
+        if out.code_valid and expired:
+            out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
             out.code_valid = False
+            self._contradicted = False
             self._publish_speeds()
 
     def _publish_speeds(self) -> None:

@@ -14,12 +14,12 @@ from fmus.signalling.digital import DigitalSystem
 ALSN_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_order": "filter_order", "filter_bandwidth": "filter_bandwidth_hz", "agc_limit": "agc_limit_v",
-    "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v",
+    "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v", "inertia": "inertia_s",
 }
 DIGITAL_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_bandwidth": "filter_bandwidth_hz", "track_parity": "track_parity", "limiter": "limiter_v",
-    "min_level": "min_level_v",
+    "min_level": "min_level_v", "inertia": "inertia_s",
 }
 
 
