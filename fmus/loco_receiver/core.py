@@ -163,7 +163,7 @@ class LocoReceiverCore:
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
         self._supported_s: Optional[float] = None   # last cycle no more restrictive than the code shown
-        self._contradicted = False      # a valid more restrictive cycle since then (not shown yet)
+        self._contradictions = 0        # valid more restrictive cycles since then (not shown yet)
         self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
         self._publish_speeds()
@@ -321,9 +321,10 @@ class LocoReceiverCore:
         self._last_valid_s = time_s
         if out.code_valid and sig.restrictiveness(code) >= sig.restrictiveness(out.aspect):
             self._supported_s = time_s        # a cycle no more restrictive than the code shown
-            self._contradicted = False
-        elif out.code_valid:
-            self._contradicted = True
+            self._contradictions = 0
+        elif out.code_valid and not self._after_gap:
+            # (a cycle begun after a gap may start mid-pattern and under-count: not news)
+            self._contradictions += 1
         # compare with what is shown, or after a loss of code with the last code shown (as the
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
@@ -352,7 +353,7 @@ class LocoReceiverCore:
         out = self.out
         if not (out.code_valid and out.aspect == code):
             self._supported_s = self._last_valid_s
-            self._contradicted = False
+            self._contradictions = 0
         out.aspect = code
         out.code_valid = True
         self._last_shown = code
@@ -382,14 +383,20 @@ class LocoReceiverCore:
                 self._short = 0
             self._previous_cycle = alsn.NO_CODE
         unsupported_s = now_s - self._supported_s if self._supported_s is not None else 0.0
-        # valid cycles of a more restrictive code that cannot be shown yet (not clean, not
-        # confirmed) end the hold after 2 s: without this an impulse-noise study run showed З
-        # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
-        expired = unsupported_s > self.inertia_s or (self._contradicted and unsupported_s > alsn.CODE_TIMEOUT_S)
+        # the hold: no pulse for `inertia` (a loss of code), or pulses without a cycle of the
+        # code shown for `inertia` + one cycle (after a loss the decoder needs a whole cycle:
+        # at the wrong cam phase a short loss costs three KPT-7 cycles, 5.6 s, from the last
+        # one); and valid cycles of a more restrictive code that cannot be shown yet (not
+        # clean, not confirmed; two of them, as one may be cut by a joint) end it 2 s after
+        # the last supporting cycle: without this an impulse-noise study run showed З for
+        # 3.4 s after the code sent had turned КЖ (beyond the stated latency)
+        cycle_s = (alsn.KPT5_WINDOW_S if out.transmitter == 5 else alsn.KPT7_WINDOW_S)[1]
+        expired = quiet > self.inertia_s or unsupported_s > self.inertia_s + cycle_s \
+            or (self._contradictions >= 2 and unsupported_s > alsn.CODE_TIMEOUT_S)
         if out.code_valid and expired:
             out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
             out.code_valid = False
-            self._contradicted = False
+            self._contradictions = 0
             self._publish_speeds()
 
     def _publish_speeds(self) -> None:

@@ -46,7 +46,7 @@ import numpy as np
 
 from fmus.signalling import redundancy
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, Acceptor, DigitalSystem, check_category, check_modem_rate
+from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES, Acceptor, DigitalSystem, check_category, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
@@ -62,6 +62,14 @@ LEVEL_FAST, LEVEL_SLOW = 1.0 / 8.0, 1.0 / 32.0   # level averages over about one
 LEVEL_JUMP = 4.0                    # their ratio beyond this: a new signal, search the timing afresh
 _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
+
+
+def default_hold_s(message_s: float) -> float:
+    """The display hold of a digital receiver by default [U] (docs/loco_receiver.md): the
+    acceptance timeout + 3 s, which bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s
+    after the timeout at 100 km/h), and never longer than the ALSN equipment's inertia (the
+    digital systems are the faster ones)."""
+    return min(TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
 
 
 @dataclass
@@ -183,12 +191,8 @@ class DigitalReceiverCore:
         self.framer = system.framer(s.track_parity)
         self.message_s = system.message_s(self.carrier_hz)
         self.acceptor = Acceptor(system, s.track_parity, self.message_s)
-        # the display holds the command shown through a loss of code (docs/loco_receiver.md,
-        # display hold [U]): by default the acceptance timeout + 3 s, which bridges FIRE_DQPSK's
-        # re-acquisition at joints (1.3–2.3 s after the timeout at 100 km/h), and never longer
-        # than the ALSN equipment's inertia (the digital systems are the faster ones)
-        self.inertia_s = s.inertia_s if s.inertia_s > 0 else \
-            min(self.acceptor.timeout_s + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
+        # the display holds the command shown through a loss of code (docs/loco_receiver.md)
+        self.inertia_s = s.inertia_s if s.inertia_s > 0 else default_hold_s(self.message_s)
         self._held: Optional[int] = None             # command displayed (in force or held)
         self._held_support_s = -np.inf               # last message confirming it
         self.channels = [ChannelState() for _ in range(CHANNELS)]
