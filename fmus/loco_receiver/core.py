@@ -21,13 +21,21 @@ same result, docs/loco_receiver.md#signal-chain-corepy-filterspy):
    КЖ (0, period doubled); the period classifies KPT-5 (1.47–1.73 s) or KPT-7 (1.73–1.99 s),
    other lengths are invalid (counted in ``errors``). Added plausibility (our choice, against
    pulses split by noise into a more permissive count): every pulse must last 0.17–0.50 s and
-   every short interval at least 0.06 s, else the cycle is invalid. No relay edge for 2 s, or no valid cycle
-   for 2 s (kpt.h's later "incorrect after 2000 ms") → no code: white, or red if the last code
-   shown was КЖ; and no cycle of the code shown or a more permissive one for 2 s → the same
-   (valid cycles of a more restrictive code that cannot be shown yet must not keep the old
-   code alive). Valid cycles come at most every 1.99 s, so a steady code never times out,
-   and an old code can outlive a change of the code sent by at most one cycle + 2 s, within
-   the stated latency.
+   every short interval at least 0.06 s, else the cycle is invalid. No relay edge for 2 s, or
+   no valid cycle for 2 s (kpt.h's later "incorrect after 2000 ms"): the decoder has lost the
+   code and starts afresh.
+
+Display hold (the locomotive equipment's inertia, docs/loco_receiver.md#display-hold-equipment-inertia):
+the indication shown, with ``code_valid``, holds through a loss of code shorter than
+``inertia`` (5.5 s, docs/sources.md#receiver-inertia-and-latencies): it falls to the no-code
+indication (white, or red after red-yellow) when no relay edge came for ``inertia`` (a loss),
+or no cycle of the code shown or a more permissive one for ``inertia`` + one cycle (pulses
+without a valid cycle: after a loss the decoder needs a whole cycle, and a short loss at the
+wrong cam phase costs three KPT-7 cycles, 5.6 s), or — restrictive news — 2 s after the last
+such cycle once two valid cycles of a more restrictive code that cannot be shown yet have
+come (valid restrictive cycles must not keep an old code alive: an old code outlives a
+restrictive change by at most one cycle + 2 s, within the stated latency). A restrictive code
+that can be shown replaces the held one at once (the display rule below).
 
 Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
 the one shown — or, after a loss of code, than the last one shown — is shown after one valid

@@ -340,6 +340,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 RECEIVER_MODEL = "LocoReceiver"
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 SPEED_TOLERANCE_KMH = 0.5
+HOLD_DECAY_S = 0.2
 
 
 @dataclass
@@ -421,7 +422,8 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
             carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
             latency = digital.stated_latency_s(system.message_s(carrier))
         try:
-            hold = max(display_hold_s(system, params), latency)
+            # + the receiver's filters' decay before its relay or squelch lets go of the code
+            hold = max(display_hold_s(system, params) + HOLD_DECAY_S, latency)
         except (TypeError, ValueError):
             continue                  # a bad parameter value: the receiver reports it at initialisation
         found.append(_Receiver(name, train, rail, coder, slot, system, category, latency, hold))
