@@ -244,12 +244,17 @@ class DigitalReceiverCore:
             self._held = message.command
 
     def _hold(self, command: Optional[int], now_s: float) -> Optional[int]:
-        """The command displayed: the one voted, else the last one displayed while the loss is
-        shorter than the inertia (counted from the last message confirming it), else none."""
+        """The command displayed: the one voted, else — when the code was lost, not when the
+        channels disagree — the last one displayed while the loss is shorter than the inertia
+        (counted from the last message confirming it), else none."""
         if command is not None:
             self._held = command
             self._held_support_s = self.acceptor.confirmed_s if command == self.acceptor.command else now_s
             return command
+        if self.acceptor.command is not None:
+            # the code is there but the channels do not agree (faults): no hold, no code
+            self._held = None
+            return None
         if self._held is not None and now_s - self._held_support_s <= self.inertia_s:
             return self._held
         return None
