@@ -11,7 +11,7 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError
 from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
-from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
+from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S, LocoReceiverCore, ReceiverSettings
 from fmus.wayside_coder.core import (SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, STATUS_FAILED,
                                      STATUS_PARTIAL, CoderSettings, WaysideCoderCore)
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
@@ -69,16 +69,18 @@ def test_transitions_green_yellow_red_yellow_in_order():
 
 @pytest.mark.parametrize("code, after_loss", [(sig.GREEN, sig.WHITE), (sig.YELLOW, sig.WHITE),
                                               (sig.RED_YELLOW, sig.RED)])
-def test_code_loss_gives_white_or_red_after_red_yellow_after_two_seconds(code, after_loss):
+def test_code_loss_is_held_for_the_equipment_inertia_then_white_or_red_after_red_yellow(code, after_loss):
     chain = Chain(0)
     cut = lambda t, e: e * (t < 8.0)
-    rows = chain.run(12.0, CODE_OCCUPANCY[code](0), disturb=cut)
+    rows = chain.run(16.0, CODE_OCCUPANCY[code](0), disturb=cut)
     before = rows[(rows[:, 0] > 7.0) & (rows[:, 0] <= 8.0)]
     assert np.all(before[:, 1] == code)
-    lost = rows[rows[:, 0] >= 8.0 + alsn.CODE_TIMEOUT_S + 0.2]   # + the envelope's decay to drop-out
+    inertia = EQUIPMENT_INERTIA_S
+    lost = rows[rows[:, 0] >= 8.0 + inertia + 0.2]                 # + the envelope's decay to drop-out
     assert np.all(lost[:, 1] == after_loss) and not lost[:, 2].any()
-    # and not before the timeout (the last pulse may have ended up to one long interval earlier)
-    assert np.all(rows[(rows[:, 0] > 8.0) & (rows[:, 0] < 8.0 + alsn.CODE_TIMEOUT_S - 0.8), 1] == code)
+    # held (and valid) until then: the last cycle supporting it ended at most one cycle before the cut
+    held = rows[(rows[:, 0] > 8.0) & (rows[:, 0] < 8.0 + inertia - KPT[0])]
+    assert np.all(held[:, 1] == code) and held[:, 2].all()
 
 
 def test_an_unconfirmed_more_restrictive_code_does_not_keep_the_old_code_shown():

@@ -10,6 +10,7 @@ import pytest
 
 from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S
+from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S
 from helpers import read_csv
 from orchestrator.analysis.systems import stock_length_m
 from orchestrator.cli import SSP_ROOT
@@ -87,13 +88,13 @@ def test_faults_each_end_in_a_restrictive_state_within_the_latency(tmp_path, pro
     summary, col = _run(tmp_path, product_fmus, "faults", 650.0,
                         ["rx.aspect", "rx.code_valid", "train.x", "train.v", "coder.status", "rail.occupied[4]",
                          "rail.coil_section[1]"])
-    # a code lost at more than 40 + 7.5 km/h brings the no-code ceiling (40 km/h) at once: the
-    # ATP's emergency brake, fail-safe (docs/scenarios.md)
-    _no_danger(summary, emergency_allowed=True)
+    # a code lost at speed: the receiver holds it for its inertia, then white; the ATP brakes
+    # to the no-code ceiling (40 km/h) on a braking curve, never with the emergency brake
+    _no_danger(summary)
     t = col["time"]
 
     def restrictive(fault_s, repaired_s, allowed):
-        window = (t >= fault_s + STATED_LATENCY_S) & (t < repaired_s)
+        window = (t >= fault_s + max(STATED_LATENCY_S, EQUIPMENT_INERTIA_S + 0.2)) & (t < repaired_s)
         assert window.any() and np.isin(col["rx.aspect"][window], allowed).all(), \
             (fault_s, np.unique(col["rx.aspect"][window]))
 

@@ -14,12 +14,23 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
 
 Fail-safe rules (never more permissive than the last valid code):
 
-* code invalid → the constraints of the last valid code stay in force, anchored where they
-  were (a red-yellow stop stays at *that* signal), together with those of what is shown now;
+* the receiver bridges short losses of code itself (its display holds through a loss shorter
+  than the equipment's inertia, docs/loco_receiver.md); ``code_valid`` false means it
+  displays the no-code indication: its constraints (white 40 km/h; red after red-yellow) are
+  added to those of the last valid code, which stay in force anchored where they were (a
+  red-yellow stop stays at *that* signal);
+* a cab-signal ceiling that falls below the train's speed (a loss of code at speed, a change
+  to red-yellow) is reached on a braking curve, not in one step: the new ceiling becomes a
+  target where the train would reach it braking at the supervision deceleration after the
+  driver's reaction time (ETCS T_driver 4 s, docs/sources.md#atp-margins-etcs), the old one
+  holding until then;
 * passing a block signal → until the receiver can have decoded the new section (its stated
-  latency: ALSN two cycles + 0.5 s), the ATP assumes the next more restrictive aspect (green
-  → yellow, yellow → red-yellow); passing the exit signal under red-yellow is a signal passed
-  at danger: counted, and the emergency brake is applied.
+  latency, or the longest display hold, the longer) the ATP adds what the worst code of the
+  new section would impose at a signal: after a green signal the next signal may be yellow,
+  so the one after it may be red — a stop target there; after a yellow signal, red-yellow
+  (stop at the next signal). A steady green at line speed is therefore not capped by a
+  speed step it may never need (docs/ato.md, ATP); passing the exit signal under red-yellow
+  is a signal passed at danger: counted, and the emergency brake is applied.
 
 Braking-curve supervision, ETCS-like margins (docs/sources.md#atp-margins-etcs): the permitted speed at the
 head is min(ceiling, sqrt(v_t² + 2·a·(x_t − x)) over the targets) with the supervision
@@ -39,6 +50,7 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
+from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
@@ -48,6 +60,9 @@ NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # red never (issue 22's "white or red at departure: hold")
 DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
+# driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
+# curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
+T_DRIVER_S = 4.0
 
 
 def dv_ebi_mps(v_mps: float) -> float:
@@ -163,6 +178,9 @@ class Atp:
         self.assumed: Optional[Constraints] = None
         self.assumed_aspect = sig.GREEN
         self.assumed_until = -_INF
+        self.cab_ceiling_mps = _INF              # cab-signal ceiling in force at the last step
+        self.ceiling_drop: Optional[Target] = None   # a lower cab ceiling being reached on a curve
+        self.ceiling_before_mps = _INF           # the ceiling held until then
         self.emergency_latched = False
         self.service_active = False
         self.interventions = 0
@@ -240,26 +258,22 @@ class Atp:
             self.section = k
             if self.mode == "ALSN":
                 shown = self._alsn(aspect, k)
-                acted_aspect = int(aspect)
             else:
                 shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
-                acted_aspect = int(aspect)
+            acted_aspect = int(aspect)
+            cab = Constraints()
             if code_valid:
                 self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
-            if not code_valid and self.last_valid is not None:
-                c.add(self.last_valid)
-                if t - self.last_valid_s <= self.latency_s:
-                    # a dropout shorter than the decoding latency (joints: docs/sources.md#interference-at-insulated-joints): the last valid
-                    # code still holds, never anything more permissive; no-code rules after that
+            elif self.last_valid is not None:
+                # no code displayed (the receiver's hold is over): the last valid code's
+                # constraints stay where they were, with the no-code ones
+                cab.add(self.last_valid)
+                if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
                     acted_aspect = self.last_valid_aspect
-                else:
-                    c.add(shown)
-                    if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
-                        acted_aspect = self.last_valid_aspect
-            else:
-                c.add(shown)
+            cab.add(shown)
             if t < self.assumed_until and self.assumed is not None:
-                c.add(self.assumed)          # constraints only: the reported aspect stays the shown one
+                cab.add(self.assumed)        # constraints only: the reported aspect stays the shown one
+            c.add(self._ceiling_on_a_curve(cab, x, v))
             result.stop_now = acted_aspect == sig.RED and self.mode == "ALSN"
         result.aspect = acted_aspect
         result.constraints = c
@@ -275,6 +289,33 @@ class Atp:
         result.intervention = self._intervene(v, permitted)
         return result
 
+    def _ceiling_on_a_curve(self, cab: Constraints, x: float, v: float) -> Constraints:
+        """The cab-signal constraints with a fall of their ceiling below the speed supervised
+        on a braking curve: the lower ceiling becomes a target at the point the train reaches
+        it braking at the supervision deceleration after T_DRIVER_S, the ceiling before the
+        fall holding until there (service brake first; the emergency brake only if the train
+        overruns that curve by dV_ebi)."""
+        ceiling = cab.ceiling_mps
+        drop = self.ceiling_drop
+        if drop is not None:
+            if ceiling >= self.ceiling_before_mps or x >= drop.position_m or v <= ceiling:
+                drop = None                          # the code came back, or the curve is done
+            elif ceiling > drop.speed_mps:
+                drop = Target(drop.position_m, ceiling)          # partly back: same point
+            elif ceiling < drop.speed_mps:
+                drop = Target(x + self._reach_m(v, ceiling), ceiling)   # fell further: from here
+        elif ceiling < self.cab_ceiling_mps and v > ceiling:
+            self.ceiling_before_mps = self.cab_ceiling_mps
+            drop = Target(x + self._reach_m(v, ceiling), ceiling)
+        self.ceiling_drop = drop
+        self.cab_ceiling_mps = ceiling
+        if drop is None:
+            return cab
+        return Constraints(max(ceiling, self.ceiling_before_mps), cab.targets + [drop])
+
+    def _reach_m(self, v: float, ceiling: float) -> float:
+        return v * T_DRIVER_S + (v * v - ceiling * ceiling) / (2.0 * self.decel)
+
     def _passed_signal(self, t: float) -> None:
         """The head passed the exit signal of the previous section."""
         previous = self.section
@@ -286,9 +327,18 @@ class Atp:
             if active == sig.RED_YELLOW:
                 self.signals_passed_at_danger += 1
                 self._emergency()
-            degraded = {sig.GREEN: sig.YELLOW, sig.YELLOW: sig.RED_YELLOW}.get(active, sig.RED)
-            self.assumed_aspect = degraded
-            self.assumed = self._alsn(degraded, None if previous is None else previous + 1)
+            entered = None if previous is None else previous + 1
+            if active == sig.GREEN:
+                # the worst the new section can carry is yellow (a yellow-green signal is sent
+                # as green too), whose consequence is a red signal at its end: a stop target at
+                # the exit of the section after the new one, not yellow's speed step
+                self.assumed_aspect = sig.YELLOW
+                self.assumed = Constraints() if entered is None else \
+                    Constraints(_INF, [Target(self.exit_signal_m(entered, 1), 0.0, signal=True)])
+            else:
+                degraded = sig.RED_YELLOW if active == sig.YELLOW else sig.RED
+                self.assumed_aspect = degraded
+                self.assumed = self._alsn(degraded, entered)
         else:
             stop_here = self.last_valid is not None and any(
                 tg.signal and abs(tg.position_m - self.section_ends[previous]) < 1e-6
@@ -298,7 +348,9 @@ class Atp:
                 self._emergency()
             self.assumed_aspect = active
             self.assumed = self.last_valid
-        self.assumed_until = t + self.latency_s
+        # the receiver may display the previous section's code until it has decoded the new
+        # one, or for its display hold when the new code is lost (at most the ALSN inertia)
+        self.assumed_until = t + max(self.latency_s, EQUIPMENT_INERTIA_S)
 
     def apply_emergency(self) -> None:
         """Emergency brake until standstill, counted once per application (a fault: core.py)."""

@@ -21,13 +21,21 @@ same result, docs/loco_receiver.md#signal-chain-corepy-filterspy):
    КЖ (0, period doubled); the period classifies KPT-5 (1.47–1.73 s) or KPT-7 (1.73–1.99 s),
    other lengths are invalid (counted in ``errors``). Added plausibility (our choice, against
    pulses split by noise into a more permissive count): every pulse must last 0.17–0.50 s and
-   every short interval at least 0.06 s, else the cycle is invalid. No relay edge for 2 s, or no valid cycle
-   for 2 s (kpt.h's later "incorrect after 2000 ms") → no code: white, or red if the last code
-   shown was КЖ; and no cycle of the code shown or a more permissive one for 2 s → the same
-   (valid cycles of a more restrictive code that cannot be shown yet must not keep the old
-   code alive). Valid cycles come at most every 1.99 s, so a steady code never times out,
-   and an old code can outlive a change of the code sent by at most one cycle + 2 s, within
-   the stated latency.
+   every short interval at least 0.06 s, else the cycle is invalid. No relay edge for 2 s, or
+   no valid cycle for 2 s (kpt.h's later "incorrect after 2000 ms"): the decoder has lost the
+   code and starts afresh.
+
+Display hold (the locomotive equipment's inertia, docs/loco_receiver.md#display-hold-equipment-inertia):
+the indication shown, with ``code_valid``, holds through a loss of code shorter than
+``inertia`` (5.5 s, docs/sources.md#receiver-inertia-and-latencies): it falls to the no-code
+indication (white, or red after red-yellow) when no relay edge came for ``inertia`` (a loss),
+or no cycle of the code shown or a more permissive one for ``inertia`` + one cycle (pulses
+without a valid cycle: after a loss the decoder needs a whole cycle, and a short loss at the
+wrong cam phase costs three KPT-7 cycles, 5.6 s), or — restrictive news — 2 s after the last
+such cycle once two valid cycles of a more restrictive code that cannot be shown yet have
+come (valid restrictive cycles must not keep an old code alive: an old code outlives a
+restrictive change by at most one cycle + 2 s, within the stated latency). A restrictive code
+that can be shown replaces the held one at once (the display rule below).
 
 Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
 the one shown — or, after a loss of code, than the last one shown — is shown after one valid
@@ -64,6 +72,10 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
+# inertia of the locomotive ALSN equipment (docs/sources.md#receiver-inertia-and-latencies: 5.5 s,
+# the joints paper; the thesis' "about 6 s" for an aspect change): the display holds the code
+# shown through a loss of code shorter than this, counted from the last cycle supporting it
+EQUIPMENT_INERTIA_S = 5.5
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
 
@@ -80,6 +92,7 @@ class ReceiverSettings:
     agc_recovery_db_per_s: float = 10.0
     pick_up_v: float = 0.12                # relay picks up above this envelope (input-referred)
     drop_out_v: float = 0.08
+    inertia_s: float = 0.0                 # 0: EQUIPMENT_INERTIA_S; the longest code loss the display bridges
 
 
 @dataclass
@@ -116,6 +129,8 @@ class LocoReceiverCore:
                             ("pick_up", s.pick_up_v), ("drop_out", s.drop_out_v)):
             if not value > 0:
                 raise FmuInputError(f"parameter {name}: must be positive, got {value}")
+        if s.inertia_s < 0:
+            raise FmuInputError(f"parameter inertia: must not be negative, got {s.inertia_s}")
         if s.drop_out_v >= s.pick_up_v:
             raise FmuInputError(f"parameter drop_out: {s.drop_out_v} V must be below pick_up {s.pick_up_v} V")
         if bandwidth >= 2 * carrier_hz:
@@ -136,6 +151,7 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
+        self.inertia_s = s.inertia_s if s.inertia_s > 0 else EQUIPMENT_INERTIA_S
         self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
         # decoder state
         self._last_edge_s: Optional[float] = None
@@ -155,6 +171,7 @@ class LocoReceiverCore:
         self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
         self._last_valid_s: Optional[float] = None
         self._supported_s: Optional[float] = None   # last cycle no more restrictive than the code shown
+        self._contradictions = 0        # valid more restrictive cycles since then (not shown yet)
         self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
         self._publish_speeds()
@@ -312,6 +329,10 @@ class LocoReceiverCore:
         self._last_valid_s = time_s
         if out.code_valid and sig.restrictiveness(code) >= sig.restrictiveness(out.aspect):
             self._supported_s = time_s        # a cycle no more restrictive than the code shown
+            self._contradictions = 0
+        elif out.code_valid and not self._after_gap:
+            # (a cycle begun after a gap may start mid-pattern and under-count: not news)
+            self._contradictions += 1
         # compare with what is shown, or after a loss of code with the last code shown (as the
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
@@ -340,6 +361,7 @@ class LocoReceiverCore:
         out = self.out
         if not (out.code_valid and out.aspect == code):
             self._supported_s = self._last_valid_s
+            self._contradictions = 0
         out.aspect = code
         out.code_valid = True
         self._last_shown = code
@@ -358,11 +380,9 @@ class LocoReceiverCore:
         out = self.out
         quiet = now_s - (self._last_edge_s if self._last_edge_s is not None else self._started_s)
         stale = now_s - (self._last_valid_s if self._last_valid_s is not None else self._started_s)
-        # cycles of a more restrictive code that cannot be shown yet (not clean, not confirmed)
-        # do not keep the code shown alive: without this an impulse-noise study run showed З
-        # for 3.4 s after the code sent had turned КЖ (beyond the stated latency)
-        unsupported = out.code_valid and self._supported_s is not None and \
-            now_s - self._supported_s > alsn.CODE_TIMEOUT_S
+        # the decoder loses the code after 2 s without an edge or a valid cycle (kpt.h) and
+        # starts afresh; the display holds what it shows (the equipment's inertia) until no
+        # cycle has supported it for `inertia` — then no code: white, or red after red-yellow
         lost = quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S
         if lost:
             self._pending = None
@@ -370,11 +390,21 @@ class LocoReceiverCore:
                 self._cycle_start_s = None
                 self._short = 0
             self._previous_cycle = alsn.NO_CODE
-        if lost or unsupported:
-            # no code: white, or red after red-yellow
-            if out.code_valid or out.aspect not in (sig.WHITE, sig.RED):
-                out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
+        unsupported_s = now_s - self._supported_s if self._supported_s is not None else 0.0
+        # the hold: no pulse for `inertia` (a loss of code), or pulses without a cycle of the
+        # code shown for `inertia` + one cycle (after a loss the decoder needs a whole cycle:
+        # at the wrong cam phase a short loss costs three KPT-7 cycles, 5.6 s, from the last
+        # one); and valid cycles of a more restrictive code that cannot be shown yet (not
+        # clean, not confirmed; two of them, as one may be cut by a joint) end it 2 s after
+        # the last supporting cycle: without this an impulse-noise study run showed З for
+        # 3.4 s after the code sent had turned КЖ (beyond the stated latency)
+        cycle_s = (alsn.KPT5_WINDOW_S if out.transmitter == 5 else alsn.KPT7_WINDOW_S)[1]
+        expired = quiet > self.inertia_s or unsupported_s > self.inertia_s + cycle_s \
+            or (self._contradictions >= 2 and unsupported_s > alsn.CODE_TIMEOUT_S)
+        if out.code_valid and expired:
+            out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
             out.code_valid = False
+            self._contradictions = 0
             self._publish_speeds()
 
     def _publish_speeds(self) -> None:

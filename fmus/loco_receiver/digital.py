@@ -46,11 +46,11 @@ import numpy as np
 
 from fmus.signalling import redundancy
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
+from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES, Acceptor, DigitalSystem, check_category, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
-from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs
+from fmus.loco_receiver.core import CHANNELS, EQUIPMENT_INERTIA_S, ReceiverOutputs
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
@@ -64,6 +64,14 @@ _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
 
 
+def default_hold_s(message_s: float) -> float:
+    """The display hold of a digital receiver by default [U] (docs/loco_receiver.md): the
+    acceptance timeout + 3 s, which bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s
+    after the timeout at 100 km/h), and never longer than the ALSN equipment's inertia (the
+    digital systems are the faster ones)."""
+    return min(TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
+
+
 @dataclass
 class DigitalReceiverSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
@@ -74,6 +82,7 @@ class DigitalReceiverSettings:
     limiter_v: float = 4.0           # 0: no limiter
     min_level_v: float = 0.1         # squelch, V at the coil: the ALSN relay's pick-up level (docs/digital_channels.md)
     filter_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
+    inertia_s: float = 0.0           # 0: the acceptance timeout + JOINT_BRIDGE_MIN_S (display hold, [U])
 
 
 class SymbolClock:
@@ -167,7 +176,7 @@ class DigitalReceiverCore:
         if s.track_parity not in (0, 1):
             raise FmuInputError(f"parameter track_parity: {s.track_parity} (0 even track, 1 odd track)")
         for name, value in (("limiter", s.limiter_v), ("min_level", s.min_level_v),
-                            ("filter_bandwidth", s.filter_bandwidth_hz)):
+                            ("filter_bandwidth", s.filter_bandwidth_hz), ("inertia", s.inertia_s)):
             if value < 0:
                 raise FmuInputError(f"parameter {name}: must not be negative, got {value}")
         self.system, self.settings, self.frame = system, s, frame
@@ -182,6 +191,10 @@ class DigitalReceiverCore:
         self.framer = system.framer(s.track_parity)
         self.message_s = system.message_s(self.carrier_hz)
         self.acceptor = Acceptor(system, s.track_parity, self.message_s)
+        # the display holds the command shown through a loss of code (docs/loco_receiver.md)
+        self.inertia_s = s.inertia_s if s.inertia_s > 0 else default_hold_s(self.message_s)
+        self._held: Optional[int] = None             # command displayed (in force or held)
+        self._held_support_s = -np.inf               # last message confirming it
         self.channels = [ChannelState() for _ in range(CHANNELS)]
         self.most_permissive = max(system.commands(), key=system.rank)
         self._level = 0.0
@@ -213,12 +226,38 @@ class DigitalReceiverCore:
             for index, message, quality in self.framer.push(symbols):
                 decided_s = (ends[index] + 1) / s.fs_hz   # when its last symbol was integrated
                 self.acceptor.expire(decided_s)
+                self._restrict_held(message)
                 self.acceptor.push(decided_s, message, quality)
         if retimed:
             self.framer.reset()
-        self.acceptor.expire((first + x.size) / s.fs_hz)
-        self._publish(self._vote(channel_faults))
+        now_s = (first + x.size) / s.fs_hz
+        self.acceptor.expire(now_s)
+        self._publish(self._hold(self._vote(channel_faults), now_s))
         return self.out
+
+    def _restrict_held(self, message) -> None:
+        """While the display holds a command through a loss, a message of this track more
+        restrictive than it is shown at once (the acceptance rules would wait for two)."""
+        if self.acceptor.command is None and self._held is not None and message is not None \
+                and message.track == self.settings.track_parity \
+                and self.system.rank(message.command) < self.system.rank(self._held):
+            self._held = message.command
+
+    def _hold(self, command: Optional[int], now_s: float) -> Optional[int]:
+        """The command displayed: the one voted, else — when the code was lost, not when the
+        channels disagree — the last one displayed while the loss is shorter than the inertia
+        (counted from the last message confirming it), else none."""
+        if command is not None:
+            self._held = command
+            self._held_support_s = self.acceptor.confirmed_s if command == self.acceptor.command else now_s
+            return command
+        if self.acceptor.command is not None:
+            # the code is there but the channels do not agree (faults): no hold, no code
+            self._held = None
+            return None
+        if self._held is not None and now_s - self._held_support_s <= self.inertia_s:
+            return self._held
+        return None
 
     def _indication(self, command: int):
         found = self._indications.get(command)
@@ -253,7 +292,7 @@ class DigitalReceiverCore:
                 out.joints += 1
             self._block = acceptor.block
         if command is None:
-            last = acceptor.last_command
+            last = self._held if self._held is not None else acceptor.last_command
             stop = last is not None and self._indication(last).aspect in (sig.RED_YELLOW, sig.RED)
             out.aspect = sig.RED if stop else sig.WHITE
             out.code, out.code_valid, out.free_blocks = 0, False, 0

@@ -6,20 +6,20 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Union
 
-from fmus.loco_receiver.core import ReceiverSettings
-from fmus.loco_receiver.digital import DigitalReceiverSettings
+from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S, ReceiverSettings
+from fmus.loco_receiver.digital import DigitalReceiverSettings, default_hold_s
 from fmus.signalling.digital import DigitalSystem
 
 # port → settings field
 ALSN_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_order": "filter_order", "filter_bandwidth": "filter_bandwidth_hz", "agc_limit": "agc_limit_v",
-    "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v",
+    "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v", "inertia": "inertia_s",
 }
 DIGITAL_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_bandwidth": "filter_bandwidth_hz", "track_parity": "track_parity", "limiter": "limiter_v",
-    "min_level": "min_level_v",
+    "min_level": "min_level_v", "inertia": "inertia_s",
 }
 
 
@@ -33,3 +33,16 @@ def receiver_settings(system: Optional[DigitalSystem], parameters: Mapping[str, 
     values = {field: type(getattr(defaults, field))(parameters[port])
               for port, field in fields.items() if port in parameters}
     return settings_class(**values)
+
+
+def display_hold_s(system: Optional[DigitalSystem], parameters: Mapping[str, object]) -> float:
+    """The longest loss of code the receiver's display bridges (its `inertia`, or the system's
+    default): how long after the code under the coils disappears it may still show the last
+    one (the run verdicts allow it, docs/scenarios.md#results-summaryjson)."""
+    settings = receiver_settings(system, parameters)
+    if settings.inertia_s > 0:
+        return settings.inertia_s
+    if system is None:
+        return EQUIPMENT_INERTIA_S
+    carrier_hz = settings.carrier_hz or system.carrier_hz
+    return default_hold_s(system.message_s(carrier_hz))

@@ -16,6 +16,7 @@ import numpy as np
 from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
                               load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
+from fmus.loco_receiver.parameters import display_hold_s
 from fmus.signalling import alsn, cab_systems, digital
 from fmus.signalling import aspects as sig
 from fmus.signalling.aspects import ASPECT_NAMES
@@ -359,6 +360,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 RECEIVER_MODEL = "LocoReceiver"
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 SPEED_TOLERANCE_KMH = 0.5
+HOLD_DECAY_S = 0.2
 
 
 @dataclass
@@ -374,17 +376,20 @@ class _Episodes:
     last_check_s: Optional[float] = None
     events: List[dict] = field(default_factory=list)
 
-    def check(self, now: float, too_permissive: Optional[bool], event: dict) -> None:
-        """``too_permissive`` None: not judged now (the coil outside every section)."""
+    def check(self, now: float, too_permissive: Optional[bool], event: dict,
+              latency_s: Optional[float] = None) -> None:
+        """``too_permissive`` None: not judged now (the coil outside every section);
+        ``latency_s``: the latency allowed now, when not ``self.latency_s`` (a loss of code)."""
+        latency_s = self.latency_s if latency_s is None else latency_s
         if too_permissive:
             if self.start_s is None:
                 self.start_s, self.counted = now, False
-            elif now - self.start_s > self.latency_s:
+            elif now - self.start_s > latency_s:
                 if not self.counted:
                     self.count += 1
                     self.counted = True
                     self.events.append({"t": self.start_s, **event})
-                self.seconds += now - max(self.last_check_s or now, self.start_s + self.latency_s)
+                self.seconds += now - max(self.last_check_s or now, self.start_s + latency_s)
         else:
             self.start_s = None
         self.last_check_s = now
@@ -400,6 +405,7 @@ class _Receiver:
     system: object                 # DigitalSystem, or None for ALSN
     category: str
     latency_s: float
+    hold_s: float                                # a code that disappears may be shown this long (display hold)
     wrong_side: Optional[_Episodes] = None       # against the code the coder sent
     unsafe: Optional[_Episodes] = None           # against the real occupancy by the block rules
 
@@ -435,7 +441,12 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         else:
             carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
             latency = digital.stated_latency_s(system.message_s(carrier))
-        found.append(_Receiver(name, train, rail, coder, slot, system, category, latency))
+        try:
+            # + the receiver's filters' decay before its relay or squelch lets go of the code
+            hold = max(display_hold_s(system, params) + HOLD_DECAY_S, latency)
+        except (TypeError, ValueError):
+            continue                  # a bad parameter value: the receiver reports it at initialisation
+        found.append(_Receiver(name, train, rail, coder, slot, system, category, latency, hold))
     return found
 
 
@@ -513,7 +524,9 @@ class ReceiverVerdict(_OutputJudge):
             buffer, index = self._code_tx[r.name][section - 1]
             sent = int(buffer.values[index])
             meant = sent if r.system is None else transmitted_indication(r.system, sent, r.category)
-            r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent})
+            nothing_sent = not meant if r.system is None else meant is None
+            r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent},
+                               r.hold_s if nothing_sent else None)
 
     def _check_track(self, master: MasterView, r: _Receiver, tick: int, now: float) -> None:
 
@@ -534,9 +547,11 @@ class ReceiverVerdict(_OutputJudge):
             allowed = None
         else:
             allowed = r.system.indication(r.system.command_for(min(free, FREE_BLOCKS_OPEN)), r.category)
+        nothing_allowed = free == NO_CODE_FREE_BLOCKS
         r.unsafe.check(now, self._more_permissive(r, allowed),
                        {"section": circuit + 1, "free_blocks_allowed": None if free < 0 else min(free, FREE_BLOCKS_OPEN),
-                        "aspect_shown": int(self._value(r.name, "aspect"))})
+                        "aspect_shown": int(self._value(r.name, "aspect"))},
+                       r.hold_s + self.tracks[r.rail].detection_s if nothing_allowed else None)
 
     def _more_permissive(self, r: _Receiver, meant) -> bool:
         """Whether the receiver shows more than ``meant``: an ALSN code (aspect enumeration, 0

@@ -1,0 +1,119 @@
+"""The receiver's display hold (the locomotive equipment's inertia, docs/loco_receiver.md) and its
+latencies, on the receiver and coder cores: a loss of code shorter than the inertia is bridged
+(the indication and code_valid stay), a longer one ends in white (red after red-yellow) at the
+inertia, restrictive news is shown at once even during a hold, and every latency is within
+its stated bound over cam phases."""
+import numpy as np
+import pytest
+
+from benchmarks.harness import latency as lat
+from fmus.errors import FmuInputError
+from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S, LocoReceiverCore, ReceiverSettings
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings, default_hold_s
+from fmus.data.loader import DEFAULT_LINE, load_line
+from fmus.signalling import aspects as sig
+from fmus.signalling import cab_systems
+from fmus.signalling.alsn import STATED_LATENCY_S
+from fmus.wayside_coder.core import CoderSettings
+from fmus.wayside_coder.digital import DigitalCoderCore
+
+CYCLE_S = {"KPT-5": 1.60, "KPT-7": 1.86}
+PHASES = (0.0, 0.3, 0.55, 0.8)
+
+
+@pytest.mark.parametrize("kpt", ["KPT-5", "KPT-7"])
+@pytest.mark.parametrize("code", [sig.GREEN, sig.YELLOW, sig.RED_YELLOW], ids=["Z", "Zh", "KZh"])
+def test_a_loss_shorter_than_the_inertia_is_bridged(kpt, code):
+    # 1.5 s without any code EMF (the longest sensitivity recovery after a joint in the joints
+    # paper) at any cam phase: with the cycle lost before it and the one begun mid-pattern after
+    # it, three cycles pass without a valid one, and the decoder's 2 s timeout used to show
+    # white (red after red-yellow) meanwhile
+    for phase in PHASES:
+        no_code_s, held = lat.loss_s(kpt, code, phase, gap_s=1.5)
+        assert no_code_s == np.inf and held, (phase, no_code_s)
+
+
+@pytest.mark.parametrize("kpt", ["KPT-5", "KPT-7"])
+def test_a_longer_loss_gives_the_no_code_indication_at_the_inertia(kpt):
+    for code in (sig.GREEN, sig.RED_YELLOW):
+        for phase in PHASES:
+            no_code_s, _ = lat.loss_s(kpt, code, phase)
+            # counted from the last cycle supporting the code: ended at most one cycle before the cut
+            assert EQUIPMENT_INERTIA_S - CYCLE_S[kpt] <= no_code_s <= EQUIPMENT_INERTIA_S + 0.3, (code, phase)
+
+
+def test_the_inertia_is_a_parameter():
+    no_code_s, _ = lat.loss_s("KPT-5", sig.GREEN, 0.0, receiver=ReceiverSettings(inertia_s=3.0))
+    assert 3.0 - 1.6 <= no_code_s <= 3.3
+    with pytest.raises(FmuInputError, match="inertia"):
+        LocoReceiverCore(40, ReceiverSettings(inertia_s=-1.0))
+
+
+@pytest.mark.parametrize("kpt", ["KPT-5", "KPT-7"])
+def test_restrictive_changes_within_the_stated_latency_permissive_within_three_cycles(kpt):
+    # a permissive change needs two identical cycles after the one that straddles the change
+    for changes, bound in ((lat.RESTRICTIVE, STATED_LATENCY_S), (lat.PERMISSIVE, 3 * CYCLE_S[kpt] + 0.5)):
+        for before, after in changes:
+            for phase in PHASES:
+                took = lat.change_s(kpt, before, after, phase)
+                assert took <= bound, (sig.ASPECT_NAMES[before], sig.ASPECT_NAMES[after], phase, took)
+
+
+def test_red_yellow_to_yellow_does_not_pass_through_red():
+    """The code sent turns from КЖ to Ж mid-block (the train ahead left): the receiver needs two
+    Ж cycles, and the decoder's 2 s without a valid cycle used to show red meanwhile."""
+    channel = lat._channel("KPT-7", 0.4)
+    schedule = lambda t: lat.occupancy(sig.RED_YELLOW if t < lat.SETTLE_S else sig.YELLOW, 1)
+    rows = channel.run(lat.SETTLE_S + lat.AFTER_S, schedule)
+    late = rows[rows[:, 0] > lat.SETTLE_S - 1.0]
+    shown = [int(a) for i, a in enumerate(late[:, 1]) if i == 0 or a != late[i - 1, 1]]
+    assert shown == [sig.RED_YELLOW, sig.YELLOW] and late[:, 2].all()
+
+
+def test_restrictive_news_during_a_hold_is_shown_at_once():
+    """З, then the EMF is lost for 2.5 s while the code sent turns КЖ: КЖ is shown on its first
+    clean cycle after the loss, never white or red in between."""
+    channel = lat._channel("KPT-5", 0.2)
+    loss = (lat.SETTLE_S, lat.SETTLE_S + 2.5)
+    schedule = lambda t: lat.occupancy(sig.GREEN if t < lat.SETTLE_S else sig.RED_YELLOW, 0)
+    cut = lambda t, e: e * ((t < loss[0]) | (t >= loss[1]))
+    rows = channel.run(lat.SETTLE_S + lat.AFTER_S, schedule, disturb=cut)
+    late = rows[rows[:, 0] > lat.SETTLE_S - 1.0]
+    shown = [int(a) for i, a in enumerate(late[:, 1]) if i == 0 or a != late[i - 1, 1]]
+    assert shown == [sig.GREEN, sig.RED_YELLOW]
+    first = late[late[:, 1] == sig.RED_YELLOW][0, 0]
+    assert first - loss[1] <= 2 * 0.8 + 0.5                        # КЖ's half-period cycles
+
+
+def _digital_run(name, gap, seconds=14.0, start_gap=8.0):
+    system = cab_systems.digital_system(name)
+    line = load_line(str(DEFAULT_LINE))
+    fs, frame = 4000.0, 40
+    coder = DigitalCoderCore(system, line, 8, frame, CoderSettings(fs_hz=fs, amplitude_v=1.0, seed=1))
+    receiver = DigitalReceiverCore(system, frame, DigitalReceiverSettings(fs_hz=fs))
+    occupied = np.zeros(8, dtype=bool)
+    rows = []
+    for k in range(int(seconds * fs / frame)):
+        t = k * frame / fs
+        e = 0.2 * coder.step(t, occupied).u_tx[0]
+        if start_gap <= t < start_gap + gap:
+            e = 0.0 * e
+        out = receiver.step(t, e)
+        rows.append((t + frame / fs, out.aspect, out.code_valid))
+    return np.array(rows), receiver
+
+
+@pytest.mark.parametrize("name", ["FIRE_DQPSK", "ALS-EN"])
+def test_digital_receivers_hold_through_a_short_loss_and_give_up_after_their_hold(name):
+    system = cab_systems.digital_system(name)
+    hold = default_hold_s(system.message_s(system.carrier_hz))
+    assert hold <= EQUIPMENT_INERTIA_S
+    # a 1.5 s loss (a joint's): FIRE_DQPSK's acceptance times out after 1.03 s, and the
+    # display holds until two identical messages bring the command back
+    rows, receiver = _digital_run(name, gap=1.5, seconds=22.0)
+    shown = rows[rows[:, 0] > 7.0, 1]
+    assert receiver.inertia_s == pytest.approx(hold)
+    assert (shown == shown[0]).all() and shown[0] != sig.WHITE and rows[rows[:, 0] > 7.0, 2].all()
+    rows, _ = _digital_run(name, gap=30.0, seconds=22.0)
+    lost = rows[(rows[:, 0] > 8.0) & (rows[:, 1] == sig.WHITE) & (rows[:, 2] == 0)]
+    assert lost.size and lost[0, 0] - 8.0 <= hold + 0.1
