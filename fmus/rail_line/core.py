@@ -9,10 +9,12 @@ The core composes three parts, each with one job:
 * traction_interference.py — the asymmetric traction return current under the coils (DC
   ripple, AC harmonics, the joints' bond-lead zones).
 
-What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k)
-(docs/rail_line.md, connecting a train), sampled for the shunts every 10 ms of simulated time
-and for the coils at every sample, whatever the frame length, so frames of any length give the
-same result.
+What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
+and the gap between where the train was and where the update puts it closes linearly over
+``POSITION_BLEND_S`` (docs/rail_line.md, connecting a train): the coils never jump, not even when
+an extrapolated position is corrected at a slow step. It is sampled for the shunts every 10 ms of
+simulated time and for the coils at every sample, whatever the frame length, so frames of any
+length give the same result.
 """
 from __future__ import annotations
 
@@ -31,6 +33,8 @@ from fmus.rail_line.traction_interference import TractionInterference
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 CONFIG_TICK_S = 0.01
+POSITION_BLEND_S = 0.01     # a position update's correction is spread over this time
+POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train placed), not blended
 
 
 @dataclass
@@ -102,7 +106,9 @@ class RailLineCore:
         self.interference = TractionInterference(line, s, trains, frame, self.bank)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index = np.arange(frame)
-        self._anchors: List[Optional[Tuple[float, float, float]]] = [None] * trains   # (x_k, v_k, t_k)
+        # (x_k, v_k, t_k, gap_k): x(t) = x_k + v_k·(t − t_k) + gap_k·max(0, 1 − (t − t_k)/blend)
+        self._anchors: List[Optional[Tuple[float, float, float, float]]] = [None] * trains
+        self._heads = np.zeros((trains, frame))
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
@@ -124,14 +130,16 @@ class RailLineCore:
         times = (first + self._index[:n]) * self.dt
         tick = math.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
         at_tick = []
+        heads = self._heads
         for j in range(self.trains):
-            x_k, v_k, t_k = self._update_anchor(j, t, float(x_head[j]), float(v[j]))
-            at_tick.append(x_k + v_k * (tick - t_k))
+            self._update_anchor(j, t, float(x_head[j]), float(v[j]))
+            at_tick.append(float(self.head_at(j, np.array([tick]))[0]))
+            heads[j, :n] = self.head_at(j, times)
         self.interference.new_frame(i_traction, n)
-        self.bank.follow_shunts(at_tick)         # every wheelset of every train shunts its section
+        self.bank.follow_shunts(at_tick, tick)        # every wheelset of every train shunts its section
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
-        self.pickup.sense(first, times, self._anchors, currents, out)
+        self.pickup.sense(first, times, heads[:, :n], currents, out)
         out.occupied[:self.count] = ~self.bank.relay_up
         return out
 
@@ -153,12 +161,28 @@ class RailLineCore:
         self.out.occupied[:self.count] = ~self.bank.relay_up
         return self.out
 
-    def _update_anchor(self, j: int, t: float, x: float, v: float) -> Tuple[float, float, float]:
-        """A new position update starts x(t) = x_k + v_k·(t − t_k)."""
+    def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
+        """A new position update starts x(t) = x_k + v_k·(t − t_k); the gap between the position
+        the previous update gives at t_k and x_k closes linearly over POSITION_BLEND_S, so the
+        head (and the coils) move continuously when an extrapolated input is corrected (a slow
+        step of the traction unit). A gap above POSITION_JUMP_M is taken as it is."""
         anchor = self._anchors[j]
-        if anchor is None or x != anchor[0] or v != anchor[1]:
-            anchor = self._anchors[j] = (x, v, t)
-        return anchor
+        if anchor is not None and x == anchor[0] and v == anchor[1]:
+            return
+        gap = 0.0
+        if anchor is not None:
+            gap = float(self.head_at(j, np.array([t]))[0]) - x
+            if abs(gap) > POSITION_JUMP_M:
+                gap = 0.0
+        self._anchors[j] = (x, v, t, gap)
+
+    def head_at(self, j: int, times: np.ndarray) -> np.ndarray:
+        """Train j's first-wheelset position at ``times`` (after its latest update)."""
+        x_k, v_k, t_k, gap = self._anchors[j]
+        head = x_k + v_k * (times - t_k)
+        if gap:
+            head = head + gap * np.clip(1.0 - (times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+        return head
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:
