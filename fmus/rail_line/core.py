@@ -47,6 +47,7 @@ class RailSettings:
     coil_length_m: float = 0.3            # sensitivity length of the coil core [U]
     train_length_m: Tuple[float, ...] = (400.0, 400.0)
     asymmetry_range: Tuple[float, float] = (0.01, 0.05)
+    coil_mismatch: float = 0.0            # the two coils' sensitivity difference / their mean (0: matched)
     seed: int = 1
     dc_ripple: Tuple[float, float] = (0.02, 0.01)       # 300 Hz, 600 Hz shares of the DC traction current [U]
     ac_harmonics: Tuple[float, float] = (0.10, 0.05)    # 150 Hz, 250 Hz shares on AC lines [U]
@@ -96,6 +97,8 @@ class RailLineCore:
             raise FmuInputError("parameter relay_drop_out: must be positive and below relay_pick_up (≤ 1)")
         if len(s.train_length_m) != trains or min(s.train_length_m) <= 0:
             raise FmuInputError(f"parameter train_length: {trains} positive lengths expected")
+        if not 0 <= s.coil_mismatch < 1:
+            raise FmuInputError(f"parameter coil_mismatch: {s.coil_mismatch:g} (need 0 ≤ mismatch < 1)")
         lo, hi = s.asymmetry_range
         if not 0 <= lo <= hi < 1:
             raise FmuInputError("parameter asymmetry_min/asymmetry_max: need 0 ≤ min ≤ max < 1")
