@@ -175,7 +175,7 @@ class TrackCircuitBank:
         omega, g = 2 * np.pi * carrier_hz, self.g_shunt
         worst_control = 0.0
         for ballast in (ballast_min, ballast_max):
-            net = circuit.network(None, Faults(ballast), 1.0)
+            net = circuit.network(None, Faults(ballast), 1.0, carrier_hz)
             family = PhasorFamily(net, omega, [1.0])
             relay = net.node_index["n0"]
             nodes = np.array([net.node_index[f"n{i}"] for i in range(circuit.segments + 1)])
@@ -290,7 +290,7 @@ class TrackCircuitBank:
             return cache[key]
         family_key = (k, faults)
         if family_key not in self._families:
-            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio)
+            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio, self.carriers[k])
             self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
         family, node_index = self._families[family_key]
         shunts, heads = config
@@ -346,7 +346,8 @@ class TrackCircuitBank:
     def _phasor_family(self, k: int, faults: Faults) -> PhasorFamily:
         key = (k, faults)
         if key not in self._phasor_families:
-            self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0),
+            self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0,
+                                                                               self.track_frequencies[k]),
                                                       2 * np.pi * self.track_frequencies[k], [1.0])
         return self._phasor_families[key]
 
@@ -359,7 +360,7 @@ class TrackCircuitBank:
         key = (k, faults)
         if key not in self._phasors:
             circuit, g_sh = self.circuits[k], self.g_shunt
-            net = circuit.network(None, faults, 1.0)
+            net = circuit.network(None, faults, 1.0, self.carriers[k])
             nodes = [net.node_index[f"n{node}"] for node in range(circuit.segments + 1)]
             at_node, at_relay, free_relay = net.phasor_with_shunt(2 * np.pi * self.carriers[k], [1.0], g_sh,
                                                                   net.node_index["n0"])
