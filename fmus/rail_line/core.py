@@ -10,9 +10,9 @@ The core composes three parts, each with one job:
   ripple, AC harmonics, the joints' bond-lead zones).
 
 What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
-and the gap between where the train was and where the update puts it closes linearly over
-``POSITION_BLEND_S`` (docs/rail_line.md, connecting a train): the coils never jump, not even when
-an extrapolated position is corrected at a slow step. It is sampled for the shunts every 10 ms of
+and the gap between where the train was (and how fast it went) and where the update puts it
+closes along a cubic over ``POSITION_BLEND_S`` (docs/rail_line.md, connecting a train): the coils'
+position and speed never jump, not even when an extrapolated position is corrected at a slow step. It is sampled for the shunts every 10 ms of
 simulated time and for the coils at every sample, whatever the frame length, so frames of any
 length give the same result.
 """
@@ -33,7 +33,7 @@ from fmus.rail_line.traction_interference import TractionInterference
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 CONFIG_TICK_S = 0.01
-POSITION_BLEND_S = 0.01     # a position update's correction is spread over this time
+POSITION_BLEND_S = 0.25     # a position update's correction is spread over this time
 POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train placed), not blended
 
 
@@ -109,8 +109,8 @@ class RailLineCore:
         self.interference = TractionInterference(line, s, trains, frame, self.bank)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index = np.arange(frame)
-        # (x_k, v_k, t_k, gap_k): x(t) = x_k + v_k·(t − t_k) + gap_k·max(0, 1 − (t − t_k)/blend)
-        self._anchors: List[Optional[Tuple[float, float, float, float]]] = [None] * trains
+        # (x_k, v_k, t_k, gap_k, speed_gap_k): head_at
+        self._anchors: List[Optional[Tuple[float, float, float, float, float]]] = [None] * trains
         self._heads = np.zeros((trains, frame))
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
@@ -165,27 +165,36 @@ class RailLineCore:
         return self.out
 
     def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
-        """A new position update starts x(t) = x_k + v_k·(t − t_k); the gap between the position
-        the previous update gives at t_k and x_k closes linearly over POSITION_BLEND_S, so the
-        head (and the coils) move continuously when an extrapolated input is corrected (a slow
-        step of the traction unit). A gap above POSITION_JUMP_M is taken as it is."""
+        """A new position update starts x(t) = x_k + v_k·(t − t_k); the gaps between the position
+        and speed the previous update gives at t_k and (x_k, v_k) close along a cubic Hermite
+        over POSITION_BLEND_S, so the head (and the coils) move with a continuous position and
+        speed when an extrapolated input is corrected (a slow step of the traction unit). A gap
+        above POSITION_JUMP_M is taken as it is (a train placed)."""
         anchor = self._anchors[j]
         if anchor is not None and x == anchor[0] and v == anchor[1]:
             return
-        gap = 0.0
+        gap = speed_gap = 0.0
         if anchor is not None:
-            gap = float(self.head_at(j, np.array([t]))[0]) - x
+            at = np.array([t])
+            gap = float(self.head_at(j, at)[0]) - x
+            speed_gap = float(self._speed_at(j, at)[0]) - v
             if abs(gap) > POSITION_JUMP_M:
-                gap = 0.0
-        self._anchors[j] = (x, v, t, gap)
+                gap = speed_gap = 0.0
+        self._anchors[j] = (x, v, t, gap, speed_gap)
 
     def head_at(self, j: int, times: np.ndarray) -> np.ndarray:
         """Train j's first-wheelset position at ``times`` (after its latest update)."""
-        x_k, v_k, t_k, gap = self._anchors[j]
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
         head = x_k + v_k * (times - t_k)
-        if gap:
-            head = head + gap * np.clip(1.0 - (times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+        if gap or speed_gap:
+            s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+            head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
         return head
+
+    def _speed_at(self, j: int, times: np.ndarray) -> np.ndarray:
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+        return v_k + gap * (6 * s ** 2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s ** 2 - 4 * s + 1)
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:
