@@ -201,21 +201,6 @@ def test_joint_crossing_null_and_weak_zones_scale_with_speed(speed_kmh):
     assert 0.5 <= null_m <= 1.5
 
 
-def test_dc_traction_gives_two_opposite_pulses_at_a_joint_of_width_1_3_m_over_v():
-    v = 80 / 3.6
-    joint = 5200.0
-    core = _steady_carrier_core()
-    core.asymmetry[:] = 0.03          # same sign on both sides: the jumper zone gives a pulse pair
-    start = joint - 1.5 - 8.0
-    t, emf, _ = _run(core, 16.0 / v, lambda t: start + v * t, v, u_amplitude=0.0, i_traction=1000.0)
-    from scipy.signal import butter, sosfiltfilt
-    low = sosfiltfilt(butter(4, 40.0, fs=FS, output="sos"), emf)        # the DC pulses, not the ripple
-    peak, trough = low.argmax(), low.argmin()
-    assert low[peak] > 0.05 and low[trough] < -0.05
-    half_width = (np.abs(low) > 0.5 * abs(low[peak])).sum() / FS / 2
-    assert half_width == pytest.approx(1.3 / v, rel=0.35)
-
-
 def test_frame_length_does_not_change_the_coil_emf():
     line = load_line()
     results = {}

@@ -142,3 +142,27 @@ def test_ac_traction_additive_50_hz_pulses_independent_of_speed():
     # the same length of track at every speed: duration ∝ 1/v
     assert lengths[40.0] == pytest.approx(lengths[80.0], rel=0.10)
     assert lengths[160.0] == pytest.approx(lengths[80.0], rel=0.10)
+
+
+def test_null_zone_of_1_m_and_weak_zone_of_1_5_m():
+    """Table rows 1 and 2: no signal current over ≈ 1 m from the feed-end bond leads to the
+    joint; then ≈ 1.5 m of the next circuit's weak, unshunted current until the first wheelset
+    crosses (the coils 1.5 m ahead of it). Measured from the code current's envelope at the coil
+    (the integrated EMF) at walking pace, where a 50 Hz envelope resolves centimetres."""
+    from scipy.signal import hilbert
+    gain = RailSettings().coil_gain_h
+    coil, t, emf = _cross(5.0, i_traction=0.0, carrier_v=4.0, before_m=5.0, after_m=5.0)
+    current = np.cumsum(emf) / (FS * gain)
+    current -= np.convolve(current, np.ones(80) / 80, mode="same")
+    envelope = np.abs(hilbert(current))
+    x = coil - JOINT_M
+    strong = envelope[(x > -3.0) & (x < -2.0)].mean()          # the feed end of the section left
+    weak = envelope[(x > 0.4) & (x < 1.1)].mean()              # the next section, not shunted yet
+    shunted = envelope[(x > 2.0) & (x < 3.0)].mean()           # the next section, shunted
+    assert strong > 5 * shunted > 5 * weak
+    null_start = x[np.argmax((x > -2.0) & (envelope < 0.5 * strong))]       # half-way down
+    inside = x[np.argmax((x > null_start) & (envelope < 0.5 * weak))]
+    null_end = x[np.argmax((x > inside) & (envelope > 0.5 * weak))]          # half-way up
+    weak_end = x[np.argmax((x > null_end) & (envelope > 0.5 * (weak + shunted)))]
+    assert null_end - null_start == pytest.approx(1.0, rel=0.10)
+    assert weak_end - null_end == pytest.approx(1.5, rel=0.10)
