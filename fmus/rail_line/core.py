@@ -35,6 +35,7 @@ from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 CONFIG_TICK_S = 0.01
 POSITION_BLEND_S = 0.25     # a position update's correction is spread over this time
 POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train placed), not blended
+SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
 
 
 @dataclass
@@ -169,7 +170,7 @@ class RailLineCore:
         and speed the previous update gives at t_k and (x_k, v_k) close along a cubic Hermite
         over POSITION_BLEND_S, so the head (and the coils) move with a continuous position and
         speed when an extrapolated input is corrected (a slow step of the traction unit). A gap
-        above POSITION_JUMP_M is taken as it is (a train placed)."""
+        above POSITION_JUMP_M or SPEED_JUMP_MPS is taken as it is (a train placed or set going)."""
         anchor = self._anchors[j]
         if anchor is not None and x == anchor[0] and v == anchor[1]:
             return
@@ -178,7 +179,7 @@ class RailLineCore:
             at = np.array([t])
             gap = float(self.head_at(j, at)[0]) - x
             speed_gap = float(self._speed_at(j, at)[0]) - v
-            if abs(gap) > POSITION_JUMP_M:
+            if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS:
                 gap = speed_gap = 0.0
         self._anchors[j] = (x, v, t, gap, speed_gap)
 
