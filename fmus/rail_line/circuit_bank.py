@@ -389,7 +389,7 @@ class TrackCircuitBank:
             return 1.0
         value = np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
         gain, since = self._handover[k]
-        if gain != 1.0:
+        if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
             value = value * (1.0 + (gain - 1.0) * np.clip(1.0 - (times - since) / SHUNT_BLEND_S, 0.0, 1.0))
         return value
 

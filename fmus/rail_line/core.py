@@ -179,7 +179,8 @@ class RailLineCore:
             at = np.array([t])
             gap = float(self.head_at(j, at)[0]) - x
             speed_gap = float(self._speed_at(j, at)[0]) - v
-            if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS:
+            if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS \
+                    or (abs(gap) < 1e-6 and abs(speed_gap) < 1e-6):      # a jump, or nothing to close
                 gap = speed_gap = 0.0
         self._anchors[j] = (x, v, t, gap, speed_gap)
 
@@ -187,7 +188,7 @@ class RailLineCore:
         """Train j's first-wheelset position at ``times`` (after its latest update)."""
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
         head = x_k + v_k * (times - t_k)
-        if gap or speed_gap:
+        if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
             s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
             head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
         return head

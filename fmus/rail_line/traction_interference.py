@@ -19,6 +19,8 @@ into EMF (no FMI here; docs/rail_line.md, traction interference at the joints).
 """
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 from fmus.data.loader import Line
@@ -61,7 +63,9 @@ class TractionInterference:
         joint, per_mismatch = joint_couplings(s.coil_gain_h)
         self.joint_peak = joint + per_mismatch * s.coil_mismatch     # peak of the coupling b(x)
         self.joints = np.array([joint for _, joint, _ in bank.joint_zones])
-        self.lead_zones = [(lo_m, hi_m) for lo_m, _, hi_m in bank.joint_zones]
+        self.lead_zones = sorted((lo_m, hi_m) for lo_m, _, hi_m in bank.joint_zones)
+        self._lead_starts = [lo_m for lo_m, _ in self.lead_zones]
+        self._lead_ends = [hi_m for _, hi_m in self.lead_zones]
         self.reach_m = JOINT_RAMP_M + 0.5 * JOINT_TOP_M     # b(x) is zero farther than this from a joint
         dt = 1.0 / s.fs_hz
         lag = np.exp(-dt / s.traction_time_constant_s)
@@ -128,7 +132,9 @@ class TractionInterference:
         bank = self.bank
         section = bank.section_of(coil)
         c = np.where(section >= 0, self.asymmetry[np.clip(section, 0, bank.count - 1)], 0.0)
-        for lo, hi in self.lead_zones:
+        first, last = float(coil.min()), float(coil.max())
+        for lo, hi in self.lead_zones[bisect.bisect_left(self._lead_ends, first):
+                                      bisect.bisect_right(self._lead_starts, last)]:
             inside = (coil >= lo) & (coil < hi)
             if inside.any():
                 before = bank.section_at(lo - 1e-9)
