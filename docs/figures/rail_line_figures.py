@@ -35,7 +35,7 @@ def code_current() -> None:
         core = RailLineCore(load_line(), 8, 2, N, RailSettings(transformer_ratio=1.0))
         _, _, axle = _run(core, 0.3, lambda t, x=x: x, 0.0, sections=[3])
         network.append(axle[-10:].mean() * np.sqrt(2.0))
-        analytic.append(_analytic_shunt_current(core.circuits[3], x, params))
+        analytic.append(_analytic_shunt_current(core.circuits[3], x, core.circuits[3].params))
     network, analytic = np.array(network), np.array(analytic)
     print(f"code current, network vs two-port: max deviation {np.max(np.abs(network / analytic - 1)) * 100:.2f} %")
     fig, ax = plt.subplots(figsize=(9, 4))

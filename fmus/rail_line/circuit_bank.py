@@ -35,6 +35,7 @@ from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
 
 _CACHE_SIZE = 64
+SHUNT_BLEND_S = 0.1      # the front train's amplitude handed over from one node's model to the next
 # a section's configuration: (shunt nodes, sorted; head nodes, one per train head in it, front first)
 Config = Tuple[Tuple[int, ...], Tuple[int, ...]]
 _NO_TRAIN: Config = ((), ())
@@ -49,6 +50,11 @@ class _Model:
     entry_o: np.ndarray     # (N, nx) the same for the entry-end current
     entry_t: np.ndarray     # (N, N)
     relay_level: float      # relay-end voltage relative to the circuit's calibrated reference
+    phi: np.ndarray         # (nx, nx) state after one sample
+    gamma: np.ndarray       # (nx,) input → state after one sample
+    carrier_response: np.ndarray    # (nx,) complex: the states' phasor per unit input phasor at the
+                                    # carrier, sampled (the discrete model's steady state)
+    ahead_response: np.ndarray      # (H,) complex: the same for the current arriving at each head
 
 
 @dataclass(frozen=True)
@@ -142,6 +148,9 @@ class TrackCircuitBank:
         self._psi_stack = np.zeros((self.count, size, frame))
         self.relay_up = np.ones(self.count, dtype=bool)
         self._relay_timer = np.zeros(self.count)
+        self._carry_over: List[Tuple[int, _Model, _Model]] = []
+        self._handover = [(1.0, 0.0)] * self.count
+        self._tick_s = 0.0
 
     # ---- geometry ---------------------------------------------------------------------------
     def section_of(self, x):
@@ -166,7 +175,7 @@ class TrackCircuitBank:
         omega, g = 2 * np.pi * carrier_hz, self.g_shunt
         worst_control = 0.0
         for ballast in (ballast_min, ballast_max):
-            net = circuit.network(None, Faults(ballast), 1.0)
+            net = circuit.network(None, Faults(ballast), 1.0, carrier_hz)
             family = PhasorFamily(net, omega, [1.0])
             relay = net.node_index["n0"]
             nodes = np.array([net.node_index[f"n{i}"] for i in range(circuit.segments + 1)])
@@ -281,7 +290,7 @@ class TrackCircuitBank:
             return cache[key]
         family_key = (k, faults)
         if family_key not in self._families:
-            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio)
+            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio, self.carriers[k])
             self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
         family, node_index = self._families[family_key]
         shunts, heads = config
@@ -321,11 +330,14 @@ class TrackCircuitBank:
             psi[:, m] = column
             column = phi @ column
         # outputs of all samples at once: (H, N, nx) and (H, N, N) per head, (N, nx), (N, N) entry
+        rotation = np.exp(2j * np.pi * self.carriers[k] * self.dt)
+        response = np.linalg.solve(rotation * np.eye(nx) - phi, gamma[:, 0].astype(complex))
         model = _Model(np.linalg.matrix_power(phi, n), psi,
                        np.ascontiguousarray(out_o[:, :-1].transpose(1, 0, 2)),
                        np.ascontiguousarray(out_t[:, :-1].transpose(1, 0, 2)),
                        np.ascontiguousarray(out_o[:, -1]), np.ascontiguousarray(out_t[:, -1]),
-                       self.relay_level(k, shunts))
+                       self.relay_level(k, shunts), phi, gamma[:, 0].copy(), response,
+                       rows[:-1] @ response + direct[:-1])
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
@@ -334,7 +346,8 @@ class TrackCircuitBank:
     def _phasor_family(self, k: int, faults: Faults) -> PhasorFamily:
         key = (k, faults)
         if key not in self._phasor_families:
-            self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0),
+            self._phasor_families[key] = PhasorFamily(self.circuits[k].network(None, faults, 1.0,
+                                                                               self.track_frequencies[k]),
                                                       2 * np.pi * self.track_frequencies[k], [1.0])
         return self._phasor_families[key]
 
@@ -347,7 +360,7 @@ class TrackCircuitBank:
         key = (k, faults)
         if key not in self._phasors:
             circuit, g_sh = self.circuits[k], self.g_shunt
-            net = circuit.network(None, faults, 1.0)
+            net = circuit.network(None, faults, 1.0, self.carriers[k])
             nodes = [net.node_index[f"n{node}"] for node in range(circuit.segments + 1)]
             at_node, at_relay, free_relay = net.phasor_with_shunt(2 * np.pi * self.carriers[k], [1.0], g_sh,
                                                                   net.node_index["n0"])
@@ -365,18 +378,26 @@ class TrackCircuitBank:
         family = self._phasor_family(k, faults)
         return supply * abs(family.with_shunts(list(shunts), self.g_shunt, 0)) / self._reference[k]
 
-    def scale(self, k: int, head: np.ndarray, j: int):
+    def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray):
         """Code-current amplitude at the exact wheelset position over the one at the model's node,
-        for the train whose head is the section's front-most shunt (1 for any other train)."""
+        for the train whose head is the section's front-most shunt (1 for any other train).
+        The shape between nodes is the one-shunt table's; a whole train's shunts make the
+        amplitude at the next node differ from it by a few per cent, and that difference is
+        spread over ``SHUNT_BLEND_S`` after the head moves on to the next node."""
         _, _, log_amplitude, at_node, front = self._active[k]
         if j != front:
             return 1.0
-        return np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
+        value = np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
+        gain, since = self._handover[k]
+        if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
+            value = value * (1.0 + (gain - 1.0) * np.clip(1.0 - (times - since) / SHUNT_BLEND_S, 0.0, 1.0))
+        return value
 
     # ---- the trains' shunts -----------------------------------------------------------------
-    def follow_shunts(self, heads: List[float]) -> None:
-        """Every train's wheelsets (heads at the configuration tick) as shunts, activating the
-        models of the sections whose configuration changed."""
+    def follow_shunts(self, heads: List[float], tick_s: float = 0.0) -> None:
+        """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts,
+        activating the models of the sections whose configuration changed."""
+        self._tick_s = tick_s
         if all(lo < head < hi for head, (lo, hi) in zip(heads, self._node_bounds)):
             return
         configs, rows = self._configuration(heads)
@@ -428,11 +449,20 @@ class TrackCircuitBank:
 
     def _activate(self, k: int, config: Config, rows: Dict[int, int]) -> None:
         model = self._model(k, config)
+        previous = self._active[k]
+        self._handover[k] = (1.0, 0.0)
+        if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
+            self._carry_over.append((k, previous[1], model))
         log_amplitude = self._phasor_table(k)[1]
         shunts, heads = config
         # the train whose head is the front-most shunt gets the continuous amplitude (scale)
         front = next((j for j, h in rows.items() if h == 0), -1) if heads and heads[0] == shunts[-1] else -1
         self._active[k] = (config, model, log_amplitude, log_amplitude[heads[0]] if front >= 0 else 0.0, front)
+        if previous is not None and front >= 0 and previous[4] == front and previous[1] is not model:
+            # the front train's steady amplitude just before and just after, at the same place
+            before = abs(previous[1].ahead_response[0]) * math.exp(-previous[3])
+            after = abs(model.ahead_response[0]) * math.exp(-self._active[k][3])
+            self._handover[k] = (before / after, self._tick_s)
         size = model.phi_n.shape[0]
         self._phi_stack[k] = 0.0                             # sections padded to one size:
         self._psi_stack[k] = 0.0                             # one product advances them all
@@ -455,6 +485,8 @@ class TrackCircuitBank:
     def advance(self, u: np.ndarray, n: int) -> FrameCurrents:
         """Every section's states over a frame of code input ``u`` (K, n) and the relays; the
         frame's currents, computed on demand from the states it started from."""
+        if self._carry_over:
+            self._carry_states_over(u)
         before = self.states
         self.states, self._spare_states = self._spare_states, before
         np.matmul(self._phi_stack, before[..., None], out=self.states[..., None])
@@ -462,6 +494,30 @@ class TrackCircuitBank:
         if not self._relays_settled:
             self._update_relays(n * self.dt)
         return FrameCurrents(self, before, u)
+
+    def _carry_states_over(self, u: np.ndarray) -> None:
+        """A wheelset shunt moved to the next node (the train's lumped shunts step by up to 50 m):
+        the branch currents' steady state at the carrier is replaced by the new network's, with the
+        carrier's amplitude and phase read from the old states and their next sample. Carrying the old states over unchanged would start a transient
+        of the network's time constants (≈ 10 ms), a step of a few per cent in the current under
+        the coils at every node: an EMF spike a moving train does not make."""
+        for k, old, new in self._carry_over:
+            if self._active[k] is None or self._active[k][1] is not new:
+                continue
+            nx = new.phi.shape[0]
+            state = self.states[k, :nx]
+            h = old.carrier_response
+            rotation = np.exp(2j * np.pi * self.carriers[k] * self.dt)
+            # x[n] = Re(h·p), x[n+1] = Re(h·p·e^{jωΔ}): the carrier's phasor p by least squares
+            following = old.phi @ state + old.gamma * u[k, 0]
+            system = np.concatenate([np.stack([h.real, -h.imag], 1),
+                                     np.stack([(h * rotation).real, -(h * rotation).imag], 1)])
+            (p_re, p_im), *_ = np.linalg.lstsq(system, np.concatenate([state, following]), rcond=None)
+            carrier = p_re + 1j * p_im
+            # only the carrier's steady state is swapped: what else the states hold (the decaying
+            # response to a code edge) carries over as it is
+            self.states[k, :nx] += ((new.carrier_response - h) * carrier).real
+        self._carry_over.clear()
 
     def _update_relays(self, step_s: float) -> None:
         s = self.settings

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from typing import List, Optional, Tuple
+from typing import List
 
 import numpy as np
 
@@ -41,7 +41,9 @@ class CoilPickup:
         # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones
         # and from each feed to its section's end, widened by the coil length
         margin = s.coil_length_m
-        bands = sorted([(lo - margin, hi + margin) for lo, _, hi in bank.joint_zones] +
+        reach = max(interference.reach_m, 0.0)
+        bands = sorted([(min(lo, joint - reach) - margin, max(hi, joint + reach) + margin)
+                        for lo, joint, hi in bank.joint_zones] +
                        [(c.feed_m - margin, c.end_m + margin) for c in bank.circuits])
         merged: List[List[float]] = []
         for lo, hi in bands:                    # touching or overlapping bands merged: disjoint, sorted
@@ -52,19 +54,16 @@ class CoilPickup:
         self._band_lo = [lo for lo, _ in merged]
         self._band_hi = [hi for _, hi in merged]
 
-    def sense(self, first: int, times: np.ndarray, anchors: List[Optional[Tuple[float, float, float]]],
-              currents: FrameCurrents, out) -> None:
+    def sense(self, first: int, times: np.ndarray, heads: np.ndarray, currents: FrameCurrents, out) -> None:
         """Every train's coil EMF, code current under its first wheelset, coil section and
-        off-line flag for the frame of sample index ``first`` (``times`` its sample times),
-        its head moving as x_k + v_k·(t − t_k) from its anchor; written into ``out``."""
+        off-line flag for the frame of sample index ``first`` (``times`` its sample times,
+        ``heads`` the trains' first-wheelset positions per sample); written into ``out``."""
         s, bank, interference = self.settings, self.bank, self.interference
         n = times.size
-        first_s, last_s = float(times[0]), float(times[-1])
         ends, feeds = bank.ends_list, bank.feed_list
         for j in range(self.trains):
-            # per sample from the anchor: the same positions for any frame length
-            x_k, v_k, t_k = anchors[j]
-            head_first, head_last = x_k + v_k * (first_s - t_k), x_k + v_k * (last_s - t_k)
+            head = heads[j]
+            head_first, head_last = float(head[0]), float(head[-1])
             out.coil_section[j] = bank.section_at(head_last + s.coil_offset_m) + 1
             if head_last + s.coil_offset_m + s.coil_length_m < 0.0 or head_first > self.line_length_m:
                 out.off_line[j] = True                   # no coil over the line: nothing to sense
@@ -74,14 +73,13 @@ class CoilPickup:
                     self._sensing[j] = False
                 continue
             out.off_line[j] = head_last < 0 or head_last > self.line_length_m
-            head = x_k + v_k * (times - t_k)
             k = bank.section_at(head_first)
             first_coil = head_first + s.coil_offset_m + self._coil_spread[0]
             last_coil = head_last + s.coil_offset_m + self._coil_spread[-1]
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
-                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j)
+                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times)
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
             else:
@@ -121,7 +119,7 @@ class CoilPickup:
         i_axle = np.zeros(n)
         for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
             own = axle_section == k
-            shunt_current = currents.ahead(k, j) * bank.scale(k, head, j)
+            shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times)
             i_axle = np.where(own, shunt_current, i_axle)
             view = share(-np.inf, bank.circuits[k].feed_m) * shunt_current
             if k + 1 < bank.count:

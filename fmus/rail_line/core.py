@@ -9,10 +9,12 @@ The core composes three parts, each with one job:
 * traction_interference.py — the asymmetric traction return current under the coils (DC
   ripple, AC harmonics, the joints' bond-lead zones).
 
-What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k)
-(docs/rail_line.md, connecting a train), sampled for the shunts every 10 ms of simulated time
-and for the coils at every sample, whatever the frame length, so frames of any length give the
-same result.
+What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
+and the gap between where the train was (and how fast it went) and where the update puts it
+closes along a cubic over ``POSITION_BLEND_S`` (docs/rail_line.md, connecting a train): the coils'
+position and speed never jump, not even when an extrapolated position is corrected at a slow step. It is sampled for the shunts every 10 ms of
+simulated time and for the coils at every sample, whatever the frame length, so frames of any
+length give the same result.
 """
 from __future__ import annotations
 
@@ -31,6 +33,9 @@ from fmus.rail_line.traction_interference import TractionInterference
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 CONFIG_TICK_S = 0.01
+POSITION_BLEND_S = 0.25     # a position update's correction is spread over this time
+POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train placed), not blended
+SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
 
 
 @dataclass
@@ -43,6 +48,7 @@ class RailSettings:
     coil_length_m: float = 0.3            # sensitivity length of the coil core [U]
     train_length_m: Tuple[float, ...] = (400.0, 400.0)
     asymmetry_range: Tuple[float, float] = (0.01, 0.05)
+    coil_mismatch: float = 0.0            # the two coils' sensitivity difference / their mean (0: matched)
     seed: int = 1
     dc_ripple: Tuple[float, float] = (0.02, 0.01)       # 300 Hz, 600 Hz shares of the DC traction current [U]
     ac_harmonics: Tuple[float, float] = (0.10, 0.05)    # 150 Hz, 250 Hz shares on AC lines [U]
@@ -92,6 +98,8 @@ class RailLineCore:
             raise FmuInputError("parameter relay_drop_out: must be positive and below relay_pick_up (≤ 1)")
         if len(s.train_length_m) != trains or min(s.train_length_m) <= 0:
             raise FmuInputError(f"parameter train_length: {trains} positive lengths expected")
+        if not 0 <= s.coil_mismatch < 1:
+            raise FmuInputError(f"parameter coil_mismatch: {s.coil_mismatch:g} (need 0 ≤ mismatch < 1)")
         lo, hi = s.asymmetry_range
         if not 0 <= lo <= hi < 1:
             raise FmuInputError("parameter asymmetry_min/asymmetry_max: need 0 ≤ min ≤ max < 1")
@@ -102,7 +110,9 @@ class RailLineCore:
         self.interference = TractionInterference(line, s, trains, frame, self.bank)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index = np.arange(frame)
-        self._anchors: List[Optional[Tuple[float, float, float]]] = [None] * trains   # (x_k, v_k, t_k)
+        # (x_k, v_k, t_k, gap_k, speed_gap_k): head_at
+        self._anchors: List[Optional[Tuple[float, float, float, float, float]]] = [None] * trains
+        self._heads = np.zeros((trains, frame))
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
@@ -124,14 +134,16 @@ class RailLineCore:
         times = (first + self._index[:n]) * self.dt
         tick = math.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
         at_tick = []
+        heads = self._heads
         for j in range(self.trains):
-            x_k, v_k, t_k = self._update_anchor(j, t, float(x_head[j]), float(v[j]))
-            at_tick.append(x_k + v_k * (tick - t_k))
+            self._update_anchor(j, t, float(x_head[j]), float(v[j]))
+            at_tick.append(float(self.head_at(j, np.array([tick]))[0]))
+            heads[j, :n] = self.head_at(j, times)
         self.interference.new_frame(i_traction, n)
-        self.bank.follow_shunts(at_tick)         # every wheelset of every train shunts its section
+        self.bank.follow_shunts(at_tick, tick)        # every wheelset of every train shunts its section
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
-        self.pickup.sense(first, times, self._anchors, currents, out)
+        self.pickup.sense(first, times, heads[:, :n], currents, out)
         out.occupied[:self.count] = ~self.bank.relay_up
         return out
 
@@ -153,12 +165,38 @@ class RailLineCore:
         self.out.occupied[:self.count] = ~self.bank.relay_up
         return self.out
 
-    def _update_anchor(self, j: int, t: float, x: float, v: float) -> Tuple[float, float, float]:
-        """A new position update starts x(t) = x_k + v_k·(t − t_k)."""
+    def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
+        """A new position update starts x(t) = x_k + v_k·(t − t_k); the gaps between the position
+        and speed the previous update gives at t_k and (x_k, v_k) close along a cubic Hermite
+        over POSITION_BLEND_S, so the head (and the coils) move with a continuous position and
+        speed when an extrapolated input is corrected (a slow step of the traction unit). A gap
+        above POSITION_JUMP_M or SPEED_JUMP_MPS is taken as it is (a train placed or set going)."""
         anchor = self._anchors[j]
-        if anchor is None or x != anchor[0] or v != anchor[1]:
-            anchor = self._anchors[j] = (x, v, t)
-        return anchor
+        if anchor is not None and x == anchor[0] and v == anchor[1]:
+            return
+        gap = speed_gap = 0.0
+        if anchor is not None:
+            at = np.array([t])
+            gap = float(self.head_at(j, at)[0]) - x
+            speed_gap = float(self._speed_at(j, at)[0]) - v
+            if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS \
+                    or (abs(gap) < 1e-6 and abs(speed_gap) < 1e-6):      # a jump, or nothing to close
+                gap = speed_gap = 0.0
+        self._anchors[j] = (x, v, t, gap, speed_gap)
+
+    def head_at(self, j: int, times: np.ndarray) -> np.ndarray:
+        """Train j's first-wheelset position at ``times`` (after its latest update)."""
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        head = x_k + v_k * (times - t_k)
+        if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
+            s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+            head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
+        return head
+
+    def _speed_at(self, j: int, times: np.ndarray) -> np.ndarray:
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+        return v_k + gap * (6 * s ** 2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s ** 2 - 4 * s + 1)
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:

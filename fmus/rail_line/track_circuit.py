@@ -35,8 +35,10 @@ OPEN_OHM = 1e9
 
 @dataclass(frozen=True)
 class CircuitParameters:
-    rail_r_ohm_per_km: float = 0.52        # rail loop, worked example (docs/sources.md#track-circuits-and-rail-impedance) [S]
-    rail_l_h_per_km: float = 1.18e-3       # L_int 0.177 + L_ext ≈ 1.0 mH/km [S]/[D]
+    rail_r_ohm_per_km: float = 0.52        # rail loop at rail_reference_hz: the worked example
+    rail_l_h_per_km: float = 1.18e-3       # (docs/sources.md#track-circuits-and-rail-impedance) [S]
+    rail_reference_hz: float = 165.0       # the worked example's frequency, from its X and L [D]
+    rail_internal_l_h_per_km: float = 0.177e-3   # the rails' internal inductance there [S]
     ballast_ohm_km: float = 0.0            # minimum (wet) ballast; 0: each section's from the line file (the
                                            # shipped lines: 1 Ω·km, the normative minimum [S])
     feed_r_ohm: float = 0.5                # track transformer + limiting resistor, at the rails [U]
@@ -52,6 +54,21 @@ class Faults:
     ballast_ohm_km: float = 0.0            # 0: the circuit's own (minimum) ballast
     broken_rail_m: float = -1.0            # absolute position, < 0: none
     feed_open: bool = False                # bond disconnected or feed failed: no code source
+
+
+def rail_impedance(params: CircuitParameters, frequency_hz: Optional[float]) -> tuple:
+    """(R Ω/km, L H/km) of the rail loop at ``frequency_hz`` (None: the reference values).
+    Skin effect in the steel rails (docs/rail_line.md, rail impedance per frequency): the
+    internal impedance grows as √f with equal resistance and reactance, so
+    R(f) = R₀ − X_int0 + X_int0·√(f/f₀) and L(f) = L₀ − L_int0 + L_int0·√(f₀/f), X_int0 = 2πf₀·L_int0;
+    the rest of R₀ (bonds, joints) and of L₀ (the loop's external inductance) do not depend on f."""
+    if frequency_hz is None or frequency_hz <= 0:
+        return params.rail_r_ohm_per_km, params.rail_l_h_per_km
+    ratio = np.sqrt(frequency_hz / params.rail_reference_hz)
+    x_internal = 2 * np.pi * params.rail_reference_hz * params.rail_internal_l_h_per_km
+    r = params.rail_r_ohm_per_km + x_internal * (ratio - 1.0)
+    l = params.rail_l_h_per_km + params.rail_internal_l_h_per_km * (1.0 / ratio - 1.0)
+    return float(r), float(l)
 
 
 def two_port(z_per_km: complex, y_per_km: complex, length_km: float) -> np.ndarray:
@@ -74,18 +91,21 @@ class TrackCircuit:
     def ballast(self, faults: Faults) -> float:
         return faults.ballast_ohm_km if faults.ballast_ohm_km > 0 else self.params.ballast_ohm_km
 
-    def network(self, shunt_node: Optional[int], faults: Faults = Faults(), transformer_ratio: float = 1.0) -> Network:
-        """Input 0 is the code voltage u_tx (× the transformer ratio at the rails)."""
+    def network(self, shunt_node: Optional[int], faults: Faults = Faults(), transformer_ratio: float = 1.0,
+                frequency_hz: Optional[float] = None) -> Network:
+        """Input 0 is the code voltage u_tx (× the transformer ratio at the rails); the rails'
+        R and L at ``frequency_hz`` (rail_impedance)."""
         p = self.params
+        rail_r, rail_l = rail_impedance(p, frequency_hz)
         net = Network(inputs=1)
         length_km = (self.feed_m - self.start_m) / 1000.0 / self.segments
         g_half = 0.5 * length_km / self.ballast(faults)
         for k in range(self.segments):
             a, b = f"n{k}", f"n{k + 1}"
-            r = p.rail_r_ohm_per_km * length_km
+            r = rail_r * length_km
             if 0 <= faults.broken_rail_m and self.nodes_m[k] <= faults.broken_rail_m < self.nodes_m[k + 1]:
                 r = OPEN_OHM
-            net.add(RLBranch(a, b, r, p.rail_l_h_per_km * length_km),
+            net.add(RLBranch(a, b, r, rail_l * length_km),
                     Conductance(a, "0", g_half), Conductance(b, "0", g_half))
         feed, relay = f"n{self.segments}", "n0"
         net.add(RLBranch(relay, "0", p.bond_r_ohm, p.bond_l_h), Conductance(relay, "0", 1.0 / p.relay_r_ohm))

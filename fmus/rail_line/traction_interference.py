@@ -1,15 +1,25 @@
-"""Traction interference at the receiver coils: the asymmetric part of the traction return
-current, a(x)·i_traction(t) (no FMI here).
+"""Traction interference at the receiver coils: the loop-equivalent current the traction
+return current makes under the coils, c(x)·i_traction(t), whose time derivative the coils turn
+into EMF (no FMI here; docs/rail_line.md, traction interference at the joints).
 
-* a(x): a per-section asymmetry (seeded, 1–5 %), falling linearly to zero between the bond
-  leads and the joint where the centre-tap jumper balances the rails, so each joint gives two
-  pulses of opposite polarity, each (lead offset + coil length)/v wide (1.3 m, 0.059 s at
-  80 km/h; docs/rail_line.md), amplitude ∝ v.
+* c(x) = a(x) + (joint_coupling + mismatch_coupling·m)·b(x):
+  - a(x): the rails' asymmetry, one value per section (seeded, 1–5 %), passing from one
+    section's to the next across the joint's bond-lead zone;
+  - b(x): the coils' coupling to the traction current in the impedance bonds' leads and the
+    jumper between their centre taps, a trapezoid around each joint (1.31 m ramps, 0.58 m top,
+    fitted to the joints paper's 0.059 s half-amplitude width and 5 Hz spectral maximum at
+    80 km/h); its peak coupling gives the paper's 0.925 V at 80 km/h and the reference current,
+    and a coil-pair mismatch m adds the common-mode part (5 % → the paper's 5 V).
+  Under DC traction the coils' motion over b(x) gives two pulses of opposite polarity per
+  joint (∝ v, each 1.31 m / v wide); under AC traction a 50 Hz burst whose amplitude does not
+  depend on speed and whose duration is the zone's length over v.
 * i_traction(t): the train's traction current through a first-order lag (the traction
   circuit's inductance), times the rectifier ripple of a DC line (300/600 Hz) or the 50 Hz
   wave with odd harmonics of an AC line. A line without electrification has none.
 """
 from __future__ import annotations
+
+import bisect
 
 import numpy as np
 
@@ -17,6 +27,27 @@ from fmus.data.loader import Line
 from fmus.dsp.periodic import period_samples
 
 _RIPPLE_MAX_SAMPLES = 1 << 14    # traction ripple kept as a table when it repeats within this
+
+# the joints paper's DC pulse pair at 22.2 m/s (80 km/h) (docs/sources.md#interference-at-insulated-joints)
+PAPER_SPEED_MPS = 80.0 / 3.6
+PAPER_HALF_WIDTH_S = 0.059           # each pulse, at half amplitude
+PAPER_SPECTRUM_PEAK_HZ = 5.0         # the envelope of the pair's spectrum
+PAPER_EMF_V = 0.925                  # the largest EMF, coils matched
+PAPER_MISMATCH = 0.05                # coil-pair asymmetry of the paper's second figure ...
+PAPER_MISMATCH_EMF_V = 5.0           # ... and its EMF
+REFERENCE_TRACTION_A = 1000.0        # the traction current of the paper's figures [U] (not given)
+JOINT_RAMP_M = PAPER_HALF_WIDTH_S * PAPER_SPEED_MPS    # 1.31 m: a pulse's half width × v
+JOINT_TOP_M = 0.575                  # fitted: puts the pair's spectral maximum at 5 Hz [D]
+
+
+def joint_couplings(coil_gain_h: float) -> tuple:
+    """(joint_coupling, mismatch_coupling): the peak of b(x) in loop-equivalent amperes per
+    ampere of traction current with matched coils, and its growth per unit coil mismatch, from
+    the paper's 0.925 V and 5 V at 22.2 m/s and the reference current. The DC EMF's peak is
+    coil_gain · I · v · coupling / ramp (the slope of b times the speed)."""
+    per_coupling = coil_gain_h * REFERENCE_TRACTION_A * PAPER_SPEED_MPS / JOINT_RAMP_M
+    joint = PAPER_EMF_V / per_coupling
+    return joint, (PAPER_MISMATCH_EMF_V - PAPER_EMF_V) / per_coupling / PAPER_MISMATCH
 
 
 class TractionInterference:
@@ -29,6 +60,13 @@ class TractionInterference:
         lo, hi = s.asymmetry_range
         rng = np.random.default_rng(s.seed)
         self.asymmetry = rng.uniform(lo, hi, count) * rng.choice([-1.0, 1.0], count)
+        joint, per_mismatch = joint_couplings(s.coil_gain_h)
+        self.joint_peak = joint + per_mismatch * s.coil_mismatch     # peak of the coupling b(x)
+        self.joints = np.array([joint for _, joint, _ in bank.joint_zones])
+        self.lead_zones = sorted((lo_m, hi_m) for lo_m, _, hi_m in bank.joint_zones)
+        self._lead_starts = [lo_m for lo_m, _ in self.lead_zones]
+        self._lead_ends = [hi_m for _, hi_m in self.lead_zones]
+        self.reach_m = JOINT_RAMP_M + 0.5 * JOINT_TOP_M     # b(x) is zero farther than this from a joint
         dt = 1.0 / s.fs_hz
         lag = np.exp(-dt / s.traction_time_constant_s)
         self._lag_powers = lag ** np.arange(1, frame + 1)
@@ -87,13 +125,35 @@ class TractionInterference:
         w = 2 * np.pi * 50 * times
         return np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w))
 
+    def coupling(self, coil: np.ndarray) -> np.ndarray:
+        """c(x) at the positions ``coil`` (any shape): the rails' asymmetry, passing linearly from
+        one section's to the next between the bond leads, plus the bond leads' and jumper's
+        trapezoid around each joint."""
+        bank = self.bank
+        section = bank.section_of(coil)
+        c = np.where(section >= 0, self.asymmetry[np.clip(section, 0, bank.count - 1)], 0.0)
+        first, last = float(coil.min()), float(coil.max())
+        for lo, hi in self.lead_zones[bisect.bisect_left(self._lead_ends, first):
+                                      bisect.bisect_right(self._lead_starts, last)]:
+            inside = (coil >= lo) & (coil < hi)
+            if inside.any():
+                before = bank.section_at(lo - 1e-9)
+                beyond = bank.section_at(hi)
+                a0 = self.asymmetry[before] if before >= 0 else 0.0
+                a1 = self.asymmetry[beyond] if beyond >= 0 else 0.0
+                c = np.where(inside, a0 + (a1 - a0) * (coil - lo) / (hi - lo), c)
+        if self.joint_peak:
+            # the nearest joint's trapezoid (joints are metres apart at the least)
+            i = np.clip(np.searchsorted(self.joints, coil), 1, self.joints.size - 1) if self.joints.size > 1 \
+                else np.zeros(coil.shape, dtype=np.intp)
+            if self.joints.size > 1:
+                i = np.where(np.abs(coil - self.joints[i - 1]) < np.abs(coil - self.joints[i]), i - 1, i)
+            if self.joints.size:
+                distance = np.abs(coil - self.joints[i])
+                c = c + self.joint_peak * np.clip((self.reach_m - distance) / JOINT_RAMP_M, 0.0, 1.0)
+        return c
+
     def under_coil(self, j: int, first: int, times: np.ndarray, coil: np.ndarray) -> np.ndarray:
-        """Asymmetric part of train j's traction return current averaged over its coil, a(x)·i_tr(t);
+        """Train j's loop-equivalent traction current averaged over its coil, c(x)·i_tr(t);
         ``coil`` holds the positions of the coil's sensitivity points (points × samples)."""
-        section = self.bank.section_of(coil)
-        a = np.where(section >= 0, self.asymmetry[np.clip(section, 0, self.bank.count - 1)], 0.0)
-        for lo, joint, hi in self.bank.joint_zones:
-            # between the bond leads the centre-tap jumper evens the rails out: the asymmetric
-            # part falls linearly to zero at the joint and rises again beyond it
-            a = np.where((coil >= lo) & (coil < hi), a * np.abs(coil - joint) / (joint - lo), a)
-        return a.mean(axis=0) * self.wave(j, first, times)
+        return self.coupling(coil).mean(axis=0) * self.wave(j, first, times)
