@@ -1,4 +1,4 @@
-"""ALSN cores (issue 5: each core processes a 10 ms frame at 4 kHz in ≤ 50 µs median for one
+"""ALSN cores (target: each core processes a 10 ms frame at 4 kHz in ≤ 50 µs median for one
 section / receiver, vectorised over the frame).
 
 * coder: WaysideCoderCore stepping one 40-sample frame, for a one-section line and for the

@@ -1,4 +1,4 @@
-"""ATO controller (issue 4: one ATO step ≤ 200 µs; the offline trajectory for the default
+"""ATO controller (target: one ATO step ≤ 200 µs; the offline trajectory for the default
 line ≤ 2 s).
 
 * planning: constructing the AtoCore for the default line and timetable (both stages:

@@ -1,4 +1,4 @@
-"""Digital cores (issue 7: each digital core processes a 10 ms frame at 4 kHz in ≤ 100 µs
+"""Digital cores (target: each digital core processes a 10 ms frame at 4 kHz in ≤ 100 µs
 median).
 
 * coder: DigitalCoderCore stepping one 40-sample frame, for a one-section line and for the

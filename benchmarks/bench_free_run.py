@@ -1,4 +1,4 @@
-"""The default system in full (issue 8: ≥ 50× real time in one process): free_run = wayside
+"""The default system in full (target: ≥ 50× real time in one process): free_run = wayside
 coder → rail line → locomotive receiver (4 kHz, 10 ms frames) → ATP/ATO → train (0.5 s), 1100 s
 of the default timetable, in process (the facades driven directly, the performance reference of docs/architecture.md#master-algorithm-orchestratormasterpy) and
 through FMI (fmpy + pythonfmu, the same process).

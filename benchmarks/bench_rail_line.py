@@ -1,8 +1,8 @@
-"""Rail line core (issue 6: K = 8 sections, M = 2 trains, one 10 ms frame at 4 kHz in ≤ 300 µs
+"""Rail line core (target: K = 8 sections, M = 2 trains, one 10 ms frame at 4 kHz in ≤ 300 µs
 median).
 
 Two trains on the default line, both moving (160 and 80 km/h, 600 A and 300 A traction), each
-shunting at every network node it covers (issue 22), a keyed 50 Hz code in every section; the first train crosses joints during the run. Reports the
+shunting at every network node it covers, a keyed 50 Hz code in every section; the first train crosses joints during the run. Reports the
 median per-frame time over repeats (each: 2000 frames = 20 s after a 2 s warm-up that fills the
 model caches), and the per-frame time of the first, cold pass (model generation included).
 

@@ -1,4 +1,4 @@
-"""One communication step of the traction core (issue 3: ≤ 100 µs at 1 s steps).
+"""One communication step of the traction core (target: ≤ 100 µs at 1 s steps).
 
 Runs the passenger train (ЧС7 + 14 coaches) over the default line under a fixed command
 schedule (full traction, coast, service brake to a stop, restart) with 1 s steps, in process,

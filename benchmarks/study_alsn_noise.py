@@ -1,4 +1,4 @@
-"""ALSN code error rate against signal-to-noise ratio (issue 5: "the code error rate vs SNR is
+"""ALSN code error rate against signal-to-noise ratio (target: "the code error rate vs SNR is
 reported"). Not a speed benchmark: a study whose table is in docs/loco_receiver.md.
 
 For each SNR (white noise over the whole 0–2 kHz band, carrier power A²/2 against σ²; the

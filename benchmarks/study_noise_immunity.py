@@ -1,4 +1,4 @@
-"""Noise immunity of ALSN, ALS-EN and FIRE_DQPSK side by side (issue 7). A study, not a speed
+"""Noise immunity of ALSN, ALS-EN and FIRE_DQPSK side by side. A study, not a speed
 benchmark: its tables and plots are in docs/noise_immunity.md.
 
 1. **Bit error rate vs Eb/N0** of the two modems (ideal symbol timing, integrate-and-dump,
@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.signal import lfilter
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
 
 from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
@@ -197,7 +199,6 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
 def alsn_chain(cycles: int, noise, seed: int) -> dict:
     """ALSN through coder → receiver in 10 ms frames (the coder keys per frame); a message is a
     code cycle."""
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
     from benchmarks.harness.channel import CodeChannel
     rng = np.random.default_rng(seed)
     codes = [sig.RED_YELLOW, sig.YELLOW, sig.GREEN]

@@ -1,6 +1,6 @@
 """Timed events on any input or output of any component, applied by the master (a
 manipulator, in libcosim's sense), read from a scenario file in the manner of the OSP
-scenario format (issue 8; docs/scenarios.md):
+scenario format (docs/scenarios.md):
 
     { "description": "main transmitter fails, then the reserve",
       "events": [

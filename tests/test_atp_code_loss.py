@@ -4,7 +4,6 @@ speed (service brake, no emergency brake), and a steady green at line speed on s
 not capped by what the ATP assumes after each signal."""
 import json
 
-import numpy as np
 import pytest
 
 from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp,

@@ -1,4 +1,4 @@
-"""Bad systems, parameter sets and scenarios (issue 15): each through the CLI as a user meets
+"""Bad systems, parameter sets and scenarios: each through the CLI as a user meets
 it — exit code 2, one line on stderr naming the file the user gave and the field, no traceback
 (docs/scenarios.md, "Systems, parameter sets and scenarios: bad input")."""
 import json

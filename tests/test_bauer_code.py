@@ -1,4 +1,4 @@
-"""ALS-EN's subchannel word code: extended Hamming (8,4) ("Bauer code"), d = 4 (issue 7 groundwork)."""
+"""ALS-EN's subchannel word code: extended Hamming (8,4) ("Bauer code"), d = 4."""
 import itertools
 
 import numpy as np

@@ -1,5 +1,5 @@
-"""Block rules (fmus/signalling/block_rules.py) and the coders that apply them (issue 22,
-finding 2): a track circuit behind an occupied circuit of the same block carries no code."""
+"""Block rules (fmus/signalling/block_rules.py) and the coders that apply them: a
+track circuit behind an occupied circuit of the same block carries no code."""
 import itertools
 
 import numpy as np

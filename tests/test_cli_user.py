@@ -2,8 +2,6 @@
 connected input, stop times between base steps, report --at without a capture, the bare
 command, build repacking only what changed, and capture files (exact times, whole 2-D ports)."""
 import csv
-import os
-import re
 import shutil
 import zipfile
 

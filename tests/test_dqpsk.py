@@ -1,5 +1,5 @@
 """π/4-DQPSK modem of the thesis' system (175 Hz, 15 Bd): round trip and bit error rate in
-white noise against differential-detection theory (issue 7 groundwork)."""
+white noise against differential-detection theory."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""The thesis' Fire (12,6) code: its real properties, checked by enumeration (issue 7 groundwork)."""
+"""The thesis' Fire (12,6) code: its real properties, checked by enumeration."""
 import itertools
 
 import numpy as np

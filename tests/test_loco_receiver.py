@@ -8,7 +8,8 @@ import pytest
 
 from benchmarks.harness import latency as lat
 from fmus.errors import FmuInputError
-from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S, LocoReceiverCore, ReceiverSettings
+from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
+from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings, default_hold_s
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.signalling import aspects as sig

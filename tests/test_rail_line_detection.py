@@ -78,7 +78,7 @@ def test_every_train_shunts_its_whole_length():
 
 # ---- finding 3: detection margins, calibration ---------------------------------------------
 def test_old_example_reads_occupied_at_200_ohm_km():
-    """The issue's example: ballast_override 200 Ω·km, a 400 m train standing with its head 10 m
+    """The example: ballast_override 200 Ω·km, a 400 m train standing with its head 10 m
     before the feed end read free; with every wheelset shunting it reads occupied."""
     core = _core()
     override = np.zeros(8)

@@ -1,4 +1,4 @@
-"""2-out-of-2 wayside comparison and 2-out-of-3 receiver voting (issue 7 groundwork)."""
+"""2-out-of-2 wayside comparison and 2-out-of-3 receiver voting."""
 import pytest
 
 from fmus.signalling.fire_dqpsk import COMMANDS

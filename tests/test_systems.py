@@ -10,7 +10,7 @@ import pytest
 
 from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S
-from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S
+from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from helpers import read_csv
 from orchestrator.analysis.systems import stock_length_m
 from orchestrator.cli import SSP_ROOT

@@ -8,7 +8,7 @@ tests (tests/test_loco_receiver_display.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Dict, List
 
 import numpy as np
 

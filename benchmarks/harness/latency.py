@@ -10,7 +10,6 @@ from typing import Dict, Iterable, List, Tuple
 import numpy as np
 
 from benchmarks.harness.channel import CodeChannel
-from fmus.loco_receiver.core import ReceiverSettings
 from fmus.signalling import aspects as sig
 from fmus.wayside_coder.core import CoderSettings
 

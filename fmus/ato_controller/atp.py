@@ -50,14 +50,14 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
-from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S
+from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 
 CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # aspects a train may start on (docs/ato.md, departure hold): red-yellow too, since it permits
 # moving up to the exit signal, which the ATP supervises as a stop target; white (no code) and
-# red never (issue 22's "white or red at departure: hold")
+# red never
 DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
 # driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking

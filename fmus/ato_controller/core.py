@@ -92,7 +92,7 @@ class AtoSettings:
     brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)
     # stop by predicting the stopping point (stopping.py) when the brake lead is longer than this:
     # a freight pneumatic brake (20.5 s); an EP brake (1.75–2.5 s) stops within 0.2 m without it,
-    # and the prediction costs about 1 ms per ATO step on the final approach (issue 4: 200 µs)
+    # and the prediction costs about 1 ms per ATO step on the final approach (the ATO step target is 200 µs, docs/performance.md)
     predictive_stop_lead_s: float = 5.0
     # vigilance device (docs/ato.md, "Vigilance device"): ДКСВ-1-Д checks every 30–40 s
     # (docs/sources.md#vigilance-device), we take 30 s; the answer window 7 s [U]; 0: no device

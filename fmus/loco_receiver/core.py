@@ -72,10 +72,6 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
-# inertia of the locomotive ALSN equipment (docs/sources.md#receiver-inertia-and-latencies: 5.5 s,
-# the joints paper; the thesis' "about 6 s" for an aspect change): the display holds the code
-# shown through a loss of code shorter than this, counted from the last cycle supporting it
-EQUIPMENT_INERTIA_S = 5.5
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
 
@@ -92,7 +88,7 @@ class ReceiverSettings:
     agc_recovery_db_per_s: float = 10.0
     pick_up_v: float = 0.12                # relay picks up above this envelope (input-referred)
     drop_out_v: float = 0.08
-    inertia_s: float = 0.0                 # 0: EQUIPMENT_INERTIA_S; the longest code loss the display bridges
+    inertia_s: float = 0.0                 # 0: alsn.EQUIPMENT_INERTIA_S; the longest code loss the display bridges
 
 
 @dataclass
@@ -151,7 +147,7 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
-        self.inertia_s = s.inertia_s if s.inertia_s > 0 else EQUIPMENT_INERTIA_S
+        self.inertia_s = s.inertia_s if s.inertia_s > 0 else alsn.EQUIPMENT_INERTIA_S
         self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
         # decoder state
         self._last_edge_s: Optional[float] = None

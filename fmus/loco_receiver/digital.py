@@ -50,7 +50,8 @@ from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOU
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
-from fmus.loco_receiver.core import CHANNELS, EQUIPMENT_INERTIA_S, ReceiverOutputs
+from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs
+from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Union
 
-from fmus.loco_receiver.core import EQUIPMENT_INERTIA_S, ReceiverSettings
+from fmus.loco_receiver.core import ReceiverSettings
+from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.loco_receiver.digital import DigitalReceiverSettings, default_hold_s
 from fmus.signalling.digital import DigitalSystem
 

@@ -33,6 +33,10 @@ CODE_TIMEOUT_S = 2.0
 # the stated decoding latency (docs/scenarios.md#results-summaryjson): two code cycles of the slower transmitter (KPT-7,
 # 1.86 s) + 0.5 s; the ATP's allowance and the wrong-side judgement use it
 STATED_LATENCY_S = 2 * 1.86 + 0.5
+# inertia of the locomotive ALSN equipment (docs/sources.md#receiver-inertia-and-latencies: 5.5 s,
+# the joints paper; the thesis' "about 6 s" for an aspect change): the display holds the code
+# shown through a loss of code shorter than this, counted from the last cycle supporting it
+EQUIPMENT_INERTIA_S = 5.5
 # plausibility of the parts of a cycle (our addition, docs/loco_receiver.md): the shortest code
 # pulse is 0.22 s and the longest 0.44 s, the short intervals 0.12 s, all ±5 % drift, plus the
 # smearing of the receiver filters

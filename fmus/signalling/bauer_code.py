@@ -1,4 +1,4 @@
-"""The 8-bit, 16-word, distance-4 code of ALS-EN's subchannels (issue 7; docs/sources.md#als-en).
+"""The 8-bit, 16-word, distance-4 code of ALS-EN's subchannels (docs/sources.md#als-en).
 
 The product literature calls it a "modified Bauer code"; no public source gives its
 construction. We use the code with exactly those parameters that Russian coding texts call

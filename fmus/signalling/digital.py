@@ -1,4 +1,4 @@
-"""What the digital cab-signal systems share (issue 7; docs/digital_channels.md): the message
+"""What the digital cab-signal systems share (docs/digital_channels.md): the message
 model, the interface a system implements (ALS-EN in als_en.py, the thesis' FIRE_DQPSK in
 fire_dqpsk.py), and the receiver's acceptance rules. No FMI and no signal processing here.
 

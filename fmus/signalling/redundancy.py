@@ -1,4 +1,4 @@
-"""Redundancy of the digital cab-signal systems (issue 7; docs/sources.md#digital-generator-receiver-and-redundancy): the wayside's
+"""Redundancy of the digital cab-signal systems (docs/sources.md#digital-generator-receiver-and-redundancy): the wayside's
 duplicated generator compared 2-out-of-2, the receiver's three channels voted 2-out-of-3.
 Commands are compared by a restrictiveness rank supplied by the system (lower = more
 restrictive); ``None`` means no output (loss of code), the most restrictive state of all.

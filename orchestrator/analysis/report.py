@@ -21,7 +21,6 @@ and prints the verdict as a short text table.
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
