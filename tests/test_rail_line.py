@@ -298,3 +298,17 @@ def test_ac_traction_adds_50_hz_and_odd_harmonics_at_the_coil():
     expected = core.settings.coil_gain_h * 2 * np.pi * 50 * 0.02 * 300 * np.sqrt(2)
     assert 2 * peak[50] / (emf.size - int(0.5 * FS)) == pytest.approx(expected, rel=0.05)
     assert json.loads((DATA / "default_line_ac.json").read_text())["electrification"]["system"] == "AC25000"
+
+
+def test_a_feed_opening_under_a_moving_train_leaves_the_coil_emf_finite():
+    """An open feed (bond disconnected, transmitter failed) in the section a moving train is in:
+    the network without a feed carries no code to hand over as the shunt moves from node to
+    node, and the coil EMF stays a number (the `faults` system opens a feed at speed)."""
+    core = _steady_carrier_core()
+    _run(core, 1.0, lambda t: 9000.0 + 20.0 * t, 20.0)        # coded, moving, in section 4
+    feed = np.zeros(8, dtype=bool)
+    feed[3] = True
+    core.set_faults(-1.0, np.zeros(8), feed)
+    _, emf, axle = _run(core, 6.0, lambda t: 9020.0 + 20.0 * t, 20.0)   # 120 m: several node changes
+    assert np.isfinite(emf).all() and np.isfinite(axle).all()
+    assert np.abs(axle[-20:]).max() < 0.01

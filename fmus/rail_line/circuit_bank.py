@@ -462,7 +462,8 @@ class TrackCircuitBank:
             # the front train's steady amplitude just before and just after, at the same place
             before = abs(previous[1].ahead_response[0]) * math.exp(-previous[3])
             after = abs(model.ahead_response[0]) * math.exp(-self._active[k][3])
-            self._handover[k] = (before / after, self._tick_s)
+            if before > 0.0 and after > 0.0:     # an opened feed carries no code to hand over
+                self._handover[k] = (before / after, self._tick_s)
         size = model.phi_n.shape[0]
         self._phi_stack[k] = 0.0                             # sections padded to one size:
         self._psi_stack[k] = 0.0                             # one product advances them all
