@@ -132,3 +132,15 @@ def test_no_bridging_of_its_own_the_no_code_display_acts_at_once():
     r = atp.supervise(0.5, 3005.0, 10.0, sig.WHITE, False, 0.0, 0.0, 0)
     assert r.aspect == sig.WHITE and r.ceiling_mps == pytest.approx(40.0 * MPS_PER_KMH)
     assert r.intervention == NO_INTERVENTION
+
+
+def test_passing_the_last_block_signal_of_the_line_under_green_needs_no_brake():
+    """Beyond the line's last block signal (sidings, a terminus) there is no next section whose
+    code the ATP could assume, so no stop target is put behind the train: a train running on
+    at 40 km/h (the no-code speed) past it is not braked."""
+    atp = _atp()
+    last_signal_m = atp.section_ends[-1]
+    shown = lambda t: (sig.GREEN, True) if t < 10.0 else (sig.WHITE, False)
+    rows = _drive(atp, last_signal_m - 100.0, 36.0 * MPS_PER_KMH, 0.0, 40.0, shown)
+    assert rows[-1][1] > last_signal_m + 200.0
+    assert atp.emergency_brakings == 0 and atp.interventions == 0

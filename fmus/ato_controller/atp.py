@@ -327,7 +327,8 @@ class Atp:
             if active == sig.RED_YELLOW:
                 self.signals_passed_at_danger += 1
                 self._emergency()
-            entered = None if previous is None else previous + 1
+            # past the line's last block signal there is no section whose code to assume
+            entered = None if previous is None or previous + 1 >= len(self.section_ends) else previous + 1
             if active == sig.GREEN:
                 # the worst the new section can carry is yellow (a yellow-green signal is sent
                 # as green too), whose consequence is a red signal at its end: a stop target at
