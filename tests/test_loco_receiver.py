@@ -10,7 +10,7 @@ from benchmarks.harness import latency as lat
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings, default_hold_s
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings, bridging_hold_s
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.signalling import aspects as sig
 from fmus.signalling import cab_systems
@@ -86,12 +86,12 @@ def test_restrictive_news_during_a_hold_is_shown_at_once():
     assert first - loss[1] <= 2 * 0.8 + 0.5                        # КЖ's half-period cycles
 
 
-def _digital_run(name, gap, seconds=14.0, start_gap=8.0):
+def _digital_run(name, gap, seconds=14.0, start_gap=8.0, inertia_s=0.0):
     system = cab_systems.digital_system(name)
     line = load_line(str(DEFAULT_LINE))
     fs, frame = 4000.0, 40
     coder = DigitalCoderCore(system, line, 8, frame, CoderSettings(fs_hz=fs, amplitude_v=1.0, seed=1))
-    receiver = DigitalReceiverCore(system, frame, DigitalReceiverSettings(fs_hz=fs))
+    receiver = DigitalReceiverCore(system, frame, DigitalReceiverSettings(fs_hz=fs, inertia_s=inertia_s))
     occupied = np.zeros(8, dtype=bool)
     rows = []
     for k in range(int(seconds * fs / frame)):
@@ -104,17 +104,26 @@ def _digital_run(name, gap, seconds=14.0, start_gap=8.0):
     return np.array(rows), receiver
 
 
+def test_a_digital_receiver_holds_nothing_by_default():
+    """No display hold unless one is set: a 1.5 s loss on FIRE_DQPSK outlasts its acceptance
+    timeout (1.03 s), and the display shows no code until the command is back."""
+    rows, receiver = _digital_run("FIRE_DQPSK", gap=1.5, seconds=14.0)
+    assert receiver.inertia_s == 0.0
+    after = rows[(rows[:, 0] > 8.0) & (rows[:, 0] < 11.0)]
+    assert (after[:, 1] == sig.WHITE).any() and not after[after[:, 1] == sig.WHITE, 2].any()
+
+
 @pytest.mark.parametrize("name", ["FIRE_DQPSK", "ALS-EN"])
-def test_digital_receivers_hold_through_a_short_loss_and_give_up_after_their_hold(name):
+def test_digital_receivers_hold_through_a_short_loss_and_give_up_after_a_set_hold(name):
     system = cab_systems.digital_system(name)
-    hold = default_hold_s(system.message_s(system.carrier_hz))
+    hold = bridging_hold_s(system.message_s(system.carrier_hz))
     assert hold <= EQUIPMENT_INERTIA_S
     # a 1.5 s loss (a joint's): FIRE_DQPSK's acceptance times out after 1.03 s, and the
     # display holds until two identical messages bring the command back
-    rows, receiver = _digital_run(name, gap=1.5, seconds=22.0)
+    rows, receiver = _digital_run(name, gap=1.5, seconds=22.0, inertia_s=hold)
     shown = rows[rows[:, 0] > 7.0, 1]
     assert receiver.inertia_s == pytest.approx(hold)
     assert (shown == shown[0]).all() and shown[0] != sig.WHITE and rows[rows[:, 0] > 7.0, 2].all()
-    rows, _ = _digital_run(name, gap=30.0, seconds=22.0)
+    rows, _ = _digital_run(name, gap=30.0, seconds=22.0, inertia_s=hold)
     lost = rows[(rows[:, 0] > 8.0) & (rows[:, 1] == sig.WHITE) & (rows[:, 2] == 0)]
     assert lost.size and lost[0, 0] - 8.0 <= hold + 0.1

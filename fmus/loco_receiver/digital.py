@@ -65,12 +65,22 @@ _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
 
 
-def default_hold_s(message_s: float) -> float:
-    """The display hold of a digital receiver by default [U] (docs/loco_receiver.md): the
-    acceptance timeout + 3 s, which bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s
-    after the timeout at 100 km/h), and never longer than the ALSN equipment's inertia (the
-    digital systems are the faster ones)."""
+def bridging_hold_s(message_s: float) -> float:
+    """A display hold that bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s after the
+    acceptance timeout at 100 km/h): the timeout + 3 s, never longer than the ALSN equipment's
+    inertia. Not the default (``default_hold_s``); a user may set it as ``inertia``."""
     return min(TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
+
+
+def default_hold_s(message_s: float) -> float:
+    """The display hold of a digital receiver by default: none [U] (docs/loco_receiver.md).
+    The sources give no inertia for the digital equipment, and a receiver cannot tell a joint's
+    dropout from the code of the next section: holding through FIRE_DQPSK's re-acquisition at
+    a joint (``bridging_hold_s``) shows the previous section's command after the train has
+    entered a more restrictive one for up to 0.3 s beyond the stated latency (6 times in
+    ``fire_dqpsk_following``), a wrong-side indication. Without a hold the display shows no
+    code during the re-acquisition, which is restrictive."""
+    return 0.0
 
 
 @dataclass
@@ -83,7 +93,7 @@ class DigitalReceiverSettings:
     limiter_v: float = 4.0           # 0: no limiter
     min_level_v: float = 0.1         # squelch, V at the coil: the ALSN relay's pick-up level (docs/digital_channels.md)
     filter_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
-    inertia_s: float = 0.0           # 0: the acceptance timeout + JOINT_BRIDGE_MIN_S (display hold, [U])
+    inertia_s: float = 0.0           # display hold, s; 0: none (default_hold_s, [U])
 
 
 class SymbolClock:
@@ -256,7 +266,7 @@ class DigitalReceiverCore:
             # the code is there but the channels do not agree (faults): no hold, no code
             self._held = None
             return None
-        if self._held is not None and now_s - self._held_support_s <= self.inertia_s:
+        if self._held is not None and self.inertia_s > 0 and now_s - self._held_support_s <= self.inertia_s:
             return self._held
         return None
 
