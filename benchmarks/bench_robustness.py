@@ -11,17 +11,12 @@ error at B and C, energy, ATP interventions, and the worst figures (docs/tractio
     python benchmarks/bench_robustness.py [--steps 0.1 0.5 1.0]
 """
 import argparse
-import json
 import tempfile
 from pathlib import Path
 
-from benchmarks.harness.closed_loop import run_closed_loop
+from benchmarks.harness.closed_loop import run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.core import AtoSettings
-from fmus.ato_controller.planner import StagePlanner
-from fmus.ato_controller.train_model import NominalTrain
-from fmus.data.loader import load_line, load_rolling_stock
 
-KMH = 1 / 3.6
 RUN_S = 1100.0
 RATED_V = 3000.0
 #: (mass_scale, resistance_scale, voltage ratio)
@@ -29,18 +24,6 @@ CASES = [(1.0, 1.0, 1.0), (1.0, 1.0, 0.95), (1.0, 1.0, 1.05),
          (1.1, 1.2, 0.95), (1.1, 0.8, 1.05), (0.9, 1.2, 0.95), (0.9, 0.8, 1.05)]
 
 
-def timetable_with_supplement(folder: Path, supplement: float = 0.08) -> Path:
-    """The default stops with scheduled running times = minimum time × (1 + supplement)."""
-    line, stock = load_line(), load_rolling_stock()
-    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
-    t_ab = planner.plan(400, 10300, None).minimum_time_s * (1 + supplement)
-    t_bc = planner.plan(10300, 19600, None).minimum_time_s * (1 + supplement)
-    stops = [{"station": "A", "departure_s": 60.0},
-             {"station": "B", "arrival_s": round(60 + t_ab), "departure_s": round(60 + t_ab) + 60},
-             {"station": "C", "arrival_s": round(60 + t_ab) + 60 + round(t_bc)}]
-    path = folder / "timetable_8pct.json"
-    path.write_text(json.dumps({"train": "robustness", "stops": stops}))
-    return path
 
 
 def run_case(timetable: Path, strategy: str, step_s: float, mass: float, resistance: float, ratio: float) -> dict:

@@ -12,7 +12,7 @@ import pytest
 
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop
+from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.signalling import aspects as sig
@@ -26,17 +26,7 @@ LINE_KM = (19600 - 400) / 1000
 
 
 def _timetable(tmp_path, supplement, name="tt.json"):
-    """Default stops with the scheduled running times = minimum time × (1 + supplement)."""
-    line, stock = load_line(), load_rolling_stock()
-    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
-    t_ab = planner.plan(400, 10300, None).minimum_time_s * (1 + supplement)
-    t_bc = planner.plan(10300, 19600, None).minimum_time_s * (1 + supplement)
-    stops = [{"station": "A", "departure_s": 60.0},
-             {"station": "B", "arrival_s": round(60 + t_ab), "departure_s": round(60 + t_ab) + 60},
-             {"station": "C", "arrival_s": round(60 + t_ab) + 60 + round(t_bc)}]
-    path = tmp_path / name
-    path.write_text(json.dumps({"train": "test", "stops": stops}))
-    return path
+    return timetable_with_supplement(tmp_path, supplement, name)
 
 
 def _assert_on_time_and_on_the_mark(result, arrival_s=15.0, stop_m=0.5):

@@ -5,7 +5,9 @@ The cab signal comes from a function of (t, x) returning (aspect, code_valid).
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -14,7 +16,9 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.traction.core import TractionCore
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from fmus.units import J_PER_KWH
+from fmus.ato_controller.planner import StagePlanner
+from fmus.ato_controller.train_model import NominalTrain
+from fmus.units import J_PER_KWH, MPS_PER_KMH
 
 CabSignal = Callable[[float, float], Tuple[int, bool]]
 
@@ -81,3 +85,17 @@ def red_signal_ahead(line, red_signal_m: float, clear_s: float) -> CabSignal:
             return sig.YELLOW, True
         return sig.GREEN, True
     return cab
+
+
+def timetable_with_supplement(folder: Path, supplement: float = 0.08, name: str = "timetable_8pct.json") -> Path:
+    """The default stops with scheduled running times = minimum time × (1 + supplement)."""
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * MPS_PER_KMH)
+    t_ab = planner.plan(400, 10300, None).minimum_time_s * (1 + supplement)
+    t_bc = planner.plan(10300, 19600, None).minimum_time_s * (1 + supplement)
+    stops = [{"station": "A", "departure_s": 60.0},
+             {"station": "B", "arrival_s": round(60 + t_ab), "departure_s": round(60 + t_ab) + 60},
+             {"station": "C", "arrival_s": round(60 + t_ab) + 60 + round(t_bc)}]
+    path = Path(folder) / name
+    path.write_text(json.dumps({"train": "supplemented", "stops": stops}))
+    return path
