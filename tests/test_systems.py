@@ -65,8 +65,11 @@ def test_following_the_follower_stops_before_the_red_signal_and_reaches_c_once_t
     assert [e["t"] for e in summary["scenario"]["events_applied"]] == [830.0, 1060.0]
     follower = next(t for t in summary["trains"] if t["name"] == "follower")
     approach = [a["aspect"] for a in follower["aspects"] if 8000.0 < a["x"] < 15200.0]
-    sequence = ["green", "yellow", "red-yellow"]
-    assert any(approach[i:i + 3] == sequence for i in range(len(approach))), approach
+    # green, then yellow, then red-yellow, in that order; a digital receiver (no display hold)
+    # shows no code (white, or red after a stop command) between them while it re-acquires
+    # after a joint
+    seen = iter(approach)
+    assert all(aspect in seen for aspect in ("green", "yellow", "red-yellow")), approach
     # it stops before signal 9 (15.2 km) while the leader's tail is still in section 7 ...
     signal_m = 15200.0
     # (standing anywhere from 12.8 km up to C's approach: standing beyond the signal would be caught)
