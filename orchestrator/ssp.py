@@ -11,6 +11,7 @@ naming the element; it is never silently ignored.
 """
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import shutil
@@ -125,14 +126,22 @@ def safe_extract(archive_path: Path, dest: Path) -> None:
             _extract_member(archive, member, dest, archive_path)
 
 
+#: zip compression methods zipfile can read here: stored and deflate always (zlib is imported
+#: above), bzip2 and LZMA where Python was built with their modules
+READABLE_ZIP_METHODS = frozenset(
+    [zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED]
+    + [method for method, module in ((zipfile.ZIP_BZIP2, "bz2"), (zipfile.ZIP_LZMA, "lzma"))
+       if importlib.util.find_spec(module) is not None])
+
+
 def _extract_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, dest: Path, archive_path: Path) -> None:
-    """One member; a member that cannot be read (bad CRC, corrupt deflate stream, cut short)
-    is an error naming ``<archive>!<member>``."""
+    """One member; a member in a compression method that cannot be read here, or that cannot be
+    read (bad CRC, corrupt deflate stream, cut short), is an error naming ``<archive>!<member>``."""
+    if member.compress_type not in READABLE_ZIP_METHODS:
+        raise UserError(f"{archive_path}!{member.filename}: compressed with a method this Python "
+                        f"cannot read (zip method {member.compress_type}); repack it with deflate")
     try:
         archive.extract(member, dest)
-    except NotImplementedError:   # zipfile's answer to a compression method it has no codec for
-        raise UserError(f"{archive_path}!{member.filename}: compressed with a method this Python "
-                        f"cannot read (zip method {member.compress_type}); repack it with deflate") from None
     except (zipfile.BadZipFile, zlib.error, EOFError) as error:
         raise UserError(f"{archive_path}!{member.filename}: cannot be read from the archive "
                         f"({error or type(error).__name__}); the archive is corrupt") from None

@@ -195,6 +195,23 @@ def test_corrupt_member_deflated_stream(tmp_path, test_fmus):
     _expect_error(*_run(archive, tmp_path)[::2], f"{archive}!SystemStructure.ssd", "corrupt")
 
 
+def test_member_in_a_compression_method_python_cannot_read(tmp_path, test_fmus):
+    """A member packed with a method zipfile has no codec for (here 99, AES as WinZip writes it)
+    is named with its method, not reported as a corrupt archive."""
+    archive = _pack(_pair(tmp_path / "sys", test_fmus), tmp_path / "pair.ssp", zipfile.ZIP_STORED)
+    with zipfile.ZipFile(archive) as packed:
+        info = packed.getinfo("SystemStructure.ssd")
+    data = bytearray(archive.read_bytes())
+    data[info.header_offset + 8:info.header_offset + 10] = (99).to_bytes(2, "little")   # local header
+    central = data.index(b"PK\x01\x02")                    # the member's central directory entry
+    while data[central + 46:central + 46 + len(info.filename)] != info.filename.encode():
+        central = data.index(b"PK\x01\x02", central + 4)
+    data[central + 10:central + 12] = (99).to_bytes(2, "little")                       # central directory
+    archive.write_bytes(bytes(data))
+    _expect_error(*_run(archive, tmp_path)[::2], f"{archive}!SystemStructure.ssd", "zip method 99",
+                  "repack it with deflate")
+
+
 def test_truncated_archive(tmp_path, test_fmus):
     archive = _pack(_pair(tmp_path / "sys", test_fmus), tmp_path / "pair.ssp")
     archive.write_bytes(archive.read_bytes()[: archive.stat().st_size // 2])
