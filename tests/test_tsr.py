@@ -10,7 +10,7 @@ import pytest
 from benchmarks.harness.closed_loop import run_closed_loop
 from fmus.ato_controller.atp import NO_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import MODE_COAST, RESTRICTION_BAND_MPS, AtoCore, AtoSettings
-from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, TemporaryRestriction, load_line, load_rolling_stock,
+from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, TemporaryRestriction, load_line, load_rolling_stock,
                               load_timetable)
 from fmus.errors import FmuInputError
 from fmus.traction.core import TractionCore
@@ -79,6 +79,14 @@ def test_the_atp_supervises_a_braking_curve_to_the_start_and_holds_until_the_tai
 
 
 # ---- closed loop: ATO + train ------------------------------------------------------------------
+def _restrict_at(time_s, restriction):
+    """A restriction given to the ATO at ``time_s``, as a scenario event would give it."""
+    def before_step(t, ato):
+        if t == time_s:
+            ato.set_restrictions([restriction])
+    return before_step
+
+
 def _inside(x):
     return (x >= TSR["start_m"]) & (x - TRAIN_LENGTH_M < TSR["end_m"])
 
@@ -127,20 +135,9 @@ def test_the_atp_intervenes_when_the_ato_ignores_the_restriction(tmp_path):
 
 def test_a_restriction_set_while_running_is_kept(tmp_path):
     """Set at 100 s (the train near 2 km), 5–6 km at 40 km/h: the ATO brakes for it, no intervention."""
-    line = load_line()
-    stock = load_rolling_stock(DEFAULT_ROLLING_STOCK)
-    path = _timetable(tmp_path)
-    ato = AtoCore(line, stock, load_timetable(path, line), path, "passenger", AtoSettings(cab_signal="off"))
-    train = TractionCore(stock, line, x0_m=400.0)
-    state, rows = train.out, []
-    for k in range(int(800.0 / 0.5)):
-        t = k * 0.5
-        if t == 100.0:
-            ato.set_restrictions([TemporaryRestriction(5000.0, 6000.0, 40 * KMH)])
-        out = ato.step(t, 0.5, state.x_m, state.v_mps)
-        rows.append((state.x_m, state.v_mps))
-        state = train.step(t, 0.5, out.command, out.emergency_brake)
-    x, v = np.array(rows).T
+    loop = run_closed_loop(800.0, timetable_file=_timetable(tmp_path),
+                           before_step=_restrict_at(100.0, TemporaryRestriction(5000.0, 6000.0, 40 * KMH)))
+    ato, x, v = loop.ato, loop.column("x"), loop.column("v")
     assert v[_inside(x)].max() <= 40 * KMH
     assert ato.atp.interventions == 0 and [a["station"] for a in ato.arrivals] == ["B"]
 
@@ -205,20 +202,8 @@ def test_a_restrict_event_through_the_fmu_is_kept_and_drawn_in_the_report(tmp_pa
 def test_after_a_restriction_the_ato_runs_at_the_permitted_speed_until_on_time():
     """The book's recovery: late when a restriction clears → maximum permitted speed (full
     traction, no coasting) until back on schedule, also once less than 16 s late."""
-    line = load_line()
-    stock = load_rolling_stock(DEFAULT_ROLLING_STOCK)
-    ato = AtoCore(line, stock, load_timetable(DEFAULT_TIMETABLE, line), DEFAULT_TIMETABLE, "passenger",
-                  AtoSettings(cab_signal="off"))
-    train = TractionCore(stock, line, x0_m=400.0)
-    state, rows = train.out, []
-    for k in range(int(560.0 / 0.5)):
-        t = k * 0.5
-        if t == 100.0:
-            ato.set_restrictions([TemporaryRestriction(7000.0, 7400.0, 70 * KMH)])
-        out = ato.step(t, 0.5, state.x_m, state.v_mps)
-        rows.append((state.x_m, out.mode, out.schedule_deviation_s))
-        state = train.step(t, 0.5, out.command, out.emergency_brake)
-    x, mode, deviation = np.array(rows).T
+    loop = run_closed_loop(560.0, before_step=_restrict_at(100.0, TemporaryRestriction(7000.0, 7400.0, 70 * KMH)))
+    x, mode, deviation = loop.column("x"), loop.column("mode"), loop.column("deviation")
     cleared = x > 7400.0 + TRAIN_LENGTH_M
     first = np.argmax(cleared)
     assert 0.0 < deviation[first] < 30.0

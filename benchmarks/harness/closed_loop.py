@@ -30,7 +30,7 @@ class LoopResult:
     # one row per step: t, x, v, command, mode, v_atp (ATP permitted), atp ceiling-equivalent, aspect
     trace: np.ndarray = field(repr=False)
 
-    COLUMNS = ("t", "x", "v", "command", "mode", "v_atp", "aspect", "energy")
+    COLUMNS = ("t", "x", "v", "command", "mode", "v_atp", "aspect", "energy", "deviation")
 
     def column(self, name: str) -> np.ndarray:
         return self.trace[:, self.COLUMNS.index(name)]
@@ -46,7 +46,10 @@ class LoopResult:
 def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[AtoSettings] = None,
                     line_file=DEFAULT_LINE, stock_file=DEFAULT_ROLLING_STOCK, timetable_file=DEFAULT_TIMETABLE,
                     category: Optional[str] = None, mass_scale: float = 1.0, resistance_scale: float = 1.0,
-                    pantograph_voltage_v: float = 0.0, cab_signal: Optional[CabSignal] = None) -> LoopResult:
+                    pantograph_voltage_v: float = 0.0, cab_signal: Optional[CabSignal] = None,
+                    before_step: Optional[Callable[[float, AtoCore], None]] = None) -> LoopResult:
+    """The ATO driving the traction core, one ATO step per ``step_s``; ``before_step(t, ato)``
+    is called before each step (what a scenario event would set, e.g. a restriction)."""
     line = load_line(line_file)
     stock = load_rolling_stock(stock_file)
     timetable = load_timetable(timetable_file, line)
@@ -60,8 +63,11 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
     for k in range(steps):
         t = k * step_s
         aspect, valid = cab_signal(t, state.x_m) if cab_signal else (sig.GREEN, True)
+        if before_step is not None:
+            before_step(t, ato)
         out = ato.step(t, step_s, state.x_m, state.v_mps, aspect, valid)
-        trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j)
+        trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j,
+                    out.schedule_deviation_s)
         state = train.step(t, step_s, out.command, out.emergency_brake)
     return LoopResult(ato, train, trace)
 
