@@ -32,9 +32,6 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, exit 2 (argparse prints usage on two)
         # main() says "railcosim: error:" once; a subcommand's parser names the subcommand
         where = self.prog.partition(" ")[2]
-        if message.startswith("the following arguments are required: command"):
-            commands = next(a for a in self._actions if isinstance(a, argparse._SubParsersAction)).choices
-            message = f"no command given; choose one of {', '.join(commands)} (railcosim COMMAND -h for help)"
         raise UserError(f"{where}: {message}" if where else message)
 
 
@@ -315,7 +312,8 @@ def _add_run_setup_arguments(parser: argparse.ArgumentParser) -> None:
 
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    # not required: a missing command is said by main, naming the commands, in one line
+    sub = parser.add_subparsers(dest="command", parser_class=_Parser)
 
     build = sub.add_parser("build", help="build the FMUs into build/fmus and pack the shipped systems")
     build.add_argument("--sections", type=int, default=8, help="block sections K (default 8)")
@@ -354,12 +352,16 @@ def make_parser() -> argparse.ArgumentParser:
 
     env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
     env.set_defaults(func=cmd_fmu_env)
+    parser.set_defaults(commands=tuple(sub.choices))
     return parser
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     try:
         args = make_parser().parse_args(argv)
+        if args.command is None:
+            raise UserError(f"no command given; choose one of {', '.join(args.commands)} "
+                            "(railcosim COMMAND -h for help)")
         return args.func(args)
     except UserError as error:
         message = " ".join(str(error).split())

@@ -11,7 +11,6 @@ naming the element; it is never silently ignored.
 """
 from __future__ import annotations
 
-import importlib.util
 import math
 import os
 import shutil
@@ -127,11 +126,11 @@ def safe_extract(archive_path: Path, dest: Path) -> None:
 
 
 #: zip compression methods zipfile can read here: stored and deflate always (zlib is imported
-#: above), bzip2 and LZMA where Python was built with their modules
+#: above), bzip2 and LZMA where zipfile could import their modules (it holds None otherwise)
 READABLE_ZIP_METHODS = frozenset(
     [zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED]
-    + [method for method, module in ((zipfile.ZIP_BZIP2, "bz2"), (zipfile.ZIP_LZMA, "lzma"))
-       if importlib.util.find_spec(module) is not None])
+    + [method for method, module in ((zipfile.ZIP_BZIP2, zipfile.bz2), (zipfile.ZIP_LZMA, zipfile.lzma))
+       if module is not None])
 
 
 def _extract_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, dest: Path, archive_path: Path) -> None:
