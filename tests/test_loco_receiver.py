@@ -10,7 +10,8 @@ from benchmarks.harness import latency as lat
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings, bridging_hold_s
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.signalling import aspects as sig
 from fmus.signalling import cab_systems
@@ -84,6 +85,13 @@ def test_restrictive_news_during_a_hold_is_shown_at_once():
     assert shown == [sig.GREEN, sig.RED_YELLOW]
     first = late[late[:, 1] == sig.RED_YELLOW][0, 0]
     assert first - loss[1] <= 2 * 0.8 + 0.5                        # КЖ's half-period cycles
+
+
+def bridging_hold_s(message_s: float) -> float:
+    """A display hold that bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s after the
+    acceptance timeout at 100 km/h): the timeout + 3 s, never longer than the ALSN equipment's
+    inertia; a user may set it as a digital receiver's ``inertia``."""
+    return min(TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
 
 
 def _digital_run(name, gap, seconds=14.0, start_gap=8.0, inertia_s=0.0):

@@ -72,6 +72,23 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
+# display hold of a digital receiver whose `inertia` is 0: none [U] (docs/loco_receiver.md). The
+# sources give no inertia for the digital equipment, and a receiver cannot tell a joint's dropout
+# from the next section's code: a hold bridging FIRE_DQPSK's re-acquisition at joints showed the
+# previous section's command after the train had entered a more restrictive one, up to 0.3 s
+# beyond the stated latency (a wrong-side indication); without a hold the display shows no code
+# while it re-acquires, which is restrictive
+DIGITAL_DEFAULT_HOLD_S = 0.0
+
+
+def resolve_inertia_s(inertia_s: float, digital: bool) -> float:
+    """A receiver's display hold (s): its `inertia` parameter, or for 0 the default of its kind
+    (the ALSN equipment's inertia; DIGITAL_DEFAULT_HOLD_S)."""
+    if inertia_s > 0:
+        return inertia_s
+    return DIGITAL_DEFAULT_HOLD_S if digital else alsn.EQUIPMENT_INERTIA_S
+
+
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
 
@@ -88,7 +105,7 @@ class ReceiverSettings:
     agc_recovery_db_per_s: float = 10.0
     pick_up_v: float = 0.12                # relay picks up above this envelope (input-referred)
     drop_out_v: float = 0.08
-    inertia_s: float = 0.0                 # 0: alsn.EQUIPMENT_INERTIA_S; the longest code loss the display bridges
+    inertia_s: float = 0.0                 # 0: the equipment's (resolve_inertia_s); the longest code loss the display bridges
 
 
 @dataclass
@@ -147,7 +164,7 @@ class LocoReceiverCore:
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
-        self.inertia_s = s.inertia_s if s.inertia_s > 0 else alsn.EQUIPMENT_INERTIA_S
+        self.inertia_s = resolve_inertia_s(s.inertia_s, digital=False)
         self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
         # decoder state
         self._last_edge_s: Optional[float] = None

@@ -46,12 +46,11 @@ import numpy as np
 
 from fmus.signalling import redundancy
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES, Acceptor, DigitalSystem, check_category, check_modem_rate
+from fmus.signalling.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
-from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs
-from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
+from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs, resolve_inertia_s
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 ANTI_ALIAS_HZ, ANTI_ALIAS_ORDER, ANTI_ALIAS_RIPPLE_DB = 500.0, 6, 1.0
@@ -65,24 +64,6 @@ _NO_SYMBOLS = np.zeros(0, dtype=complex)
 CHANNEL_OK, CHANNEL_FAILED, CHANNEL_STUCK_PERMISSIVE, CHANNEL_SILENT = 0, 1, 2, 3
 
 
-def bridging_hold_s(message_s: float) -> float:
-    """A display hold that bridges FIRE_DQPSK's re-acquisition at joints (1.3–2.3 s after the
-    acceptance timeout at 100 km/h): the timeout + 3 s, never longer than the ALSN equipment's
-    inertia. Not the default (``default_hold_s``); a user may set it as ``inertia``."""
-    return min(TIMEOUT_MESSAGES * message_s + TIMEOUT_MARGIN_S + JOINT_BRIDGE_MIN_S, EQUIPMENT_INERTIA_S)
-
-
-def default_hold_s(message_s: float) -> float:
-    """The display hold of a digital receiver by default: none [U] (docs/loco_receiver.md).
-    The sources give no inertia for the digital equipment, and a receiver cannot tell a joint's
-    dropout from the code of the next section: holding through FIRE_DQPSK's re-acquisition at
-    a joint (``bridging_hold_s``) shows the previous section's command after the train has
-    entered a more restrictive one for up to 0.3 s beyond the stated latency (6 times in
-    ``fire_dqpsk_following``), a wrong-side indication. Without a hold the display shows no
-    code during the re-acquisition, which is restrictive."""
-    return 0.0
-
-
 @dataclass
 class DigitalReceiverSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
@@ -93,7 +74,7 @@ class DigitalReceiverSettings:
     limiter_v: float = 4.0           # 0: no limiter
     min_level_v: float = 0.1         # squelch, V at the coil: the ALSN relay's pick-up level (docs/digital_channels.md)
     filter_bandwidth_hz: float = 0.0  # 0: 10/3 × the symbol rate
-    inertia_s: float = 0.0           # display hold, s; 0: none (default_hold_s, [U])
+    inertia_s: float = 0.0           # display hold, s; 0: none (core.DIGITAL_DEFAULT_HOLD_S, [U])
 
 
 class SymbolClock:
@@ -203,7 +184,7 @@ class DigitalReceiverCore:
         self.message_s = system.message_s(self.carrier_hz)
         self.acceptor = Acceptor(system, s.track_parity, self.message_s)
         # the display holds the command shown through a loss of code (docs/loco_receiver.md)
-        self.inertia_s = s.inertia_s if s.inertia_s > 0 else default_hold_s(self.message_s)
+        self.inertia_s = resolve_inertia_s(s.inertia_s, digital=True)
         self._held: Optional[int] = None             # command displayed (in force or held)
         self._held_support_s = -np.inf               # last message confirming it
         self.channels = [ChannelState() for _ in range(CHANNELS)]
@@ -249,7 +230,7 @@ class DigitalReceiverCore:
     def _restrict_held(self, message) -> None:
         """While the display holds a command through a loss, a message of this track more
         restrictive than it is shown at once (the acceptance rules would wait for two)."""
-        if self.acceptor.command is None and self._held is not None and message is not None \
+        if self.inertia_s > 0 and self.acceptor.command is None and self._held is not None and message is not None \
                 and message.track == self.settings.track_parity \
                 and self.system.rank(message.command) < self.system.rank(self._held):
             self._held = message.command

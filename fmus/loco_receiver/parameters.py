@@ -6,9 +6,8 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Union
 
-from fmus.loco_receiver.core import ReceiverSettings
-from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.loco_receiver.digital import DigitalReceiverSettings, default_hold_s
+from fmus.loco_receiver.core import ReceiverSettings, resolve_inertia_s
+from fmus.loco_receiver.digital import DigitalReceiverSettings
 from fmus.signalling.digital import DigitalSystem
 
 # port → settings field
@@ -40,10 +39,4 @@ def display_hold_s(system: Optional[DigitalSystem], parameters: Mapping[str, obj
     """The longest loss of code the receiver's display bridges (its `inertia`, or the system's
     default): how long after the code under the coils disappears it may still show the last
     one (the run verdicts allow it, docs/scenarios.md#results-summaryjson)."""
-    settings = receiver_settings(system, parameters)
-    if settings.inertia_s > 0:
-        return settings.inertia_s
-    if system is None:
-        return EQUIPMENT_INERTIA_S
-    carrier_hz = settings.carrier_hz or system.carrier_hz
-    return default_hold_s(system.message_s(carrier_hz))
+    return resolve_inertia_s(receiver_settings(system, parameters).inertia_s, digital=system is not None)
