@@ -16,14 +16,13 @@ from pathlib import Path
 
 from benchmarks.harness.closed_loop import run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.core import AtoSettings
+from fmus.traction.core import RATED_VOLTAGE_V
 
+RATED_V = RATED_VOLTAGE_V["DC3000"]      # the default passenger train's system
 RUN_S = 1100.0
-RATED_V = 3000.0
 #: (mass_scale, resistance_scale, voltage ratio)
 CASES = [(1.0, 1.0, 1.0), (1.0, 1.0, 0.95), (1.0, 1.0, 1.05),
          (1.1, 1.2, 0.95), (1.1, 0.8, 1.05), (0.9, 1.2, 0.95), (0.9, 0.8, 1.05)]
-
-
 
 
 def run_case(timetable: Path, strategy: str, step_s: float, mass: float, resistance: float, ratio: float) -> dict:

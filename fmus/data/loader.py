@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import List, Optional, Tuple
 
 from fmus.errors import FmuInputError
+from fmus.signalling.aspects import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
 
 HERE = Path(__file__).resolve().parent
@@ -130,7 +131,7 @@ class TemporaryRestriction:
     start_m: float
     end_m: float
     speed_mps: float
-    categories: Tuple[str, ...] = ("passenger", "freight", "high_speed")
+    categories: Tuple[str, ...] = TRAIN_CATEGORIES
     name: str = ""
 
 
@@ -138,6 +139,11 @@ class TemporaryRestriction:
 class Station:
     name: str
     stop_m: float
+
+
+#: nominal voltage of each electrification system (V); a line file may give its own, and a rolling
+#: stock's effort table holds at its system's (docs/traction.md#effort-and-catenary-voltage)
+NOMINAL_VOLTAGE_V = {"DC3000": 3000.0, "AC25000": 25000.0, "none": 0.0}
 
 
 class Line:
@@ -149,7 +155,7 @@ class Line:
         self.length_m = float(document["length_m"])
         self.electrification = document["electrification"]["system"]
         self.nominal_voltage_v = float(document["electrification"].get(
-            "nominal_voltage_v", {"DC3000": 3000.0, "AC25000": 25000.0, "none": 0.0}[self.electrification]))
+            "nominal_voltage_v", NOMINAL_VOLTAGE_V[self.electrification]))
         self.sections = [BlockSection(**s) for s in document["block_sections"]]
         self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
         self.joints = document.get("insulated_joints", [])

@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional
 
-from fmus.data.loader import Line, RollingStock
+from fmus.data.loader import NOMINAL_VOLTAGE_V, Line, RollingStock
 from fmus.units import KMH_PER_MPS, STANDARD_GRAVITY_MPS2
 from fmus.errors import FmuInputError
 from fmus.traction.brake_pipeline import BrakePipeline
@@ -49,7 +49,7 @@ def _interp(xs: List[float], ys: List[float], x: float) -> float:
 
 
 #: the voltage at which a rolling-stock file's effort table holds, per electrical system
-RATED_VOLTAGE_V = {"DC3000": 3000.0, "AC25000": 25000.0}
+RATED_VOLTAGE_V = {system: volts for system, volts in NOMINAL_VOLTAGE_V.items() if volts > 0}
 #: relative spread of F·v within which the end of an effort table counts as the constant-power
 #: (natural) characteristic of the motors
 CONSTANT_POWER_TOLERANCE = 0.01
@@ -162,7 +162,6 @@ class TractionCore:
         self.traction_resistance_poly = _train_poly(stock.resistance_terms, resistance_scale)
         # no tractive effort (coasting, braking): a locomotive's idle formula (ПТР, docs/traction.md#resistance)
         self.idle_resistance_poly = _train_poly(stock.idle_resistance_terms or stock.resistance_terms, resistance_scale)
-        self.resistance_poly = self.idle_resistance_poly
         self.breakaway_n_per_kn = stock.starting_resistance * resistance_scale
         self.voltage_v = pantograph_voltage_v if pantograph_voltage_v > 0 else line.nominal_voltage_v
         if stock.electrical_system != "none" and self.voltage_v <= 0:
@@ -208,8 +207,9 @@ class TractionCore:
         return self._resistance(v, self.idle_resistance_poly)
 
     def _resistance(self, v: float, poly=None) -> float:
-        """Main resistance [N] in the present mode (``poly`` None), or with ``poly``."""
-        a, b, c = poly or self.resistance_poly
+        """Main resistance [N] in the present mode (``poly`` None: the traction formulas while a
+        tractive effort is commanded, the idle ones otherwise), or with ``poly``."""
+        a, b, c = poly or (self.traction_resistance_poly if self._share_t > 0.0 else self.idle_resistance_poly)
         vk = v * KMH_PER_MPS
         return (a + b * vk + c * vk * vk) * self.weight_kn
 
@@ -238,7 +238,6 @@ class TractionCore:
             command = max(-1.0, min(1.0, command))
             out.commands_clamped += 1
         self._share_t = command if command > 0.0 and not emergency else 0.0
-        self.resistance_poly = self.traction_resistance_poly if self._share_t > 0.0 else self.idle_resistance_poly
         share_b = -command if command < 0.0 else 0.0
         self.brake_pipeline.command(time_s, share_b * self.m_eff * self.stock.service_decel, bool(emergency))
         out.notch = math.ceil(self._share_t * self.stock.notches - 1e-9) if self._share_t > 0 else 0
