@@ -296,22 +296,21 @@ class Line:
         return next((s for s in self.stations if s.name == name), None)
 
 
-def _check_carrier_against_traction(document: dict, path: Path) -> None:
+def check_carrier_under_traction(carrier_hz: float, electrification: str, where: str) -> None:
     """A 50 Hz ALSN carrier cannot be told from the traction current's own 50 Hz fundamental on
-    an AC line, so such a pairing is refused (docs/sources.md#alsn-carriers-and-aspects, row 1)."""
-    if document["electrification"]["system"] != "AC25000":
-        return
-    for k, section in enumerate(document["block_sections"]):
-        if section["carrier_hz"] == 50:
-            _fail(path, f"block_sections[{k}].carrier_hz",
-                  "a 50 Hz ALSN carrier cannot be used under 50 Hz AC traction (electrification.system "
-                  "AC25000); use 25 or 75 Hz")
+    an AC line, so such a pairing is refused (docs/sources.md#alsn-carriers-and-aspects, row 1);
+    ``where`` names the field that set the carrier, in the message."""
+    if electrification == "AC25000" and carrier_hz == 50:
+        raise FmuInputError(f"{where}: a 50 Hz ALSN carrier cannot be used under 50 Hz AC traction "
+                            "(electrification.system AC25000); use 25 or 75 Hz")
 
 
 def load_line(path=DEFAULT_LINE) -> Line:
     path = Path(path)
     document = load_json(path, "line.schema.json")
-    _check_carrier_against_traction(document, path)
+    for k, section in enumerate(document["block_sections"]):
+        check_carrier_under_traction(section["carrier_hz"], document["electrification"]["system"],
+                                     f"{path}: field block_sections[{k}].carrier_hz")
     return Line(document, path)
 
 
