@@ -105,8 +105,13 @@ def _runs(mask: np.ndarray):
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
 
 
+#: sig.restrictiveness of aspects 0..4, as a lookup table over whole arrays
+_RANK_OF_ASPECT = np.array([sig.restrictiveness(a) for a in range(sig.GREEN + 1)])
+
+
 def rank(aspects: np.ndarray) -> np.ndarray:
-    return np.vectorize(sig.restrictiveness, otypes=[int])(aspects)
+    """sig.restrictiveness of every aspect in ``aspects`` (higher is more permissive)."""
+    return _RANK_OF_ASPECT[np.asarray(aspects, dtype=int)]
 
 
 @dataclass

@@ -10,6 +10,7 @@ from typing import Dict, Iterable, List, Tuple
 import numpy as np
 
 from benchmarks.harness.channel import CodeChannel
+from benchmarks.harness.display import rank
 from fmus.signalling import aspects as sig
 from fmus.wayside_coder.core import CoderSettings
 
@@ -50,7 +51,7 @@ def change_s(kpt: str, before: int, after: int, phase: float, receiver=None) -> 
     assert rows[rows[:, 0] <= SETTLE_S][-1, 1] == before, "the code before the change was not shown"
     late = rows[rows[:, 0] > SETTLE_S]
     if sig.restrictiveness(after) < sig.restrictiveness(before):
-        hit = np.flatnonzero(np.vectorize(sig.restrictiveness)(late[:, 1]) <= sig.restrictiveness(after))
+        hit = np.flatnonzero(rank(late[:, 1]) <= sig.restrictiveness(after))
     else:
         hit = np.flatnonzero((late[:, 1] == after) & (late[:, 2] == 1))
     return float(late[hit[0], 0] - SETTLE_S) if hit.size else np.inf
