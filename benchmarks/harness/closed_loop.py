@@ -96,9 +96,12 @@ def red_signal_ahead(line, red_signal_m: float, clear_s: float) -> CabSignal:
 def timetable_with_supplement(folder: Path, supplement: float = 0.08, name: str = "timetable_8pct.json") -> Path:
     """The default stops with scheduled running times = minimum time × (1 + supplement)."""
     line, stock = load_line(), load_rolling_stock()
-    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * MPS_PER_KMH)
-    t_ab = planner.plan(400, 10300, None).minimum_time_s * (1 + supplement)
-    t_bc = planner.plan(10300, 19600, None).minimum_time_s * (1 + supplement)
+    stop_m = {station.name: station.stop_m for station in line.stations}
+    # the planning deceleration the ATO takes for this train (0.5 m/s², below 0.6 × its service
+    # deceleration) and its speed margin below every limit
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, AtoSettings().speed_margin_mps)
+    t_ab = planner.plan(stop_m["A"], stop_m["B"], None).minimum_time_s * (1 + supplement)
+    t_bc = planner.plan(stop_m["B"], stop_m["C"], None).minimum_time_s * (1 + supplement)
     stops = [{"station": "A", "departure_s": 60.0},
              {"station": "B", "arrival_s": round(60 + t_ab), "departure_s": round(60 + t_ab) + 60},
              {"station": "C", "arrival_s": round(60 + t_ab) + 60 + round(t_bc)}]
