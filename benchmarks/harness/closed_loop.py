@@ -18,7 +18,7 @@ from fmus.traction.core import TractionCore
 from fmus.ato_controller.core import AtoCore, AtoSettings
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
-from fmus.units import J_PER_KWH, MPS_PER_KMH
+from fmus.units import J_PER_KWH
 
 CabSignal = Callable[[float, float], Tuple[int, bool]]
 
