@@ -6,8 +6,11 @@ The core composes three parts, each with one job:
 * circuit_bank.py — the track-circuit bank: a network model per section for its trains'
   wheelset shunts, the network states frame by frame, the track relays (occupancy);
 * coil_pickup.py — the coil pickup: the code current the coils see → coil EMF per train;
-* traction_interference.py — the asymmetric traction return current under the coils (DC
-  ripple, AC harmonics, the joints' bond-lead zones).
+* traction_interference.py — the traction interference under the coils: the traction return
+  current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
+  asymmetry per section passing from one section's to the next across each joint's bond-lead
+  zone, plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
+  mismatch).
 
 What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
 and the gap between where the train was (and how fast it went) and where the update puts it
