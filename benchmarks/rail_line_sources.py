@@ -14,12 +14,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.signal import butter, hilbert, sosfiltfilt  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-from test_rail_line_joints import FS, JOINT_M, _burst, _cross, _lobes  # noqa: E402
-
+from benchmarks.harness.joints import FS, JOINT_M, burst_envelope, cross_joint, pulse_lobes  # noqa: E402
 from fmus.data.loader import DEFAULT_LINE, load_line  # noqa: E402
 from fmus.rail_line.core import RailLineCore, RailSettings  # noqa: E402
 from fmus.rail_line.track_circuit import CircuitParameters, rail_impedance  # noqa: E402
@@ -69,10 +68,10 @@ def joints() -> None:
     print("| quantity (DC, 80 km/h, 1000 A, matched coils) | joints paper | model |")
     print("|---|---|---|")
     for speed in (40.0, 80.0, 160.0):
-        coil, t, emf = _cross(speed, asymmetry=0.03, before_m=6.0, after_m=6.0)
+        coil, t, emf = cross_joint(speed, asymmetry=0.03, before_m=6.0, after_m=6.0)
         centre = t[np.argmin(np.abs(coil - JOINT_M))]
         axes[0].plot((t - centre) * 1000, emf, label=f"{speed:g} km/h")
-        (up, w_up, _), (down, w_down, _) = _lobes(t, emf)
+        (up, w_up, _), (down, w_down, _) = pulse_lobes(t, emf)
         if speed == 80.0:
             spectrum = np.abs(np.fft.rfft(emf, 1 << 16))
             f = np.fft.rfftfreq(1 << 16, 1 / FS)
@@ -86,7 +85,7 @@ def joints() -> None:
             print(f"| largest EMF | 0.925 V | {max(up, down):.3f} V (+{up:.3f} / −{down:.3f}) |")
         else:
             print(f"| at {speed:g} km/h: largest EMF, width | depends on speed | {max(up, down):.3f} V, {w_up:.4f} s |")
-    _, _, mismatched = _cross(80.0, asymmetry=0.03, coil_mismatch=0.05, before_m=6.0, after_m=6.0)
+    _, _, mismatched = cross_joint(80.0, asymmetry=0.03, coil_mismatch=0.05, before_m=6.0, after_m=6.0)
     print(f"| coil-pair asymmetry 5 % | 5 V | {np.abs(mismatched).max():.2f} V |")
     axes[0].set_xlabel("time from the coil's passing the joint [ms]")
     axes[0].set_ylabel("coil EMF [V]")
@@ -98,9 +97,8 @@ def joints() -> None:
     axes[1].set_title("DC, 80 km/h: spectrum\n(paper: maximum at 5 Hz, energy below 20 Hz)", fontsize=10)
     line = load_line(AC_LINE)
     for speed in (40.0, 80.0, 160.0):
-        coil, t, emf = _cross(speed, line=line, i_traction=300.0, asymmetry=0.03, before_m=6.0, after_m=6.0)
-        envelope, peak = _burst(t, emf)
-        from scipy.signal import butter, hilbert, sosfiltfilt
+        coil, t, emf = cross_joint(speed, line=line, i_traction=300.0, asymmetry=0.03, before_m=6.0, after_m=6.0)
+        envelope, peak = burst_envelope(emf)
         fifty = np.abs(hilbert(sosfiltfilt(butter(4, (30.0, 70.0), btype="band", fs=FS, output="sos"), emf)))
         inner = np.abs(coil - JOINT_M) < 5.0
         axes[2].plot((coil - JOINT_M)[inner], fifty[inner], label=f"{speed:g} km/h (50 Hz peak {fifty[inner].max():.2f} V)")

@@ -4,57 +4,9 @@ the joints). One test per row the paper quantifies, each within ±10 %."""
 import numpy as np
 import pytest
 
+from benchmarks.harness.joints import FS, JOINT_M, N, burst_envelope, cross_joint, pulse_lobes
 from fmus.data.loader import load_line
 from fmus.rail_line.core import RailLineCore, RailSettings
-from fmus.rail_line.traction_interference import REFERENCE_TRACTION_A
-
-FS, N = 4000.0, 40
-JOINT_M = 2600.0                     # the default lines' joint between sections 1 and 2
-COIL_OFFSET_M = 1.5
-
-
-def _cross(speed_kmh, line=None, i_traction=REFERENCE_TRACTION_A, carrier_v=0.0, before_m=40.0,
-           after_m=40.0, asymmetry=None, **settings):
-    """A train crossing the joint at 2600 m at constant speed (coil 1.5 m ahead of the head);
-    a steady current established before (the traction lag settled). Returns (coil position per
-    sample, t, EMF)."""
-    settings.setdefault("dc_ripple", (0.0, 0.0))
-    core = RailLineCore(line or load_line(), 8, 2, N, RailSettings(**settings))
-    if asymmetry is not None:
-        core.asymmetry[:] = asymmetry
-    v = speed_kmh / 3.6
-    x_start = JOINT_M - COIL_OFFSET_M - before_m
-    settle_s = 1.0                               # standing still for the lag to settle
-    seconds = settle_s + (before_m + after_m) / v
-    emf, coil = [], []
-    for k in range(int(round(seconds * FS / N))):
-        t = k * N / FS
-        times = t + np.arange(N) / FS
-        head = x_start + v * np.clip(times - settle_s, 0.0, None)
-        u = np.tile(carrier_v * np.sin(2 * np.pi * 50.0 * times), (8, 1))
-        out = core.step(t, u, np.array([head[0], -1000.0]), np.array([v if t >= settle_s else 0.0, 0.0]),
-                        np.array([i_traction, 0.0]))
-        emf.append(out.e_coil[0].copy())
-        coil.append(head + COIL_OFFSET_M)
-    t = np.arange(len(emf) * N) / FS
-    keep = t >= settle_s + 0.05
-    return np.concatenate(coil)[keep], t[keep], np.concatenate(emf)[keep]
-
-
-def _lobes(t, emf):
-    """(peak, half-amplitude width) of the positive and of the negative pulse."""
-    result = []
-    for sign in (1.0, -1.0):
-        e = sign * emf
-        i = int(np.argmax(e))
-        above = e >= 0.5 * e[i]
-        lo, hi = i, i
-        while lo > 0 and above[lo - 1]:
-            lo -= 1
-        while hi < e.size - 1 and above[hi + 1]:
-            hi += 1
-        result.append((e[i], (hi - lo + 1) / FS, t[i]))
-    return result
 
 
 def test_dc_traction_two_opposite_pulses_as_in_the_paper():
@@ -62,8 +14,8 @@ def test_dc_traction_two_opposite_pulses_as_in_the_paper():
     amplitude, the spectrum's envelope largest at 5 Hz with the energy below 20 Hz, the
     largest EMF 0.925 V (matched coils, the reference traction current, the same rail
     asymmetry on both sides)."""
-    _, t, emf = _cross(80.0, asymmetry=0.03)
-    (up, up_width, up_t), (down, down_width, down_t) = _lobes(t, emf)
+    _, t, emf = cross_joint(80.0, asymmetry=0.03)
+    (up, up_width, up_t), (down, down_width, down_t) = pulse_lobes(t, emf)
     assert max(up, down) == pytest.approx(0.925, rel=0.10)
     assert min(up, down) > 0.9 * max(up, down)                 # a pair, one of each polarity
     assert abs(up_t - down_t) < 0.2
@@ -78,9 +30,9 @@ def test_dc_traction_two_opposite_pulses_as_in_the_paper():
 
 def test_coil_pair_mismatch_of_5_percent_gives_5_v():
     """Table row 6: with 5 % asymmetry of the coils the EMF reaches 5 V."""
-    _, t, emf = _cross(80.0, asymmetry=0.03, coil_mismatch=0.05)
+    _, t, emf = cross_joint(80.0, asymmetry=0.03, coil_mismatch=0.05)
     assert np.abs(emf).max() == pytest.approx(5.0, rel=0.10)
-    _, _, matched = _cross(80.0, asymmetry=0.03, coil_mismatch=0.0)
+    _, _, matched = cross_joint(80.0, asymmetry=0.03, coil_mismatch=0.0)
     assert np.abs(matched).max() < 0.2 * np.abs(emf).max()
 
 
@@ -88,8 +40,8 @@ def test_coil_pair_mismatch_of_5_percent_gives_5_v():
 def test_dc_pulses_depend_on_speed(speed_kmh):
     """Table row 6: the pulses depend on speed — the motion over the bond leads' field makes
     them: amplitude ∝ v, width ∝ 1/v."""
-    _, t, emf = _cross(speed_kmh, asymmetry=0.03)
-    (up, width, _), _ = _lobes(t, emf)
+    _, t, emf = cross_joint(speed_kmh, asymmetry=0.03)
+    (up, width, _), _ = pulse_lobes(t, emf)
     assert up == pytest.approx(0.925 * speed_kmh / 80.0, rel=0.10)
     assert width == pytest.approx(0.059 * 80.0 / speed_kmh, rel=0.10)
 
@@ -102,21 +54,9 @@ def test_every_joint_gives_two_opposite_pulses_with_the_default_asymmetries():
     asymmetry = core.asymmetry.copy()
     for joint in [j["position_m"] for j in line.joints][1:]:
         k = int(np.searchsorted([s.end_m for s in line.sections], joint))
-        global JOINT_M
-        saved, JOINT_M = JOINT_M, joint
-        try:
-            _, t, emf = _cross(80.0, asymmetry=None, before_m=10.0, after_m=10.0)
-        finally:
-            JOINT_M = saved
-        (up, _, _), (down, _, _) = _lobes(t, emf)
+        _, t, emf = cross_joint(80.0, asymmetry=None, before_m=10.0, after_m=10.0, joint_m=joint)
+        (up, _, _), (down, _, _) = pulse_lobes(t, emf)
         assert min(up, down) > 0.5 * max(up, down), (joint, asymmetry[k - 1:k + 1], up, down)
-
-
-def _burst(t, emf):
-    """The 50 Hz envelope (magnitude of the analytic signal) and its largest value."""
-    from scipy.signal import hilbert
-    envelope = np.abs(hilbert(emf))
-    return envelope, envelope.max()
 
 
 def test_ac_traction_additive_50_hz_pulses_independent_of_speed():
@@ -126,8 +66,8 @@ def test_ac_traction_additive_50_hz_pulses_independent_of_speed():
         "default_line.json", "default_line_ac.json"))
     peaks, lengths = {}, {}
     for speed in (40.0, 80.0, 160.0):
-        coil, t, emf = _cross(speed, line=line, i_traction=300.0, asymmetry=0.03)
-        envelope, peak = _burst(t, emf)
+        coil, t, emf = cross_joint(speed, line=line, i_traction=300.0, asymmetry=0.03)
+        envelope, peak = burst_envelope(emf)
         # away from the joint: only the rails' asymmetry; at the joint: the burst on top
         away = envelope[(np.abs(coil - JOINT_M) > 10.0) & (np.abs(coil - JOINT_M) < 30.0)].max()
         assert peak > 3.0 * away
@@ -151,7 +91,7 @@ def test_null_zone_of_1_m_and_weak_zone_of_1_5_m():
     (the integrated EMF) at walking pace, where a 50 Hz envelope resolves centimetres."""
     from scipy.signal import hilbert
     gain = RailSettings().coil_gain_h
-    coil, t, emf = _cross(5.0, i_traction=0.0, carrier_v=4.0, before_m=5.0, after_m=5.0)
+    coil, t, emf = cross_joint(5.0, i_traction=0.0, carrier_v=4.0, before_m=5.0, after_m=5.0)
     current = np.cumsum(emf) / (FS * gain)
     current -= np.convolve(current, np.ones(80) / 80, mode="same")
     envelope = np.abs(hilbert(current))

@@ -50,11 +50,12 @@ class _Model:
     entry_o: np.ndarray     # (N, nx) the same for the entry-end current
     entry_t: np.ndarray     # (N, N)
     relay_level: float      # relay-end voltage relative to the circuit's calibrated reference
-    phi: np.ndarray         # (nx, nx) state after one sample
-    gamma: np.ndarray       # (nx,) input → state after one sample
+    phi: np.ndarray         # (nx, nx) state after one sample (psi[:, -1]: input → state after one sample)
     carrier_response: np.ndarray    # (nx,) complex: the states' phasor per unit input phasor at the
                                     # carrier, sampled (the discrete model's steady state)
-    ahead_response: np.ndarray      # (H,) complex: the same for the current arriving at each head
+    front_response: complex         # the same for the current arriving at the front head (0: no head)
+    carrier_system: np.ndarray      # (2·nx, 2) the states at a sample and the next → the carrier's
+                                    # phasor (re, im), by least squares (_carry_states_over)
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,6 @@ class TrackCircuitBank:
         self._relay_timer = np.zeros(self.count)
         self._carry_over: List[Tuple[int, _Model, _Model]] = []
         self._handover = [(1.0, 0.0)] * self.count
-        self._tick_s = 0.0
 
     # ---- geometry ---------------------------------------------------------------------------
     def section_of(self, x):
@@ -332,12 +332,16 @@ class TrackCircuitBank:
         # outputs of all samples at once: (H, N, nx) and (H, N, N) per head, (N, nx), (N, N) entry
         rotation = np.exp(2j * np.pi * self.carriers[k] * self.dt)
         response = np.linalg.solve(rotation * np.eye(nx) - phi, gamma[:, 0].astype(complex))
+        ahead_response = rows[:-1] @ response + direct[:-1]
+        rotated = response * rotation
+        carrier_system = np.concatenate([np.stack([response.real, -response.imag], 1),
+                                         np.stack([rotated.real, -rotated.imag], 1)])
         model = _Model(np.linalg.matrix_power(phi, n), psi,
                        np.ascontiguousarray(out_o[:, :-1].transpose(1, 0, 2)),
                        np.ascontiguousarray(out_t[:, :-1].transpose(1, 0, 2)),
                        np.ascontiguousarray(out_o[:, -1]), np.ascontiguousarray(out_t[:, -1]),
-                       self.relay_level(k, shunts), phi, gamma[:, 0].copy(), response,
-                       rows[:-1] @ response + direct[:-1])
+                       self.relay_level(k, shunts), phi, response,
+                       complex(ahead_response[0]) if heads else 0j, carrier_system)
         cache[key] = model
         if len(cache) > _CACHE_SIZE:
             cache.popitem(last=False)
@@ -397,14 +401,13 @@ class TrackCircuitBank:
     def follow_shunts(self, heads: List[float], tick_s: float = 0.0) -> None:
         """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts,
         activating the models of the sections whose configuration changed."""
-        self._tick_s = tick_s
         if all(lo < head < hi for head, (lo, hi) in zip(heads, self._node_bounds)):
             return
         configs, rows = self._configuration(heads)
         for k, config in enumerate(configs):
             if config != self._configs[k]:
                 self._rows[k] = rows[k]
-                self._activate(k, config, rows[k])
+                self._activate(k, config, rows[k], tick_s)
         self._configs = configs
 
     def _configuration(self, heads: List[float]):
@@ -447,7 +450,7 @@ class TrackCircuitBank:
             lo, hi = max(lo, start + (middle - 0.5) * spacing), min(hi, start + (middle + 0.5) * spacing)
         return lo, hi
 
-    def _activate(self, k: int, config: Config, rows: Dict[int, int]) -> None:
+    def _activate(self, k: int, config: Config, rows: Dict[int, int], tick_s: float) -> None:
         model = self._model(k, config)
         previous = self._active[k]
         self._handover[k] = (1.0, 0.0)
@@ -460,10 +463,10 @@ class TrackCircuitBank:
         self._active[k] = (config, model, log_amplitude, log_amplitude[heads[0]] if front >= 0 else 0.0, front)
         if previous is not None and front >= 0 and previous[4] == front and previous[1] is not model:
             # the front train's steady amplitude just before and just after, at the same place
-            before = abs(previous[1].ahead_response[0]) * math.exp(-previous[3])
-            after = abs(model.ahead_response[0]) * math.exp(-self._active[k][3])
+            before = abs(previous[1].front_response) * math.exp(-previous[3])
+            after = abs(model.front_response) * math.exp(-self._active[k][3])
             if before > 0.0 and after > 0.0:     # an opened feed carries no code to hand over
-                self._handover[k] = (before / after, self._tick_s)
+                self._handover[k] = (before / after, tick_s)
         size = model.phi_n.shape[0]
         self._phi_stack[k] = 0.0                             # sections padded to one size:
         self._psi_stack[k] = 0.0                             # one product advances them all
@@ -507,17 +510,14 @@ class TrackCircuitBank:
                 continue
             nx = new.phi.shape[0]
             state = self.states[k, :nx]
-            h = old.carrier_response
-            rotation = np.exp(2j * np.pi * self.carriers[k] * self.dt)
             # x[n] = Re(h·p), x[n+1] = Re(h·p·e^{jωΔ}): the carrier's phasor p by least squares
-            following = old.phi @ state + old.gamma * u[k, 0]
-            system = np.concatenate([np.stack([h.real, -h.imag], 1),
-                                     np.stack([(h * rotation).real, -(h * rotation).imag], 1)])
-            (p_re, p_im), *_ = np.linalg.lstsq(system, np.concatenate([state, following]), rcond=None)
+            # (h: the old model's carrier response; its system matrix is built with the model)
+            following = old.phi @ state + old.psi[:, -1] * u[k, 0]
+            (p_re, p_im), *_ = np.linalg.lstsq(old.carrier_system, np.concatenate([state, following]), rcond=None)
             carrier = p_re + 1j * p_im
             # only the carrier's steady state is swapped: what else the states hold (the decaying
             # response to a code edge) carries over as it is
-            self.states[k, :nx] += ((new.carrier_response - h) * carrier).real
+            self.states[k, :nx] += ((new.carrier_response - old.carrier_response) * carrier).real
         self._carry_over.clear()
 
     def _update_relays(self, step_s: float) -> None:

@@ -41,7 +41,7 @@ class CoilPickup:
         # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones
         # and from each feed to its section's end, widened by the coil length
         margin = s.coil_length_m
-        reach = max(interference.reach_m, 0.0)
+        reach = interference.reach_m
         bands = sorted([(min(lo, joint - reach) - margin, max(hi, joint + reach) + margin)
                         for lo, joint, hi in bank.joint_zones] +
                        [(c.feed_m - margin, c.end_m + margin) for c in bank.circuits])

@@ -6,8 +6,11 @@ The core composes three parts, each with one job:
 * circuit_bank.py — the track-circuit bank: a network model per section for its trains'
   wheelset shunts, the network states frame by frame, the track relays (occupancy);
 * coil_pickup.py — the coil pickup: the code current the coils see → coil EMF per train;
-* traction_interference.py — the asymmetric traction return current under the coils (DC
-  ripple, AC harmonics, the joints' bond-lead zones).
+* traction_interference.py — the traction interference under the coils: the traction return
+  current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
+  asymmetry per section passing from one section's to the next across each joint's bond-lead
+  zone, plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
+  mismatch).
 
 What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
 and the gap between where the train was (and how fast it went) and where the update puts it
@@ -137,7 +140,7 @@ class RailLineCore:
         heads = self._heads
         for j in range(self.trains):
             self._update_anchor(j, t, float(x_head[j]), float(v[j]))
-            at_tick.append(float(self.head_at(j, np.array([tick]))[0]))
+            at_tick.append(self.head_at_time(j, tick))
             heads[j, :n] = self.head_at(j, times)
         self.interference.new_frame(i_traction, n)
         self.bank.follow_shunts(at_tick, tick)        # every wheelset of every train shunts its section
@@ -177,7 +180,7 @@ class RailLineCore:
         gap = speed_gap = 0.0
         if anchor is not None:
             at = np.array([t])
-            gap = float(self.head_at(j, at)[0]) - x
+            gap = self.head_at_time(j, t) - x
             speed_gap = float(self._speed_at(j, at)[0]) - v
             if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS \
                     or (abs(gap) < 1e-6 and abs(speed_gap) < 1e-6):      # a jump, or nothing to close
@@ -192,6 +195,14 @@ class RailLineCore:
             s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
             head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
         return head
+
+    def head_at_time(self, j: int, t: float) -> float:
+        """``head_at`` at one time, without an array: the straight line's arithmetic is the same
+        in floats; while a correction is being blended in, the array formula is used as it is."""
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        if (gap or speed_gap) and t - t_k < POSITION_BLEND_S:
+            return float(self.head_at(j, np.array([t]))[0])
+        return x_k + v_k * (t - t_k)
 
     def _speed_at(self, j: int, times: np.ndarray) -> np.ndarray:
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]

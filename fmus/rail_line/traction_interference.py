@@ -62,10 +62,14 @@ class TractionInterference:
         self.asymmetry = rng.uniform(lo, hi, count) * rng.choice([-1.0, 1.0], count)
         joint, per_mismatch = joint_couplings(s.coil_gain_h)
         self.joint_peak = joint + per_mismatch * s.coil_mismatch     # peak of the coupling b(x)
-        self.joints = np.array([joint for _, joint, _ in bank.joint_zones])
-        self.lead_zones = sorted((lo_m, hi_m) for lo_m, _, hi_m in bank.joint_zones)
-        self._lead_starts = [lo_m for lo_m, _ in self.lead_zones]
-        self._lead_ends = [hi_m for _, hi_m in self.lead_zones]
+        # sorted: the nearest joint is found by binary search whatever order the line file lists them in
+        self.joints = np.sort(np.array([joint for _, joint, _ in bank.joint_zones], dtype=float))
+        # each bond-lead zone with the sections on either side (−1: off the line); indices, not
+        # values, because a study may overwrite the asymmetries after construction
+        self.lead_zones = sorted((lo_m, hi_m, bank.section_at(lo_m - 1e-9), bank.section_at(hi_m))
+                                 for lo_m, _, hi_m in bank.joint_zones)
+        self._lead_starts = [zone[0] for zone in self.lead_zones]
+        self._lead_ends = [zone[1] for zone in self.lead_zones]
         self.reach_m = JOINT_RAMP_M + 0.5 * JOINT_TOP_M     # b(x) is zero farther than this from a joint
         dt = 1.0 / s.fs_hz
         lag = np.exp(-dt / s.traction_time_constant_s)
@@ -133,27 +137,29 @@ class TractionInterference:
         section = bank.section_of(coil)
         c = np.where(section >= 0, self.asymmetry[np.clip(section, 0, bank.count - 1)], 0.0)
         first, last = float(coil.min()), float(coil.max())
-        for lo, hi in self.lead_zones[bisect.bisect_left(self._lead_ends, first):
-                                      bisect.bisect_right(self._lead_starts, last)]:
+        for lo, hi, before, beyond in self.lead_zones[bisect.bisect_left(self._lead_ends, first):
+                                                      bisect.bisect_right(self._lead_starts, last)]:
             inside = (coil >= lo) & (coil < hi)
             if inside.any():
-                before = bank.section_at(lo - 1e-9)
-                beyond = bank.section_at(hi)
                 a0 = self.asymmetry[before] if before >= 0 else 0.0
                 a1 = self.asymmetry[beyond] if beyond >= 0 else 0.0
                 c = np.where(inside, a0 + (a1 - a0) * (coil - lo) / (hi - lo), c)
-        if self.joint_peak:
+        joints = self.joints
+        if joints.size:
             # the nearest joint's trapezoid (joints are metres apart at the least)
-            i = np.clip(np.searchsorted(self.joints, coil), 1, self.joints.size - 1) if self.joints.size > 1 \
-                else np.zeros(coil.shape, dtype=np.intp)
-            if self.joints.size > 1:
-                i = np.where(np.abs(coil - self.joints[i - 1]) < np.abs(coil - self.joints[i]), i - 1, i)
-            if self.joints.size:
-                distance = np.abs(coil - self.joints[i])
-                c = c + self.joint_peak * np.clip((self.reach_m - distance) / JOINT_RAMP_M, 0.0, 1.0)
+            if joints.size > 1:
+                i = np.clip(np.searchsorted(joints, coil), 1, joints.size - 1)
+                nearest = joints[np.where(np.abs(coil - joints[i - 1]) < np.abs(coil - joints[i]), i - 1, i)]
+            else:
+                nearest = joints[0]
+            distance = np.abs(coil - nearest)
+            c = c + self.joint_peak * np.clip((self.reach_m - distance) / JOINT_RAMP_M, 0.0, 1.0)
         return c
 
     def under_coil(self, j: int, first: int, times: np.ndarray, coil: np.ndarray) -> np.ndarray:
         """Train j's loop-equivalent traction current averaged over its coil, c(x)·i_tr(t);
-        ``coil`` holds the positions of the coil's sensitivity points (points × samples)."""
+        ``coil`` holds the positions of the coil's sensitivity points (points × samples); zero
+        without traction current (an unelectrified line, or the train's current off and settled)."""
+        if not (self.ac or self.dc) or not self._traction_on[j]:
+            return np.zeros(times.size)
         return self.coupling(coil).mean(axis=0) * self.wave(j, first, times)
