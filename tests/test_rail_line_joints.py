@@ -106,3 +106,19 @@ def test_null_zone_of_1_m_and_weak_zone_of_1_5_m():
     weak_end = x[np.argmax((x > null_end) & (envelope > 0.5 * (weak + shunted)))]
     assert null_end - null_start == pytest.approx(1.0, rel=0.10)
     assert weak_end - null_end == pytest.approx(1.5, rel=0.10)
+
+
+def test_a_line_file_listing_its_joints_out_of_order_couples_the_same(tmp_path):
+    """The interference around each joint does not depend on the order the line file lists the
+    joints in (the joint search needs them sorted)."""
+    import json
+    from fmus.data.loader import DEFAULT_LINE
+
+    document = json.loads(DEFAULT_LINE.read_text())
+    document["insulated_joints"] = document["insulated_joints"][::-1]
+    reversed_line = tmp_path / "reversed_joints.json"
+    reversed_line.write_text(json.dumps(document))
+    x = np.linspace(0.0, load_line().length_m, 200_001)
+    couplings = [RailLineCore(load_line(path), 8, 2, N, RailSettings()).interference.coupling(x)
+                 for path in (DEFAULT_LINE, reversed_line)]
+    np.testing.assert_array_equal(couplings[0], couplings[1])

@@ -167,3 +167,14 @@ def test_a_50_hz_carrier_on_an_ac_line_ends_the_run_with_one_line(tmp_path, prod
     code, _, stderr = railcosim("run", folder, "--no-build", "--output", tmp_path / "o")
     assert code == 2 and len(stderr.strip().splitlines()) == 1 and "Traceback" not in stderr
     assert "block_sections[3].carrier_hz" in stderr and "ac_50hz.json" in stderr
+
+
+def test_the_rail_lines_carrier_parameter_is_held_to_the_same_rule():
+    """The rail line's `carrier` parameter overrides the line file's carriers: 50 Hz on an AC
+    line is refused there too, naming the parameter."""
+    from fmus.rail_line.core import RailLineCore, RailSettings
+
+    line = load_line(DATA / "default_line_ac.json")
+    with pytest.raises(FmuInputError, match="parameter carrier: a 50 Hz ALSN carrier cannot be used under 50 Hz AC"):
+        RailLineCore(line, 8, 2, 40, RailSettings(carrier_hz=50.0))
+    RailLineCore(line, 8, 2, 40, RailSettings(carrier_hz=75.0))

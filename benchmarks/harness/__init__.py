@@ -1,3 +1,4 @@
 """Harnesses that couple model cores without FMI, for studies, tests, benchmarks and the
 figures in docs/: the ATO and traction cores in closed loop, a coder section straight
-into a receiver."""
+into a receiver, a train crossing an insulated joint in the rail line core, and what a receiver
+displays against the code sent (display hold, latencies)."""

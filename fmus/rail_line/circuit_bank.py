@@ -29,7 +29,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.data.loader import Line
+from fmus.data.loader import Line, check_carrier_under_traction
 from fmus.errors import FmuInputError
 from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
@@ -120,6 +120,8 @@ class TrackCircuitBank:
         self._starts_list = self.starts.tolist()
         self.ends_list = self.ends.tolist()
         self.feed_list = [float(circuit.feed_m) for circuit in self.circuits]
+        if s.carrier_hz:          # the parameter overrides the line file's carriers: the same rule holds
+            check_carrier_under_traction(s.carrier_hz, line.electrification, "parameter carrier")
         self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
         # train detection works at the track circuit's own frequency (the line file's): a digital
         # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
