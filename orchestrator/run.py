@@ -11,17 +11,16 @@ import fcntl
 import json
 import math
 import os
-import re
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
-from orchestrator.errors import UserError, shown_paths
+from orchestrator.errors import RefusedComponents, UserError, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.interrupts import InterruptFlag, Interrupted
@@ -185,10 +184,16 @@ def check_system(system_path, options: RunOptions) -> List[str]:
     the data files, and each component instantiated, given its parameters and initialised
     together as a run does. One line per problem; empty when the run would start."""
     problems: List[str] = []
+    refused: Set[str] = set()           # components whose problem is said already: not initialised
 
     def attempt(step):
         try:
             return step()
+        except RefusedComponents as error:
+            for text, names in error.problems:
+                _note(problems, UserError(text))
+                refused.update(names)
+            return None
         except UserError as error:
             _note(problems, error)
             return None
@@ -206,7 +211,7 @@ def check_system(system_path, options: RunOptions) -> List[str]:
         if plan.stop_s is not None:         # what a run would warn about, said the same way
             _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
             _warn_rounded_stop(options, system, plan)
-        _initialise_only(plan, system, options, problems)
+        _initialise_only(plan, system, options, problems, refused)
     finally:
         system.close()
     return problems
@@ -219,35 +224,28 @@ def _note(problems: List[str], error: BaseException) -> List[str]:
     return problems
 
 
-def _before_origin(problem: str) -> str:
-    """A problem without its closing ``(component.parameter)``."""
-    return re.sub(r"\s*\([\w.]+\)$", "", problem)
-
-
 class _Checked:
     """A slave as ``railcosim validate`` drives it: a lifecycle call that fails is noted, not
     raised, and the component's later calls are skipped, so the initialisation goes on and
-    every component's problem is seen (the others get the values a run would give them)."""
+    every component's problem is seen (the others get the values a run would give them).
+    A ``refused`` component (its problem found by the checks before) is instantiated, so that
+    it can be bound, and nothing more: the same problem is not met again."""
 
-    def __init__(self, slave: Slave, problems: List[str]):
+    def __init__(self, slave: Slave, problems: List[str], refused: bool = False):
         self._slave, self._problems, self.failed = slave, problems, False
-        self._instantiated = False
+        self._instantiated, self._refused = False, refused
 
     def __getattr__(self, name):                  # inputs, outputs and whatever else is read
         return getattr(self._slave, name)
 
     def _call(self, method: str, *args) -> None:
-        if self.failed:
+        if self.failed or (self._refused and method != "instantiate"):
             return
         try:
             getattr(self._slave, method)(*args)
         except Exception as error:
             self.failed = True
-            # a data file the checks before already named (``… (ato.line_file)``) is the same
-            # problem seen again by the component: said once
-            text = " ".join(str(error).split())
-            if not any(_before_origin(seen) in text for seen in self._problems):
-                _note(self._problems, error)
+            _note(self._problems, error)
 
     def instantiate(self) -> None:                # instantiated once, before the master is made
         if not self._instantiated:
@@ -285,15 +283,18 @@ class _Checked:
         self._slave.free()
 
 
-def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str]) -> None:
+def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str],
+                     refused: Set[str]) -> None:
     """Instantiate every component, then bind and initialise them together as a run does
-    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written."""
+    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written.
+    The ``refused`` components (their problem noted by the checks before) are only
+    instantiated and bound."""
     workdir = new_workdir()
     slaves: Dict[str, Slave] = {}
     try:
         def make(name, node):
             slave = _Checked(make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process),
-                             problems)
+                             problems, refused=name in refused)
             slave.instantiate()
             return slave
 
