@@ -11,7 +11,6 @@ import fcntl
 import json
 import math
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
 from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
-from orchestrator.errors import RefusedComponents, UserError, shown_paths
+from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.interrupts import InterruptFlag, Interrupted
@@ -57,10 +56,12 @@ class RunOptions:
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
     #: observers that judge the run and contribute sections to summary.json, made from the
-    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts)
-    summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
-    #: one line per capture window or scenario event beyond the stop time (default: stderr)
-    warn: Callable[[str], None] = field(default_factory=lambda: _stderr_warning)
+    #: graph once it is built and given ``warn`` (the railway verdicts:
+    #: orchestrator.analysis.verdict.railway_verdicts)
+    summaries: Optional[Callable[[SystemGraph, Callable[[str], None]], Sequence[SummaryObserver]]] = None
+    #: one line per suspicious thing that still runs: a capture window or scenario event beyond
+    #: the stop time, a rounded stop time, a summary's own warnings (default: stderr)
+    warn: Callable[[str], None] = field(default_factory=lambda: print_warning)
 
 
 @dataclass
@@ -174,7 +175,7 @@ def _plan(system: SystemDescription, options: RunOptions,
     # the judges before the folder and the FMUs: making them checks the system's data files
     # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
-        plan.judges = attempt(lambda: list(options.summaries(graph))) or []
+        plan.judges = attempt(lambda: list(options.summaries(graph, options.warn))) or []
     return plan
 
 
@@ -434,10 +435,6 @@ def _warn_rounded_stop(options: RunOptions, system: SystemDescription, plan: _Pl
         end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
         options.warn(f"stop time {plan.stop_s:g} s is not a whole number of base steps "
                      f"({base / TICKS_PER_SECOND:g} s) after the start; the run ends at {end_s:g} s")
-
-
-def _stderr_warning(message: str) -> None:
-    print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
 
 
 # ---- the output folder ---------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, print_warning
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
@@ -78,17 +78,11 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     if capture:
         written.append(capture)
     elif at_s is not None:
-        _notice(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
-                f"run with --capture rail.e_coil@T0:T1 for one")
+        print_warning(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
+                      f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
     written.append(write_html(output / "report.html", summary, written))
     return written
-
-
-def _notice(message: str) -> None:
-    import sys
-
-    print(f"railcosim: warning: {message}", file=sys.stderr)
 
 
 def _line_of(components: Dict[str, dict], ato: Optional[str]):

@@ -9,7 +9,7 @@ scheduled arrival) and every change of the aspect the ATP acted upon.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -24,6 +24,7 @@ from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, block_codes
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 
 from fmus.units import J_PER_KWH, KMH_PER_MPS
+from orchestrator.errors import print_warning
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
@@ -632,12 +633,13 @@ def safety_verdict(summary: dict) -> Tuple[bool, str]:
                   + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")")
 
 
-def railway_verdicts(graph: SystemGraph) -> list:
+def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> list:
     """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
     headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
     ``RunOptions.summaries``. The system's railway data are checked first (a bad one is a
-    UserError before the run starts: orchestrator/analysis/system_checks.py)."""
+    UserError before the run starts, what is suspicious goes to ``warn``:
+    orchestrator/analysis/system_checks.py)."""
     from orchestrator.analysis.system_checks import check_railway_data
 
-    check_railway_data(graph)
+    check_railway_data(graph, warn)
     return [TrainVerdict(graph), ReceiverVerdict(graph)]
