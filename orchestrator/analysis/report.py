@@ -109,18 +109,17 @@ def static_speed_profile(line, params: dict, x_m: np.ndarray):
     v = sqrt(v_t² + 2·a·(x_t − x)) down to each lower limit x_t, with the ATP's supervision
     deceleration a (parameter ``atp_decel``, default 0.7 × the stock's service deceleration,
     as the ATO controller sets it). Returns (static, with_curves, a)."""
+    from fmus.ato_controller.atp import Atp
+    from fmus.ato_controller.core import default_atp_decel_mps2
     from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
 
     stock = load_rolling_stock(params.get("rolling_stock_file") or DEFAULT_ROLLING_STOCK)
     category = params.get("train_category") or stock.category
-    decel = float(params.get("atp_decel") or 0.0) or 0.7 * stock.service_decel
-    starts = np.array(line.limit_starts + [np.inf])
-    limits = np.array(line.limits_mps[category])
-    static = np.full(x_m.shape, np.inf)
-    tail = x_m - stock.length_m
-    for k, limit in enumerate(limits):          # a limit applies where the train overlaps its stretch
-        overlaps = (starts[k] <= x_m) & (starts[k + 1] > tail)
-        static = np.where(overlaps, np.minimum(static, limit), static)
+    decel = float(params.get("atp_decel") or 0.0) or default_atp_decel_mps2(stock)
+    # the ATP's own static limit at each point (no cab signal: the line's limits only)
+    atp = Atp(line, category, stock.length_m, "off", decel, 0.0)
+    static = np.fromiter(map(atp.static_limit, x_m), float, count=len(x_m))
+    starts, limits = np.array(atp.limit_starts), np.array(atp.limits)
     curves = static.copy()
     for k in range(1, len(limits)):
         if limits[k] < limits[k - 1]:
