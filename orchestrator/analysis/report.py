@@ -26,6 +26,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from orchestrator.analysis.verdict import safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
@@ -382,14 +383,8 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
     stops, others = [], []
     for train in summary.get("trains", []):
         for stop in train.get("stops", []):
-            missed = stop.get("reached") is False
-            sched, arrival = stop.get("scheduled_arrival_s"), stop.get("arrival_s")
-            dev, error = stop.get("arrival_deviation_s"), stop.get("stop_error_m")
-            stops.append([train["name"], str(stop.get("station")), "" if sched is None else f"{sched:.0f}",
-                          "" if missed or arrival is None else f"{arrival:.1f}",
-                          "" if missed or dev is None else f"{dev:+.1f}",
-                          "" if missed or error is None else f"{error:+.2f}",
-                          "not reached" if missed else "reached"])
+            *cells, reached = stop_cells(stop)
+            stops.append([train["name"], *cells, "reached" if reached else "not reached"])
         if "atp_interventions" in train:
             others.append((f"train {train['name']}: supervision",
                            f"energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
@@ -405,8 +400,6 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
                        f"wrong-side failures {rx['wrong_side_failures']}, unsafe indications "
                        f"{rx.get('unsafe_indications', '?')}"))
     if summary.get("receivers"):
-        from orchestrator.analysis.verdict import safety_verdict
-
         verdict = safety_verdict(summary)[1]
         others.append(("safety", verdict[len("safety: "):] if verdict.startswith("safety: ") else verdict))
     return stops, others
@@ -471,15 +464,9 @@ def verdict_table(summary: dict) -> str:
     lines.append(f"{'train':12s} {'station':8s} {'sched. arr.':>11s} {'arrival':>9s} {'dev. s':>7s} {'stop err m':>10s}")
     for train in summary.get("trains", []):
         for stop in train.get("stops", []):
-            sched = stop.get("scheduled_arrival_s")
-            dev = stop.get("arrival_deviation_s")
-            if not stop.get("reached", True):      # missed, or the run ended before it
-                lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
-                             f"{'' if sched is None else f'{sched:.0f}':>11s} {'not reached':>9s}")
-                continue
-            lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
-                         f"{'' if sched is None else f'{sched:.0f}':>11s} {stop.get('arrival_s', 0):9.1f} "
-                         f"{'' if dev is None else f'{dev:+.1f}':>7s} {stop.get('stop_error_m', 0):+10.2f}")
+            station, sched, arrival, dev, error, reached = stop_cells(stop)
+            figures = f"{arrival:>9s} {dev:>7s} {error:>10s}" if reached else f"{'not reached':>9s}"
+            lines.append(f"{train['name']:12s} {station:8s} {sched:>11s} {figures}")
         if "atp_interventions" in train:
             lines.append(f"{train['name']:12s} energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
                          f"{train.get('max_overspeed_kmh', 0):.1f} km/h, ATP interventions {train['atp_interventions']}, "
@@ -491,8 +478,6 @@ def verdict_table(summary: dict) -> str:
                      f"{rx.get('decoded_codes', '?')}, errors {rx.get('code_errors', '?')}, wrong-side failures "
                      f"{rx['wrong_side_failures']}, unsafe indications {rx.get('unsafe_indications', '?')}")
     if summary.get("receivers"):
-        from orchestrator.analysis.verdict import safety_verdict
-
         lines.append(safety_verdict(summary)[1])
     if summary.get("scenario"):
         lines.append(f"scenario: {len(summary['scenario']['events_applied'])} events applied "

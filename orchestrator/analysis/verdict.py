@@ -601,16 +601,27 @@ def transmitted_indication(system, code: int, category: str):
     return None if command is None else system.indication(command, category)
 
 
+def stop_cells(stop: dict) -> Tuple[str, str, str, str, str, bool]:
+    """One stop of a train's summary entry as the CLI and the report show its figures:
+    (station, scheduled arrival ``1015``, arrival ``1014.9``, deviation ``+0.0`` s, stop error
+    ``-0.16`` m, reached); a figure not known, or of a stop not reached, is ``""``."""
+    reached = bool(stop.get("reached", True))
+
+    def shown(key: str, form: str) -> str:
+        value = stop.get(key)
+        return "" if value is None or not reached else format(value, form)
+
+    scheduled = stop.get("scheduled_arrival_s")
+    return (str(stop.get("station")), "" if scheduled is None else f"{scheduled:.0f}", shown("arrival_s", ".1f"),
+            shown("arrival_deviation_s", "+.1f"), shown("stop_error_m", "+.2f"), reached)
+
+
 def stop_text(stop: dict) -> str:
-    """One stop of a train's summary entry as the CLI and the report show it:
-    ``B +0.0 s / -0.16 m``, or ``C not reached (due 1015 s)``."""
-    station = stop.get("station")
-    if not stop.get("reached", True):
-        due = stop.get("scheduled_arrival_s")
-        return f"{station} not reached" + ("" if due is None else f" (due {due:.0f} s)")
-    deviation = stop.get("arrival_deviation_s")
-    timing = f"{deviation:+.1f} s" if deviation is not None else f"at {stop.get('arrival_s', 0.0):.1f} s"
-    return f"{station} {timing} / {stop.get('stop_error_m', 0.0):+.2f} m"
+    """One stop in a few words: ``B +0.0 s / -0.16 m``, or ``C not reached (due 1015 s)``."""
+    station, due, arrival, deviation, error, reached = stop_cells(stop)
+    if not reached:
+        return f"{station} not reached" + (f" (due {due} s)" if due else "")
+    return f"{station} {f'{deviation} s' if deviation else f'at {arrival} s'} / {error} m"
 
 
 def missed_stops(summary: dict) -> List[Tuple[str, str]]:
