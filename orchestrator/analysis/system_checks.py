@@ -199,15 +199,23 @@ def _stock_name(node) -> str:
     return f"{Path(str(value)).name}" if value else f"the bundled default {Path(DEFAULT_ROLLING_STOCK).name}"
 
 
-def _load(loader: Callable, path: Path, what: str):
+def load_data_file(loader: Callable, path: Path, labelled: Callable[[str], str]):
+    """``loader(path)``, a file it refuses a UserError: the loader's one line (or what Python's
+    JSON reader met: a document nested too deeply, bytes that are not UTF-8) as ``labelled``
+    words it with what names the file (a component's field, a command-line option)."""
     try:
         return loader(path)
     except FmuInputError as error:
-        raise UserError(f"{error} ({what})") from None
+        problem = str(error)
     except RecursionError:
-        raise UserError(f"{path}: not valid JSON (nested too deeply) ({what})") from None
+        problem = f"{path}: not valid JSON (nested too deeply)"
     except UnicodeDecodeError:
-        raise UserError(f"{path}: not valid JSON (not UTF-8 text) ({what})") from None
+        problem = f"{path}: not valid JSON (not UTF-8 text)"
+    raise UserError(labelled(problem))
+
+
+def _load(loader: Callable, path: Path, what: str):
+    return load_data_file(loader, path, lambda problem: f"{problem} ({what})")
 
 
 def _same_file(a: Path, b: Path) -> bool:
