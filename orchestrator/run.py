@@ -98,9 +98,9 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         raise _os_error(error) from None
     try:
         flag.check("before the run started")
-        plan = _plan(system, options, _raise)
+        plan = _plan(system, options)
         _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-        _warn_rounded_stop(options, system, plan)
+        _warn_rounded_stop(options, plan)
         flag.check("before the run started")
     except Interrupted as stop:
         system.close()
@@ -109,7 +109,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         system.close()
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
-    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    start_ticks = plan.start_ticks
     stop_ticks = round(stop_s * TICKS_PER_SECOND)
     interval_ticks, recorded, captures = plan.interval_ticks, plan.recorded, plan.captures
     workdir: Optional[Path] = None
@@ -141,31 +141,32 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
 
 
 # ---- options and loading -------------------------------------------------------------------------
+#: a --capture and the frame elements it records, one list per row, each in sample order
+Capture = Tuple[CaptureRequest, List[List[str]]]
+
+
 @dataclass
 class _Plan:
     """What a run is made from, decided before any component exists (each part a UserError
     when the system, its data or the options are wrong)."""
 
     graph: SystemGraph
+    start_ticks: int = 0
     scenario: Optional[ScenarioManipulator] = None
     stop_s: Optional[float] = None
     interval_ticks: Optional[int] = None
     recorded: List[tuple] = field(default_factory=list)
-    captures: List[Tuple[CaptureRequest, List[str]]] = field(default_factory=list)
+    captures: List[Capture] = field(default_factory=list)
     judges: Sequence[SummaryObserver] = ()
 
 
-def _raise(step: Callable[[], object]):
-    return step()
-
-
 def _plan(system: SystemDescription, options: RunOptions,
-          attempt: Callable[[Callable[[], object]], object]) -> _Plan:
+          attempt: Callable[[Callable[[], object]], object] = lambda step: step()) -> _Plan:
     """The graph (needed by everything after it), then each further part through ``attempt``:
-    a run lets the first problem raise (:func:`_raise`); :func:`check_system` notes each one
-    and goes on with what it can still check."""
+    a run lets the first problem raise (the default); :func:`check_system` notes each one and
+    goes on with what it can still check."""
     graph = _load_graph(system, options)
-    plan = _Plan(graph)
+    plan = _Plan(graph, start_ticks=round(system.start_time * TICKS_PER_SECOND))
     attempt(lambda: _refuse_connected_overrides(graph, options.overrides))
     plan.scenario = attempt(lambda: _scenario(system, graph, options))
     plan.stop_s = attempt(lambda: _stop_time(system, options, plan.scenario))
@@ -211,7 +212,7 @@ def check_system(system_path, options: RunOptions) -> List[str]:
             return _note(problems, error)
         if plan.stop_s is not None:         # what a run would warn about, said the same way
             _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-            _warn_rounded_stop(options, system, plan)
+            _warn_rounded_stop(options, plan)
         _initialise_only(plan, system, options, problems, refused)
     finally:
         system.close()
@@ -398,7 +399,7 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
     return chosen
 
 
-def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Tuple[CaptureRequest, List[str]]]:
+def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Capture]:
     """Each --capture as a request and the frame elements it records, in sample order."""
     captures = []
     for text in texts:
@@ -410,7 +411,7 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Tuple[CaptureReq
 
 
 def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulator],
-                      captures: List[Tuple[CaptureRequest, List[str]]], stop_s: float) -> None:
+                      captures: List[Capture], stop_s: float) -> None:
     """One warning line on stderr per capture window and per scenario event the run never
     reaches (they are kept out of the results, not refused: the same file serves shorter runs)."""
     for request, _ in captures:
@@ -425,11 +426,11 @@ def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulato
                              f"{stop_s:g} s; not applied")
 
 
-def _warn_rounded_stop(options: RunOptions, system: SystemDescription, plan: _Plan) -> None:
+def _warn_rounded_stop(options: RunOptions, plan: _Plan) -> None:
     """The master steps in whole base steps: a stop time between two of them ends the run at
     the next one, said in one warning line."""
     base = plan.graph.base_ticks
-    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    start_ticks = plan.start_ticks
     span = round(plan.stop_s * TICKS_PER_SECOND) - start_ticks
     if span % base:
         end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
@@ -525,7 +526,7 @@ def _interrupted_before_start(out: OutputFolder, system_name: str, stop: Interru
 
 # ---- observers, the run, the results -------------------------------------------------------------
 def _observers(out: Path, recorded: List[tuple], interval_ticks: int,
-               captures: List[Tuple[CaptureRequest, List[str]]], progress: Optional[ProgressBar],
+               captures: List[Capture], progress: Optional[ProgressBar],
                judges: Sequence[SummaryObserver]) -> List[Observer]:
     """results.csv, one capture file per --capture, the progress bar and the judges, in the
     order they are called after each tick."""
@@ -550,7 +551,7 @@ class _Setup:
     out: Path
     recorded: List[tuple]
     interval_ticks: int
-    captures: List[Tuple[CaptureRequest, List[str]]]
+    captures: List[Capture]
     progress: Optional[ProgressBar]
     scenario: Optional[ScenarioManipulator]
     flag: InterruptFlag

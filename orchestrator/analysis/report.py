@@ -26,7 +26,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.analysis.verdict import safety_verdict, stop_cells
+from orchestrator.analysis.verdict import safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
@@ -86,10 +86,15 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     return written
 
 
+def _parameters_of(components: Dict[str, dict], name: Optional[str]) -> dict:
+    """A component's parameters as metadata.json records them ({} for none or no component)."""
+    return components.get(name, {}).get("parameters", {}) if name else {}
+
+
 def _line_of(components: Dict[str, dict], ato: Optional[str]):
     from fmus.data.loader import DEFAULT_LINE, load_line
 
-    params = components.get(ato, {}).get("parameters", {}) if ato else {}
+    params = _parameters_of(components, ato)
     return load_line(params.get("line_file") or DEFAULT_LINE)
 
 
@@ -97,10 +102,6 @@ def _line_of(components: Dict[str, dict], ato: Optional[str]):
 #: colour); red-yellow is the two lights, a yellow band hatched red
 ASPECT_STYLES = {"white": ("#e8e8e8", None), "red": ("#d62728", None), "red-yellow": ("#ffd700", "#d62728"),
                  "yellow": ("#ffd700", None), "green": ("#2ca02c", None)}
-
-
-def _ato_of(components: Dict[str, dict], ato: Optional[str]) -> dict:
-    return components.get(ato, {}).get("parameters", {}) if ato else {}
 
 
 def static_speed_profile(line, params: dict, x_m: np.ndarray):
@@ -187,7 +188,7 @@ def _speed_distance(output: Path, results, trains, components, summary_events=()
         top = max(float(np.nanmax(speed, initial=0.0)), 10.0)
         key = []
         if ato and f"{ato}.v_atp" in results:
-            static, curves, decel = static_speed_profile(line, _ato_of(components, ato), grid_m)
+            static, curves, decel = static_speed_profile(line, _parameters_of(components, ato), grid_m)
             ax.plot(grid_m / 1000.0, static * 3.6, "r-", lw=1.0, label="static permitted speed (line limits)")
             ax.plot(grid_m / 1000.0, np.where(curves < static, curves, np.nan) * 3.6, "r--", lw=0.9,
                     label=f"braking curves to lower limits ({decel:.2f} m/s²)")
@@ -232,7 +233,7 @@ def restrictions_drawn(line, components, ato: Optional[str], events) -> List[tup
     """(start km, end km, speed km/h, label) of every temporary restriction the ATO ``ato`` was
     given: the line file's for its train category, and the scenario's ``restrict`` events (its
     ``tsr_*`` slots as set, ``t`` the time set)."""
-    params = components.get(ato, {}).get("parameters", {}) if ato else {}
+    params = _parameters_of(components, ato)
     category = params.get("train_category") or None
     drawn = [(r.start_m / 1000.0, r.end_m / 1000.0, r.speed_mps * 3.6, r.name or "restriction")
              for r in (line.restrictions_for(category) if category else line.restrictions)]
@@ -272,7 +273,7 @@ def _time_distance(output: Path, results, trains, components) -> Path:
         if not ato:
             continue
         line = _line_of(components, ato)
-        params = components.get(ato, {}).get("parameters", {})
+        params = _parameters_of(components, ato)
         try:
             timetable = load_timetable(params.get("timetable_file") or DEFAULT_TIMETABLE, line)
         except Exception:
@@ -316,7 +317,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     columns = [name for name in capture if name != "time"]
     emf = capture[columns[0]]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
-    params = components.get(receiver, {}).get("parameters", {}) if receiver else {}
+    params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
     filtered = lfilter(band.b, band.a, emf) if band is not None else None
     centre = at_s if at_s is not None else 0.5 * (t[0] + t[-1])
@@ -400,8 +401,7 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
                        f"wrong-side failures {rx['wrong_side_failures']}, unsafe indications "
                        f"{rx.get('unsafe_indications', '?')}"))
     if summary.get("receivers"):
-        verdict = safety_verdict(summary)[1]
-        others.append(("safety", verdict[len("safety: "):] if verdict.startswith("safety: ") else verdict))
+        others.append(("safety", safety_parts(summary)[1]))
     return stops, others
 
 

@@ -630,18 +630,25 @@ def missed_stops(summary: dict) -> List[Tuple[str, str]]:
             for stop in train.get("stops", []) if not stop.get("reached", True)]
 
 
-def safety_verdict(summary: dict) -> Tuple[bool, str]:
+def safety_parts(summary: dict) -> Tuple[bool, str]:
     """The run's safety verdict from summary.json: safe when no train passed a signal at danger
-    and no receiver had a wrong-side failure or an unsafe indication (docs/scenarios.md)."""
+    and no receiver had a wrong-side failure or an unsafe indication (docs/scenarios.md); the
+    text is the verdict and its counts (``safe (signals passed at danger 0, …)``)."""
     spad = sum(t.get("signals_passed_at_danger", 0) for t in summary.get("trains", []))
     wrong = sum(r.get("wrong_side_failures", 0) for r in summary.get("receivers", []))
     unsafe = sum(r.get("unsafe_indications", 0) for r in summary.get("receivers", []))
     unjudged = summary.get("receivers_not_judged", [])
     safe = spad == 0 and wrong == 0 and unsafe == 0 and not unjudged
     word = "UNSAFE" if spad or wrong or unsafe else ("not judged" if unjudged else "safe")
-    return safe, (f"safety: {word} (signals passed at danger {spad}, "
+    return safe, (f"{word} (signals passed at danger {spad}, "
                   f"wrong-side failures {wrong}, unsafe indications {unsafe}"
                   + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")")
+
+
+def safety_verdict(summary: dict) -> Tuple[bool, str]:
+    """:func:`safety_parts` as one line: ``safety: safe (…)``."""
+    safe, text = safety_parts(summary)
+    return safe, f"safety: {text}"
 
 
 def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> list:
