@@ -127,14 +127,19 @@ def _overrides(args) -> dict:
 def _run_options(args, overrides: dict, **more):
     """The options `run` and `validate` share (validate checks what run would meet), with the
     --set overrides parsed (:func:`_overrides`)."""
+    from functools import partial
+
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
-    return RunOptions(
+    options = RunOptions(
         stop_time=args.stop_time, overrides=overrides, param_sets=args.param_set or [],
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
-        scenario=args.scenario, default_scenario=not args.no_scenario, summaries=railway_verdicts, **more)
+        scenario=args.scenario, default_scenario=not args.no_scenario, **more)
+    # the railway checks' warnings (a rail line's train length) go where the run's own go
+    options.summaries = partial(railway_verdicts, warn=options.warn)
+    return options
 
 
 def _run_command(args) -> int:

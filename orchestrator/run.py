@@ -56,11 +56,11 @@ class RunOptions:
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
     #: observers that judge the run and contribute sections to summary.json, made from the
-    #: graph once it is built and given ``warn`` (the railway verdicts:
-    #: orchestrator.analysis.verdict.railway_verdicts)
-    summaries: Optional[Callable[[SystemGraph, Callable[[str], None]], Sequence[SummaryObserver]]] = None
+    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts,
+    #: bound to ``warn`` with functools.partial for its warnings to go there too)
+    summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
     #: one line per suspicious thing that still runs: a capture window or scenario event beyond
-    #: the stop time, a rounded stop time, a summary's own warnings (default: stderr)
+    #: the stop time, a rounded stop time (default: stderr)
     warn: Callable[[str], None] = field(default_factory=lambda: print_warning)
 
 
@@ -176,7 +176,7 @@ def _plan(system: SystemDescription, options: RunOptions,
     # the judges before the folder and the FMUs: making them checks the system's data files
     # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
-        plan.judges = attempt(lambda: list(options.summaries(graph, options.warn))) or []
+        plan.judges = attempt(lambda: list(options.summaries(graph))) or []
     return plan
 
 

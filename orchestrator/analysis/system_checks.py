@@ -49,10 +49,10 @@ def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_w
     def note(error: UserError, refused: Iterable[str] = ()) -> None:
         defects.append((str(error), frozenset(refused)))
 
-    def load(field: str, loader: Callable, default: Path, names: Iterable[str], cache: Dict[Path, object]):
+    def load(field: str, loader: Callable, default: Path, names: Iterable[str]) -> dict:
         """Each component's file of ``field``, loaded once per file; a file that does not load
         is one defect refusing every component that opens it. Returns component → loaded."""
-        paths = {}
+        paths, cache = {}, {}
         for name in names:
             node = graph.nodes[name]
             path = _data_path(node.parameters.get(field), default) if field in node.interface.variables else None
@@ -67,18 +67,17 @@ def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_w
                     note(error, [other for other, p in paths.items() if p == path])
         return {name: cache[path] for name, path in paths.items() if cache[path] is not None}
 
-    loaded: Dict[Path, Optional[Line]] = {}
-    lines = load("line_file", load_line, DEFAULT_LINE, graph.nodes, loaded)
+    lines: Dict[str, Line] = load("line_file", load_line, DEFAULT_LINE, graph.nodes)
     for line in {id(line): line for line in lines.values()}.values():
         try:
             check_sections_contiguous(line)
         except UserError as error:        # the FMUs run on such a line: nothing refuses it
             note(error)
     stocks: Dict[str, RollingStock] = load("rolling_stock_file", load_rolling_stock, DEFAULT_ROLLING_STOCK,
-                                           graph.nodes, {})
+                                           graph.nodes)
     for name in lines:                    # a timetable is read against its component's line
-        load("timetable_file", lambda p: load_timetable(p, lines[name]), DEFAULT_TIMETABLE, [name], {})
-    load("codes_file", alsn.load_transmitters, alsn.CODES_FILE, graph.nodes, {})
+        load("timetable_file", lambda p: load_timetable(p, lines[name]), DEFAULT_TIMETABLE, [name])
+    load("codes_file", alsn.load_transmitters, alsn.CODES_FILE, graph.nodes)
     paths = {name: _data_path(graph.nodes[name].parameters.get("line_file"), DEFAULT_LINE) for name in lines}
     for error in shared_line_problems(graph, paths):
         note(error)

@@ -654,8 +654,9 @@ def safety_verdict(summary: dict) -> Tuple[bool, str]:
 def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> list:
     """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
     headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
-    ``RunOptions.summaries``. The system's railway data are checked first (a bad one is a
-    UserError before the run starts, what is suspicious goes to ``warn``:
+    ``RunOptions.summaries`` (``functools.partial(railway_verdicts, warn=options.warn)`` to send
+    its warnings where the run's go). The system's railway data are checked first (a bad one is
+    a UserError before the run starts, what is suspicious goes to ``warn``:
     orchestrator/analysis/system_checks.py)."""
     from orchestrator.analysis.system_checks import check_railway_data
 
