@@ -124,28 +124,34 @@ def _overrides(args) -> dict:
     return overrides
 
 
-def _run_options(args, **more):
-    """The options `run` and `validate` share (validate checks what run would meet)."""
+def _run_options(args, overrides: dict, **more):
+    """The options `run` and `validate` share (validate checks what run would meet), with the
+    --set overrides parsed (:func:`_overrides`)."""
+    from functools import partial
+
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
-    return RunOptions(
-        stop_time=args.stop_time, overrides=_overrides(args), param_sets=args.param_set or [],
+    options = RunOptions(
+        stop_time=args.stop_time, overrides=overrides, param_sets=args.param_set or [],
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
-        scenario=args.scenario, default_scenario=not args.no_scenario, summaries=railway_verdicts, **more)
+        scenario=args.scenario, default_scenario=not args.no_scenario, **more)
+    # the railway checks' warnings (a rail line's train length) go where the run's own go
+    options.summaries = partial(railway_verdicts, warn=options.warn)
+    return options
 
 
 def _run_command(args) -> int:
     from orchestrator.run import run_system
 
     system = _system_path(args.system)
-    _overrides(args)                # a malformed --set is refused before the build
+    overrides = _overrides(args)    # a malformed --set is refused before the build
     if not args.no_build:
         from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
-    options = _run_options(args, output_dir=Path(args.output), progress=sys.stderr.isatty())
+    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty())
     result = run_system(system, options)
     summary = result.summary
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
@@ -244,7 +250,7 @@ def cmd_validate(args) -> int:
     # everything a run with these options would refuse before its first step: the SSD and its
     # parameter sets, the FMUs' ports, connections, units, steps, the data files, the scenario,
     # and each component instantiated and initialised with its parameters (as run does)
-    problems = check_system(_system_path(args.target), _run_options(args))
+    problems = check_system(_system_path(args.target), _run_options(args, _overrides(args)))
     for problem in problems:
         print(f"railcosim: error: {problem}", file=sys.stderr)
     if problems:

@@ -1,6 +1,7 @@
 """Errors the CLI turns into one line on stderr and exit code 2."""
 import os
-from typing import Dict
+import sys
+from typing import Dict, FrozenSet, List, Sequence, Tuple
 
 #: extraction folder of an .ssp archive → the archive as the user named it (orchestrator/ssp.py
 #: registers each folder it unpacks); see :func:`shown_paths`
@@ -40,8 +41,32 @@ class UserError(Exception):
         super().__init__(shown_paths(str(message)), *rest)
 
 
+class RefusedComponents(UserError):
+    """Problems found before the components are made (orchestrator/analysis/system_checks.py),
+    each with the components that would refuse the same problem at their initialisation.
+
+    The message is the first problem (a run stops there, in one line); ``problems`` holds every
+    one as (text, component names), so ``railcosim validate`` lists them all and does not
+    initialise those components to meet the same problem again."""
+
+    def __init__(self, problems: Sequence[Tuple[str, FrozenSet[str]]]):
+        super().__init__(problems[0][0])
+        self.problems: List[Tuple[str, FrozenSet[str]]] = [(shown_paths(str(text)), frozenset(names))
+                                                            for text, names in problems]
+
+    @property
+    def refused(self) -> FrozenSet[str]:
+        """Every component some problem names."""
+        return frozenset().union(*(names for _, names in self.problems))
+
+
 class SimulationError(UserError):
     """A component failed during a run; results computed so far have been written."""
+
+
+def print_warning(message: str) -> None:
+    """One warning line on stderr (the message's line breaks and runs of spaces made one space)."""
+    print(f"railcosim: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
 def where(path, line=None) -> str:

@@ -175,10 +175,17 @@ def sample_times(start_ticks: int, step_ticks: int, n: int) -> List[str]:
     from the integer clock: start + k·step/N ticks, exact (no float rounding) when a whole
     number of nanoseconds, else the shortest decimal of the nearest float."""
     numerators = start_ticks * n + np.arange(n, dtype=np.int64) * step_ticks
-    if np.all(numerators % n == 0):
+    return _instants(numerators, n, step_ticks % n == 0)
+
+
+def _instants(numerators: np.ndarray, n: int, whole: bool) -> List[str]:
+    """Sample instants numerator/N ticks as text (:func:`sample_times`); ``whole``: every
+    instant of the frame is a whole number of ticks (step·k/N is for every k when N divides
+    the step), written exactly."""
+    if whole:
         ticks = numerators // n
-        whole, nanos = np.divmod(np.abs(ticks), TICKS_PER_SECOND)
-        text = np.char.add(np.char.mod("%d.", whole), np.char.zfill(np.char.mod("%d", nanos), 9))
+        whole_s, nanos = np.divmod(np.abs(ticks), TICKS_PER_SECOND)
+        text = np.char.add(np.char.mod("%d.", whole_s), np.char.zfill(np.char.mod("%d", nanos), 9))
         text = np.char.rstrip(np.char.rstrip(text, "0"), ".")
         return list(np.char.add(np.where(ticks < 0, "-", ""), text))
     return [repr(float(t)) for t in numerators / (n * TICKS_PER_SECOND)]
@@ -201,7 +208,14 @@ class WaveformCapture(Observer):
         slots = [[master.output_slot(self.request.component, e) for e in row] for row in self.elements]
         self._buffer = slots[0][0][0]
         self._index = np.array([[i for _, i in row] for row in slots])      # (rows, N)
-        self._step_ticks = master.graph.nodes[self.request.component].step_ticks
+        n = self._index.shape[1]
+        step_ticks = master.graph.nodes[self.request.component].step_ticks
+        # sample k of the step from ``start`` is at (start·N + k·h) / N ticks: the window and
+        # the samples are compared (and written) in integers
+        self._step_ticks, self._offsets = step_ticks, np.arange(n, dtype=np.int64) * step_ticks
+        self._t0_ticks = round(self.request.t0 * TICKS_PER_SECOND)
+        self._t1_ticks = round(self.request.t1 * TICKS_PER_SECOND)
+        self._whole = step_ticks % n == 0
         self._file = open_for_writing(self.path)
         try:
             self._file.write(",".join(["time"] + self.request.columns(self.elements)) + "\n")
@@ -212,24 +226,19 @@ class WaveformCapture(Observer):
         if self.request.component not in step.stepped:
             return
         start_ticks = step.tick - master.graph.base_ticks      # the step began one base step ago
-        t0_ticks = round(self.request.t0 * TICKS_PER_SECOND)
-        t1_ticks = round(self.request.t1 * TICKS_PER_SECOND)
-        if start_ticks + self._step_ticks <= t0_ticks or start_ticks >= t1_ticks:
+        if start_ticks + self._step_ticks <= self._t0_ticks or start_ticks >= self._t1_ticks:
             return
         master.fresh(self.request.component)
         n = self._index.shape[1]
-        # sample k at (start·N + k·h) / N ticks: compared and written in integers
-        numerators = start_ticks * n + np.arange(n, dtype=np.int64) * self._step_ticks
-        keep = (numerators >= t0_ticks * n) & (numerators < t1_ticks * n)
+        numerators = start_ticks * n + self._offsets
+        keep = (numerators >= self._t0_ticks * n) & (numerators < self._t1_ticks * n)
         if not keep.any():
             return
-        times = np.array(sample_times(start_ticks, self._step_ticks, n))[keep]
-        values = np.char.mod("%.17g", np.asarray(self._buffer.values[self._index], dtype=float)[:, keep])
-        lines = times
-        for row in values:
-            lines = np.char.add(np.char.add(lines, ","), row)
+        times = _instants(numerators[keep], n, self._whole)
+        values = np.char.mod("%.17g", np.asarray(self._buffer.values[self._index[:, keep]], dtype=float))
+        text = "".join(",".join(sample) + "\n" for sample in zip(times, *values))
         try:
-            self._file.write("\n".join(lines) + "\n")
+            self._file.write(text)
         except OSError as error:
             raise cannot_write(self.path, error) from None
 

@@ -11,17 +11,15 @@ import fcntl
 import json
 import math
 import os
-import re
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
 
 from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
-from orchestrator.errors import UserError, shown_paths
+from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.interrupts import InterruptFlag, Interrupted
@@ -58,10 +56,12 @@ class RunOptions:
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
     #: observers that judge the run and contribute sections to summary.json, made from the
-    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts)
+    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts,
+    #: bound to ``warn`` with functools.partial for its warnings to go there too)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
-    #: one line per capture window or scenario event beyond the stop time (default: stderr)
-    warn: Callable[[str], None] = field(default_factory=lambda: _stderr_warning)
+    #: one line per suspicious thing that still runs: a capture window or scenario event beyond
+    #: the stop time, a rounded stop time (default: stderr)
+    warn: Callable[[str], None] = field(default_factory=lambda: print_warning)
 
 
 @dataclass
@@ -98,9 +98,9 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         raise _os_error(error) from None
     try:
         flag.check("before the run started")
-        plan = _plan(system, options, _raise)
+        plan = _plan(system, options)
         _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-        _warn_rounded_stop(options, system, plan)
+        _warn_rounded_stop(options, plan)
         flag.check("before the run started")
     except Interrupted as stop:
         system.close()
@@ -109,7 +109,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         system.close()
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
-    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    start_ticks = plan.start_ticks
     stop_ticks = round(stop_s * TICKS_PER_SECOND)
     interval_ticks, recorded, captures = plan.interval_ticks, plan.recorded, plan.captures
     workdir: Optional[Path] = None
@@ -141,31 +141,32 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
 
 
 # ---- options and loading -------------------------------------------------------------------------
+#: a --capture and the frame elements it records, one list per row, each in sample order
+Capture = Tuple[CaptureRequest, List[List[str]]]
+
+
 @dataclass
 class _Plan:
     """What a run is made from, decided before any component exists (each part a UserError
     when the system, its data or the options are wrong)."""
 
     graph: SystemGraph
+    start_ticks: int = 0
     scenario: Optional[ScenarioManipulator] = None
     stop_s: Optional[float] = None
     interval_ticks: Optional[int] = None
     recorded: List[tuple] = field(default_factory=list)
-    captures: List[Tuple[CaptureRequest, List[str]]] = field(default_factory=list)
+    captures: List[Capture] = field(default_factory=list)
     judges: Sequence[SummaryObserver] = ()
 
 
-def _raise(step: Callable[[], object]):
-    return step()
-
-
 def _plan(system: SystemDescription, options: RunOptions,
-          attempt: Callable[[Callable[[], object]], object]) -> _Plan:
+          attempt: Callable[[Callable[[], object]], object] = lambda step: step()) -> _Plan:
     """The graph (needed by everything after it), then each further part through ``attempt``:
-    a run lets the first problem raise (:func:`_raise`); :func:`check_system` notes each one
-    and goes on with what it can still check."""
+    a run lets the first problem raise (the default); :func:`check_system` notes each one and
+    goes on with what it can still check."""
     graph = _load_graph(system, options)
-    plan = _Plan(graph)
+    plan = _Plan(graph, start_ticks=round(system.start_time * TICKS_PER_SECOND))
     attempt(lambda: _refuse_connected_overrides(graph, options.overrides))
     plan.scenario = attempt(lambda: _scenario(system, graph, options))
     plan.stop_s = attempt(lambda: _stop_time(system, options, plan.scenario))
@@ -185,10 +186,16 @@ def check_system(system_path, options: RunOptions) -> List[str]:
     the data files, and each component instantiated, given its parameters and initialised
     together as a run does. One line per problem; empty when the run would start."""
     problems: List[str] = []
+    refused: Set[str] = set()           # components whose problem is said already: not initialised
 
     def attempt(step):
         try:
             return step()
+        except RefusedComponents as error:
+            for text, names in error.problems:
+                _note(problems, UserError(text))
+                refused.update(names)
+            return None
         except UserError as error:
             _note(problems, error)
             return None
@@ -205,8 +212,8 @@ def check_system(system_path, options: RunOptions) -> List[str]:
             return _note(problems, error)
         if plan.stop_s is not None:         # what a run would warn about, said the same way
             _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-            _warn_rounded_stop(options, system, plan)
-        _initialise_only(plan, system, options, problems)
+            _warn_rounded_stop(options, plan)
+        _initialise_only(plan, system, options, problems, refused)
     finally:
         system.close()
     return problems
@@ -219,35 +226,28 @@ def _note(problems: List[str], error: BaseException) -> List[str]:
     return problems
 
 
-def _before_origin(problem: str) -> str:
-    """A problem without its closing ``(component.parameter)``."""
-    return re.sub(r"\s*\([\w.]+\)$", "", problem)
-
-
 class _Checked:
     """A slave as ``railcosim validate`` drives it: a lifecycle call that fails is noted, not
     raised, and the component's later calls are skipped, so the initialisation goes on and
-    every component's problem is seen (the others get the values a run would give them)."""
+    every component's problem is seen (the others get the values a run would give them).
+    A ``refused`` component (its problem found by the checks before) is instantiated, so that
+    it can be bound, and nothing more: the same problem is not met again."""
 
-    def __init__(self, slave: Slave, problems: List[str]):
+    def __init__(self, slave: Slave, problems: List[str], refused: bool = False):
         self._slave, self._problems, self.failed = slave, problems, False
-        self._instantiated = False
+        self._instantiated, self._refused = False, refused
 
     def __getattr__(self, name):                  # inputs, outputs and whatever else is read
         return getattr(self._slave, name)
 
     def _call(self, method: str, *args) -> None:
-        if self.failed:
+        if self.failed or (self._refused and method != "instantiate"):
             return
         try:
             getattr(self._slave, method)(*args)
         except Exception as error:
             self.failed = True
-            # a data file the checks before already named (``… (ato.line_file)``) is the same
-            # problem seen again by the component: said once
-            text = " ".join(str(error).split())
-            if not any(_before_origin(seen) in text for seen in self._problems):
-                _note(self._problems, error)
+            _note(self._problems, error)
 
     def instantiate(self) -> None:                # instantiated once, before the master is made
         if not self._instantiated:
@@ -285,15 +285,18 @@ class _Checked:
         self._slave.free()
 
 
-def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str]) -> None:
+def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str],
+                     refused: Set[str]) -> None:
     """Instantiate every component, then bind and initialise them together as a run does
-    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written."""
+    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written.
+    The ``refused`` components (their problem noted by the checks before) are only
+    instantiated and bound."""
     workdir = new_workdir()
     slaves: Dict[str, Slave] = {}
     try:
         def make(name, node):
             slave = _Checked(make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process),
-                             problems)
+                             problems, refused=name in refused)
             slave.instantiate()
             return slave
 
@@ -396,7 +399,7 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
     return chosen
 
 
-def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Tuple[CaptureRequest, List[str]]]:
+def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Capture]:
     """Each --capture as a request and the frame elements it records, in sample order."""
     captures = []
     for text in texts:
@@ -408,7 +411,7 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Tuple[CaptureReq
 
 
 def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulator],
-                      captures: List[Tuple[CaptureRequest, List[str]]], stop_s: float) -> None:
+                      captures: List[Capture], stop_s: float) -> None:
     """One warning line on stderr per capture window and per scenario event the run never
     reaches (they are kept out of the results, not refused: the same file serves shorter runs)."""
     for request, _ in captures:
@@ -423,20 +426,16 @@ def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulato
                              f"{stop_s:g} s; not applied")
 
 
-def _warn_rounded_stop(options: RunOptions, system: SystemDescription, plan: _Plan) -> None:
+def _warn_rounded_stop(options: RunOptions, plan: _Plan) -> None:
     """The master steps in whole base steps: a stop time between two of them ends the run at
     the next one, said in one warning line."""
     base = plan.graph.base_ticks
-    start_ticks = round(system.start_time * TICKS_PER_SECOND)
+    start_ticks = plan.start_ticks
     span = round(plan.stop_s * TICKS_PER_SECOND) - start_ticks
     if span % base:
         end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
         options.warn(f"stop time {plan.stop_s:g} s is not a whole number of base steps "
                      f"({base / TICKS_PER_SECOND:g} s) after the start; the run ends at {end_s:g} s")
-
-
-def _stderr_warning(message: str) -> None:
-    print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
 
 
 # ---- the output folder ---------------------------------------------------------------------------
@@ -527,7 +526,7 @@ def _interrupted_before_start(out: OutputFolder, system_name: str, stop: Interru
 
 # ---- observers, the run, the results -------------------------------------------------------------
 def _observers(out: Path, recorded: List[tuple], interval_ticks: int,
-               captures: List[Tuple[CaptureRequest, List[str]]], progress: Optional[ProgressBar],
+               captures: List[Capture], progress: Optional[ProgressBar],
                judges: Sequence[SummaryObserver]) -> List[Observer]:
     """results.csv, one capture file per --capture, the progress bar and the judges, in the
     order they are called after each tick."""
@@ -552,7 +551,7 @@ class _Setup:
     out: Path
     recorded: List[tuple]
     interval_ticks: int
-    captures: List[Tuple[CaptureRequest, List[str]]]
+    captures: List[Capture]
     progress: Optional[ProgressBar]
     scenario: Optional[ScenarioManipulator]
     flag: InterruptFlag

@@ -60,6 +60,11 @@ def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestrictio
             if v > 0.0 and b > a]
 
 
+def default_atp_decel_mps2(stock) -> float:
+    """The ATP's supervision deceleration when parameter ``atp_decel`` is 0: 0.7 × the stock's service deceleration."""
+    return 0.7 * stock.service_decel
+
+
 @dataclass(frozen=True, slots=True)
 class BrakingTarget:
     """A point ahead the ATO brakes for: the train's head at ``position_m`` at no more than
@@ -145,7 +150,7 @@ class AtoCore:
         self.timetable = timetable
         self.train = NominalTrain(stock, line)
         self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else min(0.5, 0.6 * stock.service_decel)
-        a_atp = s.atp_decel_mps2 if s.atp_decel_mps2 > 0 else 0.7 * stock.service_decel
+        a_atp = s.atp_decel_mps2 if s.atp_decel_mps2 > 0 else default_atp_decel_mps2(stock)
         if self.a_plan >= a_atp:
             raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
                                 f"supervision deceleration {a_atp} m/s²")

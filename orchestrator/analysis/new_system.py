@@ -24,9 +24,8 @@ from typing import Optional, Sequence
 
 from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock,
                               load_timetable)
-from fmus.errors import FmuInputError
 from fmus.signalling.cab_systems import DIGITAL
-from orchestrator.analysis.system_checks import check_sections_contiguous
+from orchestrator.analysis.system_checks import check_sections_contiguous, load_data_file
 from orchestrator.analysis.systems import (cab_settings, check_placements, committed_ports, signal_chain,
                                            train_and_ato)
 from orchestrator.errors import UserError
@@ -53,19 +52,13 @@ class Sizes:
 def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
     """K, M, N of the rail line FMU in ``fmu_dir`` (``railcosim build --sections/--trains/
     --frame``), else of the committed contract (8, 2, 40)."""
-    fmu = Path(fmu_dir) / "RailLine.fmu" if fmu_dir else None
-    ports = fmu_ports(fmu.parent, fmu.name) if fmu is not None and fmu.is_file() else None
-    if ports is None:
-        ports = committed_ports(Path("."), "RailLine.fmu")
+    ports = built_ports(fmu_dir, "RailLine.fmu")
     k, n = ports["u_tx"]["shape"]
     return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
 
 
 def _load(loader, path: Path, option: str):
-    try:
-        return loader(path)
-    except FmuInputError as error:
-        raise UserError(f"{option}: {error}") from None
+    return load_data_file(loader, path, lambda problem: f"{option}: {problem}")
 
 
 def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],

@@ -26,7 +26,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.errors import UserError
+from orchestrator.analysis.verdict import safety_parts, safety_verdict, stop_cells
+from orchestrator.errors import UserError, print_warning
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
@@ -78,23 +79,22 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     if capture:
         written.append(capture)
     elif at_s is not None:
-        _notice(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
-                f"run with --capture rail.e_coil@T0:T1 for one")
+        print_warning(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
+                      f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
     written.append(write_html(output / "report.html", summary, written))
     return written
 
 
-def _notice(message: str) -> None:
-    import sys
-
-    print(f"railcosim: warning: {message}", file=sys.stderr)
+def _parameters_of(components: Dict[str, dict], name: Optional[str]) -> dict:
+    """A component's parameters as metadata.json records them ({} for none or no component)."""
+    return components.get(name, {}).get("parameters", {}) if name else {}
 
 
 def _line_of(components: Dict[str, dict], ato: Optional[str]):
     from fmus.data.loader import DEFAULT_LINE, load_line
 
-    params = components.get(ato, {}).get("parameters", {}) if ato else {}
+    params = _parameters_of(components, ato)
     return load_line(params.get("line_file") or DEFAULT_LINE)
 
 
@@ -104,10 +104,6 @@ ASPECT_STYLES = {"white": ("#e8e8e8", None), "red": ("#d62728", None), "red-yell
                  "yellow": ("#ffd700", None), "green": ("#2ca02c", None)}
 
 
-def _ato_of(components: Dict[str, dict], ato: Optional[str]) -> dict:
-    return components.get(ato, {}).get("parameters", {}) if ato else {}
-
-
 def static_speed_profile(line, params: dict, x_m: np.ndarray):
     """The ATP's static permitted speed along ``x_m`` (m/s) from the line file: the line limit
     for the train's category, held until the tail has cleared a lower limit
@@ -115,18 +111,17 @@ def static_speed_profile(line, params: dict, x_m: np.ndarray):
     v = sqrt(v_t² + 2·a·(x_t − x)) down to each lower limit x_t, with the ATP's supervision
     deceleration a (parameter ``atp_decel``, default 0.7 × the stock's service deceleration,
     as the ATO controller sets it). Returns (static, with_curves, a)."""
+    from fmus.ato_controller.atp import Atp
+    from fmus.ato_controller.core import default_atp_decel_mps2
     from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
 
     stock = load_rolling_stock(params.get("rolling_stock_file") or DEFAULT_ROLLING_STOCK)
     category = params.get("train_category") or stock.category
-    decel = float(params.get("atp_decel") or 0.0) or 0.7 * stock.service_decel
-    starts = np.array(line.limit_starts + [np.inf])
-    limits = np.array(line.limits_mps[category])
-    static = np.full(x_m.shape, np.inf)
-    tail = x_m - stock.length_m
-    for k, limit in enumerate(limits):          # a limit applies where the train overlaps its stretch
-        overlaps = (starts[k] <= x_m) & (starts[k + 1] > tail)
-        static = np.where(overlaps, np.minimum(static, limit), static)
+    decel = float(params.get("atp_decel") or 0.0) or default_atp_decel_mps2(stock)
+    # the ATP's own static limit at each point (no cab signal: the line's limits only)
+    atp = Atp(line, category, stock.length_m, "off", decel, 0.0)
+    static = np.fromiter(map(atp.static_limit, x_m), float, count=len(x_m))
+    starts, limits = np.array(atp.limit_starts), np.array(atp.limits)
     curves = static.copy()
     for k in range(1, len(limits)):
         if limits[k] < limits[k - 1]:
@@ -193,7 +188,7 @@ def _speed_distance(output: Path, results, trains, components, summary_events=()
         top = max(float(np.nanmax(speed, initial=0.0)), 10.0)
         key = []
         if ato and f"{ato}.v_atp" in results:
-            static, curves, decel = static_speed_profile(line, _ato_of(components, ato), grid_m)
+            static, curves, decel = static_speed_profile(line, _parameters_of(components, ato), grid_m)
             ax.plot(grid_m / 1000.0, static * 3.6, "r-", lw=1.0, label="static permitted speed (line limits)")
             ax.plot(grid_m / 1000.0, np.where(curves < static, curves, np.nan) * 3.6, "r--", lw=0.9,
                     label=f"braking curves to lower limits ({decel:.2f} m/s²)")
@@ -238,7 +233,7 @@ def restrictions_drawn(line, components, ato: Optional[str], events) -> List[tup
     """(start km, end km, speed km/h, label) of every temporary restriction the ATO ``ato`` was
     given: the line file's for its train category, and the scenario's ``restrict`` events (its
     ``tsr_*`` slots as set, ``t`` the time set)."""
-    params = components.get(ato, {}).get("parameters", {}) if ato else {}
+    params = _parameters_of(components, ato)
     category = params.get("train_category") or None
     drawn = [(r.start_m / 1000.0, r.end_m / 1000.0, r.speed_mps * 3.6, r.name or "restriction")
              for r in (line.restrictions_for(category) if category else line.restrictions)]
@@ -278,7 +273,7 @@ def _time_distance(output: Path, results, trains, components) -> Path:
         if not ato:
             continue
         line = _line_of(components, ato)
-        params = components.get(ato, {}).get("parameters", {})
+        params = _parameters_of(components, ato)
         try:
             timetable = load_timetable(params.get("timetable_file") or DEFAULT_TIMETABLE, line)
         except Exception:
@@ -322,7 +317,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     columns = [name for name in capture if name != "time"]
     emf = capture[columns[0]]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
-    params = components.get(receiver, {}).get("parameters", {}) if receiver else {}
+    params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
     filtered = lfilter(band.b, band.a, emf) if band is not None else None
     centre = at_s if at_s is not None else 0.5 * (t[0] + t[-1])
@@ -389,14 +384,8 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
     stops, others = [], []
     for train in summary.get("trains", []):
         for stop in train.get("stops", []):
-            missed = stop.get("reached") is False
-            sched, arrival = stop.get("scheduled_arrival_s"), stop.get("arrival_s")
-            dev, error = stop.get("arrival_deviation_s"), stop.get("stop_error_m")
-            stops.append([train["name"], str(stop.get("station")), "" if sched is None else f"{sched:.0f}",
-                          "" if missed or arrival is None else f"{arrival:.1f}",
-                          "" if missed or dev is None else f"{dev:+.1f}",
-                          "" if missed or error is None else f"{error:+.2f}",
-                          "not reached" if missed else "reached"])
+            *cells, reached = stop_cells(stop)
+            stops.append([train["name"], *cells, "reached" if reached else "not reached"])
         if "atp_interventions" in train:
             others.append((f"train {train['name']}: supervision",
                            f"energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
@@ -412,10 +401,7 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
                        f"wrong-side failures {rx['wrong_side_failures']}, unsafe indications "
                        f"{rx.get('unsafe_indications', '?')}"))
     if summary.get("receivers"):
-        from orchestrator.analysis.verdict import safety_verdict
-
-        verdict = safety_verdict(summary)[1]
-        others.append(("safety", verdict[len("safety: "):] if verdict.startswith("safety: ") else verdict))
+        others.append(("safety", safety_parts(summary)[1]))
     return stops, others
 
 
@@ -478,15 +464,9 @@ def verdict_table(summary: dict) -> str:
     lines.append(f"{'train':12s} {'station':8s} {'sched. arr.':>11s} {'arrival':>9s} {'dev. s':>7s} {'stop err m':>10s}")
     for train in summary.get("trains", []):
         for stop in train.get("stops", []):
-            sched = stop.get("scheduled_arrival_s")
-            dev = stop.get("arrival_deviation_s")
-            if not stop.get("reached", True):      # missed, or the run ended before it
-                lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
-                             f"{'' if sched is None else f'{sched:.0f}':>11s} {'not reached':>9s}")
-                continue
-            lines.append(f"{train['name']:12s} {str(stop.get('station')):8s} "
-                         f"{'' if sched is None else f'{sched:.0f}':>11s} {stop.get('arrival_s', 0):9.1f} "
-                         f"{'' if dev is None else f'{dev:+.1f}':>7s} {stop.get('stop_error_m', 0):+10.2f}")
+            station, sched, arrival, dev, error, reached = stop_cells(stop)
+            figures = f"{arrival:>9s} {dev:>7s} {error:>10s}" if reached else f"{'not reached':>9s}"
+            lines.append(f"{train['name']:12s} {station:8s} {sched:>11s} {figures}")
         if "atp_interventions" in train:
             lines.append(f"{train['name']:12s} energy {train.get('energy_kwh', 0):.1f} kWh, max overspeed "
                          f"{train.get('max_overspeed_kmh', 0):.1f} km/h, ATP interventions {train['atp_interventions']}, "
@@ -498,8 +478,6 @@ def verdict_table(summary: dict) -> str:
                      f"{rx.get('decoded_codes', '?')}, errors {rx.get('code_errors', '?')}, wrong-side failures "
                      f"{rx['wrong_side_failures']}, unsafe indications {rx.get('unsafe_indications', '?')}")
     if summary.get("receivers"):
-        from orchestrator.analysis.verdict import safety_verdict
-
         lines.append(safety_verdict(summary)[1])
     if summary.get("scenario"):
         lines.append(f"scenario: {len(summary['scenario']['events_applied'])} events applied "

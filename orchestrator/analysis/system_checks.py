@@ -15,22 +15,22 @@ find only at initialisation, or never.
 * a rail line's ``train_length[j]`` is the length in the rolling-stock file of the train on its
   slot j: a different one is a warning (the rail line would shunt a train of another length).
 
-Every defect is a UserError (one line, exit 2; docs/scenarios.md, "Systems, parameter sets and
-scenarios: bad input").
+Every defect is one line (exit 2; docs/scenarios.md, "Systems, parameter sets and scenarios:
+bad input"): a run stops at the first, ``railcosim validate`` lists them all.
 """
 from __future__ import annotations
 
 import filecmp
-import sys
+import math
 from pathlib import Path
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
 import fmus
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.signalling import alsn
-from orchestrator.errors import UserError
+from orchestrator.errors import RefusedComponents, UserError, print_warning
 from orchestrator.graph import SystemGraph
 
 #: a relative data file the graph did not resolve in the system is one of the FMU's own
@@ -41,39 +41,50 @@ LENGTH_TOLERANCE_M = 0.5        # a rail line's train_length against the rolling
 TRAIN_MODEL = "Traction"
 
 
-def check_railway_data(graph: SystemGraph, warn: Optional[Callable[[str], None]] = None) -> None:
-    """Raise a UserError for the first defect of the system's data files (module docstring);
-    ``warn`` (default: one line on stderr) gets what is suspicious but runs."""
-    lines: Dict[str, Path] = {}
-    stocks: Dict[str, RollingStock] = {}
-    loaded: Dict[Path, Line] = {}
-    for name, node in graph.nodes.items():
-        if "line_file" not in node.interface.variables:
-            continue
-        path = _data_path(node.parameters.get("line_file"), DEFAULT_LINE)
-        if path is None:
-            continue
-        if path not in loaded:
-            loaded[path] = _load(load_line, path, f"{name}.line_file")
-            check_sections_contiguous(loaded[path])
-        lines[name] = path
-    for name, node in graph.nodes.items():
-        variables = node.interface.variables
-        if "rolling_stock_file" in variables:
-            path = _data_path(node.parameters.get("rolling_stock_file"), DEFAULT_ROLLING_STOCK)
+def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> None:
+    """Raise a :class:`RefusedComponents` holding every defect of the system's data files
+    (module docstring), its message the first; ``warn`` gets what is suspicious but runs."""
+    defects: List[Tuple[str, FrozenSet[str]]] = []
+
+    def note(error: UserError, refused: Iterable[str] = ()) -> None:
+        defects.append((str(error), frozenset(refused)))
+
+    def load(field: str, loader: Callable, default: Path, names: Iterable[str]) -> dict:
+        """Each component's file of ``field``, loaded once per file; a file that does not load
+        is one defect refusing every component that opens it. Returns component → loaded."""
+        paths, cache = {}, {}
+        for name in names:
+            node = graph.nodes[name]
+            path = _data_path(node.parameters.get(field), default) if field in node.interface.variables else None
             if path is not None:
-                stocks[name] = _load(load_rolling_stock, path, f"{name}.rolling_stock_file")
-        if "timetable_file" in variables and name in lines:
-            path = _data_path(node.parameters.get("timetable_file"), DEFAULT_TIMETABLE)
-            if path is not None:
-                _load(lambda p: load_timetable(p, loaded[lines[name]]), path, f"{name}.timetable_file")
-        if "codes_file" in variables:
-            path = _data_path(node.parameters.get("codes_file"), alsn.CODES_FILE)
-            if path is not None:
-                _load(alsn.load_transmitters, path, f"{name}.codes_file")
-    check_shared_lines(graph, lines)
-    check_placements(graph, {name: loaded[path] for name, path in lines.items()}, stocks,
-                     warn or _stderr_warning)
+                paths[name] = path
+        for name, path in paths.items():
+            if path not in cache:
+                try:
+                    cache[path] = _load(loader, path, f"{name}.{field}")
+                except UserError as error:
+                    cache[path] = None
+                    note(error, [other for other, p in paths.items() if p == path])
+        return {name: cache[path] for name, path in paths.items() if cache[path] is not None}
+
+    lines: Dict[str, Line] = load("line_file", load_line, DEFAULT_LINE, graph.nodes)
+    for line in {id(line): line for line in lines.values()}.values():
+        try:
+            check_sections_contiguous(line)
+        except UserError as error:        # the FMUs run on such a line: nothing refuses it
+            note(error)
+    stocks: Dict[str, RollingStock] = load("rolling_stock_file", load_rolling_stock, DEFAULT_ROLLING_STOCK,
+                                           graph.nodes)
+    for name in lines:                    # a timetable is read against its component's line
+        load("timetable_file", lambda p: load_timetable(p, lines[name]), DEFAULT_TIMETABLE, [name])
+    load("codes_file", alsn.load_transmitters, alsn.CODES_FILE, graph.nodes)
+    paths = {name: _data_path(graph.nodes[name].parameters.get("line_file"), DEFAULT_LINE) for name in lines}
+    for error in shared_line_problems(graph, paths):
+        note(error)
+    for error, refused in placement_problems(graph, lines, stocks, warn):
+        note(error, refused)
+    if defects:
+        raise RefusedComponents(defects)
 
 
 def check_sections_contiguous(line: Line) -> None:
@@ -88,52 +99,77 @@ def check_sections_contiguous(line: Line) -> None:
                             "detected on track without a track circuit)")
 
 
-def check_shared_lines(graph: SystemGraph, lines: Dict[str, Path]) -> None:
-    """Components connected to each other that both take a line file run on the same line."""
+def shared_line_problems(graph: SystemGraph, lines: Dict[str, Path]) -> List[UserError]:
+    """Components connected to each other that both take a line file run on the same line:
+    one problem per connection between two different lines (nothing refuses it at
+    initialisation: each component runs on its own)."""
+    problems = []
     for edge in graph.edges:
         a, b = edge.source, edge.target
         if a == b or a not in lines or b not in lines or _same_file(lines[a], lines[b]):
             continue
         first, second = sorted((a, b))
-        raise UserError(f"{edge.origin}: {first}.line_file ({_shown(graph, first, lines)}) and "
-                        f"{second}.line_file ({_shown(graph, second, lines)}) differ, but "
-                        f"{edge.source}.{edge.source_var.name} feeds {edge.target}.{edge.target_var.name}: "
-                        "connected components (an ATO and its train, a train and its rail line, "
-                        "the rail line and its coder) must run on one line file")
+        problems.append(UserError(
+            f"{edge.origin}: {first}.line_file ({_shown(graph, first, lines)}) and "
+            f"{second}.line_file ({_shown(graph, second, lines)}) differ, but "
+            f"{edge.source}.{edge.source_var.name} feeds {edge.target}.{edge.target_var.name}: "
+            "connected components (an ATO and its train, a train and its rail line, "
+            "the rail line and its coder) must run on one line file"))
+    return problems
 
 
-def check_placements(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[str, RollingStock],
-                     warn: Callable[[str], None]) -> None:
+def placement_problems(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[str, RollingStock],
+                       warn: Callable[[str], None]) -> List[Tuple[UserError, FrozenSet[str]]]:
     """Every train on its line at t = 0, tail included; no two trains of one rail line
-    overlapping; each rail line's ``train_length[j]`` the length of the train on slot j."""
-    spans = {}                      # train → (tail, head) at t = 0
+    overlapping (the rail line refuses that at initialisation: it is the component named);
+    each rail line's ``train_length[j]`` the length of the train on slot j (a warning)."""
+    problems: List[Tuple[UserError, FrozenSet[str]]] = []
+    spans = {}                      # train → (name, head, length) at t = 0
     for name, node in graph.nodes.items():
         if node.interface.model_identifier != TRAIN_MODEL or name not in stocks or name not in lines:
             continue
         head_m, length_m, line = float(_parameter(node, "x0", 0.0)), stocks[name].length_m, lines[name]
-        tail_m = head_m - length_m
-        if tail_m < 0.0 or head_m > line.length_m:
+        spans[name] = (name, head_m, length_m)
+        for _, tail_m, _ in span_defects(line.length_m, [spans[name]])[0]:
             where = f"its tail at {tail_m:g} m is before the line start" if tail_m < 0.0 else "its head is beyond the line end"
-            raise UserError(f"{node.origin}: train {name!r} (head x0 = {head_m:g} m, {length_m:g} m long in "
-                            f"{_stock_name(node)}) is not on its line {Path(line.path).name} "
-                            f"(0..{line.length_m:g} m): {where}; place its head (x0) from {length_m:g} m to "
-                            f"{line.length_m:g} m")
-        spans[name] = (tail_m, head_m)
+            problems.append((UserError(
+                f"{node.origin}: train {name!r} (head x0 = {head_m:g} m, {length_m:g} m long in "
+                f"{_stock_name(node)}) is not on its line {Path(line.path).name} "
+                f"(0..{line.length_m:g} m): {where}; place its head (x0) from {length_m:g} m to "
+                f"{line.length_m:g} m"), frozenset()))
     for rail, node in graph.nodes.items():
         slots = sorted((int(e.target_var.name[len("x_head["):-1]), e.source) for e in graph.edges
                        if e.target == rail and e.target_var.name.startswith("x_head[") and e.source in spans)
         for slot, train in slots:
             given = _parameter(node, f"train_length[{slot}]", None)
-            length_m = spans[train][1] - spans[train][0]
+            length_m = spans[train][2]
             if given is not None and abs(float(given) - length_m) > LENGTH_TOLERANCE_M:
                 warn(f"{rail}.train_length[{slot}] = {float(given):g} m, but train {train!r} on that slot is "
                      f"{length_m:g} m long ({_stock_name(graph.nodes[train])}): the rail line shunts a train of "
                      f"another length; set {rail}.train_length[{slot}] = {length_m:g}")
-        placed = sorted((spans[train][0], spans[train][1], train) for _, train in slots)
-        for (_, head_m, behind), (tail_m, _, ahead) in zip(placed, placed[1:]):
-            if tail_m <= head_m:
-                raise UserError(f"{node.origin}: trains {behind!r} (head {head_m:g} m) and {ahead!r} (tail "
-                                f"{tail_m:g} m) overlap at t = 0 on rail line {rail!r}; place them apart (x0)")
+        if not slots:
+            continue
+        line_m = lines[rail].length_m if rail in lines else math.inf
+        for (behind, _, head_m), (ahead, tail_m, _) in span_defects(line_m, [spans[t] for _, t in slots])[1]:
+            problems.append((UserError(
+                f"{node.origin}: trains {behind!r} (head {head_m:g} m) and {ahead!r} (tail "
+                f"{tail_m:g} m) overlap at t = 0 on rail line {rail!r}; place them apart (x0)"), frozenset([rail])))
+    return problems
+
+
+Span = Tuple[str, float, float]                  # (train, tail_m, head_m)
+
+
+def span_defects(line_length_m: float, trains: Iterable[Tuple[str, float, float]]
+                 ) -> Tuple[List[Span], List[Tuple[Span, Span]]]:
+    """The placement rule at t = 0 for trains given as (name, head_m, length_m): each must lie
+    on the line 0..``line_length_m``, tail included, and no two of those on it may overlap
+    (touching counts). Returns (the spans off the line, the overlapping pairs (behind, ahead)),
+    spans as (name, tail_m, head_m), in order along the line; the callers word them."""
+    spans = sorted(((name, head - length, head) for name, head, length in trains), key=lambda s: (s[1], s[2], s[0]))
+    off = [s for s in spans if s[1] < 0.0 or s[2] > line_length_m]
+    on = [s for s in spans if not (s[1] < 0.0 or s[2] > line_length_m)]
+    return off, [(a, b) for a, b in zip(on, on[1:]) if b[1] <= a[2]]
 
 
 # ---- helpers -------------------------------------------------------------------------------------
@@ -162,19 +198,23 @@ def _stock_name(node) -> str:
     return f"{Path(str(value)).name}" if value else f"the bundled default {Path(DEFAULT_ROLLING_STOCK).name}"
 
 
-def _stderr_warning(message: str) -> None:
-    print(f"railcosim: warning: {' '.join(message.split())}", file=sys.stderr)
-
-
-def _load(loader: Callable, path: Path, what: str):
+def load_data_file(loader: Callable, path: Path, labelled: Callable[[str], str]):
+    """``loader(path)``, a file it refuses a UserError: the loader's one line (or what Python's
+    JSON reader met: a document nested too deeply, bytes that are not UTF-8) as ``labelled``
+    words it with what names the file (a component's field, a command-line option)."""
     try:
         return loader(path)
     except FmuInputError as error:
-        raise UserError(f"{error} ({what})") from None
+        problem = str(error)
     except RecursionError:
-        raise UserError(f"{path}: not valid JSON (nested too deeply) ({what})") from None
+        problem = f"{path}: not valid JSON (nested too deeply)"
     except UnicodeDecodeError:
-        raise UserError(f"{path}: not valid JSON (not UTF-8 text) ({what})") from None
+        problem = f"{path}: not valid JSON (not UTF-8 text)"
+    raise UserError(labelled(problem))
+
+
+def _load(loader: Callable, path: Path, what: str):
+    return load_data_file(loader, path, lambda problem: f"{problem} ({what})")
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import fmus
+from orchestrator.analysis.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
 from orchestrator.sspgen import write_ssd as _write_ssd
@@ -84,14 +85,15 @@ def stock_length_m(stock_file=None) -> float:
 
 def check_placements(line: dict, trains: Sequence[Tuple[str, float, float]]) -> None:
     """Refuse (ValueError) initial placements (name, head position, length) with a tail before
-    the line start or two trains overlapping: the rail line refuses them at initialisation."""
-    spans = sorted((head - length, head, name) for name, head, length in trains)
-    for tail, head, name in spans:
-        if tail < 0.0 or head > line["length_m"]:
-            raise ValueError(f"{name}: {tail:g}..{head:g} m is not on the line (0..{line['length_m']:g} m)")
-    for (_, head, name), (tail, _, other) in zip(spans, spans[1:]):
-        if tail <= head:
-            raise ValueError(f"{name} (head {head:g} m) overlaps {other} (tail {tail:g} m)")
+    the line start or two trains overlapping: the rail line refuses them at initialisation
+    (the rule: orchestrator/analysis/system_checks.py ``span_defects``)."""
+    off, overlaps = span_defects(line["length_m"], trains)
+    if off:
+        name, tail, head = off[0]
+        raise ValueError(f"{name}: {tail:g}..{head:g} m is not on the line (0..{line['length_m']:g} m)")
+    if overlaps:
+        (name, _, head), (other, tail, _) = overlaps[0]
+        raise ValueError(f"{name} (head {head:g} m) overlaps {other} (tail {tail:g} m)")
 
 
 def _stop_m(line: dict, station: str) -> float:

@@ -9,7 +9,7 @@ scheduled arrival) and every change of the aspect the ATP acted upon.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -24,6 +24,7 @@ from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, block_codes
 from fmus.signalling.digital import FREE_BLOCKS_OPEN
 
 from fmus.units import J_PER_KWH, KMH_PER_MPS
+from orchestrator.errors import print_warning
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
@@ -600,16 +601,27 @@ def transmitted_indication(system, code: int, category: str):
     return None if command is None else system.indication(command, category)
 
 
+def stop_cells(stop: dict) -> Tuple[str, str, str, str, str, bool]:
+    """One stop of a train's summary entry as the CLI and the report show its figures:
+    (station, scheduled arrival ``1015``, arrival ``1014.9``, deviation ``+0.0`` s, stop error
+    ``-0.16`` m, reached); a figure not known, or of a stop not reached, is ``""``."""
+    reached = bool(stop.get("reached", True))
+
+    def shown(key: str, form: str) -> str:
+        value = stop.get(key)
+        return "" if value is None or not reached else format(value, form)
+
+    scheduled = stop.get("scheduled_arrival_s")
+    return (str(stop.get("station")), "" if scheduled is None else f"{scheduled:.0f}", shown("arrival_s", ".1f"),
+            shown("arrival_deviation_s", "+.1f"), shown("stop_error_m", "+.2f"), reached)
+
+
 def stop_text(stop: dict) -> str:
-    """One stop of a train's summary entry as the CLI and the report show it:
-    ``B +0.0 s / -0.16 m``, or ``C not reached (due 1015 s)``."""
-    station = stop.get("station")
-    if not stop.get("reached", True):
-        due = stop.get("scheduled_arrival_s")
-        return f"{station} not reached" + ("" if due is None else f" (due {due:.0f} s)")
-    deviation = stop.get("arrival_deviation_s")
-    timing = f"{deviation:+.1f} s" if deviation is not None else f"at {stop.get('arrival_s', 0.0):.1f} s"
-    return f"{station} {timing} / {stop.get('stop_error_m', 0.0):+.2f} m"
+    """One stop in a few words: ``B +0.0 s / -0.16 m``, or ``C not reached (due 1015 s)``."""
+    station, due, arrival, deviation, error, reached = stop_cells(stop)
+    if not reached:
+        return f"{station} not reached" + (f" (due {due} s)" if due else "")
+    return f"{station} {f'{deviation} s' if deviation else f'at {arrival} s'} / {error} m"
 
 
 def missed_stops(summary: dict) -> List[Tuple[str, str]]:
@@ -618,26 +630,35 @@ def missed_stops(summary: dict) -> List[Tuple[str, str]]:
             for stop in train.get("stops", []) if not stop.get("reached", True)]
 
 
-def safety_verdict(summary: dict) -> Tuple[bool, str]:
+def safety_parts(summary: dict) -> Tuple[bool, str]:
     """The run's safety verdict from summary.json: safe when no train passed a signal at danger
-    and no receiver had a wrong-side failure or an unsafe indication (docs/scenarios.md)."""
+    and no receiver had a wrong-side failure or an unsafe indication (docs/scenarios.md); the
+    text is the verdict and its counts (``safe (signals passed at danger 0, …)``)."""
     spad = sum(t.get("signals_passed_at_danger", 0) for t in summary.get("trains", []))
     wrong = sum(r.get("wrong_side_failures", 0) for r in summary.get("receivers", []))
     unsafe = sum(r.get("unsafe_indications", 0) for r in summary.get("receivers", []))
     unjudged = summary.get("receivers_not_judged", [])
     safe = spad == 0 and wrong == 0 and unsafe == 0 and not unjudged
     word = "UNSAFE" if spad or wrong or unsafe else ("not judged" if unjudged else "safe")
-    return safe, (f"safety: {word} (signals passed at danger {spad}, "
+    return safe, (f"{word} (signals passed at danger {spad}, "
                   f"wrong-side failures {wrong}, unsafe indications {unsafe}"
                   + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")")
 
 
-def railway_verdicts(graph: SystemGraph) -> list:
+def safety_verdict(summary: dict) -> Tuple[bool, str]:
+    """:func:`safety_parts` as one line: ``safety: safe (…)``."""
+    safe, text = safety_parts(summary)
+    return safe, f"safety: {text}"
+
+
+def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> list:
     """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
     headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
-    ``RunOptions.summaries``. The system's railway data are checked first (a bad one is a
-    UserError before the run starts: orchestrator/analysis/system_checks.py)."""
+    ``RunOptions.summaries`` (``functools.partial(railway_verdicts, warn=options.warn)`` to send
+    its warnings where the run's go). The system's railway data are checked first (a bad one is
+    a UserError before the run starts, what is suspicious goes to ``warn``:
+    orchestrator/analysis/system_checks.py)."""
     from orchestrator.analysis.system_checks import check_railway_data
 
-    check_railway_data(graph)
+    check_railway_data(graph, warn)
     return [TrainVerdict(graph), ReceiverVerdict(graph)]

@@ -6,8 +6,8 @@ FMU inside the archive. Our runner resolves a relative data-file parameter again
 (docs/interfaces.md, "Data files"); another engine (libcosim, FMPy) passes the String as written,
 and the FMU then finds the file in its own resources (docs/third_party.md).
 
-An archive records a fingerprint of what it was packed from (the folder's files and the FMUs'
-bytes) in its zip comment; packing again with the same inputs leaves it untouched."""
+An archive records a fingerprint of what it was packed from (the folder's files, and each FMU's
+build content hash, or its bytes for an FMU built elsewhere) in its zip comment; packing again with the same inputs leaves it untouched."""
 from __future__ import annotations
 
 import hashlib
@@ -15,10 +15,11 @@ import os
 import tempfile
 import zipfile
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import List, Optional
 
 from lxml import etree
 
+from orchestrator.build.builder import stored_hash
 from orchestrator.ssp import NS
 
 
@@ -30,27 +31,37 @@ def _system_files(folder: Path) -> List[Path]:
     return [p for p in sorted(folder.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
 
 
-def _file_digest(path: Path, cache: Dict[Path, bytes]) -> bytes:
-    if path not in cache:
-        digest = hashlib.sha256()
-        with open(path, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-        cache[path] = digest.digest()
-    return cache[path]
+def _file_digest(path: Path) -> bytes:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.digest()
 
 
-def fingerprint(folder: Path, fmu_dir: Path, sources: List[str], cache: Optional[Dict[Path, bytes]] = None) -> bytes:
-    """What the archive of ``folder`` is made from: its files' names and bytes and those of the
-    FMUs it takes from ``fmu_dir``."""
-    cache = {} if cache is None else cache
+def _fmu_digest(fmu: Path) -> bytes:
+    """What an FMU is made from: the content hash our build stores in it (the same whenever it
+    is built from the same sources), else the hash of its bytes (a foreign FMU)."""
+    built = stored_hash(fmu)
+    return b"content_hash " + built.encode() if built else b"sha256 " + _file_digest(fmu)
+
+
+def fingerprint(folder: Path, fmu_dir: Path, sources: List[str]) -> bytes:
+    """What the archive of ``folder`` is made from: its files' names and bytes and the FMUs it
+    takes from ``fmu_dir`` (:func:`_fmu_digest`)."""
     digest = hashlib.sha256(PACK_FORMAT)
     for path in _system_files(folder):
-        digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + _file_digest(path, cache))
+        digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + _file_digest(path))
     for source in sorted(set(sources)):
         if not (folder / source).is_file():
-            digest.update(source.encode() + b"\0" + _file_digest(fmu_dir / Path(source).name, cache))
+            digest.update(source.encode() + b"\0" + _fmu_digest(fmu_dir / Path(source).name))
     return PACK_FORMAT + b" " + digest.hexdigest().encode()
+
+
+def _sources(folder: Path) -> List[str]:
+    """The FMU source of every component of the folder's SSD."""
+    root = etree.parse(str(folder / "SystemStructure.ssd")).getroot()
+    return [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component") if c.get("source")]
 
 
 def _packed_from(target: Path) -> Optional[bytes]:
@@ -61,19 +72,15 @@ def _packed_from(target: Path) -> Optional[bytes]:
         return None
 
 
-def pack_system(folder: Path, fmu_dir: Path, dest: Path, force: bool = False,
-                cache: Optional[Dict[Path, bytes]] = None) -> Path:
+def pack_system(folder: Path, fmu_dir: Path, dest: Path, force: bool = False) -> Path:
     """<dest>/<name>.ssp with the folder's files plus each component's FMU under its source path,
     unless an archive packed from the same inputs is there already (``force``: pack anyway)."""
-    return _pack(folder, fmu_dir, dest, force, cache)[0]
+    return _pack(folder, _sources(folder), fmu_dir, dest, force)[0]
 
 
-def _pack(folder: Path, fmu_dir: Path, dest: Path, force: bool, cache) -> "tuple[Path, bool]":
-    ssd = folder / "SystemStructure.ssd"
-    root = etree.parse(str(ssd)).getroot()
-    sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component") if c.get("source")]
+def _pack(folder: Path, sources: List[str], fmu_dir: Path, dest: Path, force: bool) -> "tuple[Path, bool]":
     target = dest / f"{folder.name}.ssp"
-    stamp = fingerprint(folder, fmu_dir, sources, cache)
+    stamp = fingerprint(folder, fmu_dir, sources)
     if not force and target.is_file() and _packed_from(target) == stamp:
         return target, False
     dest.mkdir(parents=True, exist_ok=True)
@@ -123,14 +130,12 @@ def pack_systems(ssp_root: Path, fmu_dir: Path, dest: Path, force: bool = False,
     """Pack every shipped system whose FMUs are all built (those whose inputs changed, or all
     with ``force``); returns every archive, and adds those written to ``repacked``."""
     packed = []
-    cache: Dict[Path, bytes] = {}
     if not ssp_root.is_dir():
         return packed
     for folder in sorted(p for p in ssp_root.iterdir() if (p / "SystemStructure.ssd").is_file()):
-        root = etree.parse(str(folder / "SystemStructure.ssd")).getroot()
-        sources = [c.get("source") for c in root.iter(f"{{{NS['ssd']}}}Component")]
+        sources = _sources(folder)
         if all((folder / s).is_file() or (fmu_dir / Path(s).name).is_file() for s in sources):
-            target, written = _pack(folder, fmu_dir, dest, force, cache)
+            target, written = _pack(folder, sources, fmu_dir, dest, force)
             packed.append(target)
             if written and repacked is not None:
                 repacked.append(target)
