@@ -11,11 +11,13 @@ pythonfmu's, when a C compiler is there (docs/architecture.md, "Forwarding binar
 """
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import importlib
 import json
+import os
 import shutil
-import functools
 import sys
 import tempfile
 import zipfile
@@ -156,15 +158,42 @@ def build_unit(spec: UnitSpec, dest: Path, config: BuildConfig = BuildConfig(),
     ``forwarder`` is what ``forwarder_plan()`` decides unless given (a test passes
     ``NoForwarder`` to build a plain pythonfmu FMU).
     """
-    from pythonfmu.builder import FmuBuilder
-
     dest.mkdir(parents=True, exist_ok=True)
     target = dest / f"{spec.model_identifier}.fmu"
     extra_packages = [Path(p) for p in extra_packages]
     forwarder = forwarder if forwarder is not None else forwarder_plan()
     wanted = content_hash(spec, config, extra_packages, forwarder)
-    if not force and target.is_file() and stored_hash(target) == wanted:
-        return BuildResult(spec.unit, target, rebuilt=False)
+    # two builds into one folder at once (two terminals, parallel test workers): the second waits,
+    # then finds the FMU built and up to date
+    with _build_lock(dest):
+        if not force and target.is_file() and stored_hash(target) == wanted:
+            return BuildResult(spec.unit, target, rebuilt=False)
+        _build_into(spec, config, extra_packages, forwarder, wanted, target)
+    if validate:
+        problems = validate_built(target)
+        if problems:
+            raise RuntimeError(f"{target}: modelDescription is not valid: " + "; ".join(problems))
+    return BuildResult(spec.unit, target, rebuilt=True)
+
+
+@contextlib.contextmanager
+def _build_lock(dest: Path):
+    try:
+        import fcntl
+    except ImportError:                   # no POSIX locks (Windows): builds are not shared there
+        yield
+        return
+    with open(dest / ".build.lock", "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path], forwarder,
+                wanted: str, target: Path) -> None:
+    from pythonfmu.builder import FmuBuilder
 
     with tempfile.TemporaryDirectory(prefix="railcosim_build_") as tmp:
         staging = Path(tmp)
@@ -196,12 +225,11 @@ def build_unit(spec: UnitSpec, dest: Path, config: BuildConfig = BuildConfig(),
         else:
             _say_once(f"railcosim build: {forwarder.reason}: building plain pythonfmu FMUs "
                       "(non-Python hosts then need LD_PRELOAD, docs/third_party.md)")
-        shutil.move(str(built), target)
-    if validate:
-        problems = validate_built(target)
-        if problems:
-            raise RuntimeError(f"{target}: modelDescription is not valid: " + "; ".join(problems))
-    return BuildResult(spec.unit, target, rebuilt=True)
+        # copied beside and renamed into place: a run reading the FMU meanwhile sees the old
+        # file or the new one, never half of it
+        partial = target.with_name(f".{target.name}.partial")
+        shutil.copyfile(built, partial)
+        os.replace(partial, target)
 
 
 def validate_built(fmu_path: Path) -> List[str]:
