@@ -144,3 +144,44 @@ def test_passing_the_last_block_signal_of_the_line_under_green_needs_no_brake():
     rows = _drive(atp, last_signal_m - 100.0, 36.0 * MPS_PER_KMH, 0.0, 40.0, shown)
     assert rows[-1][1] > last_signal_m + 200.0
     assert atp.emergency_brakings == 0 and atp.interventions == 0
+
+
+# ---- the ATO through a loss of a digital code (fmus/ato_controller/core.py, docs/ato.md) ----------
+
+def _digital_loop(lost):
+    """free_run's train under a clear digital code (green, line speed, every block free) that
+    is lost while ``lost(t)``."""
+    from benchmarks.harness.closed_loop import run_closed_loop
+    from fmus.ato_controller.core import AtoSettings
+    from fmus.signalling.digital import FREE_BLOCKS_OPEN
+
+    clear = 200.0 * MPS_PER_KMH       # the line's own limits bind: the code never does
+
+    def shown(t, x):
+        if lost(t):
+            return sig.WHITE, False, 0.0, 0.0, 0
+        return sig.GREEN, True, clear, clear, FREE_BLOCKS_OPEN
+    return run_closed_loop(400.0, step_s=0.1, settings=AtoSettings(cab_signal="digital"), cab_signal=shown)
+
+
+def test_a_digital_code_lost_for_the_re_acquisition_after_a_joint_only_cuts_traction():
+    # 2.7 s, the longest re-acquisition gap the shipped digital systems show, every 40 s at speed
+    starts = [180.0 + 40.0 * k for k in range(4)]
+    result = _digital_loop(lambda t: any(s <= t < s + 2.7 for s in starts))
+    t, v, command = result.column("t"), result.column("v"), result.column("command")
+    for s in starts:
+        window = (t >= s) & (t < s + 2.7)
+        assert v[window].min() > 80.0 * MPS_PER_KMH              # at speed when the code goes
+        assert command[window].min() >= 0.0, f"the ATO braked for the loss at {s} s"
+        assert command[window].max() == 0.0                       # and drew no traction
+    assert result.ato.atp.interventions == 0
+
+
+def test_a_digital_code_lost_for_good_is_braked_for_by_the_ato_before_the_atp_intervenes():
+    result = _digital_loop(lambda t: t >= 200.0)
+    t, v, command = result.column("t"), result.column("v"), result.column("command")
+    during = (t >= 200.0) & (t < 200.0 + 3.0 - 1e-9)
+    assert command[during].min() >= 0.0 and v[t >= 200.0][0] > 80.0 * MPS_PER_KMH
+    assert command[(t > 203.0) & (t < 215.0)].min() < 0.0        # braking after the grace
+    assert v[t > 320.0].max() <= 40.0 * MPS_PER_KMH               # down to the no-code speed
+    assert result.ato.atp.interventions == 0 and result.ato.atp.emergency_brakings == 0

@@ -1,14 +1,15 @@
 """The ATO and traction cores in one closed loop, without FMI: for quick studies, the tests
 and the benchmarks. The coupling is the shipped system's (ssp/free_run): Gauss-Seidel, the ATO
 reads the train's position and speed at the start of each step, the train gets its command.
-The cab signal comes from a function of (t, x) returning (aspect, code_valid).
+The cab signal comes from a function of (t, x) returning (aspect, code_valid), or for a digital
+cab signal (aspect, code_valid, v_permitted_mps, v_target_mps, free_blocks).
 """
 from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Optional, Tuple
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.units import J_PER_KWH
 
-CabSignal = Callable[[float, float], Tuple[int, bool]]
+CabSignal = Callable[[float, float], tuple]
 
 
 @dataclass
@@ -62,10 +63,10 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
     state = train.out
     for k in range(steps):
         t = k * step_s
-        aspect, valid = cab_signal(t, state.x_m) if cab_signal else (sig.GREEN, True)
+        shown = cab_signal(t, state.x_m) if cab_signal else (sig.GREEN, True)
         if before_step is not None:
             before_step(t, ato)
-        out = ato.step(t, step_s, state.x_m, state.v_mps, aspect, valid)
+        out = ato.step(t, step_s, state.x_m, state.v_mps, *shown)
         trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j,
                     out.schedule_deviation_s)
         state = train.step(t, step_s, out.command, out.emergency_brake)

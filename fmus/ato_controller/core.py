@@ -11,7 +11,7 @@ recorded, dwell) → … → finished at the last stop.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import List, Optional, Tuple
 
 import numpy as np
@@ -20,7 +20,8 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
-from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult
+from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult,
+                                     Constraints)
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach
@@ -51,6 +52,11 @@ FINAL_APPROACH_MPS = 30.0 * MPS_PER_KMH
 RESTRICTION_BAND_MPS = 8.0 * MPS_PER_KMH
 # temporary restrictions the FMU can be given while running (its tsr_* input slots)
 TSR_SLOTS = 4
+# a digital receiver shows no code at once while it re-acquires the next section's signal after
+# a joint (0.8-2.7 s in the shipped digital systems); for this long a loss only shuts off
+# traction, then the ATO brakes for the no-code speed on the ATP's curve (docs/ato.md,
+# "Short losses of a digital code") [U]
+DIGITAL_CODE_LOSS_GRACE_S = 3.0
 
 
 def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
@@ -180,6 +186,7 @@ class AtoCore:
         self.recovering = False
         self.creeping = False
         self.band_coasting = False            # coasting down through a restriction's band
+        self.code_lost_s: Optional[float] = None   # when the digital code was lost, while it is
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
@@ -274,7 +281,10 @@ class AtoCore:
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
         permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
-        command, mode = self._drive(t, h, x, v, atp, permissive)
+        bridging = self._bridging_code_loss(t, code_valid)
+        command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
+        if bridging and command > 0.0:
+            command, mode = 0.0, MODE_COAST
         if atp.intervention == SERVICE_INTERVENTION:
             command, mode = -1.0, MODE_ATP_SERVICE
         elif atp.intervention == EMERGENCY_INTERVENTION:
@@ -283,6 +293,24 @@ class AtoCore:
         if self.stop_approach is not None:
             self.stop_approach.brake.command(t, command, emergency)
         return self._publish(command, mode, emergency, atp)
+
+    def _bridging_code_loss(self, t: float, code_valid: bool) -> bool:
+        """A digital code lost for less than DIGITAL_CODE_LOSS_GRACE_S after a valid one."""
+        if code_valid or self.settings.cab_signal != "digital":
+            self.code_lost_s = None
+            return False
+        if self.code_lost_s is None:
+            self.code_lost_s = t
+        return self.atp.last_valid is not None and t - self.code_lost_s < DIGITAL_CODE_LOSS_GRACE_S
+
+    def _as_before_the_loss(self, atp: AtpResult) -> AtpResult:
+        """What the ATO drives by while it bridges a short loss: the ATP's constraints without the
+        fall of its ceiling to the no-code speed, and the last valid aspect. The ATP itself
+        supervises that fall all the while (after the driver's reaction time)."""
+        drop = self.atp.ceiling_drop
+        targets = [target for target in atp.constraints.targets if target is not drop]
+        return replace(atp, constraints=Constraints(atp.constraints.ceiling_mps, targets),
+                       aspect=self.atp.last_valid_aspect)
 
     def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
                           free_blocks: int) -> Optional[Tuple[str, str]]:
