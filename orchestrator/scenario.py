@@ -14,8 +14,9 @@ scenario format (docs/scenarios.md):
 * ``bias`` — ``value`` is added to what the link (or, unconnected, the start value) delivers;
 * ``reset`` — back to the link's value (or the start value);
 * ``restrict`` — a temporary speed restriction for an ATO controller: ``start_m``, ``end_m``,
-  ``speed_kmh`` and optionally ``until`` (s, when it is lifted); it takes the component's next
-  ``tsr_*`` input slot (4 per component).
+  ``speed_kmh`` and optionally ``until`` (s, when it is lifted); it takes the lowest of the
+  component's ``tsr_*`` input slots free at its time (a slot is free again once its
+  restriction is lifted).
 
 Parameters are fixed once a run starts (our FMUs' parameters have variability fixed): set them
 with ``--set`` or a parameter set instead; an event on one is an error naming it. Events are
@@ -26,7 +27,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
@@ -38,7 +39,7 @@ ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
 # a temporary speed restriction for an ATO controller (expanded into set/reset events on its
 # tsr_start/tsr_end/tsr_speed input slots: docs/scenarios.md, docs/ato.md)
 RESTRICT = "restrict"
-TSR_SLOTS = 4                        # fmus/ato_controller/core.py TSR_SLOTS
+TSR_PORTS = ("tsr_start", "tsr_end", "tsr_speed")
 INT32 = (-2 ** 31, 2 ** 31 - 1)      # an FMI 2.0 Integer is a C int (fmi2Integer)
 MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
@@ -50,6 +51,19 @@ class Event:
     variable: str
     action: str          # set | bias | reset
     value: object = None
+    where: str = field(default="", compare=False)         # the file and field it came from
+    restriction: bool = field(default=False, compare=False)   # one of a restrict event's slot events
+
+
+@dataclass(frozen=True)
+class _Restriction:
+    time_s: float
+    until_s: float            # inf: never lifted
+    model: str
+    start_m: float
+    end_m: float
+    speed_mps: float
+    where: str
 
 
 @dataclass
@@ -69,7 +83,7 @@ def load_scenario(path) -> Scenario:
         raise UserError(f"{path}: field events: a list of events is required")
     defaults = doc.get("defaultOpts", {}) if isinstance(doc.get("defaultOpts", {}), dict) else {}
     events = []
-    slots: Dict[str, int] = {}          # restriction slots used per component
+    restrictions: List[_Restriction] = []
     for index, item in enumerate(doc["events"]):
         where = f"{path}: field events[{index}]"
         if not isinstance(item, dict):
@@ -83,7 +97,7 @@ def load_scenario(path) -> Scenario:
             if not isinstance(merged.get(key), str) or not merged[key]:
                 raise UserError(f"{where}.{key}: a name is required")
         if restrict:
-            events.extend(_restriction_events(merged, float(time_s), where, slots))
+            restrictions.append(_restriction(merged, float(time_s), where))
             continue
         action = ACTIONS.get(str(merged.get("action", "")).lower())
         if action is None:
@@ -91,18 +105,17 @@ def load_scenario(path) -> Scenario:
                             f"{RESTRICT}")
         if action != "reset" and "value" not in merged:
             raise UserError(f"{where}.value: required for {action}")
-        events.append(Event(float(time_s), merged["model"], merged["variable"], action, merged.get("value")))
+        events.append(Event(float(time_s), merged["model"], merged["variable"], action, merged.get("value"), where))
     end = doc.get("end")
     if end is not None and (not _is_number(end) or not 0 < end <= MAX_TIME_S):
         raise UserError(f"{path}: field end: a finite positive time in seconds is required, got {end!r}")
+    events.extend(_restriction_events(restrictions))
     events.sort(key=lambda e: e.time_s)          # stable: same-time events keep their file order
     return Scenario(path, str(doc.get("description", "")), events, None if end is None else float(end))
 
 
-def _restriction_events(item: dict, time_s: float, where: str, slots: Dict[str, int]) -> List[Event]:
-    """A ``restrict`` event: a temporary speed restriction given to an ATO controller, as
-    ``set`` events on its next free ``tsr_*`` input slot (speed in m/s), and ``reset`` events
-    lifting it at ``until`` when given."""
+def _restriction(item: dict, time_s: float, where: str) -> _Restriction:
+    """A ``restrict`` event's fields, checked."""
     values = {}
     for key in ("start_m", "end_m", "speed_kmh"):
         value = item.get(key)
@@ -116,16 +129,30 @@ def _restriction_events(item: dict, time_s: float, where: str, slots: Dict[str, 
     until = item.get("until")
     if until is not None and (not _is_number(until) or not time_s < until <= MAX_TIME_S):
         raise UserError(f"{where}.until: a time after the event's time ({time_s:g} s) is required, got {until!r}")
-    model = item["model"]
-    slot = slots[model] = slots.get(model, 0) + 1
-    if slot > TSR_SLOTS:
-        raise UserError(f"{where}: at most {TSR_SLOTS} restrictions per component ({model} has {TSR_SLOTS} "
-                        f"tsr_* input slots)")
-    settings = (("tsr_start", values["start_m"]), ("tsr_end", values["end_m"]),
-                ("tsr_speed", values["speed_kmh"] / 3.6))
-    events = [Event(time_s, model, f"{name}[{slot}]", "set", value) for name, value in settings]
-    if until is not None:
-        events += [Event(float(until), model, f"{name}[{slot}]", "reset") for name, _ in settings]
+    return _Restriction(time_s, math.inf if until is None else float(until), item["model"], values["start_m"],
+                        values["end_m"], values["speed_kmh"] / 3.6, where)
+
+
+def _restriction_events(restrictions: List[_Restriction]) -> List[Event]:
+    """Each restriction as ``set`` events on the lowest ``tsr_*`` slot of its component that is
+    free at its time, and ``reset`` events lifting it at ``until``. Whether the component has
+    that many slots is checked against its interface (ScenarioManipulator)."""
+    events = []
+    lifted_at: Dict[str, List[float]] = {}      # per component, per slot: when it is free again
+    for r in sorted(restrictions, key=lambda r: r.time_s):
+        slots = lifted_at.setdefault(r.model, [])
+        slot = next((k for k, free_s in enumerate(slots) if free_s <= r.time_s), len(slots))
+        if slot == len(slots):
+            slots.append(r.until_s)
+        else:
+            slots[slot] = r.until_s
+        for name, value in zip(TSR_PORTS, (r.start_m, r.end_m, r.speed_mps)):
+            variable = f"{name}[{slot + 1}]"
+            events.append(Event(r.time_s, r.model, variable, "set", value, r.where, restriction=True))
+            if r.until_s < math.inf:
+                events.append(Event(r.until_s, r.model, variable, "reset", None, r.where, restriction=True))
+    # a slot lifted and taken again at one time: the reset first
+    events.sort(key=lambda e: (e.time_s, e.action != "reset"))
     return events
 
 
@@ -160,13 +187,20 @@ class ScenarioManipulator(Manipulator):
         self.applied: List[dict] = []
         connected = {(e.target, e.target_var.name) for e in graph.edges}
         self.kinds: Dict[Tuple[str, str], str] = {}
-        for index, event in enumerate(scenario.events):
-            where = f"{scenario.path}: field events[{index}]"
+        for event in scenario.events:
+            where = event.where
             node = graph.nodes.get(event.component)
             if node is None:
                 raise UserError(f"{where}.model: no component {event.component!r} in {graph.name} "
                                 f"({', '.join(graph.nodes)})")
             var = node.interface.variables.get(event.variable)
+            if var is None and event.restriction:
+                slots = sum(name.startswith(f"{TSR_PORTS[0]}[") for name in node.interface.variables)
+                if slots == 0:
+                    raise UserError(f"{where}.model: {event.component} takes no restrictions (it has no "
+                                    f"tsr_* input slots)")
+                raise UserError(f"{where}: more restrictions in force at once on {event.component} than its "
+                                f"{slots} tsr_* input slots (lift one earlier with until)")
             if var is None:
                 raise UserError(f"{where}.variable: {event.component} has no variable {event.variable!r}")
             if var.causality not in ("input", "output"):

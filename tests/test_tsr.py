@@ -158,6 +158,37 @@ def test_a_restrict_event_sets_the_next_tsr_slot_and_lifts_it(tmp_path):
                       (400.0, "tsr_speed[1]", "reset", None)]
 
 
+def test_a_slot_lifted_is_taken_again_by_a_later_restriction(tmp_path):
+    path = tmp_path / "scenario.json"
+    # five restrictions in file order (not time order), at most two in force at once
+    times = [(300, 500), (100, 200), (200, 400), (150, None), (450, 600)]
+    path.write_text(json.dumps({"events": [
+        {"time": t, "model": "ato", "action": "restrict", "start_m": 1000 * k, "end_m": 1000 * k + 500,
+         "speed_kmh": 40, **({} if until is None else {"until": until})} for k, (t, until) in enumerate(times)]}))
+    starts = [(e.time_s, e.variable, e.action) for e in load_scenario(path).events if e.variable.startswith("tsr_start")]
+    assert starts == [(100.0, "tsr_start[1]", "set"), (150.0, "tsr_start[2]", "set"),
+                      (200.0, "tsr_start[1]", "reset"), (200.0, "tsr_start[1]", "set"),
+                      (300.0, "tsr_start[3]", "set"), (400.0, "tsr_start[1]", "reset"),
+                      (450.0, "tsr_start[1]", "set"), (500.0, "tsr_start[3]", "reset"),
+                      (600.0, "tsr_start[1]", "reset")]
+
+
+def test_more_restrictions_in_force_than_slots_is_one_line_naming_the_event(tmp_path, product_fmus):
+    from helpers import railcosim
+
+    path = tmp_path / "scenario.json"
+    path.write_text(json.dumps({"events": [
+        {"time": 100 + k, "model": "ato", "action": "restrict", "start_m": 1000 * k, "end_m": 1000 * k + 500,
+         "speed_kmh": 40} for k in range(5)]}))
+    code, _, stderr = railcosim("validate", "ato_only", "--scenario", path)
+    assert code == 2 and len(stderr.strip().splitlines()) == 1, stderr
+    assert "field events[4]: more restrictions in force at once on ato than its 4 tsr_* input slots" in stderr
+    path.write_text(json.dumps({"events": [
+        {"time": 100, "model": "train", "action": "restrict", "start_m": 0, "end_m": 500, "speed_kmh": 40}]}))
+    code, _, stderr = railcosim("validate", "ato_only", "--scenario", path)
+    assert code == 2 and "field events[0].model: train takes no restrictions" in stderr, stderr
+
+
 @pytest.mark.parametrize("event, field", [
     ({"end_m": 6000, "speed_kmh": 40}, "events[0].start_m"),
     ({"start_m": 6000, "end_m": 5000, "speed_kmh": 40}, "events[0].end_m"),
