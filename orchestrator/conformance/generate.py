@@ -1,0 +1,369 @@
+"""Write the conformance vectors (data/<role>.json and .npz) from our model cores and the
+documented bounds: ``python -m orchestrator.conformance.generate [ROLE ...]``.
+
+Every input is computed here (the coder core's transmitter output for the receiver, seeded
+noise, the traction core for the expected motion), every bound is the one the unit's page
+states (docs/loco_receiver.md, docs/digital_channels.md, docs/wayside_coder.md,
+docs/rail_line.md, docs/traction.md, docs/ato.md); running this again writes the same files.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Callable, Dict, List, Optional
+
+import numpy as np
+
+from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.signalling import aspects as sig
+from fmus.signalling import alsn, cab_systems
+from fmus.signalling.digital import stated_latency_s
+from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
+from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from orchestrator.conformance import ROLES
+from orchestrator.conformance.vectors import DATA_DIR, FORMAT
+
+FS_HZ = 4000.0
+FRAME = 40                  # the generator's own frame; the runner steps with the target's
+GENERATOR = "python -m orchestrator.conformance.generate"
+
+
+class RoleFile:
+    """One role's vectors and arrays as they are being written."""
+
+    def __init__(self, role: str, required_ports: List[str]):
+        self.role, self.required_ports = role, required_ports
+        self.vectors: List[dict] = []
+        self.arrays: Dict[str, np.ndarray] = {}
+
+    def samples(self, vector: str, port: str, values: np.ndarray) -> dict:
+        """An input stream stored as int16 counts × scale (the scale keeps 15 bits of its peak)."""
+        peak = float(np.max(np.abs(values))) or 1.0
+        scale = peak / 32000.0
+        key = f"{vector}.{port}"
+        self.arrays[key] = np.round(values / scale).astype(np.int16)
+        return {"array": key, "scale": scale}
+
+    def write(self, directory: Path) -> List[Path]:
+        directory.mkdir(parents=True, exist_ok=True)
+        data = {"format": FORMAT, "role": self.role, "generator": GENERATOR,
+                "required_ports": self.required_ports,
+                "arrays": f"{self.role}.npz" if self.arrays else None, "vectors": self.vectors}
+        path = directory / f"{self.role}.json"
+        path.write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+        written = [path]
+        if self.arrays:
+            npz = directory / f"{self.role}.npz"
+            # fixed member timestamps: the same vectors give the same bytes
+            _save_npz(npz, self.arrays)
+            written.append(npz)
+        return written
+
+
+def _save_npz(path: Path, arrays: Dict[str, np.ndarray]) -> None:
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for key in sorted(arrays):
+            buffer = io.BytesIO()
+            np.lib.format.write_array(buffer, arrays[key], allow_pickle=False)
+            info = zipfile.ZipInfo(f"{key}.npy", date_time=(2020, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            archive.writestr(info, buffer.getvalue())
+
+
+def _cond(port: str, values) -> dict:
+    return {"port": port, "in": [int(v) for v in values]}
+
+
+def _rng(port: str, lo: Optional[float], hi: Optional[float]) -> dict:
+    return {"port": port, "range": [lo, hi]}
+
+
+def not_more_permissive(code: int) -> List[int]:
+    """Aspects a receiver may show while ``code`` is sent: the code or anything more restrictive."""
+    return [a for a in (sig.WHITE, sig.RED, sig.RED_YELLOW, sig.YELLOW, sig.GREEN)
+            if sig.restrictiveness(a) <= sig.restrictiveness(code)]
+
+
+# ---- loco_receiver ------------------------------------------------------------------------------
+COUPLING = 0.1              # 4 V transmitter → 0.4 V at the coil (docs/loco_receiver.md, Latencies)
+SECTION = {"KPT-5": 0, "KPT-7": 1}      # the bundled line's sections 1 and 2
+CYCLE_S = {"KPT-5": 1.60, "KPT-7": 1.86}
+CODE_TAG = {sig.GREEN: "Z", sig.YELLOW: "Zh", sig.RED_YELLOW: "KZh"}      # in vector names
+CODE_NAME = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ"}
+
+
+def occupancy(code: int, section: int, sections: int = 8) -> np.ndarray:
+    """Occupied sections that make the coder send ``code`` into ``section`` (3-aspect block)."""
+    occupied = np.zeros(sections, dtype=bool)
+    if code == sig.YELLOW:
+        occupied[section + 2] = True
+    elif code == sig.RED_YELLOW:
+        occupied[section + 1] = True
+    return occupied
+
+
+def coder_emf(section: int, seconds: float, schedule: Callable[[float], np.ndarray], phase: float,
+              level: float = COUPLING, coder=None) -> np.ndarray:
+    """The coil EMF of one section's transmitter output × ``level``, frame by frame."""
+    line = load_line(str(DEFAULT_LINE))
+    if coder is None:
+        coder = WaysideCoderCore(line, len(line.sections), FRAME, CoderSettings(fs_hz=FS_HZ, seed=1))
+        coder.cam_offset_s[:] = phase * coder.cycle_s
+    frames = []
+    for k in range(int(round(seconds * FS_HZ / FRAME))):
+        t = k * FRAME / FS_HZ
+        frames.append(coder.step(t, schedule(t)).u_tx[section] * level)
+    return np.concatenate(frames)
+
+
+def _shows(code: int) -> list:
+    return [_cond("aspect", [code]), _cond("code_valid", [1])]
+
+
+def receiver_vectors() -> RoleFile:
+    role = RoleFile("loco_receiver", ["system", "fs", "e_coil", "aspect", "code_valid", "free_blocks"])
+    alsn_params = {"system": "ALSN", "fs": FS_HZ}
+    loss_at_s, loss_bound_s = 6.0, alsn.EQUIPMENT_INERTIA_S + 0.2
+    for kpt in ("KPT-5", "KPT-7"):
+        acquire_s = 2 * CYCLE_S[kpt] + 0.5
+        for code in (sig.GREEN, sig.YELLOW, sig.RED_YELLOW):
+            tag, label = CODE_TAG[code], CODE_NAME[code]
+            steady = lambda t, c=code, s=SECTION[kpt]: occupancy(c, s)
+            for phase in (0.0, 0.5):
+                with_loss = phase == 0.0
+                seconds = loss_at_s + loss_bound_s + 0.8 if with_loss else acquire_s + 1.0
+                emf = coder_emf(SECTION[kpt], seconds, steady, phase)
+                if with_loss:
+                    emf[int(loss_at_s * FS_HZ):] = 0.0
+                name = f"{'acquire_loss' if with_loss else 'acquire'}_{tag}_{kpt}_phase{phase}"
+                checks = [
+                    {"kind": "latency", "label": f"shows {label} within two cycles + 0.5 s", "from_s": 0.0,
+                     "until": _shows(code), "bound_s": acquire_s},
+                    {"kind": "holds", "label": f"never more permissive than {label}",
+                     "conditions": [_cond("aspect", not_more_permissive(code))], "bound_s": 0.0}]
+                if with_loss:
+                    no_code = [sig.RED] if code == sig.RED_YELLOW else [sig.WHITE]
+                    checks.append({"kind": "latency", "label": "loss: no-code indication within the display hold + 0.2 s",
+                                   "from_s": loss_at_s, "until": [_cond("aspect", no_code), _cond("code_valid", [0])],
+                                   "bound_s": loss_bound_s})
+                role.vectors.append({
+                    "name": name, "what": f"code {label} from a {kpt} transmitter at 0.4 V, cam phase {phase} of its cycle"
+                    + (f"; the code's EMF stops at {loss_at_s} s" if with_loss else ""),
+                    "parameters": alsn_params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+                    "inputs": {"e_coil": role.samples(name, "e_coil", emf)}, "checks": checks})
+        # a restrictive change of the code sent, З → КЖ: within the stated latency
+        change_s = 8.0
+        name = f"restrictive_Z_to_KZh_{kpt}"
+        schedule = lambda t, s=SECTION[kpt]: occupancy(sig.GREEN if t < change_s else sig.RED_YELLOW, s)
+        seconds = change_s + alsn.STATED_LATENCY_S + 2.0
+        emf = coder_emf(SECTION[kpt], seconds, schedule, 0.3)
+        role.vectors.append({
+            "name": name, "what": f"{kpt}: З for {change_s} s, then КЖ (the block ahead became occupied)",
+            "parameters": alsn_params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+            "inputs": {"e_coil": role.samples(name, "e_coil", emf)},
+            "checks": [
+                {"kind": "latency", "label": "restrictive change shown within the stated latency", "from_s": change_s,
+                 "until": [_cond("aspect", not_more_permissive(sig.RED_YELLOW))], "bound_s": alsn.STATED_LATENCY_S},
+                {"kind": "holds", "label": "never more permissive than КЖ after the stated latency",
+                 "from_s": change_s + alsn.STATED_LATENCY_S,
+                 "conditions": [_cond("aspect", not_more_permissive(sig.RED_YELLOW))], "bound_s": 0.0}]})
+
+    # noise and impulses: never more permissive than the code sent (docs/loco_receiver.md, noise study)
+    rng = np.random.default_rng(18)
+    seconds = 10.0
+    t = np.arange(int(seconds * FS_HZ)) / FS_HZ
+    code = sig.YELLOW
+    clean = coder_emf(SECTION["KPT-5"], seconds, lambda _t: occupancy(code, 0), 0.2)
+    sigma = np.sqrt(0.4 ** 2 / 2.0)                       # 0 dB over the whole band
+    hum = 0.8 * np.sin(2 * np.pi * 100 * t + 100) + 0.8 * np.sin(2 * np.pi * 150 * t + 150) \
+        + 2.0 * np.sin(2 * np.pi * 300 * t + 300)
+    noisy = clean + sigma * rng.standard_normal(t.size) + hum
+    impulses = clean.copy()
+    for start in rng.uniform(0.0, seconds - 0.01, 40):      # 2 ms spikes of ±3 V, 4 per second
+        k = int(start * FS_HZ)
+        impulses[k:k + 8] += 3.0 * rng.choice((-1.0, 1.0))
+    for name, emf, what in (("noise_Zh_0dB", noisy, "Ж (KPT-5, 0.4 V) in white noise at 0 dB full band with "
+                             "100 Hz 0.8 V, 150 Hz 0.8 V and 300 Hz 2 V traction harmonics"),
+                            ("impulses_Zh", impulses, "Ж (KPT-5, 0.4 V) with 40 impulses of ±3 V, 2 ms, at seeded instants")):
+        role.vectors.append({
+            "name": name, "what": what, "parameters": alsn_params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+            "inputs": {"e_coil": role.samples(name, "e_coil", emf)},
+            "checks": [{"kind": "holds", "label": "never more permissive than Ж",
+                        "conditions": [_cond("aspect", not_more_permissive(code))], "bound_s": 0.0}]})
+
+    # a joint: the strong feed end of one circuit (3.5 V), 1 s without code (null zone and the
+    # receiver's recovery, docs/sources.md#interference-at-insulated-joints), then the weak entry
+    # end of the next (0.28 V, the other transmitter type): З held throughout
+    before_s, gap_s, after_s = 7.0, 1.0, 8.0
+    strong = coder_emf(0, before_s, lambda _t: occupancy(sig.GREEN, 0), 0.0, level=3.5 / 4.0)
+    weak = coder_emf(1, before_s + gap_s + after_s, lambda _t: occupancy(sig.GREEN, 1), 0.6, level=0.28 / 4.0)
+    emf = weak.copy()
+    emf[:strong.size] = strong
+    emf[strong.size:strong.size + int(gap_s * FS_HZ)] = 0.0
+    name = "joint_dropout_Z"
+    role.vectors.append({
+        "name": name, "what": "З at 3.5 V (KPT-5 feed end), 1 s without code at the joint, З at 0.28 V (KPT-7 entry end)",
+        "parameters": alsn_params, "step": {"fs_hz": FS_HZ}, "duration_s": before_s + gap_s + after_s,
+        "inputs": {"e_coil": role.samples(name, "e_coil", emf)},
+        "checks": [
+            {"kind": "latency", "label": "shows З within two cycles + 0.5 s", "from_s": 0.0, "until": _shows(sig.GREEN),
+             "bound_s": 2 * CYCLE_S["KPT-5"] + 0.5},
+            {"kind": "holds", "label": "З held through the joint (display hold)", "from_s": before_s - 0.5,
+             "conditions": _shows(sig.GREEN), "bound_s": 0.0}]})
+
+    for system_name in ("FIRE_DQPSK", "ALS-EN"):
+        role.vectors.extend(_digital_receiver_vectors(role, system_name))
+    return role
+
+
+def _digital_receiver_vectors(role: RoleFile, system_name: str) -> List[dict]:
+    """Each command the block gives section 1 (clear, one and two blocks free... as occupancy
+    sets them), acquired from cold within four messages + 0.5 s, then a restrictive change
+    within the stated latency (docs/digital_channels.md, Latency)."""
+    system = cab_systems.digital_system(system_name)
+    line = load_line(str(DEFAULT_LINE))
+    message_s = system.message_s(system.carrier_hz)
+    acquire_s = 4 * message_s + 0.5
+    latency_s = stated_latency_s(message_s)
+    vectors = []
+    patterns = {"clear": np.zeros(8, dtype=bool), "block2": occupancy(sig.YELLOW, 0),
+                "block1": occupancy(sig.RED_YELLOW, 0)}
+    for before, after in (("clear", "block1"), ("block2", "block1")):
+        change_s = round(acquire_s + 1.5, 2)
+        seconds = round(change_s + latency_s + 1.5, 2)
+        coder = DigitalCoderCore(system, line, 8, FRAME, CoderSettings(fs_hz=FS_HZ, amplitude_v=1.0, seed=1))
+        receiver = DigitalReceiverCore(system, FRAME, DigitalReceiverSettings(fs_hz=FS_HZ))
+        frames, shown = [], []
+        for k in range(int(round(seconds * FS_HZ / FRAME))):
+            t = k * FRAME / FS_HZ
+            e = 0.2 * coder.step(t, patterns[before if t < change_s else after]).u_tx[0]
+            frames.append(e)
+            out = receiver.step(t, e)
+            shown.append((t + FRAME / FS_HZ, out.aspect, out.free_blocks, out.code_valid))
+        shown = np.array(shown)
+        # what our receiver settles on for each command: the expected indication
+        first = shown[(shown[:, 0] > change_s - 0.5) & (shown[:, 0] <= change_s)][-1]
+        last = shown[-1]
+        name = f"{system_name.lower().replace('-', '_')}_{before}_to_{after}"
+        vectors.append({
+            "name": name, "what": f"{system_name}: the command for '{before}' from cold, then '{after}' at {change_s} s",
+            "parameters": {"system": system_name, "fs": FS_HZ}, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+            "inputs": {"e_coil": role.samples(name, "e_coil", np.concatenate(frames))},
+            "checks": [
+                {"kind": "latency", "label": "command acquired within four messages + 0.5 s", "from_s": 0.0,
+                 "until": [_cond("aspect", [first[1]]), _cond("free_blocks", [first[2]]), _cond("code_valid", [1])],
+                 "bound_s": round(acquire_s, 4)},
+                {"kind": "latency", "label": "restrictive change within the stated latency", "from_s": change_s,
+                 "until": [_cond("aspect", [last[1]]), _cond("free_blocks", [last[2]]), _cond("code_valid", [1])],
+                 "bound_s": round(latency_s, 4)},
+                {"kind": "holds", "label": "never more permissive after the stated latency",
+                 "from_s": round(change_s + latency_s, 4),
+                 "conditions": [_cond("aspect", not_more_permissive(int(last[1]))),
+                                _rng("free_blocks", None, float(last[2]))], "bound_s": 0.0}]})
+    return vectors
+
+
+# ---- traction -----------------------------------------------------------------------------------
+def _traction_core(**kwargs):
+    from fmus.traction.core import TractionCore
+
+    return TractionCore(load_rolling_stock(str(DEFAULT_ROLLING_STOCK)), load_line(str(DEFAULT_LINE)), **kwargs)
+
+
+def _drive(core, seconds: float, step_s: float, schedule: Callable[[float], tuple]) -> np.ndarray:
+    """Rows (t_end, x, v, a) of the traction core under a (command, emergency) schedule."""
+    rows = []
+    for k in range(int(round(seconds / step_s))):
+        t = k * step_s
+        command, emergency = schedule(t)
+        out = core.step(t, step_s, command, emergency)
+        rows.append((t + step_s, out.x_m, out.v_mps, out.a_mps2))
+    return np.array(rows)
+
+
+def _schedule_input(times: List[float], values: List) -> dict:
+    return {"times_s": times, "values": values}
+
+
+def traction_vectors() -> RoleFile:
+    role = RoleFile("traction", ["x0", "v0", "command", "emergency_brake", "x", "v"])
+    # braking: from 80 km/h (service, command −1) and 100 km/h (emergency) to a stop; stopping
+    # distance and time against our core (the braking model of docs/traction.md), speed never negative
+    for name, v0_kmh, command, emergency in (("service_brake_80kmh", 80.0, -1.0, False),
+                                             ("emergency_brake_100kmh", 100.0, 0.0, True)):
+        step_s, seconds = 0.5, 90.0
+        rows = _drive(_traction_core(x0_m=2000.0, v0_mps=v0_kmh / 3.6), seconds, step_s,
+                      lambda t, c=command, e=emergency: (c, e))
+        stopped = rows[np.flatnonzero(rows[:, 2] <= 0.0)[0]]
+        role.vectors.append({
+            "name": name, "what": f"from {v0_kmh:g} km/h at 2000 m, {'emergency brake' if emergency else 'full service brake'} to a stop",
+            "parameters": {"x0": 2000.0, "v0": v0_kmh / 3.6}, "step": {"step_s": step_s}, "duration_s": seconds,
+            "inputs": {"command": _schedule_input([0.0], [command]),
+                       "emergency_brake": _schedule_input([0.0], [emergency])},
+            "checks": [
+                {"kind": "when", "label": "stopping point (reference train model)", "trigger": [_rng("v", None, 0.0)],
+                 "port": "x", "expected": float(stopped[1]), "tolerance": 2.0, "unit": "m"},
+                {"kind": "latency", "label": "stopped within the reference time + one step", "from_s": 0.0,
+                 "until": [_rng("v", None, 0.0)], "bound_s": float(stopped[0]) + step_s},
+                {"kind": "extreme", "label": "speed never negative", "port": "v", "extreme": "min",
+                 "at_least": 0.0, "unit": "m/s"}]})
+    # balancing: a part-traction command held until the speed settles on the level line start
+    step_s, seconds = 0.5, 400.0
+    rows = _drive(_traction_core(x0_m=400.0), seconds, step_s, lambda t: (0.3, False))
+    role.vectors.append({
+        "name": "balancing_speed_30pct", "what": "command 0.3 from standstill at 400 m for 400 s",
+        "parameters": {"x0": 400.0, "v0": 0.0}, "step": {"step_s": step_s}, "duration_s": seconds,
+        "inputs": {"command": _schedule_input([0.0], [0.3])},
+        "checks": [{"kind": "near", "label": "speed at 200, 300, 400 s (reference train model)", "port": "v",
+                    "at_s": [200.0, 300.0, 400.0],
+                    "expected": [float(rows[int(s / step_s) - 1, 2]) for s in (200.0, 300.0, 400.0)],
+                    "tolerance": 0.01, "relative": True}]})
+    # step-size robustness: one command profile at 0.1, 0.5 and 1 s; position at 120 s against
+    # the 0.1 s reference within 0.5 m (docs/ato.md: the stop point between 0.1 s and 1 s steps)
+    profile_t = [0.0, 60.0, 90.0]
+    profile_c = [1.0, 0.0, -0.6]
+    profile = lambda t: (profile_c[int(np.searchsorted(profile_t, t, side="right")) - 1], False)
+    reference = _drive(_traction_core(x0_m=400.0), 120.0, 0.1, profile)
+    x_ref = float(reference[-1, 1])
+    for step_s in (0.1, 0.5, 1.0):
+        role.vectors.append({
+            "name": f"step_size_{step_s:g}s", "what": f"traction 60 s, coast 30 s, brake 0.6 for 30 s, step {step_s:g} s",
+            "parameters": {"x0": 400.0, "v0": 0.0}, "step": {"step_s": step_s}, "duration_s": 120.0,
+            "inputs": {"command": _schedule_input(profile_t, profile_c)},
+            "checks": [{"kind": "near", "label": "position at 120 s against the 0.1 s reference", "port": "x",
+                        "at_s": [120.0], "expected": [x_ref], "tolerance": 0.5, "unit": "m"}]})
+    return role
+
+
+GENERATORS = {"loco_receiver": receiver_vectors, "traction": traction_vectors}
+
+
+def generate(roles=ROLES, directory: Path = DATA_DIR) -> List[Path]:
+    written = []
+    for role in roles:
+        written += GENERATORS[role]().write(directory)
+    return written
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog=GENERATOR, description=__doc__.splitlines()[0])
+    parser.add_argument("roles", nargs="*", help=f"roles (default all: {', '.join(GENERATORS)})")
+    parser.add_argument("--dest", type=Path, default=DATA_DIR, help="folder (default: the package's data/)")
+    args = parser.parse_args(argv)
+    unknown = [r for r in args.roles if r not in GENERATORS]
+    if unknown:
+        print(f"{GENERATOR}: error: unknown role {', '.join(unknown)} (roles: {', '.join(GENERATORS)})", file=sys.stderr)
+        return 2
+    for path in generate(args.roles or list(GENERATORS), args.dest):
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
