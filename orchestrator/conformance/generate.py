@@ -341,7 +341,106 @@ def traction_vectors() -> RoleFile:
     return role
 
 
-GENERATORS = {"loco_receiver": receiver_vectors, "traction": traction_vectors}
+# ---- wayside_coder ------------------------------------------------------------------------------
+def _coder_core(block_aspects: int = 3, system: Optional[str] = None):
+    line = load_line(str(DEFAULT_LINE))
+    settings = CoderSettings(fs_hz=FS_HZ, block_aspects=block_aspects, seed=1)
+    if system is None:
+        return WaysideCoderCore(line, 8, FRAME, settings)
+    return DigitalCoderCore(cab_systems.digital_system(system), line, 8, FRAME, settings)
+
+
+def coder_vectors() -> RoleFile:
+    role = RoleFile("wayside_coder", ["system", "fs", "block_aspects", "occupied", "fault_main", "fault_reserve",
+                                      "u_tx", "code_tx", "signal", "status"])
+    line = load_line(str(DEFAULT_LINE))
+    tables = json.loads(alsn.CODES_FILE.read_text(encoding="utf-8"))["transmitters"]
+    step = {"fs_hz": FS_HZ, "frame_port": "u_tx"}
+    # code timings: each code of each transmitter type, two cycles and more of the keyed carrier
+    for kpt in ("KPT-5", "KPT-7"):
+        section = SECTION[kpt]
+        carrier = line.sections[section].carrier_hz
+        cycle = tables[kpt]["cycle_s"]
+        for code in (sig.GREEN, sig.YELLOW, sig.RED_YELLOW):
+            occupied = occupancy(code, section)
+            name = f"timing_{CODE_TAG[code]}_{kpt}"
+            seconds = round(2.5 * cycle + 0.5, 2)
+            sent = _coder_core().step(0.0, occupied).code_tx.tolist()
+            role.vectors.append({
+                "name": name, "what": f"{CODE_NAME[code]} into section {section + 1} ({kpt}) for {seconds} s",
+                "parameters": {"system": "ALSN", "fs": FS_HZ}, "step": step, "duration_s": seconds,
+                "inputs": {"occupied": _schedule_input([0.0], [occupied.tolist()])},
+                "record_frames": [f"u_tx[{section + 1}]"],
+                "checks": [
+                    {"kind": "table", "label": f"code_tx: {CODE_NAME[code]} into section {section + 1}", "port": "code_tx",
+                     "at_s": [seconds], "expected": [sent]},
+                    {"kind": "code_timing", "label": f"pulses and intervals of {CODE_NAME[code]} ({kpt}) within ±5 %",
+                     "port": f"u_tx[{section + 1}]", "pattern_s": tables[kpt]["codes"][CODE_TAG[code]],
+                     "tolerance": 0.05, "fs_hz": FS_HZ, "carrier_hz": carrier, "cycle_s": cycle}]})
+    # block logic: occupancy patterns → signals and codes of every section, from our block rules
+    for aspects in (3, 4):
+        core = _coder_core(aspects)
+        patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(8)] \
+            + [np.eye(8, dtype=bool)[2] | np.eye(8, dtype=bool)[6]]
+        hold_s = 0.05
+        times = [round(i * hold_s, 4) for i in range(len(patterns))]
+        at = [round(t + hold_s, 4) for t in times]
+        signals, codes = [], []
+        for pattern in patterns:
+            out = core.step(0.0, pattern)
+            signals.append(out.signal.tolist())
+            codes.append(out.code_tx.tolist())
+        role.vectors.append({
+            "name": f"block_logic_{aspects}_aspect", "what": f"{len(patterns)} occupancy patterns, {aspects}-aspect block",
+            "parameters": {"system": "ALSN", "fs": FS_HZ, "block_aspects": aspects}, "step": step,
+            "duration_s": round(len(patterns) * hold_s, 4),
+            "inputs": {"occupied": _schedule_input(times, [p.tolist() for p in patterns])},
+            "checks": [{"kind": "table", "label": "signal of every section (block rules)", "port": "signal",
+                        "at_s": at, "expected": signals},
+                       {"kind": "table", "label": "code_tx of every section (block rules)", "port": "code_tx",
+                        "at_s": at, "expected": codes}]})
+    # 2-out-of-2: main fails at 1 s (reserve alone, status 1, code kept), reserve too at 2 s
+    # (status 2, no code, no output)
+    core = _coder_core()
+    clear = np.zeros(8, dtype=bool)
+    sent = core.step(0.0, clear).code_tx.tolist()
+    role.vectors.append({
+        "name": "two_out_of_two_faults", "what": "main transmitter fails at 1 s, the reserve at 2 s",
+        "parameters": {"system": "ALSN", "fs": FS_HZ}, "step": step, "duration_s": 3.0,
+        "inputs": {"fault_main": _schedule_input([0.0, 1.0], [False, True]),
+                   "fault_reserve": _schedule_input([0.0, 2.0], [False, True])},
+        "record_frames": ["u_tx[1]"],
+        "checks": [
+            {"kind": "table", "label": "status 0, 1, 2", "port": "status", "at_s": [1.0, 2.0, 3.0],
+             "expected": [[0], [1], [2]]},
+            {"kind": "table", "label": "codes kept on the reserve, none when both failed", "port": "code_tx",
+             "at_s": [1.0, 2.0, 3.0], "expected": [sent, sent, [0] * 8]},
+            {"kind": "frame_peak", "label": "reserve transmits (section 1)", "port": "u_tx[1]", "from_s": 1.0,
+             "to_s": 2.0, "at_least": 0.5 * CoderSettings().amplitude_v, "unit": "V"},
+            {"kind": "frame_peak", "label": "no output with both failed (section 1)", "port": "u_tx[1]",
+             "from_s": 2.0, "at_most": 0.0, "unit": "V"}]})
+    # digital 2-out-of-2 comparison: a controller computing a wrong command is outvoted by the
+    # more restrictive of the two (fmus/signalling/redundancy.py); expected from our core
+    for system_name in ("FIRE_DQPSK", "ALS-EN"):
+        system = cab_systems.digital_system(system_name)
+        wrong = max(system.commands(), key=system.rank)          # the most permissive command
+        core = _coder_core(system=system_name)
+        healthy = core.step(0.0, occupancy(sig.RED_YELLOW, 0)).code_tx.tolist()
+        faulty = core.step(0.01, occupancy(sig.RED_YELLOW, 0), wrong_command_main=wrong).code_tx.tolist()
+        role.vectors.append({
+            "name": f"{system_name.lower().replace('-', '_')}_wrong_command", "what":
+                f"{system_name}: section 2 occupied; from 0.5 s the main controller computes command {wrong} everywhere",
+            "parameters": {"system": system_name, "fs": FS_HZ}, "step": step, "duration_s": 1.0,
+            "inputs": {"occupied": _schedule_input([0.0], [occupancy(sig.RED_YELLOW, 0).tolist()]),
+                       "wrong_command_main": _schedule_input([0.0, 0.5], [0, wrong])},
+            "checks": [{"kind": "table", "label": "the 2-out-of-2 sends the more restrictive command",
+                        "port": "code_tx", "at_s": [0.5, 1.0], "expected": [healthy, faulty]},
+                       {"kind": "table", "label": "status stays 0", "port": "status", "at_s": [1.0],
+                        "expected": [[0]]}]})
+    return role
+
+
+GENERATORS = {"loco_receiver": receiver_vectors, "wayside_coder": coder_vectors, "traction": traction_vectors}
 
 
 def generate(roles=ROLES, directory: Path = DATA_DIR) -> List[Path]:

@@ -116,7 +116,7 @@ def judge_near(trace: Trace, check: Mapping):
     if check.get("relative"):
         deviation = deviation / np.maximum(np.abs(expected), 1e-300)
     measured = float(deviation.max()) if np.all(np.isfinite(deviation)) else np.inf
-    unit = "1" if check.get("relative") else check.get("unit", "")
+    unit = "" if check.get("relative") else check.get("unit", "")
     return measured, f"≤ {_fmt(check['tolerance'])}", unit, measured <= check["tolerance"]
 
 
@@ -146,12 +146,12 @@ def judge_when(trace: Trace, check: Mapping):
 
 def keyed_runs(samples: np.ndarray, fs_hz: float, carrier_hz: float):
     """(on, off) run lengths in seconds of a keyed carrier: a sample is keyed when the carrier
-    peaks above a tenth of the frame's largest value within half a carrier period of it. The
+    peaks above a tenth of the record's largest value within a twentieth of a carrier period of it. The
     first and last runs (cut by the record's ends) are left out."""
     peak = float(np.max(np.abs(samples))) if samples.size else 0.0
     if peak == 0.0:
         return np.zeros(0), np.zeros(0)
-    width = max(1, int(round(fs_hz / carrier_hz)))
+    width = max(3, int(round(0.1 * fs_hz / carrier_hz)))      # bridges the zero crossings only
     on = maximum_filter1d(np.abs(samples), size=width) > 0.1 * peak
     edges = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
     bounds = np.concatenate(([0], edges, [on.size]))
@@ -163,8 +163,8 @@ def keyed_runs(samples: np.ndarray, fs_hz: float, carrier_hz: float):
 
 def judge_code_timing(trace: Trace, check: Mapping):
     """Pulses and intervals of a keyed carrier (a frame output row) against a code's table:
-    the largest deviation of any complete pulse or interval from the nearest table value of
-    its kind; bound ``tolerance_s``. A record with no pulse, or a pulse count per cycle other
+    the largest relative deviation of any complete pulse or interval from the nearest table
+    value of its kind; bound ``tolerance`` (a share). A record with no pulse, or a pulse count per cycle other
     than the table's, fails."""
     samples = trace.samples[check["port"]]
     times = trace.sample_time_s
@@ -172,22 +172,38 @@ def judge_code_timing(trace: Trace, check: Mapping):
     pulses, intervals = keyed_runs(samples[mask], check["fs_hz"], check["carrier_hz"])
     table = np.asarray(check["pattern_s"], dtype=float)
     want_pulses, want_intervals = table[0::2], table[1::2]
-    bound = f"≤ {_fmt(check['tolerance_s'])}"
+    bound = f"≤ {_fmt(check['tolerance'])}"
     if pulses.size == 0 or intervals.size == 0:
-        return np.inf, bound, "s", False
-    deviation = max(np.abs(pulses[:, None] - want_pulses[None, :]).min(axis=1).max(),
-                    np.abs(intervals[:, None] - want_intervals[None, :]).min(axis=1).max())
+        return np.inf, bound, "", False
+    def worst(runs, table):   # relative deviation from the nearest table value
+        nearest = table[np.abs(runs[:, None] - table[None, :]).argmin(axis=1)]
+        return float((np.abs(runs - nearest) / nearest).max())
+
+    deviation = max(worst(pulses, want_pulses), worst(intervals, want_intervals))
     record_s = float(mask.sum()) / check["fs_hz"]
     cycles = record_s / check["cycle_s"]
     per_cycle = (pulses.size + 1) / cycles   # runs cut at both ends: about one pulse fewer
     if abs(per_cycle - want_pulses.size) > 0.75:
         return float(per_cycle), f"= {want_pulses.size}", "pulses per cycle", False
-    return float(deviation), bound, "s", deviation <= check["tolerance_s"]
+    return float(deviation), bound, "", deviation <= check["tolerance"]
+
+
+def judge_frame_peak(trace: Trace, check: Mapping):
+    """The largest |sample| of a recorded frame row in the window, against ``at_least`` or
+    ``at_most``."""
+    times = trace.sample_time_s
+    mask = (times >= check.get("from_s", -np.inf) - 1e-9) & (times < check.get("to_s", np.inf) - 1e-9)
+    peak = float(np.max(np.abs(trace.samples[check["port"]][mask]), initial=0.0))
+    unit = check.get("unit", "")
+    if "at_least" in check:
+        return peak, f"≥ {_fmt(check['at_least'])}", unit, peak >= check["at_least"]
+    return peak, f"≤ {_fmt(check['at_most'])}", unit, peak <= check["at_most"]
 
 
 JUDGES: Dict[str, Callable] = {
     "latency": judge_latency, "holds": judge_holds, "table": judge_table, "near": judge_near,
     "extreme": judge_extreme, "when": judge_when, "code_timing": judge_code_timing,
+    "frame_peak": judge_frame_peak,
 }
 
 
@@ -198,6 +214,8 @@ def judge(vector: str, trace: Trace, check: Mapping) -> Verdict:
 
 def ports_of(check: Mapping) -> List[str]:
     """The recorded ports a check reads."""
+    if check["kind"] in ("code_timing", "frame_peak"):
+        return []                                  # frame rows: the vector's record_frames
     ports = [check["port"]] if "port" in check else []
     for key in ("until", "conditions", "trigger", "where"):
         ports += [condition["port"] for condition in check.get(key, ())]

@@ -111,7 +111,7 @@ def run_vector(target: Target, role: RoleVectors, vector: Mapping) -> List[Verdi
             out_names.setdefault(port, target.elements(port))
     frame_inputs = {port: spec for port, spec in vector.get("inputs", {}).items() if "array" in spec}
     if "fs_hz" in vector["step"]:
-        frame = _frame_size(target, role, frame_inputs, frames)
+        frame = _frame_size(target, role, [p for p in [vector["step"].get("frame_port")] if p], frame_inputs, frames)
         step_s = frame / vector["step"]["fs_hz"]
     else:
         frame, step_s = 0, vector["step"]["step_s"]
@@ -174,9 +174,11 @@ def run_vector(target: Target, role: RoleVectors, vector: Mapping) -> List[Verdi
     return [judge(name, trace, check) for check in vector["checks"]]
 
 
-def _frame_size(target: Target, role: RoleVectors, frame_inputs: Mapping, frames: Sequence[str]) -> int:
-    """N of the target's frame ports (the last index of an input's or recorded row's elements)."""
-    for port in [*frame_inputs, *frames]:
+def _frame_size(target: Target, role: RoleVectors, vector_frame_port: Sequence[str], frame_inputs: Mapping,
+                frames: Sequence[str]) -> int:
+    """N of the target's frame ports (the last index of the step's ``frame_port``, an input's
+    or a recorded row's elements)."""
+    for port in [*vector_frame_port, *frame_inputs, *frames]:
         shape = target.shape(port)
         if shape:
             return shape[-1]

@@ -21,7 +21,8 @@ _CHECK_FIELDS = {
     "latency": ("from_s", "until", "bound_s"), "holds": ("conditions", "bound_s"),
     "table": ("port", "at_s", "expected"), "near": ("port", "at_s", "expected", "tolerance"),
     "extreme": ("port", "extreme"), "when": ("trigger", "port", "expected", "tolerance"),
-    "code_timing": ("port", "pattern_s", "tolerance_s", "fs_hz", "carrier_hz", "cycle_s"),
+    "code_timing": ("port", "pattern_s", "tolerance", "fs_hz", "carrier_hz", "cycle_s"),
+    "frame_peak": ("port",),
 }
 
 
