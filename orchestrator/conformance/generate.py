@@ -440,7 +440,113 @@ def coder_vectors() -> RoleFile:
     return role
 
 
-GENERATORS = {"loco_receiver": receiver_vectors, "wayside_coder": coder_vectors, "traction": traction_vectors}
+# ---- rail_line ----------------------------------------------------------------------------------
+OFF_LINE_M = -1000.0
+
+
+def _coder_stream(seconds: float) -> np.ndarray:
+    """The coder core's output for a free line (З into every section), K × samples."""
+    coder = _coder_core()
+    frames = [coder.step(k * FRAME / FS_HZ, np.zeros(8, dtype=bool)).u_tx.copy()
+              for k in range(int(round(seconds * FS_HZ / FRAME)))]
+    return np.concatenate(frames, axis=1)
+
+
+def _rail_run(u_tx: np.ndarray, schedule: Callable[[float], tuple]):
+    """Our rail-line core fed as the runner feeds a target: per frame (t_end, i_axle[1],
+    occupied[1..8]) and train 1's coil EMF samples; ``schedule(t)`` → (x_head, v, broken_rail_at)."""
+    from fmus.rail_line.core import RailLineCore, RailSettings
+
+    core = RailLineCore(load_line(str(DEFAULT_LINE)), 8, 2, FRAME, RailSettings(fs_hz=FS_HZ))
+    core.start(np.array([OFF_LINE_M, OFF_LINE_M]))
+    rows, emf = [], []
+    for k in range(u_tx.shape[1] // FRAME):
+        t = k * FRAME / FS_HZ
+        x_head, v, broken = schedule(t)
+        core.set_faults(broken, np.zeros(8), np.zeros(8, dtype=bool))
+        out = core.step(t, u_tx[:, k * FRAME:(k + 1) * FRAME], np.array([x_head, OFF_LINE_M]), np.array([v, 0.0]),
+                        np.zeros(2))
+        rows.append((t + FRAME / FS_HZ, out.i_axle[0], *out.occupied.astype(int)))
+        emf.append(out.e_coil[0].copy())
+    return np.array(rows), np.concatenate(emf)
+
+
+def rail_vectors() -> RoleFile:
+    role = RoleFile("rail_line", ["fs", "u_tx", "x_head", "v", "broken_rail_at", "e_coil", "occupied", "i_axle"])
+    step = {"fs_hz": FS_HZ, "frame_port": "u_tx"}
+    params = {"fs": FS_HZ}
+    # the code current under the first axle of a standing train at three places in section 1:
+    # the peak over a code cycle against our core, which follows the two-port cascade of the
+    # worked example's method within 0.5 % (docs/rail_line.md, tests); bound 1 %
+    hold_s, heads = 2.0, [900.0, 1800.0, 2500.0]
+    seconds = hold_s * len(heads)
+    u_tx = _coder_stream(seconds)
+    place = lambda t: (heads[min(int(t // hold_s), len(heads) - 1)], 0.0, -1.0)
+    rows, _ = _rail_run(u_tx, place)
+    windows = [[i * hold_s + 0.4, (i + 1) * hold_s] for i in range(len(heads))]
+    peaks = [float(rows[(rows[:, 0] > lo) & (rows[:, 0] <= hi + 1e-9), 1].max()) for lo, hi in windows]
+    name = "code_current_first_axle"
+    role.vectors.append({
+        "name": name, "what": f"З (4 V) into every section; a standing train's head at {', '.join(f'{h:g}' for h in heads)} m, {hold_s:g} s each",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"u_tx": role.samples(name, "u_tx", u_tx),
+                   "x_head": _schedule_input([i * hold_s for i in range(len(heads))], [[h] for h in heads]),
+                   "v": _schedule_input([0.0], [[0.0]])},
+        "checks": [{"kind": "near", "label": "peak i_axle[1] over each place (two-port cascade, our core)",
+                    "port": "i_axle[1]", "windows": windows, "expected": peaks, "tolerance": 0.01,
+                    "relative": True}]})
+    # the track relays: normal (free), shunt (a train in section 3), control (a broken rail in
+    # section 4) modes, 2 s each
+    phases = [(OFF_LINE_M, -1.0), (6000.0, -1.0), (OFF_LINE_M, 9000.0)]
+    seconds = hold_s * len(phases)
+    u_tx = _coder_stream(seconds)
+    rows, _ = _rail_run(u_tx, lambda t: (*phases[min(int(t // hold_s), 2)][:1], 0.0, phases[min(int(t // hold_s), 2)][1]))
+    at = [hold_s * (i + 1) for i in range(len(phases))]
+    expected = [rows[int(round(a * FS_HZ / FRAME)) - 1, 2:].astype(int).tolist() for a in at]
+    assert expected == [[0] * 8, [0, 0, 1, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0, 0]], expected
+    name = "track_circuit_modes"
+    role.vectors.append({
+        "name": name, "what": "free line (normal mode), a train with its head at 6000 m (shunt mode), "
+                              "a broken rail at 9000 m (control mode), 2 s each",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"u_tx": role.samples(name, "u_tx", u_tx),
+                   "x_head": _schedule_input([0.0, 2.0, 4.0], [[p[0]] for p in phases]),
+                   "v": _schedule_input([0.0], [[0.0]]),
+                   "broken_rail_at": _schedule_input([0.0, 2.0, 4.0], [p[1] for p in phases])},
+        "checks": [{"kind": "table", "label": "occupied: none; section 3; section 4", "port": "occupied",
+                    "at_s": at, "expected": expected}]})
+    # the joint between sections 1 and 2 (2600 m) passed at 20 m/s: the coil EMF vanishes in
+    # the null zone between the feed leads and the joint (docs/rail_line.md)
+    seconds, speed, start = 4.0, 20.0, 2540.0
+    u_tx = _coder_stream(seconds)
+    rows, emf = _rail_run(u_tx, lambda t: (start + speed * t, speed, -1.0))
+    frame_peak = np.abs(emf).reshape(-1, FRAME).max(axis=1)
+    t_end = rows[:, 0]
+    near_joint = np.abs(t_end - (2600.0 - 1.5 - start) / speed) < 0.1
+    null = np.flatnonzero(near_joint & (frame_peak == 0.0))
+    null_window = [round(float(t_end[null[0]] - FRAME / FS_HZ), 4), round(float(t_end[null[-1]]), 4)]
+    entry_level = float(frame_peak[t_end > 3.2].max())
+    name = "joint_null_zone"
+    role.vectors.append({
+        "name": name, "what": f"З into every section; a train from {start:g} m at {speed:g} m/s across the joint at 2600 m",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"u_tx": role.samples(name, "u_tx", u_tx),
+                   "x_head": _schedule_input([0.0], [[start]]), "v": _schedule_input([0.0], [[speed]])},
+        "record_frames": ["e_coil[1]"],
+        "checks": [
+            {"kind": "frame_peak", "label": "code before the joint (≥ half our core's level)", "port": "e_coil[1]",
+             "from_s": 1.0, "to_s": 2.5, "at_least": 0.5 * float(frame_peak[(t_end > 1.0) & (t_end <= 2.5)].max()),
+             "unit": "V"},
+            {"kind": "frame_peak", "label": "null zone: EMF ≤ 5 % of the next section's entry level",
+             "port": "e_coil[1]", "from_s": null_window[0], "to_s": null_window[1],
+             "at_most": round(0.05 * entry_level, 6), "unit": "V"},
+            {"kind": "frame_peak", "label": "next section's code after the joint (≥ half our core's level)",
+             "port": "e_coil[1]", "from_s": 3.2, "at_least": 0.5 * entry_level, "unit": "V"}]})
+    return role
+
+
+GENERATORS = {"loco_receiver": receiver_vectors, "wayside_coder": coder_vectors, "rail_line": rail_vectors,
+              "traction": traction_vectors}
 
 
 def generate(roles=ROLES, directory: Path = DATA_DIR) -> List[Path]:

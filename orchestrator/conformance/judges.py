@@ -107,11 +107,17 @@ def judge_table(trace: Trace, check: Mapping):
 
 
 def judge_near(trace: Trace, check: Mapping):
-    """A port at given instants against expected values: largest deviation, absolute or
+    """A port at given instants (``at_s``), or its greatest value in given windows
+    (``windows``: [from, to] pairs), against expected values: largest deviation, absolute or
     relative (``relative``: true); bound ``tolerance``."""
     column = trace.column(check["port"])
     expected = np.asarray(check["expected"], dtype=float)
-    got = np.array([column[int(np.argmin(np.abs(trace.time_s - at)))] for at in check["at_s"]])
+    if "windows" in check:
+        t = trace.time_s
+        got = np.array([np.max(column[(t > lo - 1e-9) & (t <= hi + 1e-9)], initial=-np.inf)
+                        for lo, hi in check["windows"]])
+    else:
+        got = np.array([column[int(np.argmin(np.abs(trace.time_s - at)))] for at in check["at_s"]])
     deviation = np.abs(got - expected)
     if check.get("relative"):
         deviation = deviation / np.maximum(np.abs(expected), 1e-300)

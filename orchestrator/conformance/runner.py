@@ -51,6 +51,11 @@ class _PortIO:
                 self.slot[name] = (is_input, var.type, len(vrs))
                 vrs.append(var.vr)
         slave.bind(*tables)
+        # an element a vector leaves alone keeps its start value (it is written with the rest)
+        for name in dict.fromkeys(inputs):
+            start = variables[name].start
+            if start is not None:
+                self.set([name], [_start_value(variables[name].type, start)])
 
     def set(self, names: Sequence[str], values) -> None:
         buffers = self.slave.inputs
@@ -61,6 +66,12 @@ class _PortIO:
     def get(self, names: Sequence[str]) -> np.ndarray:
         buffers = self.slave.outputs
         return np.array([buffers[self.slot[n][1]].values[self.slot[n][2]] for n in names], dtype=float)
+
+
+def _start_value(type_name: str, start) -> float:
+    if type_name == "Boolean":
+        return float(str(start).lower() in ("true", "1"))
+    return float(start)
 
 
 class _TractionPlant:

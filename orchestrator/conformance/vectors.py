@@ -19,7 +19,7 @@ FORMAT = 1
 #: fields every check kind needs (beyond kind and label)
 _CHECK_FIELDS = {
     "latency": ("from_s", "until", "bound_s"), "holds": ("conditions", "bound_s"),
-    "table": ("port", "at_s", "expected"), "near": ("port", "at_s", "expected", "tolerance"),
+    "table": ("port", "at_s", "expected"), "near": ("port", "expected", "tolerance"),
     "extreme": ("port", "extreme"), "when": ("trigger", "port", "expected", "tolerance"),
     "code_timing": ("port", "pattern_s", "tolerance", "fs_hz", "carrier_hz", "cycle_s"),
     "frame_peak": ("port",),
