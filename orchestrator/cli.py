@@ -287,7 +287,7 @@ def add_new_command(sub) -> None:
 def cmd_conform(args) -> int:
     from orchestrator.conformance.runner import conform, format_json, format_table
 
-    report = conform(args.role, args.target)
+    report = conform(args.role, args.target, args.vectors)
     print(format_json(report) if args.format == "json" else format_table(report))
     return 0 if report.passed else 1
 
@@ -370,6 +370,8 @@ def make_parser() -> argparse.ArgumentParser:
     conform.add_argument("--role", required=True,
                          help="loco_receiver, wayside_coder, rail_line, traction or ato_controller")
     conform.add_argument("--format", choices=["table", "json"], default="table")
+    conform.add_argument("--vectors", metavar="DIR",
+                         help="a folder of vector files (default: the ones shipped in the package)")
     conform.set_defaults(func=cmd_conform)
 
     env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
