@@ -86,8 +86,8 @@ def test_an_fmu_of_another_role_is_refused(product_fmus):
 @pytest.mark.parametrize("damage, message", [
     (lambda d: (d / "traction.json").write_text("{not json"), "traction.json: not a valid JSON vector file"),
     (lambda d: (d / "traction.json").write_text(
-        (d / "traction.json").read_text().replace('"kind": "near"', '"kind": "nearby"', 1)),
-     "traction.json: field vectors[2].checks[0].kind: must be one of"),
+        (d / "traction.json").read_text().replace('"kind": "when"', '"kind": "whenever"', 1)),
+     "traction.json: field vectors[0].checks[0].kind: must be one of"),
     (lambda d: (d / "rail_line.npz").write_bytes(b"PK\x03\x04 damaged"), "rail_line.npz: not a readable .npz archive"),
 ])
 def test_a_damaged_vector_file_is_one_line_exit_2(product_fmus, tmp_path, damage, message):

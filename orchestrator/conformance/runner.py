@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
@@ -138,7 +139,7 @@ def run_vector(target: Target, role: RoleVectors, vector: Mapping) -> List[Verdi
         io = _PortIO(target, slave, [n for names in in_names.values() for n in names],
                      [n for names in [*out_names.values(), *frame_names.values()] for n in names])
         slave.setup_experiment(0.0, None)
-        slave.set_values(_parameter_values(target, vector.get("parameters", {})))
+        slave.set_values(_parameter_values(target, role, vector.get("parameters", {})))
         slave.enter_initialization()
         slave.exit_initialization()
         arrays = {port: role.array(spec) for port, spec in frame_inputs.items()}
@@ -207,10 +208,17 @@ def _frame_slice(samples: np.ndarray, k: int, frame: int, shape: Tuple[int, ...]
     return out
 
 
-def _parameter_values(target: Target, parameters: Mapping) -> Dict[str, object]:
+def _parameter_values(target: Target, role: RoleVectors, parameters: Mapping) -> Dict[str, object]:
+    """Parameters by variable name; a relative ``*_file`` names a data file beside the vector
+    file (as a system's resources/ folder does for a run, docs/interfaces.md, Data files)."""
     values: Dict[str, object] = {}
     for name, value in parameters.items():
-        if isinstance(value, list):
+        if name.endswith("_file") and isinstance(value, str) and value and not Path(value).is_absolute():
+            beside = role.path.parent / value
+            if not beside.is_file():
+                raise UserError(f"{role.path}: parameter {name}: data file {value} not found beside it")
+            values[name] = str(beside.resolve())
+        elif isinstance(value, list):
             values.update(zip(target.elements(name), value))
         else:
             values[name] = value
