@@ -105,3 +105,18 @@ def test_the_shipped_vectors_are_what_the_generator_writes(tmp_path):
 
     for path in generate(directory=tmp_path):
         assert path.read_bytes() == (DATA / path.name).read_bytes(), path.name
+
+
+def test_a_target_built_with_another_frame_size_is_stepped_with_its_own_frames():
+    """The runner steps N/fs with the target's N (here 16, the vectors were written with 40):
+    the rail line's frame input and output and its per-frame rms give the same verdicts."""
+    from orchestrator.build.builder import UnitSpec, build_unit
+    from orchestrator.conformance.runner import conform
+    from fmus.sizes import BuildConfig
+
+    fmu = build_unit(UnitSpec("rail_line", "fmus.rail_line.facade", "RailLine"), REPO / "build" / "test_fmus" / "n16",
+                     BuildConfig(frame=16)).path
+    report = conform("rail_line", str(fmu))
+    assert report.passed, [v for v in report.verdicts if not v.passed]
+    current = [v for v in report.verdicts if v.vector == "code_current_first_axle"]
+    assert current[0].measured < 1e-4          # the window's rms does not depend on the frame

@@ -107,15 +107,18 @@ def judge_table(trace: Trace, check: Mapping):
 
 
 def judge_near(trace: Trace, check: Mapping):
-    """A port at given instants (``at_s``), or its greatest value in given windows
-    (``windows``: [from, to] pairs), against expected values: largest deviation, absolute or
-    relative (``relative``: true); bound ``tolerance``."""
+    """A port at given instants (``at_s``), or a statistic of it in given windows (``windows``:
+    [from, to] pairs; ``statistic`` max, or rms: the root of the mean square, which for a port
+    that is itself an rms over each frame is the rms over the window whatever the frame size),
+    against expected values: largest deviation, absolute or relative (``relative``: true);
+    bound ``tolerance``."""
     column = trace.column(check["port"])
     expected = np.asarray(check["expected"], dtype=float)
     if "windows" in check:
         t = trace.time_s
-        got = np.array([np.max(column[(t > lo - 1e-9) & (t <= hi + 1e-9)], initial=-np.inf)
-                        for lo, hi in check["windows"]])
+        rms = check.get("statistic", "max") == "rms"
+        inside = [column[(t > lo + 1e-9) & (t <= hi + 1e-9)] for lo, hi in check["windows"]]
+        got = np.array([(np.sqrt(np.mean(x ** 2)) if rms else np.max(x)) if x.size else np.nan for x in inside])
     else:
         got = np.array([column[int(np.argmin(np.abs(trace.time_s - at)))] for at in check["at_s"]])
     deviation = np.abs(got - expected)
