@@ -579,11 +579,12 @@ def rail_vectors() -> RoleFile:
                     "tolerance": 0.01, "relative": True}]})
     # the track relays: normal (free), shunt (a train in section 3), control (a broken rail in
     # section 4) modes, 2 s each
+    mode_s = 2.0
     phases = [(OFF_LINE_M, -1.0), (6000.0, -1.0), (OFF_LINE_M, 9000.0)]
-    seconds = hold_s * len(phases)
+    seconds = mode_s * len(phases)
     u_tx = _coder_stream(seconds)
-    rows, _ = _rail_run(u_tx, lambda t: (*phases[min(int(t // hold_s), 2)][:1], 0.0, phases[min(int(t // hold_s), 2)][1]))
-    at = [hold_s * (i + 1) for i in range(len(phases))]
+    rows, _ = _rail_run(u_tx, lambda t: (*phases[min(int(t // mode_s), 2)][:1], 0.0, phases[min(int(t // mode_s), 2)][1]))
+    at = [mode_s * (i + 1) for i in range(len(phases))]
     expected = [rows[int(round(a * FS_HZ / FRAME)) - 1, 2:].astype(int).tolist() for a in at]
     assert expected == [[0] * 8, [0, 0, 1, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0, 0]], expected
     name = "track_circuit_modes"
@@ -592,9 +593,9 @@ def rail_vectors() -> RoleFile:
                               "a broken rail at 9000 m (control mode), 2 s each",
         "parameters": params, "step": step, "duration_s": seconds,
         "inputs": {"u_tx": role.samples(name, "u_tx", u_tx),
-                   "x_head": _schedule_input([0.0, 2.0, 4.0], [[p[0]] for p in phases]),
+                   "x_head": _schedule_input([i * mode_s for i in range(3)], [[p[0]] for p in phases]),
                    "v": _schedule_input([0.0], [[0.0]]),
-                   "broken_rail_at": _schedule_input([0.0, 2.0, 4.0], [p[1] for p in phases])},
+                   "broken_rail_at": _schedule_input([i * mode_s for i in range(3)], [p[1] for p in phases])},
         "checks": [{"kind": "table", "label": "occupied: none; section 3; section 4", "port": "occupied",
                     "at_s": at, "expected": expected}]})
     # the joint between sections 1 and 2 (2600 m) passed at 20 m/s: the coil EMF vanishes in
