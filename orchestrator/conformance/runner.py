@@ -44,6 +44,7 @@ class _PortIO:
         self.slave = slave
         tables: Tuple[Dict[str, List[int]], Dict[str, List[int]]] = ({}, {})
         self.slot: Dict[str, Tuple[bool, str, int]] = {}
+        self._positions: Dict[tuple, Tuple[str, np.ndarray]] = {}
         for is_input, names in ((True, inputs), (False, outputs)):
             table = tables[0 if is_input else 1]
             for name in dict.fromkeys(names):
@@ -60,13 +61,21 @@ class _PortIO:
 
     def set(self, names: Sequence[str], values) -> None:
         buffers = self.slave.inputs
-        for name, value in zip(names, np.ravel(values)):
-            _, type_name, position = self.slot[name]
-            buffers[type_name].values[position] = value
+        type_name, positions = self._where(names)
+        buffers[type_name].values[positions] = np.ravel(values)
 
     def get(self, names: Sequence[str]) -> np.ndarray:
-        buffers = self.slave.outputs
-        return np.array([buffers[self.slot[n][1]].values[self.slot[n][2]] for n in names], dtype=float)
+        type_name, positions = self._where(names)
+        return np.asarray(self.slave.outputs[type_name].values[positions], dtype=float)
+
+    def _where(self, names: Sequence[str]):
+        """(FMI type, buffer positions) of a port's elements (all of one type), found once."""
+        key = tuple(names)
+        found = self._positions.get(key)
+        if found is None:
+            slots = [self.slot[n] for n in names]
+            found = self._positions[key] = (slots[0][1], np.array([slot[2] for slot in slots], dtype=np.intp))
+        return found
 
 
 def _start_value(type_name: str, start) -> float:
@@ -143,11 +152,12 @@ def run_vector(target: Target, role: RoleVectors, vector: Mapping) -> List[Verdi
         slave.enter_initialization()
         slave.exit_initialization()
         arrays = {port: role.array(spec) for port, spec in frame_inputs.items()}
+        shapes = {port: target.shape(port) for port in arrays}
         for k in range(steps):
             t = k * step_s
             for port, spec in vector.get("inputs", {}).items():
                 if port in arrays:
-                    io.set(in_names[port], _frame_slice(arrays[port], k, frame, target.shape(port)))
+                    io.set(in_names[port], _frame_slice(arrays[port], k, frame, shapes[port]))
                 else:
                     value = _schedule_value(spec, t)
                     io.set(in_names[port][:len(np.ravel(value))], value)
