@@ -89,6 +89,11 @@ def test_an_fmu_of_another_role_is_refused(product_fmus):
         (d / "traction.json").read_text().replace('"kind": "when"', '"kind": "whenever"', 1)),
      "traction.json: field vectors[0].checks[0].kind: must be one of"),
     (lambda d: (d / "rail_line.npz").write_bytes(b"PK\x03\x04 damaged"), "rail_line.npz: not a readable .npz archive"),
+    (lambda d: (d / "traction.json").write_text(json.dumps(
+        {**json.loads((d / "traction.json").read_text()),
+         "required_ports": [p for p in json.loads((d / "traction.json").read_text())["required_ports"]
+                            if p != "stop_time"]})),
+     "traction.json: field vectors[0]: uses ports not in required_ports: stop_time"),
 ])
 def test_a_damaged_vector_file_is_one_line_exit_2(product_fmus, tmp_path, damage, message):
     vectors = tmp_path / "vectors"

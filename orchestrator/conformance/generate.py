@@ -432,6 +432,7 @@ def _coder_core(block_aspects: int = 3, system: Optional[str] = None):
 
 def coder_vectors() -> RoleFile:
     role = RoleFile("wayside_coder", ["system", "fs", "block_aspects", "occupied", "fault_main", "fault_reserve",
+                                      "wrong_command_main",
                                       "u_tx", "code_tx", "signal", "status"])
     line = load_line(str(DEFAULT_LINE))
     tables = json.loads(alsn.CODES_FILE.read_text(encoding="utf-8"))["transmitters"]

@@ -75,6 +75,7 @@ def load_role(role: str, directory: Optional[Path] = None) -> RoleVectors:
         _require(arrays_path.is_file(), path, "arrays", f"{arrays_path.name} not found beside it")
     for i, vector in enumerate(vectors):
         _check_vector(path, f"vectors[{i}]", vector, arrays_path is not None)
+        _check_ports(path, f"vectors[{i}]", vector, ports)
     return RoleVectors(role, path, ports, vectors, arrays_path)
 
 
@@ -104,6 +105,22 @@ def _check_vector(path: Path, where: str, vector: Any, have_arrays: bool) -> Non
                  f"must be one of {', '.join(JUDGES)}")
         for key in ("label", *_CHECK_FIELDS[check["kind"]]):
             _require(key in check, path, f"{at}.{key}", "missing")
+
+
+def _base(port: str) -> str:
+    return port.split("[", 1)[0]
+
+
+def _check_ports(path: Path, where: str, vector: Mapping, required: List[str]) -> None:
+    """Every port a vector uses is one of the role's required ports, so that a target lacking
+    it is refused before anything runs."""
+    from orchestrator.conformance.judges import ports_of
+
+    used = [*vector.get("parameters", {}), *vector.get("inputs", {}), *vector.get("record_frames", [])]
+    used += [p for check in vector["checks"] for p in ports_of(check) if not p.startswith("plant.")]
+    used += [check["port"] for check in vector["checks"] if check["kind"] in ("code_timing", "frame_peak")]
+    missing = sorted({_base(p) for p in used} - set(required))
+    _require(not missing, path, f"{where}", f"uses ports not in required_ports: {', '.join(missing)}")
 
 
 def _positive(value) -> bool:
