@@ -12,6 +12,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from fmus.signalling.aspects import GREEN
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.judges import Trace, Verdict, judge, ports_of
 from orchestrator.conformance.target import Target, open_target
@@ -104,7 +105,7 @@ class _TractionPlant:
             for start, end, aspect in self.zones:
                 if start <= self.state.x_m < end:
                     return int(aspect), True
-        return 4, True           # green
+        return GREEN, True
 
     def values(self) -> Dict[str, float]:
         return {"plant.x": self.state.x_m, "plant.v": self.state.v_mps, "plant.a": self.state.a_mps2}
@@ -187,7 +188,8 @@ def run_vector(target: Target, role: RoleVectors, vector: Mapping) -> List[Verdi
     finally:
         slave.free()
     if failure is not None:
-        return [Verdict(name, "the target completes every step", math.nan, "no failure", "", False,
+        return [Verdict(name, "the target accepts the parameters and completes every step", math.nan,
+                        "no failure", "", False,
                         " ".join(failure.split()))]
     trace = Trace(np.asarray(times), {port: np.asarray(r, dtype=float) for port, r in rows.items()})
     if frames:
