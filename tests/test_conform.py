@@ -22,7 +22,7 @@ def broken_fmus(tmp_path_factory):
     dest = REPO / "build" / "test_fmus" / "broken"
     return {identifier: build_unit(UnitSpec(identifier.lower(), "rcs_testfmus.broken", identifier), dest,
                                    extra_packages=[FIXTURE_PACKAGE]).path
-            for identifier in ("StuckReceiver", "NoFailoverCoder")}
+            for identifier in ("StuckReceiver", "NoFailoverCoder", "BlindAto")}
 
 
 @pytest.mark.parametrize("role", sorted(PRODUCT))
@@ -63,6 +63,14 @@ def test_a_coder_without_its_two_out_of_two_fails_and_the_table_names_it(broken_
     assert out.strip().splitlines()[-1].endswith("1 of 11 vectors fail: two_out_of_two_faults")
     rows = [line for line in out.splitlines() if line.startswith("two_out_of_two_faults")]
     assert any("no output with both failed" in row and row.rstrip().endswith("FAIL") for row in rows)
+
+
+def test_an_ato_that_reads_every_code_as_green_fails_the_signal_at_danger(broken_fmus):
+    code, out, _ = railcosim("conform", "--role", "ato_controller", broken_fmus["BlindAto"], "--format", "json")
+    report = json.loads(out)
+    assert code == 1 and report["failed_vectors"] == ["red_signal_ahead"]
+    failed = {c["check"] for c in report["checks"] if not c["passed"]}
+    assert "stops before the signal at danger" in failed
 
 
 @pytest.mark.parametrize("args, message", [

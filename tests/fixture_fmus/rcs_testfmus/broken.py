@@ -1,6 +1,7 @@
 """Deliberately broken variants of our product facades, each with one behaviour broken, for
 the conformance tests (tests/test_conform.py): `railcosim conform` must fail them and name the
 vectors that catch the fault."""
+from fmus.ato_controller.facade import AtoController
 from fmus.loco_receiver.facade import LocoReceiver
 from fmus.wayside_coder.facade import WaysideCoder
 
@@ -30,4 +31,12 @@ class NoFailoverCoder(WaysideCoder):
         io = self.io
         io["fault_main"][...] = False
         io["fault_reserve"][...] = False
+        super().step_core(current_time, step_size)
+
+
+class BlindAto(AtoController):
+    """An ATO/ATP that reads every cab code as green: it drives through a signal at danger."""
+
+    def step_core(self, current_time, step_size):
+        self.io["aspect"][...] = 4
         super().step_core(current_time, step_size)
