@@ -228,9 +228,10 @@ def receiver_vectors() -> RoleFile:
 
 
 def _digital_receiver_vectors(role: RoleFile, system_name: str) -> List[dict]:
-    """Each command the block gives section 1 (clear, one and two blocks free... as occupancy
-    sets them), acquired from cold within four messages + 0.5 s, then a restrictive change
-    within the stated latency (docs/digital_channels.md, Latency)."""
+    """The command the block sends into section 1 for a clear line and for the second section
+    ahead occupied, each acquired from cold within four messages + 0.5 s, then the command for
+    the next section occupied within the stated latency (docs/digital_channels.md, Latency).
+    The indication expected for each command is the one our receiver core settles on."""
     system = cab_systems.digital_system(system_name)
     line = load_line(str(DEFAULT_LINE))
     message_s = system.message_s(system.carrier_hz)
