@@ -98,7 +98,9 @@ def not_more_permissive(code: int) -> List[int]:
 # ---- loco_receiver ------------------------------------------------------------------------------
 COUPLING = 0.1              # 4 V transmitter → 0.4 V at the coil (docs/loco_receiver.md, Latencies)
 SECTION = {"KPT-5": 0, "KPT-7": 1}      # the bundled line's sections 1 and 2
-CYCLE_S = {"KPT-5": 1.60, "KPT-7": 1.86}
+#: cam cycle per transmitter type, from the code tables (docs/wayside_coder.md)
+CYCLE_S = {kpt: table["cycle_s"] for kpt, table in
+           json.loads(alsn.CODES_FILE.read_text(encoding="utf-8"))["transmitters"].items()}
 CODE_TAG = {sig.GREEN: "Z", sig.YELLOW: "Zh", sig.RED_YELLOW: "KZh"}      # in vector names
 CODE_NAME = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ"}
 
@@ -114,12 +116,12 @@ def occupancy(code: int, section: int, sections: int = 8) -> np.ndarray:
 
 
 def coder_emf(section: int, seconds: float, schedule: Callable[[float], np.ndarray], phase: float,
-              level: float = COUPLING, coder=None) -> np.ndarray:
-    """The coil EMF of one section's transmitter output × ``level``, frame by frame."""
+              level: float = COUPLING) -> np.ndarray:
+    """The coil EMF of one section's transmitter output × ``level``, frame by frame, every cam
+    starting at ``phase`` of its cycle."""
     line = load_line(str(DEFAULT_LINE))
-    if coder is None:
-        coder = WaysideCoderCore(line, len(line.sections), FRAME, CoderSettings(fs_hz=FS_HZ, seed=1))
-        coder.cam_offset_s[:] = phase * coder.cycle_s
+    coder = WaysideCoderCore(line, len(line.sections), FRAME, CoderSettings(fs_hz=FS_HZ, seed=1))
+    coder.cam_offset_s[:] = phase * coder.cycle_s
     frames = []
     for k in range(int(round(seconds * FS_HZ / FRAME))):
         t = k * FRAME / FS_HZ
