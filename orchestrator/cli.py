@@ -284,6 +284,14 @@ def add_new_command(sub) -> None:
     new.set_defaults(func=cmd_new)
 
 
+def cmd_conform(args) -> int:
+    from orchestrator.conformance.runner import conform, format_json, format_table
+
+    report = conform(args.role, args.target, args.vectors)
+    print(format_json(report) if args.format == "json" else format_table(report))
+    return 0 if report.passed else 1
+
+
 def cmd_fmu_env(args) -> int:
     from orchestrator.hostenv import host_environment
 
@@ -355,6 +363,16 @@ def make_parser() -> argparse.ArgumentParser:
     validate.set_defaults(func=cmd_validate)
 
     add_new_command(sub)
+
+    conform = sub.add_parser("conform", help="run a role's behavioural test vectors against an FMU "
+                                             "(pass/fail table; exit 1 when a vector fails)")
+    conform.add_argument("target", help="an FMI 2.0 co-simulation .fmu claiming the role")
+    conform.add_argument("--role", required=True,
+                         help="loco_receiver, wayside_coder, rail_line, traction or ato_controller")
+    conform.add_argument("--format", choices=["table", "json"], default="table")
+    conform.add_argument("--vectors", metavar="DIR",
+                         help="a folder of vector files (default: the ones shipped in the package)")
+    conform.set_defaults(func=cmd_conform)
 
     env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
     env.set_defaults(func=cmd_fmu_env)
