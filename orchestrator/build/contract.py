@@ -1,11 +1,12 @@
-"""Contract manifests: the committed port list of an FMU, and the diff against a built one.
+"""Contract manifests: the committed manifest of an FMU (orchestrator/contracts.py), and the diff
+of its ports against a built one.
 
 Arrays are collapsed (``u_tx`` with shape [8, 40]) so a manifest stays readable; every field
-a user's model relies on is compared: causality, variability, type, unit, min, max, start.
+a user's model relies on is compared: causality, variability, type, unit, min, max, start,
+description. ``railcosim contract check`` classifies the differences (orchestrator/contracts.py).
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Dict, List
 
@@ -28,4 +29,7 @@ def diff(manifest: Dict[str, dict], built: Dict[str, dict]) -> List[str]:
 
 
 def write_manifest(fmu_path: Path, manifest_path: Path) -> None:
-    Path(manifest_path).write_text(json.dumps(manifest_of(Path(fmu_path)), indent=1, sort_keys=True) + "\n")
+    """The FMU's manifest (``railcosim contract snapshot``) into ``manifest_path``."""
+    from orchestrator.contracts import write_snapshot
+
+    write_snapshot(Path(fmu_path), Path(manifest_path))
