@@ -93,6 +93,9 @@ def load_manifest(path: Path) -> dict:
         raise UserError(f"manifest {path}: not JSON ({error})") from None
     if not isinstance(manifest, dict):
         raise UserError(f"manifest {path}: expected a JSON object with the fields {', '.join(MODEL_FIELDS)}")
+    version = manifest.get("manifest_version", MANIFEST_VERSION)
+    if version != MANIFEST_VERSION:
+        raise UserError(f"manifest {path}: manifest_version {version!r}; this railcosim reads version {MANIFEST_VERSION}")
     missing = [key for key in MODEL_FIELDS if key not in manifest]
     if missing:
         raise UserError(f"manifest {path}: lacks the field(s) {', '.join(missing)} "
