@@ -4,6 +4,7 @@ CI relies on, bad input in one line; descriptions, units, declared step handling
 user finds them with fmpy alone."""
 import copy
 import json
+import re
 import subprocess
 import sys
 import zipfile
@@ -213,6 +214,9 @@ def test_bad_manifests_fmus_and_roles_are_one_line_exit_2(capsys, tmp_path, prod
     assert "FMU not found" in _one_line_error(capsys, "contract", "snapshot", tmp_path / "absent.fmu")
     assert "contract check: the following arguments are required: --manifest" in _one_line_error(
         capsys, "contract", "check", fmu)
+    other_version = _write(tmp_path / "v2.json", {**receiver, "manifest_version": 2})
+    assert "manifest_version 2; this railcosim reads version 1" in _one_line_error(
+        capsys, "contract", "check", fmu, "--manifest", other_version)
 
 
 # ---- model descriptions as a user finds them ----------------------------------------------------
@@ -262,6 +266,34 @@ def _fmpy(fmu: Path, values: dict, step: float) -> dict:
     proc = subprocess.run([sys.executable, "-c", _FMPY_SCRIPT, str(fmu), json.dumps(values), str(step)],
                           capture_output=True, text=True, timeout=300, env=cli_environment())
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# a message naming a parameter: `parameter NAME` (NAME, or each of NAME / NAME, a literal word)
+_NAMED = re.compile(r"parameter ((?:[a-z_][a-z0-9_]*)(?: / [a-z_][a-z0-9_]*)*)[:\s]")
+
+
+def test_error_messages_name_the_fmus_own_variables():
+    """Every message of a unit's model that names a parameter names one of its FMU's variables
+    (not a core's keyword such as ``pantograph_voltage_v``)."""
+    import importlib
+
+    from fmus.sizes import BuildConfig
+
+    ports = set()
+    for spec in discover_units():
+        facade = getattr(importlib.import_module(spec.facade_module), spec.model_identifier)
+        ports |= {port.name for port in facade.declare_ports(BuildConfig())}
+    root = Path(__file__).resolve().parent.parent / "fmus"
+    strangers = []
+    for path in sorted(root.rglob("*.py")):
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            text = line.strip()
+            if text.startswith(("class ", '"""')) or ("Error(" not in text and not text.startswith(('f"', '"'))):
+                continue
+            for match in _NAMED.finditer(line):
+                strangers += [f"{path.relative_to(root)}:{number}: {name}"
+                              for name in match.group(1).split(" / ") if name not in ports]
+    assert strangers == []
 
 
 @pytest.mark.parametrize("values, message", [
