@@ -291,12 +291,11 @@ def cmd_contract(args) -> int:
     from orchestrator import contracts
 
     if args.action == "snapshot":
-        manifest = contracts.snapshot(Path(args.fmu))
         if args.output:
-            contracts.write_snapshot(Path(args.fmu), Path(args.output))
+            manifest = contracts.write_snapshot(Path(args.fmu), Path(args.output))
             print(f"wrote {args.output}: {manifest['model_identifier']}, {len(manifest['ports'])} ports")
         else:
-            print(json.dumps(manifest, indent=1, sort_keys=True))
+            print(json.dumps(contracts.snapshot(Path(args.fmu)), indent=1, sort_keys=True))
         return 0
     result = contracts.check(Path(args.fmu), args.manifest, strict=args.strict)
     print(json.dumps(result.as_json(), indent=1) if args.format == "json" else result.text())

@@ -154,8 +154,8 @@ def _port_differences(name: str, old: dict, new: dict) -> List[Difference]:
     causality = old.get("causality")
     for key in sorted(set(PORT_FIELDS) | {"shape"} | set(old) | set(new)):
         a, b = old.get(key), new.get(key)
-        if a == b:
-            continue
+        if a == b or (key in ("min", "max", "start") and _number(a) is not None and _number(a) == _number(b)):
+            continue                    # "10" and "10.0" are one value
         if key == "description":
             kind = COMPATIBLE
         elif key in ("min", "max"):

@@ -214,6 +214,8 @@ def test_bad_manifests_fmus_and_roles_are_one_line_exit_2(capsys, tmp_path, prod
     assert "FMU not found" in _one_line_error(capsys, "contract", "snapshot", tmp_path / "absent.fmu")
     assert "contract check: the following arguments are required: --manifest" in _one_line_error(
         capsys, "contract", "check", fmu)
+    assert "cannot write the manifest" in _one_line_error(
+        capsys, "contract", "snapshot", fmu, "-o", tmp_path / "no_such_folder" / "m.json")
     other_version = _write(tmp_path / "v2.json", {**receiver, "manifest_version": 2})
     assert "manifest_version 2; this railcosim reads version 1" in _one_line_error(
         capsys, "contract", "check", fmu, "--manifest", other_version)
