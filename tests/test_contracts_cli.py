@@ -315,3 +315,34 @@ def test_the_declared_step_handling_is_what_the_fmus_do(product_fmus):
     # not raise), naming the one it needs
     refused = _fmpy(product_fmus / "RailLine.fmu", {}, 0.02)
     assert refused["messages"] == ["RailLine: communication step 0.02 s refused; this build needs exactly 0.01 s (frame/fs)"]
+
+
+_IMPORTS_SCRIPT = r"""
+import importlib, json, sys
+module, name = sys.argv[1], sys.argv[2]
+facade = getattr(importlib.import_module(module), name)
+slave = facade(instance_name="imports", resources=None)
+slave.setup_experiment(0.0, None, None)
+slave.enter_initialization_mode()
+slave.exit_initialization_mode()
+assert slave.do_step(0.0, slave.required_step_s or 0.5)
+print(json.dumps(sorted({m.split(".")[0] for m in sys.modules})))
+"""
+_PACKAGES = ("numpy", "scipy", "control", "matplotlib", "jsonschema", "pythonfmu")
+
+
+def test_the_python_packages_each_fmu_needs_are_the_ones_documented():
+    """docs/interfaces.md lists, per FMU, the packages its Python must have: the ones its model
+    imports through initialisation and a step (pythonfmu for every FMU)."""
+    page = (Path(__file__).resolve().parent.parent / "docs" / "interfaces.md").read_text(encoding="utf-8")
+    documented = {}
+    for line in page.splitlines():
+        cells = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        if len(cells) == 2 and cells[0] in {identifier for _, identifier in UNITS}:
+            documented[cells[0]] = {p for p in _PACKAGES if re.search(rf"\b{p}\b", cells[1])} | {"pythonfmu"}
+    assert set(documented) == {identifier for _, identifier in UNITS}
+    for spec in discover_units():
+        proc = subprocess.run([sys.executable, "-c", _IMPORTS_SCRIPT, spec.facade_module, spec.model_identifier],
+                              capture_output=True, text=True, timeout=300, env=cli_environment())
+        imported = set(json.loads(proc.stdout.strip().splitlines()[-1])) & set(_PACKAGES)
+        assert imported == documented[spec.model_identifier], spec.model_identifier
