@@ -289,6 +289,7 @@ def cmd_contract(args) -> int:
     """``railcosim contract snapshot|check``: an FMU's interface manifest, or the FMU against a
     manifest or a role's shipped one (docs/contracts.md); exit 1 when the check fails."""
     from orchestrator import contracts
+    from orchestrator.build.contract import resolve_manifest
 
     if args.action == "snapshot":
         if args.output:
@@ -297,13 +298,14 @@ def cmd_contract(args) -> int:
         else:
             print(json.dumps(contracts.snapshot(Path(args.fmu)), indent=1, sort_keys=True))
         return 0
-    result = contracts.check(Path(args.fmu), args.manifest, strict=args.strict)
+    manifest, shown = resolve_manifest(args.manifest)
+    result = contracts.check(Path(args.fmu), manifest, strict=args.strict, shown=shown)
     print(json.dumps(result.as_json(), indent=1) if args.format == "json" else result.text())
     return 0 if result.passed else 1
 
 
 def add_contract_command(sub) -> None:
-    from orchestrator.contracts import ROLES
+    from orchestrator.build.contract import ROLES
 
     contract = sub.add_parser("contract", help="an FMU's interface manifest, or the FMU checked against one")
     actions = contract.add_subparsers(dest="action", required=True, parser_class=_Parser)

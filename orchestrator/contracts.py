@@ -4,7 +4,8 @@ differences between an FMU and a manifest (``railcosim contract check``); docs/c
 A manifest is the FMU-level interface (model identifier, default communication step, whether the
 step may vary, frame size) plus every port as :func:`orchestrator.ports.manifest_of` reads it
 (causality, variability, type, unit, min, max, start, description; an array collapsed with its
-shape). The five roles' reference manifests are the shipped ``fmus/<role>/contract.json``.
+shape). The five roles' reference manifests are the shipped ``fmus/<role>/contract.json``
+(orchestrator/build/contract.py finds them by role name; this module knows no railway).
 
 A difference is *breaking* when a host or a system built against the manifest may stop working or
 silently behave otherwise with the FMU; *compatible* when everything that worked still does.
@@ -18,21 +19,14 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
-import fmus
 from orchestrator.errors import UserError
 from orchestrator.ports import manifest_of
 
-#: the roles whose reference manifests ship in the package (fmus/<role>/contract.json)
-ROLES = ("wayside_coder", "rail_line", "loco_receiver", "traction", "ato_controller")
 MANIFEST_VERSION = 1
 #: FMU-level fields of a manifest, and the fields of each port (``shape`` only for an array)
 MODEL_FIELDS = ("model_identifier", "step_size_s", "variable_step", "frame", "ports")
 PORT_FIELDS = ("causality", "variability", "type", "unit", "min", "max", "start", "description")
 BREAKING, COMPATIBLE = "breaking", "compatible"
-
-
-def role_manifest_path(role: str) -> Path:
-    return Path(fmus.__file__).resolve().parent / role / "contract.json"
 
 
 # ---- snapshot ---------------------------------------------------------------------------------
@@ -67,18 +61,6 @@ def write_snapshot(fmu_path: Path, manifest_path: Path) -> dict:
 
 
 # ---- reading a manifest -----------------------------------------------------------------------
-def resolve_manifest(name: str) -> Path:
-    """A manifest file, or a role name meaning that role's shipped manifest."""
-    path = Path(name)
-    if path.is_file():
-        return path
-    if name in ROLES:
-        return role_manifest_path(name)
-    if path.suffix == ".json" or "/" in name or path.exists():
-        raise UserError(f"--manifest {name}: no such file")
-    raise UserError(f"--manifest {name}: neither a manifest file nor a role (roles: {', '.join(ROLES)})")
-
-
 def load_manifest(path: Path) -> dict:
     """A manifest file, checked for every field :func:`compare` reads; a defect is one UserError
     naming the file and the field."""
@@ -269,9 +251,8 @@ class CheckResult:
         return "\n".join(lines)
 
 
-def check(fmu_path: Path, manifest_name: str, strict: bool = False) -> CheckResult:
+def check(fmu_path: Path, manifest_path: Path, strict: bool = False, shown: Optional[str] = None) -> CheckResult:
+    """The FMU against the manifest file; ``shown`` names the manifest in the report (a role)."""
     current = snapshot(Path(fmu_path))
-    manifest_path = resolve_manifest(manifest_name)
-    manifest = load_manifest(manifest_path)
-    shown = manifest_name if manifest_name in ROLES and not Path(manifest_name).is_file() else str(manifest_path)
-    return CheckResult(str(fmu_path), shown, tuple(compare(manifest, current)), strict)
+    manifest = load_manifest(Path(manifest_path))
+    return CheckResult(str(fmu_path), shown or str(manifest_path), tuple(compare(manifest, current)), strict)

@@ -16,6 +16,7 @@ from lxml import etree
 from helpers import cli_environment, railcosim
 from orchestrator import contracts
 from orchestrator.build.builder import discover_units
+from orchestrator.build.contract import role_manifest_path
 from orchestrator.cli import main
 
 UNITS = [(spec.unit, spec.model_identifier) for spec in discover_units()]
@@ -52,7 +53,7 @@ def test_snapshot_then_check_is_clean_and_the_shipped_manifest_matches(capsys, t
     # the role's shipped manifest is this FMU's, field for field
     code, out, _ = _cli(capsys, "contract", "check", fmu, "--manifest", unit, "--strict")
     assert code == 0, out
-    assert json.loads(contracts.role_manifest_path(unit).read_text()) == written
+    assert json.loads(role_manifest_path(unit).read_text()) == written
 
 
 def test_snapshot_to_standard_output_is_the_manifest(capsys, product_fmus):

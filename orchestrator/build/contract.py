@@ -8,9 +8,30 @@ description. ``railcosim contract check`` classifies the differences (orchestrat
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Dict, List
+from typing import Dict, List, Tuple
 
+import fmus
+from orchestrator.errors import UserError
 from orchestrator.ports import manifest_of, read_manifest  # noqa: F401 (the contract API)
+
+#: the roles whose reference manifests ship in the package (fmus/<role>/contract.json)
+ROLES = ("wayside_coder", "rail_line", "loco_receiver", "traction", "ato_controller")
+
+
+def role_manifest_path(role: str) -> Path:
+    return Path(fmus.__file__).resolve().parent / role / "contract.json"
+
+
+def resolve_manifest(name: str) -> Tuple[Path, str]:
+    """(file, name to show) of ``--manifest``: a manifest file, or a role meaning its shipped one."""
+    path = Path(name)
+    if path.is_file():
+        return path, str(path)
+    if name in ROLES:
+        return role_manifest_path(name), name
+    if path.suffix == ".json" or "/" in name or path.exists():
+        raise UserError(f"--manifest {name}: no such file")
+    raise UserError(f"--manifest {name}: neither a manifest file nor a role (roles: {', '.join(ROLES)})")
 
 
 def diff(manifest: Dict[str, dict], built: Dict[str, dict]) -> List[str]:
