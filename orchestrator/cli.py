@@ -1,4 +1,4 @@
-"""`railcosim` command line: build, run, inspect, validate, fmu-env.
+"""`railcosim` command line: build, run, inspect, validate, new, contract, conform, fmu-env.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
 SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
@@ -8,6 +8,7 @@ exit-time abort is avoided at its cause, see orchestrator/fmu.py FmuSlave.free).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -292,6 +293,43 @@ def cmd_conform(args) -> int:
     return 0 if report.passed else 1
 
 
+def cmd_contract(args) -> int:
+    """``railcosim contract snapshot|check``: an FMU's interface manifest, or the FMU against a
+    manifest or a role's shipped one (docs/contracts.md); exit 1 when the check fails."""
+    from orchestrator import contracts
+    from orchestrator.build.contract import resolve_manifest
+
+    if args.action == "snapshot":
+        if args.output:
+            manifest = contracts.write_snapshot(Path(args.fmu), Path(args.output))
+            print(f"wrote {args.output}: {manifest['model_identifier']}, {len(manifest['ports'])} ports")
+        else:
+            print(json.dumps(contracts.snapshot(Path(args.fmu)), indent=1, sort_keys=True))
+        return 0
+    manifest, shown = resolve_manifest(args.manifest)
+    result = contracts.check(Path(args.fmu), manifest, strict=args.strict, shown=shown)
+    print(json.dumps(result.as_json(), indent=1) if args.format == "json" else result.text())
+    return 0 if result.passed else 1
+
+
+def add_contract_command(sub) -> None:
+    from orchestrator.build.contract import ROLES
+
+    contract = sub.add_parser("contract", help="an FMU's interface manifest, or the FMU checked against one")
+    actions = contract.add_subparsers(dest="action", required=True, parser_class=_Parser)
+    snapshot = actions.add_parser("snapshot", help="write an FMU's interface manifest (JSON)")
+    snapshot.add_argument("fmu", help="an .fmu")
+    snapshot.add_argument("-o", "--output", metavar="FILE", help="manifest file to write (default: standard output)")
+    check = actions.add_parser("check", help="every difference between an FMU and a manifest, breaking or "
+                                             "compatible; exit 1 on a breaking one")
+    check.add_argument("fmu", help="an .fmu")
+    check.add_argument("--manifest", required=True, metavar="M",
+                       help=f"a manifest file, or a role meaning its shipped manifest: {', '.join(ROLES)}")
+    check.add_argument("--strict", action="store_true", help="any difference fails, compatible ones too")
+    check.add_argument("--format", choices=["text", "json"], default="text", help="text (default) or json")
+    contract.set_defaults(func=cmd_contract)
+
+
 def cmd_fmu_env(args) -> int:
     from orchestrator.hostenv import host_environment
 
@@ -363,6 +401,7 @@ def make_parser() -> argparse.ArgumentParser:
     validate.set_defaults(func=cmd_validate)
 
     add_new_command(sub)
+    add_contract_command(sub)
 
     conform = sub.add_parser("conform", help="run a role's behavioural test vectors against an FMU "
                                              "(pass/fail table; exit 1 when a vector fails)")

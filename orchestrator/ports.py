@@ -1,8 +1,9 @@
-"""An FMU's ports as a manifest: name → causality, variability, type, unit, min, max, start and,
-for an array, its shape (``u_tx`` with shape [8, 40]), read from its modelDescription.xml.
+"""An FMU's ports as a manifest: name → causality, variability, type, unit, min, max, start,
+description and, for an array, its shape (``u_tx`` with shape [8, 40]), read from its
+modelDescription.xml.
 
-The contract manifests (``fmus/<unit>/contract.json``, orchestrator/build/contract.py) and the
-connectors written into SSDs (orchestrator/sspgen.py) are both this form.
+The ports of the contract manifests (``fmus/<unit>/contract.json``, orchestrator/contracts.py)
+and the connectors written into SSDs (orchestrator/sspgen.py) are both this form.
 """
 from __future__ import annotations
 
@@ -27,7 +28,8 @@ def manifest_of(fmu_path: Path) -> Dict[str, dict]:
         base = match.group("base")
         entry = {"causality": sv.get("causality", "local"), "variability": sv.get("variability", "continuous"),
                  "type": etree.QName(typed).localname, "unit": typed.get("unit"),
-                 "min": typed.get("min"), "max": typed.get("max"), "start": typed.get("start")}
+                 "min": typed.get("min"), "max": typed.get("max"), "start": typed.get("start"),
+                 "description": sv.get("description")}
         index = match.group("index")
         if index:
             shape = [int(i) for i in index.split(",")]
@@ -43,4 +45,6 @@ def manifest_of(fmu_path: Path) -> Dict[str, dict]:
 
 
 def read_manifest(path: Path) -> Dict[str, dict]:
-    return json.loads(Path(path).read_text())
+    """The ports of a contract manifest (its ``ports``; a file of ports alone is read as such)."""
+    manifest = json.loads(Path(path).read_text())
+    return manifest["ports"] if isinstance(manifest.get("ports"), dict) else manifest

@@ -182,6 +182,9 @@ class FrameSlave(Fmi2Slave):
     build_config: Dict[str, int] = {}
     #: Communication step the FMU requires, in seconds; None when any step is allowed.
     required_step_s: Optional[float] = None
+    #: Whether doStep takes a communication step of any length (the modelDescription's
+    #: canHandleVariableCommunicationStepSize); a signal FMU takes only frame/fs.
+    variable_step: bool = True
     description = "railcosim FMU"
     author = "railcosim"
     version = "0.1.0"
@@ -572,6 +575,8 @@ class FrameSlave(Fmi2Slave):
     # ---- model description -------------------------------------------------------------------
     def to_xml(self, model_options: Dict[str, str] = dict()) -> Element:
         root = super().to_xml(model_options)
+        root.find("CoSimulation").set("canHandleVariableCommunicationStepSize",
+                                      "true" if self.variable_step else "false")
         port_of_element = {}
         for port in self.ports:
             for element in port.element_names():

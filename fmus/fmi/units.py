@@ -16,6 +16,9 @@ _BASE_UNITS = {
     "Ohm": {"kg": 1, "m": 2, "s": -3, "A": -2},
     "Hz": {"s": -1},
     "1/s": {"s": -1},
+    # a level rate: the decibel is a dimensionless ratio, so its SI base is 1/s like Hz; the
+    # unit's name tells a tool (and a reader) that the quantity is logarithmic
+    "dB/s": {"s": -1},
     "H": {"kg": 1, "m": 2, "s": -2, "A": -2},
     "Ohm/km": {"kg": 1, "m": 1, "s": -3, "A": -2, "factor": 1e-3},
     "H/km": {"kg": 1, "m": 1, "s": -2, "A": -2, "factor": 1e-3},

@@ -10,6 +10,7 @@ from fmus.loco_receiver.parameters import receiver_settings
 class LocoReceiver(FrameSlave):
     description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
                    "decoder) or ALS-EN / FIRE_DQPSK (correlation demodulator, code check, 2-out-of-3 channels)")
+    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -30,11 +31,12 @@ class LocoReceiver(FrameSlave):
                  description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate"),
             Port("agc_limit", "parameter", unit="V", start=s.agc_limit_v, min=0.0,
                  description="input amplitude where gain reduction starts"),
-            Port("agc_recovery", "parameter", unit="1/s", start=s.agc_recovery_db_per_s, min=0.0,
-                 description="gain recovery rate, dB per second"),
+            Port("agc_recovery", "parameter", unit="dB/s", start=s.agc_recovery_db_per_s, min=0.0,
+                 description="gain recovery rate"),
             Port("pick_up", "parameter", unit="V", start=s.pick_up_v, min=0.0,
                  description="relay pick-up (input-referred envelope)"),
-            Port("drop_out", "parameter", unit="V", start=s.drop_out_v, min=0.0),
+            Port("drop_out", "parameter", unit="V", start=s.drop_out_v, min=0.0,
+                 description="relay drop-out (input-referred envelope); below pick_up"),
             Port("inertia", "parameter", unit="s", start=s.inertia_s, min=0.0,
                  description="longest loss of code the display bridges, from the last code supporting it; "
                              "0: the system's (ALSN 5.5 s, the equipment's inertia; digital: none)"),
@@ -48,10 +50,14 @@ class LocoReceiver(FrameSlave):
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
             Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code", "output", "Integer", start=0, description="last decoded cycle: 0 none/invalid, 2 КЖ, 3 Ж, 4 З"),
-            Port("code_valid", "output", "Boolean", start=False),
-            Port("v_permitted", "output", unit="m/s"),
-            Port("v_target", "output", unit="m/s"),
-            Port("free_blocks", "output", "Integer", start=0),
+            Port("code_valid", "output", "Boolean", start=False,
+                 description="the indication shown is a received code (held ones included); false: the no-code indication"),
+            Port("v_permitted", "output", unit="m/s",
+                 description="speed permitted from now on, per train category (white 40 km/h, red 20 km/h)"),
+            Port("v_target", "output", unit="m/s",
+                 description="speed to be reached at the next signal; 0: stop before it"),
+            Port("free_blocks", "output", "Integer", start=0,
+                 description="free block sections ahead: ALSN 2 green, 1 yellow, 0 otherwise; digital 0-6"),
             Port("level", "output", unit="V", description="carrier amplitude at the coil (peak-hold, 1 s release)"),
             Port("errors", "output", "Integer", start=0, description="invalid cycles"),
             Port("decoded_codes", "output", "Integer", start=0, description="valid cycles"),

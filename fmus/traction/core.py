@@ -165,7 +165,7 @@ class TractionCore:
         self.breakaway_n_per_kn = stock.starting_resistance * resistance_scale
         self.voltage_v = pantograph_voltage_v if pantograph_voltage_v > 0 else line.nominal_voltage_v
         if stock.electrical_system != "none" and self.voltage_v <= 0:
-            raise FmuInputError("parameter pantograph_voltage_v: an electric train needs a positive voltage")
+            raise FmuInputError("parameter pantograph_voltage: an electric train needs a positive voltage")
         self.power_factor = stock.power_factor if stock.electrical_system == "AC25000" else 1.0
         # the effort table holds at the stock's rated voltage (docs/traction.md#effort-and-catenary-voltage)
         rated_v = RATED_VOLTAGE_V.get(stock.electrical_system)

@@ -50,8 +50,10 @@ class DigitalCoderCore:
         self.system, self.settings = system, s
         self.carrier_hz = s.carrier_hz if s.carrier_hz > 0 else system.carrier_hz
         check_modem_rate(system, self.carrier_hz, s.fs_hz)
-        if s.generator_bandwidth_hz < 0 or s.generator_ripple_db <= 0:
-            raise FmuInputError("parameter generator_bandwidth / generator_ripple: must be ≥ 0 / > 0")
+        if s.generator_bandwidth_hz < 0:
+            raise FmuInputError(f"parameter generator_bandwidth: must not be negative, got {s.generator_bandwidth_hz:g}")
+        if s.generator_ripple_db <= 0:       # a setting of the core, not an FMU variable
+            raise ValueError(f"CoderSettings.generator_ripple_db: must be positive, got {s.generator_ripple_db:g}")
         self.baud = system.baud(self.carrier_hz)
         bandwidth = s.generator_bandwidth_hz or 10.0 / 3.0 * self.baud
         if bandwidth >= self.carrier_hz:

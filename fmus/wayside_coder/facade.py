@@ -10,6 +10,7 @@ from fmus.wayside_coder.digital import DigitalCoderCore
 class WaysideCoder(FrameSlave):
     description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters "
                    "or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
+    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -25,9 +26,11 @@ class WaysideCoder(FrameSlave):
                  description="0: ALSN each section's carrier from the line file, digital the system's "
                              "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); else this carrier for all"),
             Port("amplitude", "parameter", unit="V", start=s.amplitude_v, min=0.0, description="peak transmitter voltage"),
-            Port("block_aspects", "parameter", "Integer", start=s.block_aspects, min=3, max=4),
+            Port("block_aspects", "parameter", "Integer", start=s.block_aspects, min=3, max=4,
+                 description="automatic block with 3 or 4 signal aspects"),
             Port("coding", "parameter", "String", start=s.coding, description="always | on_occupation"),
-            Port("switch_on_delay", "parameter", unit="s", start=s.switch_on_delay_s, min=0.0),
+            Port("switch_on_delay", "parameter", unit="s", start=s.switch_on_delay_s, min=0.0,
+                 description="coding on_occupation: a section is coded this long after it became occupied"),
             Port("timing_scale", "parameter", unit="1", start=s.timing_scale, min=0.5, max=2.0,
                  description="all code timings × this (transmitter drift)"),
             Port("relay_time_constant", "parameter", unit="s", start=s.relay_time_constant_s, min=0.0,
@@ -37,16 +40,20 @@ class WaysideCoder(FrameSlave):
                  description="digital: parity of this track sent in every message (1 odd, 0 even)"),
             Port("generator_bandwidth", "parameter", unit="Hz", start=s.generator_bandwidth_hz, min=0.0,
                  description="digital: generator band-pass width; 0: 10/3 × the symbol rate"),
-            Port("occupied", "input", "Boolean", start=False, shape=(k,)),
-            Port("fault_main", "input", "Boolean", start=False),
-            Port("fault_reserve", "input", "Boolean", start=False),
+            Port("occupied", "input", "Boolean", start=False, shape=(k,),
+                 description="track relay of each section down (from the rail line)"),
+            Port("fault_main", "input", "Boolean", start=False,
+                 description="the main transmitter / controller failed (found by its self-test)"),
+            Port("fault_reserve", "input", "Boolean", start=False,
+                 description="the reserve transmitter / controller failed (found by its self-test)"),
             Port("wrong_command_main", "input", "Integer", start=0, min=0,
                  description="digital: 0 healthy, else the main controller computes this command everywhere"),
             Port("wrong_command_reserve", "input", "Integer", start=0, min=0,
                  description="digital: 0 healthy, else the reserve controller computes this command everywhere"),
             Port("u_tx", "output", unit="V", shape=(k, n), frame=True, description="transmitter voltage into each section"),
             Port("code_tx", "output", "Integer", start=0, shape=(k,),
-                 description="code sent, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; FIRE_DQPSK command 1-16; ALS-EN KLUB register"),
+                 description="code in the frame's last sample, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; FIRE_DQPSK command 1-16; "
+                             "ALS-EN KLUB register"),
             Port("signal", "output", "Integer", start=0, shape=(k,),
                  description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
             Port("status", "output", "Integer", start=0, description="0 ok, 1 one transmitter/controller failed, 2 both"),
