@@ -278,3 +278,95 @@ def test_sigterm_ends_the_slave_cleanly(test_fmus):
             proc.kill()
         proc.stdout.close()
         proc.stderr.close()
+
+
+def _serve(fmu):
+    proc, address = start_slave(fmu)
+    return proc, TestMaster(address)
+
+
+def _end(proc, master):
+    master.close()
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=30)
+    proc.stdout.close()
+    proc.stderr.close()
+
+
+def _run_to_running(master):
+    master.request(lambda s: StcRun(s, master.slave_id, State.CONFIGURED, 0))
+    master.wait_state(State.SYNCHRONIZED)
+    master.request(lambda s: StcRun(s, master.slave_id, State.SYNCHRONIZED, 0))
+    master.wait_state(State.RUNNING)
+
+
+def _step(master, steps):
+    master.request(lambda s: StcDoStep(s, master.slave_id, State.RUNNING, steps))
+    master.wait_state(State.COMPUTED)
+    master.stc(PduType.STC_send_outputs, State.COMPUTED, State.RUNNING)
+
+
+def test_parameters_and_every_fmi_type_travel(test_fmus):
+    """Real, Integer, Boolean (as uint8) and String parameters by CFG_parameter; Integer and
+    Boolean outputs back in DAT."""
+    from orchestrator.fmu import read_interface
+
+    desc = dcpx.description_from_fmu(read_interface(test_fmus / "TestGain.fmu"))
+    v = {name: desc.by_name(name) for name in ("u", "y", "k", "bias", "enabled", "mode", "label",
+                                                "mode_out", "enabled_out")}
+    assert v["enabled"].data_type == DataType.uint8 and v["mode"].data_type == DataType.int32
+    proc, master = _serve(test_fmus / "TestGain.fmu")
+    try:
+        master.register(desc.uuid)
+        label = PayloadCodec([(DataType.string, 1)]).encode(["по-русски"])
+        master.configure([(v["u"].vr, DataType.float32)],            # a float32 source widened
+                         [(v[n].vr, None) for n in ("y", "mode_out", "enabled_out")], 10_000_000,
+                         parameters=[(v["k"].vr, DataType.float64, struct.pack("<d", 2.5)),
+                                     (v["bias"].vr, DataType.int16, struct.pack("<h", -3)),
+                                     (v["mode"].vr, DataType.int32, struct.pack("<i", 7)),
+                                     (v["enabled"].vr, DataType.uint8, b"\x01"),
+                                     (v["label"].vr, DataType.string, label)])
+        _run_to_running(master)
+        master.send_inputs(0, PayloadCodec([(DataType.float32, 1)]).encode([4.0]))
+        _step(master, 10_000_000)
+        master.wait_data(1)
+        out = PayloadCodec([(DataType.float64, 1), (DataType.int32, 1), (DataType.uint8, 1)])
+        y, mode, enabled = out.decode(master.data[-1].payload)
+        assert (y[0], mode[0], enabled[0]) == (2.5 * 4.0 - 3, 7, 1)
+    finally:
+        _end(proc, master)
+
+
+def test_a_failing_fmu_puts_the_slave_in_error_and_reset_starts_afresh(test_fmus):
+    from orchestrator.fmu import read_interface
+
+    desc = dcpx.description_from_fmu(read_interface(test_fmus / "TestCounter.fmu"))
+    steps_vr, fail_vr = desc.by_name("steps").vr, desc.by_name("fail_at").vr
+    proc, master = _serve(test_fmus / "TestCounter.fmu")
+    try:
+        master.register(desc.uuid)
+        master.configure([], [(steps_vr, None)], 10_000_000,
+                         parameters=[(fail_vr, DataType.float64, struct.pack("<d", 0.02))])
+        _run_to_running(master)
+        _step(master, 10_000_000)
+        _step(master, 10_000_000)
+        master.request(lambda s: StcDoStep(s, master.slave_id, State.RUNNING, 10_000_000))
+        master.wait_state(State.ERROR_HANDLING)
+        master.wait_state(State.ERROR_RESOLVED)
+        rsp = master.request(lambda s: Basic(PduType.INF_error, s, master.slave_id), expect_ack=False)
+        assert rsp.error_code == ErrorCode.PROTOCOL_ERROR_GENERIC
+        master.stc(PduType.STC_reset, State.ERROR_RESOLVED, State.CONFIGURATION)
+        master.data.clear()
+        master.configure([], [(steps_vr, None)], 10_000_000)     # fail_at back to its start value
+        _run_to_running(master)
+        for _ in range(4):
+            _step(master, 10_000_000)
+        master.wait_data(4)
+        counts = [PayloadCodec([(DataType.int32, 1)]).decode(d.payload)[0][0] for d in master.data]
+        assert counts == [1, 2, 3, 4]                               # a fresh instance counts from 1
+        master.stc(PduType.STC_stop, State.RUNNING, State.STOPPED)
+        master.stc(PduType.STC_deregister, State.STOPPED, State.ALIVE)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        _end(proc, master)
