@@ -1,5 +1,5 @@
 """DCP slave descriptions (``.dcpx``, root element ``dcpSlaveDescription``): read, write and
-validate against the DCP 1.0 schema shipped in orchestrator/dcp/schema/ (docs/hil.md#dcpx),
+validate against the DCP 1.0 schema shipped in orchestrator/dcp/schema/ (docs/hil.md#the-slave-description-dcpx),
 and the description of an FMI 2.0 co-simulation FMU served as a DCP slave.
 
 An FMU variable becomes a DCP variable of the same name and value reference. An FMI array
