@@ -165,6 +165,14 @@ class DcpSlave:
     def handle(self, data: bytes, address: Tuple[str, int]) -> None:
         """Act on one datagram; never raises for anything a peer can send."""
         try:
+            self._handle(data, address)
+        except Exception as error:     # a defect of ours must not end a bench session
+            self.counters.malformed += 1
+            self.log(f"internal error on a {len(data)}-byte datagram from {address[0]}:{address[1]}: "
+                     f"{type(error).__name__}: {error}")
+
+    def _handle(self, data: bytes, address: Tuple[str, int]) -> None:
+        try:
             pdu = decode(data)
         except PduError as error:
             self._malformed(error, address)
@@ -356,6 +364,8 @@ class DcpSlave:
                 action(pdu)
         except (SimulationError, UserError) as error:
             self._fail(str(error))
+        except Exception as error:     # anything else the FMU or fmpy raises
+            self._fail(f"{type(error).__name__}: {error}")
 
     def _fail(self, message: str) -> None:
         """The FMU failed: ERROR_HANDLING, clean up, ERROR_RESOLVED (reset or deregister next)."""
