@@ -467,15 +467,18 @@ class DcpSlave:
             self._set_state(self.run_state)
 
     def _do_STC_run(self, pdu: StcRun) -> None:
+        """From CONFIGURED: run. In real time the slave's clock starts here (at start_time) and
+        it steps in SYNCHRONIZING, SYNCHRONIZED and RUNNING alike, as the standard's real-time
+        states exchange data with simulation time mapped to absolute time; a second STC_run
+        (SYNCHRONIZED → RUNNING) only changes the state."""
         if self.state == State.CONFIGURED:
             self._initialise_fmu()
             self._set_state(State.SYNCHRONIZING)
-            self.start_at = time.time() if pdu.start_time <= 0 else float(pdu.start_time)
+            if self.op_mode != OpMode.NRT:
+                self._start_clock(pdu.start_time)
             self._set_state(State.SYNCHRONIZED)    # nothing to synchronise: the FMU is initialised
         else:
             self._set_state(State.RUNNING)
-            if self.op_mode != OpMode.NRT:
-                self._start_clock(pdu.start_time)
 
     def _do_STC_do_step(self, pdu: StcDoStep) -> None:
         self.run_state = self.state
@@ -648,7 +651,7 @@ class DcpSlave:
         self.rt_count = 0
 
     def next_deadline(self) -> Optional[float]:
-        return self.clock if self.clock is not None and self.state == State.RUNNING else None
+        return self.clock if self.clock is not None and self.state in states.RUN_STATES else None
 
     def tick(self) -> None:
         """One real-time step (called at or after its deadline)."""
