@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import List, Optional
 
 from orchestrator.dcp.pdu import (Basic, CfgInput, CfgNetworkInformation, CfgOutput, CfgParameter, CfgSteps,
-                                  CfgTimeRes, DatInputOutput, NtfStateChanged, OpMode, PduError, PduType,
-                                  RspAck, RspNack, State, Stc, StcDoStep, StcRegister, StcRun, decode, next_seq)
+                                  CfgTimeRes, DatInputOutput, NtfStateChanged, OpMode, PduType, RspAck, State,
+                                  Stc, StcRegister, decode, next_seq)
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -19,7 +19,6 @@ The FMU itself is driven through orchestrator/fmu.py's FmuSlave, as in a run.
 from __future__ import annotations
 
 import math
-import os
 import selectors
 import signal
 import socket
@@ -32,11 +31,11 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from orchestrator.dcp import states
-from orchestrator.dcp.dcpx import NS_PER_SECOND, SlaveDescription, description_from_fmu, write_dcpx
-from orchestrator.dcp.pdu import (NUMPY_DTYPES, VARIABLE_LENGTH, Basic, CfgInput, CfgNetworkInformation,
+from orchestrator.dcp.dcpx import SlaveDescription, description_from_fmu, write_dcpx
+from orchestrator.dcp.pdu import (NUMPY_DTYPES, VARIABLE_LENGTH, CfgInput, CfgNetworkInformation,
                                   CfgOutput, CfgParameter, CfgScope, CfgSteps, CfgTimeRes, DataType,
                                   DatInputOutput, ErrorCode, NtfStateChanged, OpMode, PayloadCodec, PduError,
-                                  PduType, RspAck, RspErrorAck, RspNack, RspStateAck, Scope, State, Stc,
+                                  PduType, RspAck, RspErrorAck, RspNack, RspStateAck, Scope, State,
                                   StcDoStep, StcRegister, StcRun, TransportProtocol, Unsupported, decode,
                                   next_seq)
 from orchestrator.errors import SimulationError, UserError
