@@ -4,7 +4,7 @@
 From DIR/study.json and DIR/study.csv: per point the mean, min and max of every numeric
 collected key over the point's successful runs (its seeds), for the safety keys the total and
 the worst run, the values other keys took; PNG plots for one- and two-axis studies; the worst
-runs by id. Written to DIR/report.md and DIR/study_<key>.png.
+runs by id. Written to DIR/report.md and DIR/study_<key>*.png.
 """
 from __future__ import annotations
 
@@ -18,6 +18,8 @@ from typing import Dict, List, Optional, TextIO, Tuple
 from orchestrator.errors import UserError
 
 WORST_SHOWN = 5
+#: more pictures per key than this: no plots (the table says it all)
+MAX_FACETS = 12
 
 
 def _number(text: str) -> Optional[float]:
@@ -124,17 +126,24 @@ def _slug(key: str) -> str:
 
 
 def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
-    """One PNG per numeric key for a study with one or two axes: the key's mean (min–max as
-    error bars) against the axis with numeric values (the one with the most values), one line
-    per value of the other axis."""
+    """PNGs of every numeric key: its mean (min–max as error bars) against the axis with
+    numeric values that has the most of them, one line per value of the last other axis; with
+    more axes, one picture per combination of the rest (``study_<key>_<axis>-<value>.png``)."""
     axes = study["axes"]
-    if not 1 <= len(axes) <= 2 or not table:
+    if not axes or not table:
         return []
     numeric = [a for a in axes if all(_number(e["axes"][a]) is not None for e in table)]
     if not numeric:
         return []
     x_axis = max(numeric, key=lambda a: len({e["axes"][a] for e in table}))
-    other = next((a for a in axes if a != x_axis), None)
+    rest = [a for a in axes if a != x_axis]
+    line_axis = rest[-1] if rest else None
+    facet_axes = rest[:-1]
+    facets: Dict[tuple, List[dict]] = {}
+    for entry in table:
+        facets.setdefault(tuple(entry["axes"][a] for a in facet_axes), []).append(entry)
+    if len(facets) > MAX_FACETS:
+        return []
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,30 +153,33 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
     for key in study["collect"]:
         if not all("mean" in e["keys"][key] or e["runs"] == e["failed"] for e in table):
             continue
-        figure, ax = plt.subplots(figsize=(6.4, 4.0))
-        groups: Dict[str, List[dict]] = {}
-        for entry in table:
-            if "mean" in entry["keys"][key]:
-                groups.setdefault(entry["axes"][other] if other else "", []).append(entry)
-        for label, entries in groups.items():
-            entries.sort(key=lambda e: _number(e["axes"][x_axis]))
-            x = [_number(e["axes"][x_axis]) for e in entries]
-            mean = [e["keys"][key]["mean"] for e in entries]
-            low = [m - e["keys"][key]["min"] for m, e in zip(mean, entries)]
-            high = [e["keys"][key]["max"] - m for m, e in zip(mean, entries)]
-            ax.errorbar(x, mean, yerr=[low, high], marker="o", capsize=3,
-                        label=f"{other} {label}" if other else None)
-        ax.set_xlabel(x_axis)
-        ax.set_ylabel(key)
-        ax.set_title(f"{study['name']}: {key}")
-        ax.grid(True, alpha=0.3)
-        if other:
-            ax.legend(fontsize="small")
-        figure.tight_layout()
-        path = folder / f"study_{_slug(key)}.png"
-        figure.savefig(path, dpi=100)
-        plt.close(figure)
-        written.append(path)
+        for facet, members in facets.items():
+            figure, ax = plt.subplots(figsize=(6.4, 4.0))
+            lines: Dict[str, List[dict]] = {}
+            for entry in members:
+                if "mean" in entry["keys"][key]:
+                    lines.setdefault(entry["axes"][line_axis] if line_axis else "", []).append(entry)
+            for label, entries in lines.items():
+                entries.sort(key=lambda e: _number(e["axes"][x_axis]))
+                x = [_number(e["axes"][x_axis]) for e in entries]
+                mean = [e["keys"][key]["mean"] for e in entries]
+                low = [m - e["keys"][key]["min"] for m, e in zip(mean, entries)]
+                high = [e["keys"][key]["max"] - m for m, e in zip(mean, entries)]
+                ax.errorbar(x, mean, yerr=[low, high], marker="o", capsize=3,
+                            label=f"{line_axis} {label}" if line_axis else None)
+            where = ", ".join(f"{a} {v}" for a, v in zip(facet_axes, facet))
+            ax.set_xlabel(x_axis)
+            ax.set_ylabel(key)
+            ax.set_title(f"{study['name']}: {key}" + (f" ({where})" if where else ""))
+            ax.grid(True, alpha=0.3)
+            if line_axis:
+                ax.legend(fontsize="small")
+            figure.tight_layout()
+            suffix = "".join(f"_{_slug(a)}-{_slug(str(v))}" for a, v in zip(facet_axes, facet))
+            path = folder / f"study_{_slug(key)}{suffix}.png"
+            figure.savefig(path, dpi=100)
+            plt.close(figure)
+            written.append(path)
     return written
 
 
