@@ -304,10 +304,16 @@ def cmd_study(args) -> int:
 
             build_all(_build_dir())
         check_against_system(spec, system, [_build_dir()])
+    python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
+    if spec.is_function:
+        from orchestrator.study.runner import import_function
+
+        import_function(spec.data["function"], [str(spec.path.parent.resolve()), *python_path],
+                        f"study {spec.path}: field function")
     output = Path(args.output) if args.output else Path("results") / spec.name
     result = run_study(spec, output, system, [_build_dir().resolve()], workers=args.workers,
                        scheduler=args.scheduler, resume=args.resume, progress=sys.stderr,
-                       python_path=[str(PACKAGE_PARENT)] if IN_CHECKOUT else [])
+                       python_path=python_path)
     counts = result.counts
     print(f"study {spec.name}: {counts['runs']} run(s) of {counts['points']} point(s): {counts['ok']} ok, "
           f"{counts['failed']} failed, {counts['timeout']} timed out, {counts['lost']} lost"

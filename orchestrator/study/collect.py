@@ -3,11 +3,14 @@
 A key is a dotted path into summary.json — ``trains.0.energy_kwh``, or with names instead of
 list positions ``trains.train.stops.B.arrival_deviation_s`` (an element whose ``name`` or
 ``station`` is that word) — or one of the derived keys below, which add up what the run's
-verdict is made of over every train and receiver.
+verdict is made of over every train and receiver, or ``final.COMP.VAR``: the last recorded
+value of an output in the run's results.csv.
 """
 from __future__ import annotations
 
-from typing import Dict, List
+import os
+from pathlib import Path
+from typing import Dict, List, Optional
 
 
 def _verdict(summary: dict):
@@ -73,5 +76,36 @@ def value_of(summary: dict, key: str, derived: bool = True):
     return node
 
 
-def collect(summary: dict, keys: List[str], derived: bool = True) -> Dict[str, object]:
-    return {key: value_of(summary, key, derived) for key in keys}
+FINAL = "final."
+
+
+def final_values(results_csv: Path) -> Dict[str, float]:
+    """The last row of a results.csv, column → value (empty when the file has no row)."""
+    import csv
+
+    try:
+        with open(results_csv, newline="") as f:
+            header = next(csv.reader([f.readline()]), [])
+            f.seek(0, os.SEEK_END)
+            size = f.tell()
+            f.seek(max(0, size - 65536))            # the last row is far shorter than this
+            tail = f.read().splitlines()
+    except OSError:
+        return {}
+    last = next(csv.reader([tail[-1]]), []) if tail else []
+    if len(last) != len(header) or last == header:
+        return {}
+    values = {}
+    for name, text in zip(header, last):
+        try:
+            values[name] = float(text)
+        except ValueError:
+            values[name] = text
+    return values
+
+
+def collect(summary: dict, keys: List[str], derived: bool = True,
+            results_csv: Optional[Path] = None) -> Dict[str, object]:
+    finals = final_values(results_csv) if results_csv is not None and any(k.startswith(FINAL) for k in keys) else {}
+    return {key: finals.get(key[len(FINAL):]) if key.startswith(FINAL) else value_of(summary, key, derived)
+            for key in keys}

@@ -67,14 +67,29 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
     return run_system(job["system"], options).summary
 
 
-def _run_function_here(job: dict, run_dir: Path) -> dict:
+def import_function(name: str, python_path: Sequence[str], where: str):
+    """``module:callable``, imported with ``python_path`` searched first; a UserError naming
+    ``where`` when it cannot be."""
     import importlib
 
-    for folder in job["python_path"]:
+    for folder in python_path:
         if folder not in sys.path:
             sys.path.insert(0, folder)
-    module_name, _, attribute = job["function"].partition(":")
-    function = getattr(importlib.import_module(module_name), attribute)
+    module_name, _, attribute = name.partition(":")
+    try:
+        function = getattr(importlib.import_module(module_name), attribute)
+    except ImportError as error:
+        raise UserError(f"{where}: {name}: cannot import {module_name} ({error}); a study of a function "
+                        "needs its module importable on every worker") from None
+    except AttributeError:
+        raise UserError(f"{where}: {name}: module {module_name} has no {attribute!r}") from None
+    if not callable(function):
+        raise UserError(f"{where}: {name}: not callable")
+    return function
+
+
+def _run_function_here(job: dict, run_dir: Path) -> dict:
+    function = import_function(job["function"], job["python_path"], "function")
     keywords = {**job["arguments"], **job["values"]}
     if job["seed"] is not None:
         keywords["seed"] = job["seed"]
@@ -190,7 +205,8 @@ def execute_run(job: dict) -> dict:
     record = {"id": job["id"], "spec_hash": job["spec_hash"], "point": job["point"],
               "values": job["label"], "seed": job["seed"], "status": outcome["status"],
               "error": outcome["error"], "warnings": outcome["warnings"][:20], "wall_time_s": wall_s,
-              "collected": collect(summary, job["collect"], derived=not job.get("function")) if summary else
+              "collected": collect(summary, job["collect"], derived=not job.get("function"),
+                                   results_csv=run_dir / "results.csv") if summary else
               {k: None for k in job["collect"]}}
     (run_dir / RECORD).write_text(json.dumps(record, indent=1, default=str) + "\n")
     return record
