@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.cli import main
 from orchestrator.run import RunOptions, run_system
 from orchestrator.study.runner import run_study
@@ -73,7 +74,7 @@ def test_grid_study_gives_the_values_of_the_runs_made_one_by_one(grid_study, pro
         for mass in (0.9, 1.1):
             alone = run_system(REPO / "ssp" / "ato_only", RunOptions(
                 stop_time=20, output_interval=1.0, fmu_dirs=[product_fmus], output_dir=tmp_path / f"{v0}-{mass}",
-                overrides={"train.v0": str(v0), "train.mass_scale": str(mass)}))
+                overrides={"train.v0": str(v0), "train.mass_scale": str(mass)}, summaries=railway_verdicts))
             final = _csv(tmp_path / f"{v0}-{mass}" / "results.csv")[-1]
             mine = [r for r in rows if float(r["train.v0"]) == v0 and float(r["train.mass_scale"]) == mass]
             assert sorted(r["seed"] for r in mine) == ["1", "2"]

@@ -280,7 +280,12 @@ class _Progress:
 
 
 def _dashboard(client) -> Optional[str]:
-    """The scheduler's dashboard address, when it serves one (it needs bokeh installed)."""
+    """The scheduler's dashboard address, when it serves one (its pages need bokeh: without it
+    here, none is shown)."""
+    import importlib.util
+
+    if importlib.util.find_spec("bokeh") is None:
+        return None
     try:
         services = client.scheduler_info().get("services", {})
         return client.dashboard_link if "dashboard" in services else None
@@ -311,14 +316,8 @@ def _client(workers: Optional[int], scheduler: Optional[str]):
         return client, None, count
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    try:
-        import bokeh  # noqa: F401 — the dashboard needs it
-
-        dashboard = ":0"
-    except ImportError:
-        dashboard = None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=dashboard, silence_logs=logging.ERROR,
+                           dashboard_address=":0", silence_logs=logging.ERROR,
                            host="127.0.0.1")
     return Client(cluster), cluster, workers
 
