@@ -110,7 +110,7 @@ def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):
     text = capsys.readouterr().out
     table = [line for line in text.splitlines() if line.startswith("| ") and line[2].isdigit()]
     assert len(table) == 4 and all("safe×2" in line for line in table)
-    assert (out / "report.md").is_file()
+    assert (out / "report.txt").read_text() in text
     assert sorted(p.name for p in out.glob("study_*.png")) == [
         "study_final_train_v.png", "study_final_train_x.png", "study_trains_train_energy_kwh.png"]
 

@@ -4,7 +4,7 @@
 From DIR/study.json and DIR/study.csv: per point the mean, min and max of every numeric
 collected key over the point's successful runs (its seeds), for the safety keys the total and
 the worst run, the values other keys took; PNG plots for one- and two-axis studies; the worst
-runs by id. Written to DIR/report.md and DIR/study_<key>*.png.
+runs by id. Written to DIR/report.txt (Markdown) and DIR/study_<key>*.png.
 """
 from __future__ import annotations
 
@@ -184,12 +184,12 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
 
 
 def make_study_report(folder: Path, stream: Optional[TextIO] = None) -> List[Path]:
-    """report.md and the plots in ``folder``; the table is also written to ``stream``."""
+    """report.txt (a Markdown table) and the plots in ``folder``; the table is also written to ``stream``."""
     study, rows = _read(folder)
     table = aggregate(study, rows)
     text = _markdown(study, table, _worst_runs(study, rows))
     if stream is not None:
         stream.write(text)
-    report = folder / "report.md"
+    report = folder / "report.txt"
     report.write_text(text)
     return [report, *plot(study, table, folder)]
