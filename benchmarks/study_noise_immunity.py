@@ -27,6 +27,9 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
    track parity) must never give a command.
 
     python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--systems ALSN,ALS-EN,FIRE_DQPSK]
+
+Part 2 is the study orchestrator/study/studies/noise_immunity.toml run on Dask (a local cluster,
+or --scheduler): ``railcosim study noise_immunity`` runs the same conditions on their own.
 """
 from __future__ import annotations
 
@@ -255,9 +258,51 @@ def alsn_chain(cycles: int, noise, seed: int) -> dict:
             "availability": float(np.mean(((shown_rank >= lowest) & (shown_rank <= recent) & (shown_rank >= 0))[settled]))}
 
 
-# ---- main ------------------------------------------------------------------------------------------
+# ---- one condition: a run of the study -------------------------------------------------------------
 SNRS_DB = (0.0, -6.0, -10.0, -13.0, -16.0, -20.0)
 IMPULSE_RATES = (0.5, 2.0, 5.0)
+#: the random-number seeds of each (noise, system): (noise generator, messages); ALSN's message
+#: schedule always from seed 5. Replication ``seed`` k adds 1000·k to both (0: the figures below).
+SEEDS = {("white", "FIRE_DQPSK"): (100, 7), ("white", "ALS-EN"): (101, 8), ("white", "ALSN"): (99, 5),
+         ("impulse", "FIRE_DQPSK"): (200, 17), ("impulse", "ALS-EN"): (201, 18), ("impulse", "ALSN"): (199, 5)}
+STUDY = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "studies" / "noise_immunity.toml"
+
+
+def condition(system: str, noise: str, level: float, seed: int = 0, messages: int = 100000,
+              alsn_cycles: int = 2000) -> dict:
+    """One system under one noise condition (white: SNR in dB; impulse: impulses per second):
+    a run of the study orchestrator/study/studies/noise_immunity.toml (``railcosim study``)."""
+    if (noise, system) not in SEEDS:
+        raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALS-EN or FIRE_DQPSK")
+    noise_seed, message_seed = (s + 1000 * seed for s in SEEDS[(noise, system)])
+    noise_of = white if noise == "white" else impulses
+    source = noise_of(level, np.random.default_rng(noise_seed))
+    if system == "ALSN":
+        return alsn_chain(alsn_cycles, source, message_seed)
+    return run_digital(system, messages, source, message_seed)
+
+
+# ---- main ------------------------------------------------------------------------------------------
+def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, workers=None, scheduler=None) -> dict:
+    """The white- and impulse-noise tables through ``railcosim study`` (the study file with
+    these message counts and systems): {"white": {snr: {system: result}}, "impulse": …}."""
+    from orchestrator.study.runner import run_study
+    from orchestrator.study.spec import load_study
+
+    spec = load_study(STUDY)
+    spec.data["arguments"].update(messages=messages, alsn_cycles=alsn_cycles)
+    spec.runs = [r for r in spec.runs if r.values["system"] in systems]
+    result = run_study(spec, output, None, [], workers=workers, scheduler=scheduler, resume=True,
+                       progress=sys.stderr, python_path=[str(Path(__file__).resolve().parents[1])])
+    tables = {"white": {}, "impulse": {}}
+    for record in result.records:
+        if record["status"] != "ok":
+            raise SystemExit(f"{record['id']} {record['values']}: {record['status']}: {record['error']}")
+        summary = json.loads((result.output / "runs" / record["id"] / "summary.json").read_text())
+        summary.pop("wall_time_s", None)
+        values = record["values"]
+        tables[values["noise"]].setdefault(str(float(values["level"])), {})[values["system"]] = summary
+    return tables
 
 
 def main():
@@ -268,6 +313,10 @@ def main():
     parser.add_argument("--systems", default="ALSN,ALS-EN,FIRE_DQPSK",
                         help="which systems to (re)compute; the others are kept from an existing --output")
     parser.add_argument("--output", default=str(DOCS / "figures" / "noise_immunity.json"))
+    parser.add_argument("--runs", default="results/noise_immunity",
+                        help="the study's folder (one run folder per condition; an interrupted study resumes)")
+    parser.add_argument("--workers", type=int, help="local Dask workers (default: one per core)")
+    parser.add_argument("--scheduler", help="an existing Dask scheduler instead of a local cluster")
     args = parser.parse_args()
     chosen = set(args.systems.split(","))
     digital = [name for name in ("FIRE_DQPSK", "ALS-EN") if name in chosen]
@@ -280,18 +329,12 @@ def main():
         results["ber"][name] = {str(e): ber(name, e, args.ber_symbols, 11 + int(e)) for e in (2, 4, 6, 8, 10)}
     results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
     print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
-    for kind, conditions, noise_of, seeds in (("white", SNRS_DB, white, (100, 99)),
-                                              ("impulse", IMPULSE_RATES, impulses, (200, 199))):
-        for condition in conditions:
-            row = results[kind].setdefault(str(condition), {})
-            for seed, name in enumerate(("FIRE_DQPSK", "ALS-EN")):
-                if name in digital:
-                    row[name] = run_digital(name, args.messages, noise_of(condition, np.random.default_rng(seeds[0] + seed)),
-                                            (7 if kind == "white" else 17) + seed)
-            if "ALSN" in chosen:
-                row["ALSN"] = alsn_chain(args.alsn_cycles, noise_of(condition, np.random.default_rng(seeds[1])), 5)
-            print(kind, condition, json.dumps(row), f"{time.perf_counter() - began:.0f} s", flush=True)
-            output.write_text(json.dumps(results, indent=1) + "\n")
+    tables = run_conditions(args.messages, args.alsn_cycles, chosen, Path(args.runs), args.workers, args.scheduler)
+    for kind in ("white", "impulse"):
+        for level, row in tables[kind].items():
+            results[kind].setdefault(level, {}).update(row)
+    print(f"white and impulse noise: {time.perf_counter() - began:.0f} s", flush=True)
+    output.write_text(json.dumps(results, indent=1) + "\n")
     for name in digital:
         results["tone"][name] = run_digital(name, max(args.messages // 10, 100), None, 3, tone=True)
         results["adjacent"][name] = run_digital(name, args.messages, None, 4, track_parity=0)

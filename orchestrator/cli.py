@@ -1,4 +1,5 @@
-"""`railcosim` command line: build, run, inspect, validate, new, contract, conform, fmu-env.
+"""`railcosim` command line: build, run, report, inspect, validate, new, contract, conform, study,
+dcp-slave, fmu-env.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
 SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
@@ -260,6 +261,71 @@ def cmd_validate(args) -> int:
     return 0
 
 
+def _study_path(name: str) -> Path:
+    """A study file, or the name of a shipped one (studies/NAME.toml)."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    from orchestrator.study import shipped_studies
+
+    shipped = shipped_studies()
+    if name in shipped:
+        return shipped[name]
+    raise UserError(f"study {name!r}: no such file, and not a shipped study "
+                    f"(shipped: {', '.join(sorted(shipped)) or 'none'})")
+
+
+def cmd_study(args) -> int:
+    """``railcosim study STUDY`` runs a study on Dask; ``railcosim study report DIR`` sums it up
+    (docs/studies.md)."""
+    if args.study == "report" and args.run_dir is not None:
+        from orchestrator.study.report import make_study_report
+
+        for path in make_study_report(Path(args.run_dir), sys.stdout):
+            print(f"wrote {path}")
+        return 0
+    if args.run_dir is not None:
+        raise UserError(f"study: unexpected argument {args.run_dir!r} (railcosim study STUDY, or "
+                        "railcosim study report DIR)")
+    if args.workers is not None and args.workers < 1:
+        raise UserError(f"--workers {args.workers}: must be at least 1")
+    if args.workers is not None and args.scheduler:
+        raise UserError("--workers sizes the local cluster; with --scheduler the cluster's own workers run")
+    from orchestrator.study.spec import check_against_system, load_study
+    from orchestrator.study.runner import run_study
+
+    spec = load_study(_study_path(args.study))
+    system = None
+    if not spec.is_function:
+        given = spec.data["system"]
+        beside = spec.path.parent / given
+        system = beside if beside.exists() else _system_path(given)
+        system = system.resolve()
+        if not args.no_build:
+            from orchestrator.build.builder import build_all
+
+            build_all(_build_dir())
+        check_against_system(spec, system, [_build_dir()])
+    python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
+    if spec.is_function:
+        from orchestrator.study.runner import import_function
+
+        import_function(spec.data["function"], [str(spec.path.parent.resolve()), *python_path],
+                        f"study {spec.path}: field function")
+    output = Path(args.output) if args.output else Path("results") / spec.name
+    result = run_study(spec, output, system, [_build_dir().resolve()], workers=args.workers,
+                       scheduler=args.scheduler, resume=args.resume, progress=sys.stderr,
+                       python_path=python_path)
+    counts = result.counts
+    print(f"study {spec.name}: {counts['runs']} run(s) of {counts['points']} point(s): {counts['ok']} ok, "
+          f"{counts['failed']} failed, {counts['timeout']} timed out, {counts['lost']} lost"
+          + (f" ({result.skipped} done before)" if result.skipped else "") + f"; results in {result.output}")
+    for record in result.records:
+        if record["status"] != "ok":
+            print(f"  {record['id']} {record['status']}: {record['error']}")
+    return 0 if counts["ok"] == counts["runs"] else 1
+
+
 def cmd_new(args) -> int:
     """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md)."""
     from orchestrator.analysis.new_system import new_system
@@ -408,6 +474,18 @@ def make_parser() -> argparse.ArgumentParser:
     validate.add_argument("target", help="an .fmu, or a system (folder, .ssp archive or shipped system name)")
     _add_run_setup_arguments(validate)
     validate.set_defaults(func=cmd_validate)
+
+    study = sub.add_parser("study", help="run a study (sweeps, Monte Carlo) on Dask, or `study report DIR`")
+    study.add_argument("study", metavar="STUDY", help="study file (.toml or .json) or shipped study name; "
+                                                      "or `report` followed by a study's output folder")
+    study.add_argument("run_dir", nargs="?", metavar="DIR", help=argparse.SUPPRESS)
+    study.add_argument("--workers", type=int, help="local cluster size (default: one per core)")
+    study.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, e.g. tcp://host:8786")
+    study.add_argument("--output", help="study folder (default results/NAME)")
+    study.add_argument("--resume", action="store_true",
+                       help="skip runs finished by an earlier start of the same study file")
+    study.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    study.set_defaults(func=cmd_study)
 
     add_new_command(sub)
     add_contract_command(sub)

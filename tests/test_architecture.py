@@ -62,7 +62,7 @@ def _forbidden_for(module: str):
         return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
                 *(f"fmus.{u}.facade" for u in UNITS)), set()
     if parts[0] == "orchestrator":
-        if len(parts) > 1 and parts[1] in ("analysis", "conformance"):    # railway knowledge on the engine
+        if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study"):   # railway knowledge on the engine
             return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.build", "orchestrator.cli"), set()
         if len(parts) > 1 and parts[1] in ("build", "cli", "__main__"):
             return ("benchmarks",), set()

@@ -1,0 +1,88 @@
+"""Throughput of `railcosim study` and what its machinery costs per run (docs/studies.md,
+docs/performance.md).
+
+1. One fixed study (ato_only, 60 s of simulated time, through FMI as `railcosim run` runs it,
+   --runs runs) on a LocalCluster of 1 worker, then of 2 workers, back to back: runs per minute
+   (the study's whole wall time, cluster start included) and the speed-up.
+2. Per-run overhead: the median wall time of a run inside the study (the task on the worker:
+   fork, run, record) against the median of plain `railcosim run` commands of the same run
+   (a fresh process each, as a user starts them) and against the run's own wall time
+   (summary.json wall_time_s: the simulation alone).
+
+    PYTHONPATH=. python benchmarks/bench_study.py [--runs 8] [--plain 4] [--stop-time 60]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from orchestrator.build.builder import build_all, default_build_dir  # noqa: E402
+from orchestrator.study.runner import run_study  # noqa: E402
+from orchestrator.study.spec import check_against_system, load_study  # noqa: E402
+
+SYSTEM = REPO / "ssp" / "ato_only"
+
+
+def study_file(folder: Path, runs: int, stop_s: float) -> Path:
+    values = ", ".join(f"{4.0 + k:.1f}" for k in range(runs))          # one point per run
+    path = folder / "bench.toml"
+    path.write_text(f'name = "bench"\nsystem = "ato_only"\nstop_time = {stop_s}\n'
+                    f'collect = ["final.train.x", "verdict"]\n[options]\noutput_interval = 1.0\n'
+                    f'[grid]\n"train.v0" = [{values}]\n')
+    return path
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=8)
+    parser.add_argument("--plain", type=int, default=4, help="plain `railcosim run` commands for the overhead")
+    parser.add_argument("--stop-time", type=float, default=60.0)
+    args = parser.parse_args(argv)
+    fmus = default_build_dir(REPO)
+    build_all(fmus)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        spec = load_study(study_file(folder, args.runs, args.stop_time))
+        check_against_system(spec, SYSTEM, [fmus])
+        throughput, inside, own = {}, [], []
+        for workers in (1, 2):
+            began = time.perf_counter()
+            result = run_study(spec, folder / f"w{workers}", SYSTEM, [fmus], workers=workers)
+            wall = time.perf_counter() - began
+            assert result.counts["ok"] == args.runs, result.counts
+            throughput[workers] = args.runs / wall * 60.0
+            print(f"{workers} worker(s): {args.runs} runs in {wall:.1f} s = {throughput[workers]:.2f} runs/min",
+                  flush=True)
+            if workers == 1:
+                inside = [r["wall_time_s"] for r in result.records]
+                own = [json.loads((folder / "w1" / "runs" / r["id"] / "summary.json").read_text())["wall_time_s"]
+                       for r in result.records]
+        print(f"speed-up 2 workers / 1 worker: {throughput[2] / throughput[1]:.2f}x")
+        plain = []
+        env = {**os.environ, "PYTHONPATH": str(REPO)}
+        for k in range(args.plain):
+            began = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "orchestrator", "run", "ato_only", "--no-build",
+                            "--stop-time", str(args.stop_time), "--output-interval", "1.0",
+                            "--set", f"train.v0={4.0 + k:.1f}", "--output", str(folder / f"plain{k}")],
+                           env=env, check=True, capture_output=True)
+            plain.append(time.perf_counter() - began)
+        med_inside, med_plain, med_own = (statistics.median(x) for x in (inside, plain, own))
+        print(f"median per run: in the study {med_inside:.2f} s, plain `railcosim run` {med_plain:.2f} s, "
+              f"the simulation alone {med_own:.2f} s")
+        print(f"study machinery over a plain run: {100 * (med_inside / med_plain - 1):+.1f} %; "
+              f"over the simulation alone: {100 * (med_inside / med_own - 1):+.1f} %")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,195 @@
+"""``railcosim study report DIR``: a finished study summed up per point (docs/studies.md,
+"Reading the results").
+
+From DIR/study.json and DIR/study.csv: per point the mean, min and max of every numeric
+collected key over the point's successful runs (its seeds), for the safety keys the total and
+the worst run, the values other keys took; PNG plots for one- and two-axis studies; the worst
+runs by id. Written to DIR/report.txt (Markdown) and DIR/study_<key>*.png.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from pathlib import Path
+from typing import Dict, List, Optional, TextIO, Tuple
+
+from orchestrator.errors import UserError
+
+WORST_SHOWN = 5
+#: more pictures per key than this: no plots (the table says it all)
+MAX_FACETS = 12
+
+
+def _number(text: str) -> Optional[float]:
+    if text in ("", "True", "False"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _read(folder: Path) -> Tuple[dict, List[dict]]:
+    try:
+        study = json.loads((folder / "study.json").read_text())
+        with open(folder / "study.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+    except FileNotFoundError as error:
+        raise UserError(f"study report {folder}: no {Path(error.filename).name} (not a study's output "
+                        "folder, or the study has not finished)") from None
+    except (OSError, ValueError) as error:
+        raise UserError(f"study report {folder}: cannot read the study's files ({error})") from None
+    return study, rows
+
+
+def aggregate(study: dict, rows: List[dict]) -> List[dict]:
+    """One entry per point: its axis values, run and failure counts, and per collected key
+    either numbers (mean, min, max, total, worst run) or the values seen with their counts."""
+    points: Dict[str, List[dict]] = {}
+    for row in rows:
+        points.setdefault(row["point"], []).append(row)
+    safety = set(study.get("safety", []))
+    table = []
+    for point, runs in sorted(points.items(), key=lambda item: int(item[0])):
+        good = [r for r in runs if r["status"] == "ok"]
+        entry = {"point": int(point), "axes": {a: runs[0][a] for a in study["axes"]},
+                 "runs": len(runs), "failed": len(runs) - len(good), "keys": {}}
+        for key in study["collect"]:
+            numbers = [(v, r["id"]) for r in good if (v := _number(r[key])) is not None]
+            if numbers and len(numbers) == sum(r[key] != "" for r in good):
+                values = [v for v, _ in numbers]
+                stats = {"mean": sum(values) / len(values), "min": min(values), "max": max(values),
+                         "n": len(values)}
+                if key in safety:
+                    worst = max(numbers, key=lambda item: item[0])
+                    stats.update(total=sum(values), worst=worst[1] if worst[0] > 0 else None)
+                entry["keys"][key] = stats
+            else:
+                seen: Dict[str, int] = {}
+                for r in good:
+                    seen[r[key] or "—"] = seen.get(r[key] or "—", 0) + 1
+                entry["keys"][key] = {"values": seen}
+        table.append(entry)
+    return table
+
+
+def _format(stats: dict) -> str:
+    if "values" in stats:
+        return ", ".join(f"{v}×{n}" if n > 1 else v for v, n in stats["values"].items()) or "—"
+    g = lambda x: f"{x:.4g}"                                        # noqa: E731
+    if "total" in stats:
+        return f"total {g(stats['total'])}" + (f" (worst {stats['worst']})" if stats["worst"] else "")
+    if stats["min"] == stats["max"]:
+        return g(stats["mean"])
+    return f"{g(stats['mean'])} [{g(stats['min'])}, {g(stats['max'])}]"
+
+
+def _worst_runs(study: dict, rows: List[dict]) -> List[str]:
+    lines = []
+    for key in study.get("safety", []):
+        hits = sorted(((v, r) for r in rows if (v := _number(r.get(key, ""))) is not None and v > 0),
+                      key=lambda item: -item[0])
+        for value, r in hits[:WORST_SHOWN]:
+            lines.append(f"- {r['id']} ({_axes_text(study, r)}, seed {r['seed'] or '—'}): {key} = {value:g}")
+    for r in rows:
+        if r["status"] != "ok":
+            lines.append(f"- {r['id']} ({_axes_text(study, r)}, seed {r['seed'] or '—'}): {r['status']}: {r['error']}")
+    return lines
+
+
+def _axes_text(study: dict, row: dict) -> str:
+    return ", ".join(f"{a} {row[a]}" for a in study["axes"]) or "the point"
+
+
+def _markdown(study: dict, table: List[dict], worst: List[str]) -> str:
+    counts = study["counts"]
+    head = ["point", *study["axes"], "runs", "failed", *study["collect"]]
+    lines = [f"# Study {study['name']}", "",
+             f"{counts['runs']} runs of {counts['points']} points: {counts['ok']} ok, {counts['failed']} failed, "
+             f"{counts['timeout']} timed out, {counts['lost']} lost (study file {study['file']}, hash {study['hash']}). "
+             "Numbers: mean [min, max] over the point's successful runs; safety keys: total over the runs "
+             "and the run with the most.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for entry in table:
+        cells = [str(entry["point"]), *entry["axes"].values(), str(entry["runs"]), str(entry["failed"]),
+                 *[_format(entry["keys"][k]) for k in study["collect"]]]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "## Worst runs", ""] + (worst or ["none: no safety key above zero, no failed run"])
+    return "\n".join(lines) + "\n"
+
+
+def _slug(key: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", key).strip("_")
+
+
+def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
+    """PNGs of every numeric key: its mean (min–max as error bars) against the axis with
+    numeric values that has the most of them, one line per value of the last other axis; with
+    more axes, one picture per combination of the rest (``study_<key>_<axis>-<value>.png``)."""
+    axes = study["axes"]
+    if not axes or not table:
+        return []
+    numeric = [a for a in axes if all(_number(e["axes"][a]) is not None for e in table)]
+    if not numeric:
+        return []
+    x_axis = max(numeric, key=lambda a: len({e["axes"][a] for e in table}))
+    rest = [a for a in axes if a != x_axis]
+    line_axis = rest[-1] if rest else None
+    facet_axes = rest[:-1]
+    facets: Dict[tuple, List[dict]] = {}
+    for entry in table:
+        facets.setdefault(tuple(entry["axes"][a] for a in facet_axes), []).append(entry)
+    if len(facets) > MAX_FACETS:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    for key in study["collect"]:
+        if not all("mean" in e["keys"][key] or e["runs"] == e["failed"] for e in table):
+            continue
+        for facet, members in facets.items():
+            figure, ax = plt.subplots(figsize=(6.4, 4.0))
+            lines: Dict[str, List[dict]] = {}
+            for entry in members:
+                if "mean" in entry["keys"][key]:
+                    lines.setdefault(entry["axes"][line_axis] if line_axis else "", []).append(entry)
+            for label, entries in lines.items():
+                entries.sort(key=lambda e: _number(e["axes"][x_axis]))
+                x = [_number(e["axes"][x_axis]) for e in entries]
+                mean = [e["keys"][key]["mean"] for e in entries]
+                low = [m - e["keys"][key]["min"] for m, e in zip(mean, entries)]
+                high = [e["keys"][key]["max"] - m for m, e in zip(mean, entries)]
+                ax.errorbar(x, mean, yerr=[low, high], marker="o", capsize=3,
+                            label=f"{line_axis} {label}" if line_axis else None)
+            where = ", ".join(f"{a} {v}" for a, v in zip(facet_axes, facet))
+            ax.set_xlabel(x_axis)
+            ax.set_ylabel(key)
+            ax.set_title(f"{study['name']}: {key}" + (f" ({where})" if where else ""))
+            ax.grid(True, alpha=0.3)
+            if line_axis:
+                ax.legend(fontsize="small")
+            figure.tight_layout()
+            suffix = "".join(f"_{_slug(a)}-{_slug(str(v))}" for a, v in zip(facet_axes, facet))
+            path = folder / f"study_{_slug(key)}{suffix}.png"
+            figure.savefig(path, dpi=100)
+            plt.close(figure)
+            written.append(path)
+    return written
+
+
+def make_study_report(folder: Path, stream: Optional[TextIO] = None) -> List[Path]:
+    """report.txt (a Markdown table) and the plots in ``folder``; the table is also written to ``stream``."""
+    study, rows = _read(folder)
+    table = aggregate(study, rows)
+    text = _markdown(study, table, _worst_runs(study, rows))
+    if stream is not None:
+        stream.write(text)
+    report = folder / "report.txt"
+    report.write_text(text)
+    return [report, *plot(study, table, folder)]

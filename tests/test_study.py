@@ -1,0 +1,277 @@
+"""`railcosim study`: study files expanded into runs, run on Dask (a 2-worker LocalCluster, and a
+real `dask scheduler` + `dask worker` on loopback), failures and timeouts recorded, --resume,
+the report, the noise-immunity study against the benchmark's own chain, bad input.
+
+Short runs only: ato_only for 20 s of simulated time, noise conditions of a few hundred messages.
+"""
+import json
+import os
+import signal
+import socket
+import subprocess
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.cli import main
+from orchestrator.run import RunOptions, run_system
+from orchestrator.study.runner import run_study
+from orchestrator.study.spec import load_study
+
+REPO = Path(__file__).resolve().parent.parent
+GRID_STUDY = """
+name = "grid"
+system = "ato_only"
+stop_time = 20
+seeds = [1, 2]
+collect = ["final.train.x", "final.train.v", "trains.train.energy_kwh", "verdict"]
+[options]
+output_interval = 1.0
+[grid]
+"train.v0" = [5.0, 10.0]
+"train.mass_scale" = [0.9, 1.1]
+"""
+
+
+def _write(folder: Path, name: str, text: str) -> Path:
+    path = folder / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def _csv(path: Path):
+    import csv
+
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def grid_study(product_fmus, tmp_path_factory):
+    """The 4 points × 2 seeds of ato_only, on a LocalCluster of 2 workers, through the CLI."""
+    folder = tmp_path_factory.mktemp("grid")
+    study = _write(folder, "grid.toml", GRID_STUDY)
+    status = main(["study", str(study), "--workers", "2", "--output", str(folder / "out"), "--no-build"])
+    return study, folder / "out", status
+
+
+def test_grid_study_gives_the_values_of_the_runs_made_one_by_one(grid_study, product_fmus, tmp_path):
+    study, out, status = grid_study
+    assert status == 0
+    rows = _csv(out / "study.csv")
+    assert [r["id"] for r in rows] == [f"r{k:04d}" for k in range(8)]
+    assert all(r["status"] == "ok" for r in rows)
+    for row in rows:
+        for name in ("results.csv", "summary.json", "metadata.json"):
+            assert (out / "runs" / row["id"] / name).is_file()
+    positions = set()
+    for v0 in (5.0, 10.0):
+        for mass in (0.9, 1.1):
+            alone = run_system(REPO / "ssp" / "ato_only", RunOptions(
+                stop_time=20, output_interval=1.0, fmu_dirs=[product_fmus], output_dir=tmp_path / f"{v0}-{mass}",
+                overrides={"train.v0": str(v0), "train.mass_scale": str(mass)}, summaries=railway_verdicts))
+            final = _csv(tmp_path / f"{v0}-{mass}" / "results.csv")[-1]
+            mine = [r for r in rows if float(r["train.v0"]) == v0 and float(r["train.mass_scale"]) == mass]
+            assert sorted(r["seed"] for r in mine) == ["1", "2"]
+            for row in mine:
+                assert float(row["final.train.x"]) == float(final["train.x"])
+                assert float(row["final.train.v"]) == float(final["train.v"])
+                assert float(row["trains.train.energy_kwh"]) == alone.summary["trains"][0]["energy_kwh"]
+                assert row["verdict"] == "safe"
+            positions.add(float(final["train.x"]))
+    assert len(positions) == 4                 # every point is a different run
+    study_json = json.loads((out / "study.json").read_text())
+    assert study_json["counts"]["ok"] == 8 and study_json["counts"]["points"] == 4
+    assert study_json["hash"] == load_study(study).hash
+
+
+def test_resume_reruns_nothing_of_a_finished_study(grid_study):
+    study, out, _ = grid_study
+    records = sorted((out / "runs").glob("*/study_run.json"))
+    before = {p: p.stat().st_mtime_ns for p in records}
+    result = run_study(load_study(study), out, REPO / "ssp" / "ato_only", [], resume=True)
+    assert result.skipped == 8 and result.counts["ok"] == 8
+    assert {p: p.stat().st_mtime_ns for p in records} == before
+    # another stop time is another study: nothing of this one would be reused
+    other = _write(study.parent, "other.toml", GRID_STUDY.replace("stop_time = 20", "stop_time = 21"))
+    from orchestrator.study.runner import _resumable
+
+    assert all(_resumable(out, run, load_study(other).hash) is None for run in load_study(other).runs)
+
+
+def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):
+    _, out, _ = grid_study
+    assert main(["study", "report", str(out)]) == 0
+    text = capsys.readouterr().out
+    table = [line for line in text.splitlines() if line.startswith("| ") and line[2].isdigit()]
+    assert len(table) == 4 and all("safe×2" in line for line in table)
+    assert (out / "report.txt").read_text() in text
+    assert sorted(p.name for p in out.glob("study_*.png")) == [
+        "study_final_train_v.png", "study_final_train_x.png", "study_trains_train_energy_kwh.png"]
+
+
+WORKER_MODULE = """
+import time
+
+def work(x, seed, scale=1):
+    if x == 2:
+        raise ValueError("x = 2 is refused")
+    if x == 3:
+        time.sleep(120)
+    return {"y": scale * x * x + seed}
+"""
+
+
+def test_failing_and_timed_out_runs_are_recorded_and_the_rest_complete(tmp_path):
+    _write(tmp_path, "worker_module_of_test.py", WORKER_MODULE)
+    study = _write(tmp_path, "f.json", json.dumps({
+        "function": "worker_module_of_test:work", "arguments": {"scale": 10}, "grid": {"x": [1, 2, 3, 4]},
+        "seeds": [0, 1], "collect": ["y"], "timeout_s": 3, "safety": ["y"]}))
+    spec = load_study(study)
+    result = run_study(spec, tmp_path / "out", None, [], workers=2)
+    by_x = {}
+    for r in result.records:
+        by_x.setdefault(r["values"]["x"], []).append(r)
+    assert [(r["status"], r["collected"]["y"]) for r in by_x[1]] == [("ok", 10), ("ok", 11)]
+    assert [(r["status"], r["collected"]["y"]) for r in by_x[4]] == [("ok", 160), ("ok", 161)]
+    assert all(r["status"] == "failed" and r["error"] == "ValueError: x = 2 is refused" for r in by_x[2])
+    assert all(r["status"] == "timeout" and "3 s" in r["error"] for r in by_x[3])
+    assert result.counts == {"ok": 4, "failed": 2, "timeout": 2, "lost": 0, "runs": 8, "points": 4, "skipped": 0}
+    # resuming runs the failed and timed-out points again, and only those
+    again = run_study(spec, tmp_path / "out", None, [], workers=1, resume=True)
+    assert again.skipped == 4 and again.counts["ok"] == 4
+
+
+def test_a_bad_parameter_value_fails_its_run_only(product_fmus, tmp_path):
+    study = _write(tmp_path, "bad.toml", """
+        system = "ato_only"
+        stop_time = 5
+        collect = ["final.train.x"]
+        [grid]
+        "train.mass_scale" = [1.0, 20.0]
+        """)
+    assert main(["study", str(study), "--workers", "1", "--output", str(tmp_path / "out"), "--no-build"]) == 1
+    rows = _csv(tmp_path / "out" / "study.csv")
+    assert [r["status"] for r in rows] == ["ok", "failed"]
+    assert "mass_scale = 20 is above its maximum 10" in rows[1]["error"] and "\n" not in rows[1]["error"]
+    assert rows[0]["final.train.x"] != ""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_study_on_a_dask_scheduler_and_worker_started_as_processes(product_fmus, tmp_path):
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
+    processes = []
+    try:
+        processes.append(subprocess.Popen(
+            ["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+            env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+        processes.append(subprocess.Popen(
+            ["dask", "worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
+             "--host", "127.0.0.1"],
+            env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+        study = _write(tmp_path, "one.toml", """
+            system = "ato_only"
+            stop_time = 10
+            seeds = [1, 2]
+            collect = ["final.train.x", "verdict"]
+            [grid]
+            "train.v0" = [10.0]
+            """)
+        deadline = time.monotonic() + 60
+        while True:                            # the scheduler takes a moment to listen
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "dask scheduler did not start"
+                time.sleep(0.5)
+        assert main(["study", str(study), "--scheduler", address, "--output", str(tmp_path / "out"),
+                     "--no-build"]) == 0
+        rows = _csv(tmp_path / "out" / "study.csv")
+        assert [r["status"] for r in rows] == ["ok", "ok"]
+        assert rows[0]["final.train.x"] == rows[1]["final.train.x"] != ""
+        assert json.loads((tmp_path / "out" / "study.json").read_text())["scheduler"] == address
+    finally:
+        for process in reversed(processes):
+            try:
+                os.killpg(process.pid, signal.SIGTERM)
+            except ProcessLookupError:
+                continue
+        for process in reversed(processes):
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+
+
+def test_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
+    """The noise-immunity study's runs against the benchmark's chain called as its loop did,
+    with the loop's seeds (reduced: a few hundred messages, two conditions)."""
+    import benchmarks.study_noise_immunity as noise
+
+    shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity.toml")
+    data = {**shipped.data, "arguments": {"messages": 300, "alsn_cycles": 30},
+            "cases": [{"noise": "white", "level": -10.0}, {"noise": "impulse", "level": 2.0}]}
+    study = _write(tmp_path, "noise.json", json.dumps(data))
+    result = run_study(load_study(study), tmp_path / "out", None, [], workers=2, python_path=[str(REPO)])
+    assert result.counts["ok"] == 6
+    # the loop: white noise seeds 100 + k / 7 + k (FIRE_DQPSK k = 0, ALS-EN k = 1), ALSN 99 / 5;
+    # impulse noise 200 + k / 17 + k, ALSN 199 / 5
+    expected = {("white", "FIRE_DQPSK"): noise.run_digital("FIRE_DQPSK", 300, noise.white(-10.0, np.random.default_rng(100)), 7),
+                ("white", "ALS-EN"): noise.run_digital("ALS-EN", 300, noise.white(-10.0, np.random.default_rng(101)), 8),
+                ("white", "ALSN"): noise.alsn_chain(30, noise.white(-10.0, np.random.default_rng(99)), 5),
+                ("impulse", "FIRE_DQPSK"): noise.run_digital("FIRE_DQPSK", 300, noise.impulses(2.0, np.random.default_rng(200)), 17),
+                ("impulse", "ALS-EN"): noise.run_digital("ALS-EN", 300, noise.impulses(2.0, np.random.default_rng(201)), 18),
+                ("impulse", "ALSN"): noise.alsn_chain(30, noise.impulses(2.0, np.random.default_rng(199)), 5)}
+    for record in result.records:
+        want = expected[(record["values"]["noise"], record["values"]["system"])]
+        for key in ("messages", "correct", "undetected", "detected", "wrong_side_events"):
+            assert record["collected"][key] == want[key], (record["values"], key)
+        assert record["collected"]["mer"] == pytest.approx(want["mer"])
+        assert record["collected"]["availability"] == pytest.approx(want["availability"])
+    assert len({r["collected"]["correct"] for r in result.records}) > 1
+
+
+@pytest.mark.parametrize("text, message", [
+    ('system = "ato_only"\n[grid]\n"train.mass_scal" = [1.0]\n',
+     "field grid.train.mass_scal: component 'train' of ato_only has no variable 'mass_scal'"),
+    ('system = "ato_only"\n[grid]\n"trian.mass_scale" = [1.0]\n',
+     "field grid.trian.mass_scale: 'trian.mass_scale' is not COMPONENT.VARIABLE of ato_only"),
+    ('system = "no_such_system"\n', "system 'no_such_system': no such folder"),
+    ('system = "ato_only"\n[random]\ncount = 3\nseed = 1\n[random.variables]\n"train.mass_scale" = '
+     '{distribution = "uniform", low = 1.1, high = 0.9}\n',
+     "field random.variables.train.mass_scale: low 1.1 must be below high 0.9"),
+    ('system = "ato_only"\n[random]\ncount = 3\nseed = 1\n[random.variables]\n"train.mass_scale" = '
+     '{distribution = "normal", mean = 1.0}\n', "a normal distribution takes mean and std (missing std)"),
+    ('system = "ato_only"\n[random]\ncount = 3\nseed = 1\n[random.variables]\n"train.mass_scale" = '
+     '{distribution = "poisson", mean = 1.0}\n', "field random.variables.train.mass_scale.distribution"),
+    ('system = "ato_only"\nstop_time = -1\n', "field stop_time: -1 is less than or equal to the minimum of 0"),
+    ('system = "ato_only"\n[grid]\n"train.x" = [1.0]\n', "field grid.train.x: train.x is an output"),
+    ('system = "ato_only"\n[grid]\n"train.mass_scale" = ["heavy"]\n', "'heavy' is not a valid Real"),
+])
+def test_bad_study_files_are_one_line_and_exit_2(product_fmus, tmp_path, capsys, text, message):
+    study = _write(tmp_path, "s.toml", text)
+    assert main(["study", str(study), "--no-build", "--output", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("railcosim: error: ") and message in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_unreachable_scheduler_is_one_line_and_exit_2(tmp_path, capsys):
+    study = _write(tmp_path, "f.json", json.dumps({"function": "math:hypot", "grid": {"x": [1]}, "collect": ["y"]}))
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    assert main(["study", str(study), "--scheduler", address, "--output", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--scheduler {address}: cannot connect" in err
