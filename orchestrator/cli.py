@@ -151,7 +151,8 @@ def _run_command(args) -> int:
         from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
-    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty())
+    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty(),
+                           real_time=args.real_time)
     result = run_system(system, options)
     summary = result.summary
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
@@ -336,6 +337,9 @@ def make_parser() -> argparse.ArgumentParser:
                           "earlier run's files in it are replaced")
     _add_run_setup_arguments(run)
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    run.add_argument("--real-time", type=float, nargs="?", const=1.0, default=None, metavar="FACTOR",
+                     help="pace the run to the wall clock, FACTOR simulated seconds per second (default 1: "
+                          "real time); late steps are counted in summary.json real_time")
     run.set_defaults(func=cmd_run)
 
     report = sub.add_parser("report", help="pictures and the verdict table of a finished run")
