@@ -22,6 +22,7 @@ from orchestrator import interrupts
 from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
+from orchestrator.hil import DcpSlave, DcpTarget, SlaveDescription, swapped_descriptions
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
@@ -66,6 +67,9 @@ class RunOptions:
     #: pace the master to the wall clock: simulated seconds per wall-clock second (1: real
     #: time; orchestrator/pacing.py); None runs as fast as it can
     real_time: Optional[float] = None
+    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/hil.py;
+    #: the CLI's --swap NAME=dcp://HOST:PORT)
+    swaps: Dict[str, "DcpTarget"] = field(default_factory=dict)
 
 
 @dataclass
@@ -122,7 +126,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         workdir = new_workdir()
         setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
                        ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
-                       judges)
+                       judges, plan.hil)
         outcome = _run(setup, system.start_time, stop_s, stop_ticks, options.blas_threads)
         master = outcome.master
         end_s = master.time_s if master is not None and master.time_ticks >= start_ticks else system.start_time
@@ -164,6 +168,7 @@ class _Plan:
     recorded: List[tuple] = field(default_factory=list)
     captures: List[Capture] = field(default_factory=list)
     judges: Sequence[SummaryObserver] = ()
+    hil: Dict[str, SlaveDescription] = field(default_factory=dict)   # swapped components' .dcpx
 
 
 def _plan(system: SystemDescription, options: RunOptions,
@@ -179,6 +184,7 @@ def _plan(system: SystemDescription, options: RunOptions,
     plan.interval_ticks = attempt(lambda: _output_interval_ticks(graph, options))
     plan.recorded = attempt(lambda: _recorded(graph, options.record)) or []
     plan.captures = attempt(lambda: _captures(graph, options.captures)) or []
+    plan.hil = attempt(lambda: swapped_descriptions(options.swaps, graph)) or {}
     # the judges before the folder and the FMUs: making them checks the system's data files
     # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
@@ -564,6 +570,7 @@ class _Setup:
     scenario: Optional[ScenarioManipulator]
     flag: InterruptFlag
     judges: Sequence[SummaryObserver]
+    hil: Dict[str, SlaveDescription] = field(default_factory=dict)
 
 
 @dataclass
@@ -575,6 +582,7 @@ class _Outcome:
     steps_taken: Dict[str, int]
     judges: Sequence[SummaryObserver] = ()
     pacer: Optional[Pacer] = None
+    hil: Dict[str, DcpSlave] = field(default_factory=dict)
 
 
 def _start(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
@@ -610,9 +618,17 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     observers: List[Observer] = []
     judges = setup.judges
     master: Optional[Master] = None
-    pacer = Pacer(options.real_time, flag) if options.real_time is not None else None
+    # a slave that runs on its own clock (soft real time) needs the master at real time
+    factor = options.real_time
+    if factor is None and any(d.op_modes.isdisjoint({"NRT"}) for d in setup.hil.values()):
+        factor = 1.0
+    pacer = Pacer(factor, flag) if factor is not None else None
+    swapped: Dict[str, DcpSlave] = {}
 
     def make(name: str, node) -> Slave:
+        if name in setup.hil:
+            swapped[name] = DcpSlave(name, node.interface, options.swaps[name], setup.hil[name], node.step_ticks)
+            return swapped[name]
         return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
 
     try:
@@ -638,7 +654,7 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
                 problems.append(str(error))
     problems.extend(shutdown_slaves(graph.order, slaves))
     steps = dict(master.steps_taken) if master is not None else {name: 0 for name in graph.nodes}
-    return _Outcome(wall, failure, problems, master, steps, judges, pacer)
+    return _Outcome(wall, failure, problems, master, steps, judges, pacer, swapped)
 
 
 def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
@@ -659,6 +675,8 @@ def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
         summary.update(judge.summary_section())
     if outcome.pacer is not None:
         summary.update(outcome.pacer.summary_section())
+    if outcome.hil:
+        summary["hil"] = {name: slave.summary_section() for name, slave in outcome.hil.items()}
     if scenario is not None:
         summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
                                "events_applied": scenario.applied}
