@@ -128,6 +128,11 @@ class DcpVariable:
     vr: int
     causality: str          # input, output, parameter, structuralParameter
     data_type: str          # a DataType name: float64, int32, uint8, string …
+    dims: Tuple[int, ...] = ()          # () for a scalar; an array's dimensions (row-major)
+
+    @property
+    def count(self) -> int:
+        return int(np.prod(self.dims)) if self.dims else 1
 
 
 @dataclass
@@ -207,12 +212,14 @@ def read_dcpx(path: Path) -> SlaveDescription:
         if not typed:
             raise UserError(f"{where}: variable {element.get('name')!r} has no supported data type "
                             f"({', '.join(_DCPX_TYPES)})")
-        if typed[0].find("{*}Dimensions") is not None or typed[0].find("{*}Dimension") is not None:
-            raise UserError(f"{where}: variable {element.get('name')!r} is an array; the master exchanges "
-                            "scalar variables (indexed names such as e_coil[3])")
+        try:
+            dims = tuple(int(d.get("constant")) for d in causal[0].iterfind(".//{*}Dimension"))
+        except (TypeError, ValueError):
+            raise UserError(f"{where}: variable {element.get('name')!r}: only constant dimensions are "
+                            "supported") from None
         description.variables[element.get("name")] = DcpVariable(
             element.get("name"), int(element.get("valueReference")), kinds[_local(causal[0])],
-            _DCPX_TYPES[_local(typed[0])])
+            _DCPX_TYPES[_local(typed[0])], dims)
     return description
 
 
@@ -286,11 +293,14 @@ class DcpSlave(Slave):
         self._newest_at = 0.0
         self._last_out_seq: Optional[int] = None
         self._registered = False
-        self._in_map: List[Tuple[ValueBuffer, int, DcpVariable]] = []
-        self._out_map: List[Tuple[ValueBuffer, int, DcpVariable]] = []
+        self._in_map: List[tuple] = []      # (buffer, index, payload entry, element, port name)
+        self._out_map: List[tuple] = []
         self._out_values: Optional[List[float]] = None              # the values the outputs show now
         self._fail_safe: List[Optional[float]] = []
         self._in_codec = self._out_codec = None
+        self._in_remotes: List[DcpVariable] = []
+        self._out_remotes: List[DcpVariable] = []
+        self._in_arrays: List[np.ndarray] = []
 
     # ---- transport -------------------------------------------------------------------------
     def _send(self, message) -> None:
@@ -392,26 +402,51 @@ class DcpSlave(Slave):
         self._registered = True
 
     def bind(self, inputs: Mapping[str, Sequence[int]], outputs: Mapping[str, Sequence[int]]) -> None:
+        """Map every bound port to a slave variable of its name, or to an element of a DCP array
+        (``e_coil[3]`` → element 3 of ``e_coil``, row-major); one payload entry per variable."""
         self.inputs, self.outputs = _make_buffers(dict(inputs)), _make_buffers(dict(outputs))
         by_vr = {var.vr: var for var in self.interface.variables.values()}
         fail_safe = FAIL_SAFE.get(self.interface.model_identifier, {})
-        for table, buffers, causality in ((self._in_map, self.inputs, "input"),
-                                          (self._out_map, self.outputs, "output")):
+        codec = self.pdu.PayloadCodec
+        for direction, buffers, causality in (("in", self.inputs, "input"), ("out", self.outputs, "output")):
+            entries: Dict[str, int] = {}
+            remotes: List[DcpVariable] = []
+            slots = []
             for buffer in buffers.values():
                 for index, vr in enumerate(buffer.vr_array):
                     port = by_vr[int(vr)]
-                    remote = self.description.variables.get(port.name)
-                    if remote is None or remote.causality != causality:
-                        raise UserError(f"{self.description.path}: the slave has no {causality} {port.name!r}, "
-                                        f"which component {self.name!r} uses in this system")
+                    remote, element = self._remote(port.name, causality)
                     if (port.type in _NUMERIC) == (remote.data_type == "string"):
                         raise UserError(f"{self.description.path}: {port.name!r} is {remote.data_type} on the "
                                         f"slave but {port.type} on component {self.name!r}")
-                    table.append((buffer, index, remote))
-        self._fail_safe = [fail_safe.get(remote.name) for _, _, remote in self._out_map]
-        codec = self.pdu.PayloadCodec
-        self._in_codec = codec([(self.pdu.DataType[v.data_type], 1) for _, _, v in self._in_map])
-        self._out_codec = codec([(self.pdu.DataType[v.data_type], 1) for _, _, v in self._out_map])
+                    if remote.name not in entries:
+                        entries[remote.name] = len(remotes)
+                        remotes.append(remote)
+                    slots.append((buffer, index, entries[remote.name], element, port.name))
+            arrays = [np.zeros(r.count) for r in remotes]
+            entry_codec = codec([(self.pdu.DataType[r.data_type], r.count) for r in remotes])
+            if direction == "in":
+                self._in_map, self._in_remotes, self._in_arrays, self._in_codec = slots, remotes, arrays, entry_codec
+            else:
+                self._out_map, self._out_remotes, self._out_codec = slots, remotes, entry_codec
+        self._fail_safe = [fail_safe.get(name) for *_, name in self._out_map]
+
+    def _remote(self, name: str, causality: str) -> Tuple[DcpVariable, int]:
+        variables = self.description.variables
+        remote, element = variables.get(name), 0
+        if remote is None and name.endswith("]") and "[" in name:
+            base, _, index = name[:-1].partition("[")
+            remote = variables.get(base)
+            if remote is not None and remote.dims:
+                try:
+                    position = tuple(int(i) - 1 for i in index.split(","))
+                    element = int(np.ravel_multi_index(position, remote.dims))
+                except ValueError:
+                    remote = None
+        if remote is None or remote.causality != causality:
+            raise UserError(f"{self.description.path}: the slave has no {causality} {name!r}, "
+                            f"which component {self.name!r} uses in this system")
+        return remote, element
 
     def setup_experiment(self, start_time: float, stop_time: Optional[float]) -> None:
         return None
@@ -444,9 +479,9 @@ class DcpSlave(Slave):
         for data_id, table in ((INPUTS_ID, self._in_map), (OUTPUTS_ID, self._out_map)):
             if table:
                 requests.append(pdu.CfgScope(nxt(), SLAVE_ID, data_id, pdu.Scope.Initialization_Run_NonRealTime))
-        for pos, (_, _, remote) in enumerate(self._in_map):
+        for pos, remote in enumerate(self._in_remotes):
             requests.append(pdu.CfgInput(nxt(), SLAVE_ID, INPUTS_ID, pos, remote.vr, pdu.DataType[remote.data_type]))
-        for pos, (_, _, remote) in enumerate(self._out_map):
+        for pos, remote in enumerate(self._out_remotes):
             requests.append(pdu.CfgOutput(nxt(), SLAVE_ID, OUTPUTS_ID, pos, remote.vr))
         if self._in_map:
             requests.append(pdu.CfgNetworkInformation(pdu.PduType.CFG_source_network_information, nxt(), SLAVE_ID,
@@ -483,7 +518,10 @@ class DcpSlave(Slave):
     def _send_inputs(self) -> None:
         if not self._in_map:
             return
-        payload = self._in_codec.encode([buffer.values[index] for buffer, index, _ in self._in_map])
+        arrays = self._in_arrays
+        for buffer, index, entry, element, _ in self._in_map:
+            arrays[entry][element] = buffer.values[index]
+        payload = self._in_codec.encode(arrays)
         self._dat_seq = self.pdu.next_seq(self._dat_seq)
         self._send(self.pdu.DatInputOutput(self._dat_seq, INPUTS_ID, payload))
 
@@ -497,8 +535,13 @@ class DcpSlave(Slave):
                 if during is not None:
                     raise self._gone(f"sent no outputs during {during} within {self.target.timeout_s:g} s")
                 return False
-        self._out_values = [float(v[0]) if not isinstance(v, str) else v for v in self._fresh_outputs[1]]
+        self._out_values = self._slot_values(self._fresh_outputs[1])
         return True
+
+    def _slot_values(self, decoded) -> List:
+        """The value of each bound output from the decoded payload entries."""
+        return [decoded[entry] if isinstance(decoded[entry], str) else float(decoded[entry][element])
+                for _, _, entry, element, _ in self._out_map]
 
     def _apply_fail_safe(self) -> None:
         self.stats.lost += 1
@@ -529,7 +572,7 @@ class DcpSlave(Slave):
                 pass
             got = self._fresh_outputs is not None and began - self._newest_at <= self.target.deadline_s
             if got:
-                self._out_values = [float(v[0]) if not isinstance(v, str) else v for v in self._fresh_outputs[1]]
+                self._out_values = self._slot_values(self._fresh_outputs[1])
         elapsed = time.perf_counter() - began
         if got:
             self.stats.rtt_s.append(elapsed)
@@ -547,7 +590,7 @@ class DcpSlave(Slave):
         values = self._out_values
         if values is None:
             return
-        for (buffer, index, _), value in zip(self._out_map, values):
+        for (buffer, index, *_), value in zip(self._out_map, values):
             if types is None or buffer.type in types:
                 buffer.values[index] = value
 
