@@ -293,6 +293,7 @@ class DcpSlave(Slave):
         self._newest_at = 0.0
         self._last_out_seq: Optional[int] = None
         self._registered = False
+        self._exchanged = False                 # an initialisation exchange took place
         self._in_map: List[tuple] = []      # (buffer, index, payload entry, element, port name)
         self._out_map: List[tuple] = []
         self._out_values: Optional[List[float]] = None              # the values the outputs show now
@@ -493,11 +494,13 @@ class DcpSlave(Slave):
             self._request(request)
         self._stc(pdu.PduType.STC_prepare, reaches=pdu.State.PREPARED)
         self._stc(pdu.PduType.STC_configure, reaches=pdu.State.CONFIGURED)
-        self._initialise()
+        # the first initialisation exchange waits for the inputs the master gathers
+        # (write_inputs), as an FMU's initial inputs are set before it leaves initialisation
 
     def _initialise(self) -> None:
         """One initialisation exchange: the inputs written, STC_initialize, the outputs sent."""
         pdu = self.pdu
+        self._exchanged = True
         self._send_inputs()
         self._stc(pdu.PduType.STC_initialize, reaches=pdu.State.INITIALIZED)
         before = self._fresh_outputs
@@ -506,6 +509,8 @@ class DcpSlave(Slave):
 
     def exit_initialization(self) -> None:
         pdu = self.pdu
+        if not self._exchanged:              # never exchanged (no input written): once now
+            self._initialise()
         self._stc_run(pdu.State.SYNCHRONIZED)
         if self.mode == "NRT":
             self._stc_run(pdu.State.RUNNING)
@@ -551,9 +556,9 @@ class DcpSlave(Slave):
                                 for safe, value in zip(self._fail_safe, self._out_values)]
 
     def write_inputs(self) -> None:
-        """In initialisation: one more initialisation exchange with these inputs; while running
-        the inputs go with the step (:meth:`do_step`)."""
-        if self._state == self.pdu.State.CONFIGURED and self._in_map:
+        """In initialisation: an initialisation exchange with these inputs; while running the
+        inputs go with the step (:meth:`do_step`)."""
+        if self._state == self.pdu.State.CONFIGURED:
             self._initialise()
 
     def do_step(self, time_s: float, step_s: float) -> None:
