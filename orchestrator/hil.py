@@ -34,17 +34,12 @@ from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
-from lxml import etree
 
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.fmu import Interface, ValueBuffer, _make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
 from orchestrator.protocols import Slave
 
-#: the DCP data types an FMI type may be carried as (the .dcpx's element names)
-_DCPX_TYPES = {"Float64": "float64", "Float32": "float32", "Int8": "int8", "Int16": "int16", "Int32": "int32",
-               "Int64": "int64", "Uint8": "uint8", "Uint16": "uint16", "Uint32": "uint32", "Uint64": "uint64",
-               "String": "string"}
 _NUMERIC = {"Real", "Integer", "Boolean"}
 #: data ids of the two DAT_input_output streams the master configures
 INPUTS_ID, OUTPUTS_ID = 1, 2
@@ -148,6 +143,7 @@ class SlaveDescription:
     variables: Dict[str, DcpVariable] = field(default_factory=dict)
     host: Optional[str] = None
     port: Optional[int] = None
+    supports_nrt_steps: object = lambda steps: True
 
     def resolution_for(self, step_s: Fraction) -> Tuple[Fraction, int]:
         """(time resolution, steps) with steps × resolution = ``step_s``: a resolution the
@@ -157,7 +153,8 @@ class SlaveDescription:
             if steps.denominator == 1 and steps >= 1:
                 return resolution, int(steps)
         for finest, coarsest in self.resolution_ranges:
-            if finest <= step_s <= coarsest:
+            # a range offers every multiple of its finest resolution up to its coarsest one
+            if finest <= step_s <= coarsest and (step_s / finest).denominator == 1:
                 return step_s, 1
         offered = [f"{float(r):g} s" for r, _ in self.resolutions] + \
                   [f"{float(a):g}…{float(b):g} s" for a, b in self.resolution_ranges]
@@ -165,61 +162,26 @@ class SlaveDescription:
                         f"(offered: {', '.join(offered) or 'none'})")
 
 
-def _local(element) -> str:
-    return etree.QName(element).localname
-
-
 def read_dcpx(path: Path) -> SlaveDescription:
-    """The parts of a .dcpx the master uses; a missing or malformed file is one UserError."""
+    """The parts of a .dcpx the master uses, read and validated against the standard's schema
+    by orchestrator/dcp/dcpx.py; a missing or malformed file is one UserError."""
+    from orchestrator.dcp import dcpx
+
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: DCP slave description (.dcpx) not found")
-    try:
-        root = etree.parse(str(path)).getroot()
-    except etree.XMLSyntaxError as error:
-        raise UserError(f"{path}: not an XML file ({error})") from None
-    if _local(root) != "dcpSlaveDescription":
-        raise UserError(f"{path}: not a DCP slave description (root element {_local(root)!r})")
-    try:
-        slave_uuid = uuidlib.UUID(root.get("uuid", ""))
-    except ValueError:
-        raise UserError(f"{path}: uuid {root.get('uuid')!r} is not a UUID") from None
-    modes = {"HardRealTime": "HRT", "SoftRealTime": "SRT", "NonRealTime": "NRT"}
-    op_modes = frozenset(modes[_local(e)] for e in root.iterfind("{*}OpMode/*") if _local(e) in modes)
-    resolutions, ranges = [], []
-    for element in root.iterfind("{*}TimeRes/*"):
-        try:
-            if _local(element) == "Resolution":
-                resolutions.append((Fraction(int(element.get("numerator", "1")), int(element.get("denominator", "1000"))),
-                                    element.get("fixed", "true") == "true"))
-            elif _local(element) == "ResolutionRange":
-                ranges.append((Fraction(int(element.get("numeratorFrom", "1")), int(element.get("denominatorFrom"))),
-                               Fraction(int(element.get("numeratorTo", "1")), int(element.get("denominatorTo")))))
-        except (TypeError, ValueError, ZeroDivisionError):
-            raise UserError(f"{path}:{element.sourceline}: malformed {_local(element)}") from None
-    control = root.find("{*}TransportProtocols/{*}UDP_IPv4/{*}Control")
-    description = SlaveDescription(path, root.get("dcpSlaveName", ""), slave_uuid, op_modes, resolutions, ranges,
-                                   host=control.get("host") if control is not None else None,
-                                   port=int(control.get("port")) if control is not None and control.get("port") else None)
-    kinds = {"Input": "input", "Output": "output", "Parameter": "parameter",
-             "StructuralParameter": "structuralParameter"}
-    for element in root.iterfind("{*}Variables/{*}Variable"):
-        where = f"{path}:{element.sourceline}"
-        causal = [c for c in element if _local(c) in kinds]
-        if not causal:
-            continue
-        typed = [t for t in causal[0] if _local(t) in _DCPX_TYPES]
-        if not typed:
-            raise UserError(f"{where}: variable {element.get('name')!r} has no supported data type "
-                            f"({', '.join(_DCPX_TYPES)})")
-        try:
-            dims = tuple(int(d.get("constant")) for d in causal[0].iterfind(".//{*}Dimension"))
-        except (TypeError, ValueError):
-            raise UserError(f"{where}: variable {element.get('name')!r}: only constant dimensions are "
-                            "supported") from None
-        description.variables[element.get("name")] = DcpVariable(
-            element.get("name"), int(element.get("valueReference")), kinds[_local(causal[0])],
-            _DCPX_TYPES[_local(typed[0])], dims)
+    read = dcpx.read_dcpx(path)
+    description = SlaveDescription(
+        path, read.name, read.uuid, frozenset(mode.name for mode in read.op_modes),
+        [(Fraction(num, den), bool(fixed)) for num, den, fixed, _ in read.resolutions],
+        [(Fraction(lo, den), Fraction(hi, den)) for lo, hi, den in read.resolution_ranges],
+        host=read.control_host, port=read.control_port)
+    if not read.resolutions and not read.resolution_ranges:
+        description.resolutions.append((Fraction(1, 1000), True))     # the schema's default
+    for variable in read.variables:
+        description.variables[variable.name] = DcpVariable(variable.name, variable.vr, variable.causality,
+                                                           variable.data_type.name, tuple(variable.dims))
+    description.supports_nrt_steps = read.supports_nrt_steps
     return description
 
 
@@ -272,6 +234,9 @@ class DcpSlave(Slave):
         self.name, self.interface, self.target, self.description = name, interface, target, description
         self.step_s = Fraction(step_ticks, TICKS_PER_SECOND)
         self.resolution, self.steps = description.resolution_for(self.step_s)
+        if "NRT" in description.op_modes and not description.supports_nrt_steps(self.steps):
+            raise UserError(f"{description.path}: the slave cannot step {self.steps} × {self.resolution} s "
+                            f"at a time (the component's step {float(self.step_s):g} s)")
         if "NRT" in description.op_modes:
             self.mode = "NRT"
         elif "SRT" in description.op_modes:

@@ -23,7 +23,7 @@ from orchestrator.run import RunOptions, run_system
 DCPX = """<?xml version="1.0" encoding="UTF-8"?>
 <dcpSlaveDescription dcpMajorVersion="1" dcpMinorVersion="0" dcpSlaveName="counter"
     uuid="2f1c1d7e-5a7b-4c1e-9f0e-3b8f5d1a6c42">
-  <OpMode><NonRealTime/></OpMode>
+  <OpMode><NonRealTime defaultSteps="10" fixedSteps="false" minSteps="1" maxSteps="1000"/></OpMode>
   <TimeRes><Resolution numerator="1" denominator="1000" fixed="true" recommended="true"/></TimeRes>
   <TransportProtocols><UDP_IPv4>
     <Control host="127.0.0.1" port="{port}"/>
