@@ -323,6 +323,15 @@ def _add_run_setup_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-scenario", action="store_true", help="ignore the system's own scenario.json")
 
 
+def cmd_dcp_slave(args) -> int:
+    from orchestrator.dcp.slave import serve
+
+    if not 0 <= args.port <= 65535:
+        raise UserError(f"dcp-slave: --port {args.port}: a UDP port 0..65535 is expected")
+    return serve(Path(args.fmu), args.host, args.port, args.real_time,
+                 Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet)
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
     # not required: a missing command is said by main, naming the commands, in one line
@@ -368,6 +377,21 @@ def make_parser() -> argparse.ArgumentParser:
     validate.set_defaults(func=cmd_validate)
 
     add_new_command(sub)
+
+    dcp = sub.add_parser("dcp-slave", help="serve an FMI 2.0 co-simulation FMU as a DCP 1.0 slave over UDP "
+                                            "(docs/hil.md)")
+    dcp.add_argument("fmu", help="the .fmu to serve")
+    dcp.add_argument("--host", default="127.0.0.1", help="IPv4 address to listen on (default 127.0.0.1)")
+    dcp.add_argument("--port", type=int, default=0,
+                     help="UDP port for control and data PDUs (default 0: a free port, printed at start)")
+    dcp.add_argument("--real-time", action="store_true",
+                     help="offer soft real-time mode only (the slave's own clock) instead of non-real-time")
+    dcp.add_argument("--dcpx-out", metavar="FILE", help="write the slave's DCP description (.dcpx) here")
+    dcp.add_argument("--drop-data", type=float, default=0.0, metavar="FRACTION",
+                     help="test option: leave this fraction of the DAT PDUs it should send unsent")
+    dcp.add_argument("--seed", type=int, default=None, help="seed of --drop-data's random choice")
+    dcp.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    dcp.set_defaults(func=cmd_dcp_slave)
 
     env = sub.add_parser("fmu-env", help="optional overrides of the Python our FMUs start in a non-Python FMI host")
     env.set_defaults(func=cmd_fmu_env)

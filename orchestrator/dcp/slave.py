@@ -1,0 +1,763 @@
+"""``railcosim dcp-slave``: any FMI 2.0 co-simulation FMU served as a DCP 1.0 slave over UDP_IPv4.
+
+The slave follows the standard's state machine (orchestrator/dcp/states.py) from STC_register
+to STC_deregister, checks every request as the standard asks (receiver, sequence id, length,
+state, state_id, then the request's own fields) and answers RSP_ack or RSP_nack with the
+standard's error code; each state change is announced with NTF_state_changed. DAT PDUs are
+never answered: a malformed, unknown or out-of-date one is dropped and counted.
+
+Operating modes (docs/hil.md#operating-modes):
+
+* NRT — the master steps the slave: STC_do_step(steps) advances the FMU by steps × time
+  resolution, STC_send_outputs sends the outputs it computed.
+* SRT (``--real-time``) — the slave follows its own monotonic clock once running: every
+  output period it applies the latest inputs, steps the FMU and sends its outputs, whether or
+  not the master keeps up (late steps are counted, none skipped).
+
+The FMU itself is driven through orchestrator/fmu.py's FmuSlave, as in a run.
+"""
+from __future__ import annotations
+
+import math
+import os
+import selectors
+import signal
+import socket
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from orchestrator.dcp import states
+from orchestrator.dcp.dcpx import NS_PER_SECOND, SlaveDescription, description_from_fmu, write_dcpx
+from orchestrator.dcp.pdu import (NUMPY_DTYPES, VARIABLE_LENGTH, Basic, CfgInput, CfgNetworkInformation,
+                                  CfgOutput, CfgParameter, CfgScope, CfgSteps, CfgTimeRes, DataType,
+                                  DatInputOutput, ErrorCode, NtfStateChanged, OpMode, PayloadCodec, PduError,
+                                  PduType, RspAck, RspErrorAck, RspNack, RspStateAck, Scope, State, Stc,
+                                  StcDoStep, StcRegister, StcRun, TransportProtocol, Unsupported, decode,
+                                  next_seq)
+from orchestrator.errors import SimulationError, UserError
+
+_RECV_BYTES = 65536          # more than the largest UDP payload: a datagram is never cut
+
+
+def castable(source: DataType, target: DataType) -> bool:
+    """May values of ``source`` type feed a variable of ``target`` type? Equal types, or a
+    numeric widening that loses nothing (numpy's 'safe' casting)."""
+    if source == target:
+        return True
+    if source in VARIABLE_LENGTH or target in VARIABLE_LENGTH:
+        return False
+    return bool(np.can_cast(NUMPY_DTYPES[source], NUMPY_DTYPES[target], casting="safe"))
+
+
+@dataclass
+class _Binding:
+    """One DCP variable's place in the FMU's value buffers."""
+    var: object                 # DcpVariable
+    fmi_type: str
+    index: np.ndarray           # positions in the FMU buffer of that type
+
+
+@dataclass
+class _DataId:
+    """Configuration of one data_id (CFG_input/CFG_output/CFG_steps/CFG_scope/network)."""
+    positions: Dict[int, Tuple[int, DataType]] = field(default_factory=dict)   # pos → (vr, source type)
+    steps: Optional[int] = None
+    scope: Scope = Scope.Initialization_Run_NonRealTime
+    address: Optional[Tuple[str, int]] = None
+    codec: Optional[PayloadCodec] = None
+    order: List[int] = field(default_factory=list)      # vrs in pos order
+    last_seq: Optional[int] = None
+    send_seq: int = 0
+
+
+@dataclass
+class Counters:
+    dat_received: int = 0
+    dat_missing: int = 0          # gaps in the incoming sequence ids
+    dat_stale: int = 0            # older than one already applied: dropped
+    dat_rejected: int = 0         # unknown data_id, wrong length, not allowed in this state
+    dat_sent: int = 0
+    dat_dropped: int = 0          # by --drop-data
+    nacks: int = 0
+    malformed: int = 0            # datagrams that are no PDU at all (unanswerable)
+    steps: int = 0
+    overruns: int = 0             # SRT: steps started after their deadline
+    worst_lateness_s: float = 0.0
+
+    def line(self) -> str:
+        return (f"{self.steps} steps, DAT in {self.dat_received} (missing {self.dat_missing}, "
+                f"stale {self.dat_stale}, rejected {self.dat_rejected}), DAT out {self.dat_sent} "
+                f"(dropped {self.dat_dropped}), RSP_nack {self.nacks}, malformed {self.malformed}, "
+                f"overruns {self.overruns} (worst {self.worst_lateness_s * 1e3:.3f} ms late)")
+
+
+class DcpSlave:
+    """The protocol engine of one slave around one FMU (``fmu`` follows orchestrator's Slave
+    protocol; ``make_fmu`` makes a fresh instance after STC_reset)."""
+
+    def __init__(self, description: SlaveDescription, make_fmu, sock: socket.socket,
+                 drop_data: float = 0.0, seed: Optional[int] = None, log=None):
+        self.desc = description
+        self.make_fmu = make_fmu
+        self.sock = sock
+        self.host = sock.getsockname()[0]
+        self.port = sock.getsockname()[1]
+        self.drop_data = float(drop_data)
+        self.rng = np.random.default_rng(seed)
+        self.log = log or (lambda message: None)
+        self.counters = Counters()
+        self.state = State.ALIVE
+        self.error = ErrorCode.NONE
+        self.slave_id = 0
+        self.master: Optional[Tuple[str, int]] = None
+        self.expected_seq = 0
+        self.op_mode = OpMode.NRT
+        self.deregistered = False
+        self.data_sockets: Dict[Tuple[str, int], socket.socket] = {}
+        self.fmu = None
+        self._fresh_fmu = True
+        self.vars_by_vr = {v.vr: v for v in description.variables}
+        self._clear_configuration()
+
+    # ---- configuration -------------------------------------------------------------------
+    def _clear_configuration(self) -> None:
+        self.inputs: Dict[int, _DataId] = {}
+        self.outputs: Dict[int, _DataId] = {}
+        self.sources: Dict[int, Tuple[str, int]] = {}    # data_id → where its inputs arrive
+        self.scopes: Dict[int, Scope] = {}
+        self.steps: Dict[int, int] = {}
+        self.resolution: Optional[Tuple[int, int]] = None
+        self.parameters: Dict[int, list] = {}
+        self.initialised = False
+        self.fmi_initialised = False
+        self.units = 0                 # simulation time in resolution units since the start
+        self.run_state = State.RUNNING
+
+    def _close_data_sockets(self) -> None:
+        for s in self.data_sockets.values():
+            s.close()
+        self.data_sockets.clear()
+
+    # ---- sending -------------------------------------------------------------------------
+    def _send(self, pdu, address=None) -> None:
+        target = address or self.master
+        if target is None:
+            return
+        try:
+            self.sock.sendto(pdu.encode(), target)
+        except OSError as error:          # e.g. the master's port closed: keep serving
+            self.log(f"send to {target[0]}:{target[1]} failed: {error}")
+
+    def _set_state(self, state: State) -> None:
+        self.state = state
+        self._send(NtfStateChanged(self.slave_id, state))
+
+    def _nack(self, seq: int, code: ErrorCode, sender: Optional[int] = None, address=None) -> None:
+        self.counters.nacks += 1
+        self._send(RspNack(self.slave_id if sender is None else sender, seq, self.expected_seq, code), address)
+
+    # ---- receiving -----------------------------------------------------------------------
+    def handle(self, data: bytes, address: Tuple[str, int]) -> None:
+        """Act on one datagram; never raises for anything a peer can send."""
+        try:
+            pdu = decode(data)
+        except PduError as error:
+            self._malformed(error, address)
+            return
+        if pdu.type_id == PduType.DAT_input_output:
+            self._data(pdu)
+            return
+        if pdu.type_id == PduType.DAT_parameter or pdu.type_id >= PduType.RSP_ack:
+            return      # tunable parameters are not offered; responses/notifications are not ours
+        self._request(pdu, address)
+
+    def _malformed(self, error: PduError, address) -> None:
+        if error.type_id == PduType.DAT_input_output:
+            self.counters.dat_rejected += 1
+            return
+        if error.pdu_seq_id is None or error.type_id is None or error.type_id >= PduType.RSP_ack \
+                or error.error_code == ErrorCode.NOT_SUPPORTED_PDU:
+            self.counters.malformed += 1          # no header to answer to
+            return
+        if self.state == State.ALIVE:
+            if error.type_id in (PduType.STC_register, PduType.INF_state):
+                self._nack(error.pdu_seq_id, error.error_code, sender=error.receiver, address=address)
+            return
+        if error.receiver != self.slave_id:
+            return
+        if not self._sequence_ok(error.pdu_seq_id, address):
+            return
+        self._nack(error.pdu_seq_id, error.error_code, address=address)
+
+    def _sequence_ok(self, seq: int, address) -> bool:
+        if seq != self.expected_seq:
+            self._nack(seq, ErrorCode.INVALID_SEQUENCE_ID, address=address)
+            return False
+        self.expected_seq = next_seq(seq)
+        return True
+
+    def _request(self, pdu, address) -> None:
+        type_id = pdu.type_id
+        if self.state == State.ALIVE:
+            if type_id == PduType.INF_state:        # a slave not registered answers as asked
+                self._send(RspStateAck(pdu.receiver, pdu.pdu_seq_id, self.state), address)
+            elif type_id == PduType.STC_register:
+                self._register(pdu, address)
+            else:
+                self._nack(pdu.pdu_seq_id, ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE,
+                           sender=pdu.receiver, address=address)
+            return
+        if pdu.receiver != self.slave_id:
+            return                                   # addressed to another slave
+        if not self._sequence_ok(pdu.pdu_seq_id, address):
+            return
+        code = self._check(pdu)
+        if code != ErrorCode.NONE:
+            self._nack(pdu.pdu_seq_id, code, address=address)
+            return
+        if type_id == PduType.INF_state:
+            self._send(RspStateAck(self.slave_id, pdu.pdu_seq_id, self.state), address)
+            return
+        if type_id == PduType.INF_error:
+            self._send(RspErrorAck(self.slave_id, pdu.pdu_seq_id, self.error), address)
+            return
+        self._send(RspAck(self.slave_id, pdu.pdu_seq_id), address)
+        self._act(pdu)
+
+    def _register(self, pdu: StcRegister, address) -> None:
+        code = ErrorCode.NONE
+        if pdu.state_id != self.state:
+            code = ErrorCode.INVALID_STATE_ID
+        elif pdu.slave_uuid != self.desc.uuid:
+            code = ErrorCode.INVALID_UUID
+        elif pdu.op_mode not in self.desc.op_modes:
+            code = ErrorCode.INVALID_OP_MODE
+        elif pdu.major_version != self.desc.major_version:
+            code = ErrorCode.INVALID_MAJOR_VERSION
+        elif pdu.minor_version != self.desc.minor_version:
+            code = ErrorCode.INVALID_MINOR_VERSION
+        if code != ErrorCode.NONE:
+            self.expected_seq = next_seq(pdu.pdu_seq_id)
+            self._nack(pdu.pdu_seq_id, code, sender=pdu.receiver, address=address)
+            return
+        self.slave_id, self.master, self.op_mode = pdu.receiver, address, pdu.op_mode
+        self.expected_seq = next_seq(pdu.pdu_seq_id)
+        self.error = ErrorCode.NONE
+        self._send(RspAck(self.slave_id, pdu.pdu_seq_id))
+        self.log(f"registered by {address[0]}:{address[1]} as slave {self.slave_id}, {self.op_mode.name}")
+        self._set_state(State.CONFIGURATION)
+
+    # ---- checks (the standard's order: state, state_id, then the request's fields) ---------
+    def _check(self, pdu) -> ErrorCode:
+        type_id = pdu.type_id
+        if type_id == PduType.STC_do_step and self.op_mode != OpMode.NRT:
+            return ErrorCode.NOT_SUPPORTED_PDU
+        if isinstance(pdu, Unsupported):
+            return ErrorCode.NOT_SUPPORTED_PDU
+        if not states.allowed(self.state, type_id):
+            return ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE
+        if hasattr(pdu, "state_id") and pdu.state_id != self.state:
+            return ErrorCode.INVALID_STATE_ID
+        check = getattr(self, f"_check_{type_id.name}", None)
+        return check(pdu) if check is not None else ErrorCode.NONE
+
+    def _check_CFG_time_res(self, pdu: CfgTimeRes) -> ErrorCode:
+        ok = self.desc.supports_time_resolution(pdu.numerator, pdu.denominator)
+        return ErrorCode.NONE if ok else ErrorCode.INVALID_TIME_RESOLUTION
+
+    def _check_CFG_steps(self, pdu: CfgSteps) -> ErrorCode:
+        if pdu.steps < 1:
+            return ErrorCode.INVALID_STEPS
+        config = self.outputs.get(pdu.data_id)
+        for vr, _ in (config.positions.values() if config else ()):
+            if not self.vars_by_vr[vr].steps_supported(pdu.steps):
+                return ErrorCode.INVALID_STEPS
+        return ErrorCode.NONE
+
+    def _check_CFG_input(self, pdu: CfgInput) -> ErrorCode:
+        var = self.vars_by_vr.get(pdu.target_vr)
+        if var is None or var.causality != "input":
+            return ErrorCode.INVALID_VALUE_REFERENCE
+        return ErrorCode.NONE if castable(pdu.source_data_type, var.data_type) else ErrorCode.INVALID_SOURCE_DATA_TYPE
+
+    def _check_CFG_output(self, pdu: CfgOutput) -> ErrorCode:
+        var = self.vars_by_vr.get(pdu.source_vr)
+        if var is None or var.causality != "output":
+            return ErrorCode.INVALID_VALUE_REFERENCE
+        steps = self.steps.get(pdu.data_id)
+        if steps is not None and not var.steps_supported(steps):
+            return ErrorCode.INVALID_STEPS
+        return ErrorCode.NONE
+
+    def _check_network(self, pdu: CfgNetworkInformation) -> ErrorCode:
+        if pdu.transport_protocol != TransportProtocol.UDP_IPv4:
+            return ErrorCode.INVALID_TRANSPORT_PROTOCOL
+        if not 1 <= pdu.port <= 65535:
+            return ErrorCode.INVALID_NETWORK_INFORMATION
+        if pdu.type_id == PduType.CFG_source_network_information and not self.desc.supports_dat_port(pdu.port):
+            return ErrorCode.INVALID_NETWORK_INFORMATION
+        return ErrorCode.NONE
+
+    _check_CFG_source_network_information = _check_network
+    _check_CFG_target_network_information = _check_network
+
+    def _check_CFG_parameter(self, pdu: CfgParameter) -> ErrorCode:
+        var = self.vars_by_vr.get(pdu.parameter_vr)
+        if var is None or var.causality != "parameter":
+            return ErrorCode.INVALID_VALUE_REFERENCE
+        if not castable(pdu.source_data_type, var.data_type):
+            return ErrorCode.INVALID_SOURCE_DATA_TYPE
+        try:
+            PayloadCodec([(pdu.source_data_type, var.count)]).decode(pdu.configuration)
+        except PduError as error:
+            return error.error_code
+        return ErrorCode.NONE
+
+    def _check_STC_prepare(self, pdu) -> ErrorCode:
+        for table, gap in ((self.inputs, ErrorCode.INCOMPLETE_CONFIG_GAP_INPUT_POS),
+                           (self.outputs, ErrorCode.INCOMPLETE_CONFIG_GAP_OUTPUT_POS)):
+            for config in table.values():
+                if sorted(config.positions) != list(range(len(config.positions))):
+                    return gap
+        if any(data_id not in self.sources for data_id in self.inputs):
+            return ErrorCode.INCOMPLETE_CONFIG_NW_INFO_INPUT
+        if any(config.address is None for config in self.outputs.values()):
+            return ErrorCode.INCOMPLETE_CONFIG_NW_INFO_OUTPUT
+        if any(data_id not in self.steps for data_id in self.outputs):
+            return ErrorCode.INCOMPLETE_CONFIG_STEPS
+        if self.resolution is None:
+            return ErrorCode.INCOMPLETE_CONFIG_TIME_RESOLUTION
+        try:   # the transport is prepared here so that a port that cannot be bound is refused
+            self._bind_sources()
+        except OSError:
+            self._close_data_sockets()
+            return ErrorCode.INVALID_NETWORK_INFORMATION
+        return ErrorCode.NONE
+
+    def _check_STC_do_step(self, pdu: StcDoStep) -> ErrorCode:
+        return ErrorCode.NONE if self.desc.supports_nrt_steps(pdu.steps) else ErrorCode.INVALID_STEPS
+
+    def _check_STC_run(self, pdu: StcRun) -> ErrorCode:
+        if self.op_mode != OpMode.NRT and 0 < pdu.start_time < int(time.time()):
+            return ErrorCode.INVALID_START_TIME
+        return ErrorCode.NONE
+
+    # ---- actions -------------------------------------------------------------------------
+    def _act(self, pdu) -> None:
+        type_id = pdu.type_id
+        try:
+            action = getattr(self, f"_do_{type_id.name}", None)
+            if action is not None:
+                action(pdu)
+        except (SimulationError, UserError) as error:
+            self._fail(str(error))
+
+    def _fail(self, message: str) -> None:
+        """The FMU failed: ERROR_HANDLING, clean up, ERROR_RESOLVED (reset or deregister next)."""
+        self.log(f"error: {message}")
+        self.error = ErrorCode.PROTOCOL_ERROR_GENERIC
+        self._set_state(State.ERROR_HANDLING)
+        self._free_fmu()
+        self._set_state(State.ERROR_RESOLVED)
+
+    def _do_CFG_time_res(self, pdu: CfgTimeRes) -> None:
+        self.resolution = (pdu.numerator, pdu.denominator)
+
+    def _do_CFG_steps(self, pdu: CfgSteps) -> None:
+        self.steps[pdu.data_id] = pdu.steps
+
+    def _do_CFG_input(self, pdu: CfgInput) -> None:
+        self.inputs.setdefault(pdu.data_id, _DataId()).positions[pdu.pos] = (pdu.target_vr, pdu.source_data_type)
+
+    def _do_CFG_output(self, pdu: CfgOutput) -> None:
+        var = self.vars_by_vr[pdu.source_vr]
+        self.outputs.setdefault(pdu.data_id, _DataId()).positions[pdu.pos] = (pdu.source_vr, var.data_type)
+
+    def _do_CFG_clear(self, pdu) -> None:
+        self._close_data_sockets()
+        self._clear_configuration()
+
+    def _do_CFG_source_network_information(self, pdu: CfgNetworkInformation) -> None:
+        ip = pdu.ip_address if pdu.ip_address != "0.0.0.0" else self.host
+        self.sources[pdu.data_id] = (ip, pdu.port)
+
+    def _do_CFG_target_network_information(self, pdu: CfgNetworkInformation) -> None:
+        self.outputs.setdefault(pdu.data_id, _DataId()).address = (pdu.ip_address, pdu.port)
+
+    def _do_CFG_parameter(self, pdu: CfgParameter) -> None:
+        var = self.vars_by_vr[pdu.parameter_vr]
+        value = PayloadCodec([(pdu.source_data_type, var.count)]).decode(pdu.configuration)[0]
+        self.parameters[var.vr] = [value] if isinstance(value, str) else list(np.asarray(value).tolist())
+
+    def _do_CFG_scope(self, pdu: CfgScope) -> None:
+        self.scopes[pdu.data_id] = pdu.scope
+
+    def _bind_sources(self) -> None:
+        for address in set(self.sources.values()):
+            if address[1] == self.port or address in self.data_sockets:
+                continue          # inputs on the control port arrive on the control socket
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                s.bind(address)
+            except OSError:
+                s.close()
+                raise
+            s.setblocking(False)
+            self.data_sockets[address] = s
+
+    def _do_STC_prepare(self, pdu) -> None:
+        self._set_state(State.PREPARING)
+        for config in list(self.inputs.values()) + list(self.outputs.values()):
+            config.order = [config.positions[p][0] for p in sorted(config.positions)]
+            config.codec = PayloadCodec([(config.positions[p][1], self.vars_by_vr[config.positions[p][0]].count)
+                                         for p in sorted(config.positions)])
+        for data_id, config in self.outputs.items():
+            config.steps = self.steps[data_id]
+            config.scope = self.scopes.get(data_id, Scope.Initialization_Run_NonRealTime)
+        self._set_state(State.PREPARED)
+
+    def _do_STC_configure(self, pdu) -> None:
+        self._set_state(State.CONFIGURING)
+        if not self._fresh_fmu or self.fmu is None:
+            self._free_fmu()
+            self.fmu = self.make_fmu()
+            self.fmu.instantiate()
+            self._bind_fmu()
+        self._fresh_fmu = False
+        self.fmu.setup_experiment(0.0, None)
+        values = {}
+        for vr, elements in self.parameters.items():
+            var = self.vars_by_vr[vr]
+            names = var.fmi_names or (var.name,)
+            for name, value in zip(names, elements if len(elements) == len(names) else elements * len(names)):
+                values[name] = bool(value) if self._fmi_type(name) == "Boolean" else value
+        if values:
+            self.fmu.set_values(values)
+        self.fmu.enter_initialization()
+        self._set_state(State.CONFIGURED)
+
+    def _do_STC_initialize(self, pdu) -> None:
+        self._set_state(State.INITIALIZING)
+        self._initialise_fmu()
+        self._set_state(State.INITIALIZED)
+
+    def _do_STC_send_outputs(self, pdu) -> None:
+        if self.state == State.INITIALIZED:
+            self._set_state(State.SENDING_I)
+            self._send_outputs(initialization=True)
+            self._set_state(State.CONFIGURED)
+        else:
+            self._set_state(State.SENDING_D)
+            self._send_outputs(initialization=False)
+            self._set_state(self.run_state)
+
+    def _do_STC_run(self, pdu: StcRun) -> None:
+        if self.state == State.CONFIGURED:
+            self._initialise_fmu()
+            self._set_state(State.SYNCHRONIZING)
+            self.start_at = time.time() if pdu.start_time <= 0 else float(pdu.start_time)
+            self._set_state(State.SYNCHRONIZED)    # nothing to synchronise: the FMU is initialised
+        else:
+            self._set_state(State.RUNNING)
+            if self.op_mode != OpMode.NRT:
+                self._start_clock(pdu.start_time)
+
+    def _do_STC_do_step(self, pdu: StcDoStep) -> None:
+        self.run_state = self.state
+        self._set_state(State.COMPUTING)
+        self._step(pdu.steps)
+        self._set_state(State.COMPUTED)
+
+    def _do_STC_stop(self, pdu) -> None:
+        self._set_state(State.STOPPING)
+        self.clock = None
+        self._terminate_fmu()
+        self._set_state(State.STOPPED)
+
+    def _do_STC_reset(self, pdu) -> None:
+        self._close_data_sockets()
+        self._clear_configuration()
+        self.error = ErrorCode.NONE
+        self._set_state(State.CONFIGURATION)
+
+    def _do_STC_deregister(self, pdu) -> None:
+        self._close_data_sockets()
+        self._clear_configuration()
+        self._set_state(State.ALIVE)
+        self.master, self.slave_id = None, 0
+        self.deregistered = True
+
+    # ---- the FMU -------------------------------------------------------------------------
+    def _fmi_type(self, name: str) -> str:
+        return self.fmi_types[name]
+
+    def _bind_fmu(self) -> None:
+        """Bind every input and output of the FMU; remember where each DCP variable lives."""
+        interface = self.fmu.interface
+        self.fmi_types = {name: v.type for name, v in interface.variables.items()}
+        tables = {"input": {}, "output": {}}
+        self.bindings: Dict[int, _Binding] = {}
+        for var in self.desc.variables:
+            if var.causality not in tables:
+                continue
+            names = var.fmi_names or (var.name,)
+            fmi_type = interface.variables[names[0]].type
+            vrs = tables[var.causality].setdefault(fmi_type, [])
+            start = len(vrs)
+            vrs.extend(interface.variables[n].vr for n in names)
+            self.bindings[var.vr] = _Binding(var, fmi_type, np.arange(start, start + len(names)))
+        self.fmu.bind(tables["input"], tables["output"])
+        for binding in self.bindings.values():            # inputs start at their start values
+            var = binding.var
+            if var.causality == "input" and var.start is not None:
+                self._put(binding, var.start if len(var.start) == var.count else var.start * var.count)
+
+    def _put(self, binding: _Binding, values) -> None:
+        buffer = self.fmu.inputs[binding.fmi_type]
+        if binding.fmi_type == "String":
+            buffer.values[binding.index[0]] = values if isinstance(values, str) else str(values[0])
+        else:
+            buffer.values[binding.index] = values
+
+    def _initialise_fmu(self) -> None:
+        self.fmu.write_inputs()
+        if not self.fmi_initialised:
+            self.fmu.exit_initialization()
+            self.fmi_initialised = True
+        self.fmu.read_outputs()
+
+    def _fmu_step_units(self) -> Optional[int]:
+        """The FMU's own step in units of the time resolution (None: not a whole number)."""
+        step_s = self.fmu.interface.default_step_s
+        if not step_s:
+            return None
+        num, den = self.resolution
+        units = step_s * den / num
+        return round(units) if round(units) >= 1 and abs(units - round(units)) < 1e-9 * units else None
+
+    def _step(self, steps: int) -> None:
+        """Advance the FMU by ``steps`` resolution units: in steps of its own size when they
+        divide the request (an FMU that accepts only its own step, as ours, can then be asked
+        for several at once), else in one."""
+        num, den = self.resolution
+        own = self._fmu_step_units()
+        parts = (steps // own, own) if own and steps > own and steps % own == 0 else (1, steps)
+        self.fmu.write_inputs()
+        for _ in range(parts[0]):
+            self.fmu.do_step(self.units * num / den, parts[1] * num / den)
+            self.units += parts[1]
+        self.fmu.read_outputs()
+        self.counters.steps += 1
+
+    def _terminate_fmu(self) -> None:
+        if self.fmu is not None:
+            try:
+                self.fmu.terminate()
+            except (SimulationError, UserError) as error:
+                self.log(f"terminate: {error}")
+        self._fresh_fmu = False
+
+    def _free_fmu(self) -> None:
+        if self.fmu is not None:
+            fmu, self.fmu = self.fmu, None
+            try:
+                fmu.free()
+            except Exception as error:      # an FMU's own failure to free: report, keep serving
+                self.log(f"freeInstance: {error}")
+
+    def shutdown(self) -> None:
+        if self.fmu is not None and self.state not in (State.STOPPED, State.ALIVE, State.ERROR_RESOLVED):
+            self._terminate_fmu()
+        self._free_fmu()
+        self._close_data_sockets()
+
+    # ---- data ----------------------------------------------------------------------------
+    def _data(self, pdu: DatInputOutput) -> None:
+        config = self.inputs.get(pdu.data_id)
+        if config is None or config.codec is None or not states.allowed(self.state, PduType.DAT_input_output) \
+                or self.fmu is None:
+            self.counters.dat_rejected += 1
+            return
+        if config.last_seq is not None:
+            gap = (pdu.pdu_seq_id - config.last_seq) & 0xFFFF
+            if gap == 0 or gap >= 0x8000:      # a repeat or older than what was applied
+                self.counters.dat_stale += 1
+                return
+            self.counters.dat_missing += gap - 1
+        try:
+            values = config.codec.decode(pdu.payload)
+        except PduError:
+            self.counters.dat_rejected += 1
+            return
+        config.last_seq = pdu.pdu_seq_id
+        self.counters.dat_received += 1
+        for vr, value in zip(config.order, values):
+            self._put(self.bindings[vr], value)
+
+    def _send_outputs(self, initialization: bool, due=None) -> None:
+        wanted = (Scope.Initialization_Run_NonRealTime, Scope.Initialization) if initialization \
+            else (Scope.Initialization_Run_NonRealTime, Scope.Run_NonRealTime)
+        for data_id, config in self.outputs.items():
+            if config.scope not in wanted or (due is not None and data_id not in due):
+                continue
+            values = []
+            for vr in config.order:
+                binding = self.bindings[vr]
+                buffer = self.fmu.outputs[binding.fmi_type]
+                if binding.fmi_type == "String":
+                    values.append(buffer.values[binding.index[0]])
+                else:
+                    values.append(buffer.values[binding.index])
+            pdu = DatInputOutput(config.send_seq, data_id, config.codec.encode(values))
+            config.send_seq = next_seq(config.send_seq)
+            if self.drop_data and self.rng.random() < self.drop_data:
+                self.counters.dat_dropped += 1
+                continue
+            self.counters.dat_sent += 1
+            self._send(pdu, config.address)
+
+    # ---- soft real time ------------------------------------------------------------------
+    clock = None
+
+    def _start_clock(self, start_time: int) -> None:
+        """The FMU steps by the greatest common divisor of the outputs' periods; each output
+        goes out at its own period."""
+        periods = [config.steps for config in self.outputs.values()]
+        own = self._fmu_step_units()
+        self.rt_steps = math.gcd(*periods, *([own] if own else [])) or 1
+        num, den = self.resolution
+        self.rt_period_s = self.rt_steps * num / den
+        start = time.time() if start_time <= 0 else float(start_time)
+        # wall-clock start mapped onto the monotonic clock
+        self.clock = time.monotonic() + max(0.0, start - time.time()) + self.rt_period_s
+        self.rt_count = 0
+
+    def next_deadline(self) -> Optional[float]:
+        return self.clock if self.clock is not None and self.state == State.RUNNING else None
+
+    def tick(self) -> None:
+        """One real-time step (called at or after its deadline)."""
+        lateness = time.monotonic() - self.clock
+        if lateness > self.rt_period_s:         # started more than a period late
+            self.counters.overruns += 1
+        self.counters.worst_lateness_s = max(self.counters.worst_lateness_s, lateness)
+        try:
+            self._step(self.rt_steps)
+        except (SimulationError, UserError) as error:
+            self.clock = None
+            self._fail(str(error))
+            return
+        self.rt_count += self.rt_steps
+        due = {d for d, c in self.outputs.items() if self.rt_count % c.steps == 0}
+        self._send_outputs(initialization=False, due=due)
+        self.clock += self.rt_period_s
+
+
+# ---- the command ---------------------------------------------------------------------------
+
+def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optional[Path],
+          drop_data: float, seed: Optional[int], quiet: bool = False) -> int:
+    """Run ``railcosim dcp-slave`` until deregistered (exit 0) or a signal (128 + signal)."""
+    from orchestrator.fmu import make_slave, new_workdir, read_interface, remove_workdir
+    from orchestrator.interrupts import FLAG, deferred
+
+    fmu_path = Path(fmu_path)
+    if not 0.0 <= drop_data < 1.0:
+        raise UserError(f"dcp-slave: --drop-data {drop_data:g}: a fraction in [0, 1) is expected")
+    interface = read_interface(fmu_path)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind((host, port))
+    except (OSError, OverflowError) as error:
+        sock.close()
+        raise UserError(f"dcp-slave: cannot listen on {host}:{port}: {error}") from None
+    host, port = sock.getsockname()
+    description = description_from_fmu(interface, host, port, real_time=False)
+    description.op_modes = (OpMode.SRT,) if real_time else (OpMode.NRT,)
+    if dcpx_out is not None:
+        try:
+            write_dcpx(description, dcpx_out)
+        except OSError as error:
+            sock.close()
+            raise UserError(f"dcp-slave: --dcpx-out {dcpx_out}: {error.strerror}") from None
+    workdir = new_workdir()
+
+    def log(message: str) -> None:
+        if not quiet:
+            print(f"railcosim dcp-slave: {message}", file=sys.stderr, flush=True)
+
+    def make_fmu():
+        return make_slave(interface.model_identifier, fmu_path, interface, workdir, in_process=False)
+
+    slave = DcpSlave(description, make_fmu, sock, drop_data=drop_data, seed=seed, log=log)
+    wake_r, wake_w = socket.socketpair()
+    wake_r.setblocking(False)
+    wake_w.setblocking(False)
+    status = 0
+    with deferred():
+        previous_fd = signal.set_wakeup_fd(wake_w.fileno(), warn_on_full_buffer=False)
+        selector = selectors.DefaultSelector()
+        selector.register(sock, selectors.EVENT_READ)
+        selector.register(wake_r, selectors.EVENT_READ)
+        registered = {sock.fileno(): sock}
+        try:
+            # the first instance is made now: an FMU that cannot load fails at once, and the
+            # slave is ready when it says so
+            slave.fmu = make_fmu()
+            slave.fmu.instantiate()
+            slave._bind_fmu()
+            log(f"{interface.model_identifier} serving DCP 1.0 on udp://{host}:{port} "
+                f"({'soft real-time' if real_time else 'non-real-time'})")
+            print(f"LISTENING {host}:{port}", flush=True)
+            while not slave.deregistered and not FLAG.signum:
+                # data sockets come and go with the configuration
+                current = {s.fileno(): s for s in slave.data_sockets.values()}
+                for fd in set(registered) - set(current) - {sock.fileno()}:
+                    selector.unregister(registered.pop(fd))
+                for fd, s in current.items():
+                    if fd not in registered:
+                        selector.register(s, selectors.EVENT_READ)
+                        registered[fd] = s
+                deadline = slave.next_deadline()
+                timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
+                for key, _ in selector.select(timeout):
+                    if key.fileobj is wake_r:
+                        try:
+                            wake_r.recv(64)
+                        except BlockingIOError:
+                            pass
+                        continue
+                    _drain(key.fileobj, slave)
+                deadline = slave.next_deadline()
+                if deadline is not None and time.monotonic() >= deadline:
+                    slave.tick()
+            if FLAG.signum:
+                status = 128 + FLAG.signum
+                log(f"stopped by {signal.Signals(FLAG.signum).name}")
+        finally:
+            signal.set_wakeup_fd(previous_fd)
+            slave.shutdown()
+            selector.close()
+            sock.close()
+            wake_r.close()
+            wake_w.close()
+            remove_workdir(workdir)
+            log(slave.counters.line())
+    return status
+
+
+def _drain(sock: socket.socket, slave: DcpSlave) -> None:
+    """Handle every datagram waiting on ``sock``."""
+    while True:
+        try:
+            data, address = sock.recvfrom(_RECV_BYTES, socket.MSG_DONTWAIT)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:          # e.g. ICMP port unreachable reported on Linux: ignore
+            continue
+        slave.handle(data, address)
