@@ -6,17 +6,19 @@ The slave here is written in the test from a hand-built .dcpx in the standard's 
 layout with its own variables (not one of ours): a step counter that echoes its input, served
 in a thread over UDP on loopback with the PDUs of orchestrator/dcp/pdu.py.
 """
-import json
 import random
 import socket
+import subprocess
+import sys
 import threading
 
 import numpy as np
 import pytest
 
-from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
+from helpers import REPO, ComponentSpec, ConnectionSpec, cli_environment, railcosim, read_csv, write_ssd
+from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.dcp import pdu as P
-from orchestrator.errors import SimulationError, UserError
+from orchestrator.errors import UserError
 from orchestrator.hil import parse_swap
 from orchestrator.run import RunOptions, run_system
 
@@ -217,3 +219,65 @@ def test_a_swap_of_a_missing_component_or_dcpx_is_refused_before_the_run(tmp_pat
     with pytest.raises(UserError, match="give the slave's description with"):
         run_system(system, RunOptions(output_dir=tmp_path / "b",
                                       swaps={"dut": parse_swap(f"dut=dcp://127.0.0.1:{slave.port}")}))
+
+
+# ---- our emulator (railcosim dcp-slave) in a process of its own ---------------------------------
+@pytest.fixture
+def emulator(tmp_path, product_fmus):
+    """Start ``railcosim dcp-slave UNIT.fmu`` on a free port; returns the --swap address."""
+    processes = []
+
+    def start(unit, *options):
+        dcpx = tmp_path / f"{unit}_{len(processes)}.dcpx"
+        process = subprocess.Popen(
+            [sys.executable, "-m", "orchestrator", "dcp-slave", str(product_fmus / f"{unit}.fmu"), "--port", "0",
+             "--dcpx-out", str(dcpx), "--quiet", *options],
+            cwd=REPO, env=cli_environment(), stdout=subprocess.PIPE, text=True)
+        processes.append(process)
+        line = process.stdout.readline()          # LISTENING HOST:PORT once it serves
+        assert line.startswith("LISTENING"), line
+        return f"dcp://{line.split()[1]}?dcpx={dcpx}"
+
+    yield start
+    for process in processes:
+        process.kill()
+        process.wait()
+
+
+def _free_run(tmp_path, product_fmus, tag, stop_time, swaps=()):
+    options = RunOptions(output_dir=tmp_path / tag, stop_time=stop_time, fmu_dirs=[product_fmus],
+                         summaries=railway_verdicts, swaps={s.component: s for s in swaps})
+    return run_system(REPO / "ssp" / "free_run", options)
+
+
+#: simulated seconds of the swapped free_run in a test (the whole run is benchmarks/bench_hil.py's)
+SWAP_TEST_S = 30.0
+
+
+def test_the_receiver_swapped_for_its_dcp_emulator_gives_identical_results(tmp_path, product_fmus, emulator):
+    address = emulator("LocoReceiver")
+    reference = _free_run(tmp_path, product_fmus, "fmu", SWAP_TEST_S)
+    swapped = _free_run(tmp_path, product_fmus, "dcp", SWAP_TEST_S, [parse_swap(f"rx={address}")])
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    assert swapped.summary["receivers"] == reference.summary["receivers"]
+    hil = swapped.summary["hil"]["rx"]
+    assert hil["lost"] == 0 and hil["exchanges"] == swapped.steps_taken["rx"]
+
+
+def test_lost_receiver_outputs_show_restrictive_and_nothing_unsafe(tmp_path, product_fmus, emulator):
+    address = emulator("LocoReceiver", "--drop-data", "0.05", "--seed", "3")
+    result = _free_run(tmp_path, product_fmus, "loss", 20.0, [parse_swap(f"rx={address}&deadline_ms=200")])
+    hil = result.summary["hil"]["rx"]
+    steps = result.steps_taken["rx"]
+    assert 0.02 * steps < hil["lost"] < 0.10 * steps          # about 5 % of the frames
+    assert hil["fail_safe_steps"] == hil["lost"] and hil["exchanges"] + hil["lost"] == steps
+    receiver = result.summary["receivers"][0]
+    assert receiver["wrong_side_failures"] == 0 and receiver["unsafe_indications"] == 0
+    # a lost frame shows the no-code indication at once (never the last permissive one held):
+    # the samples taken at lost frames (about 5 % of them, after the first code) are restrictive
+    header, data = read_csv(tmp_path / "loss" / "results.csv")
+    valid, aspect, v_permitted = (data[:, header.index(f"rx.{name}")] for name in ("code_valid", "aspect", "v_permitted"))
+    running = np.arange(len(valid)) >= np.argmax(valid == 1)
+    lost_samples = running & (valid == 0)
+    assert lost_samples.any()
+    assert np.all(aspect[lost_samples] <= 1) and np.all(v_permitted[lost_samples] == 0)
