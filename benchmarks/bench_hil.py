@@ -1,12 +1,19 @@
-"""Per-step DCP exchange of a swapped component on loopback: round trip median / p99 / max
-against a 10 ms frame, and the real-time factor of the run (docs/performance.md).
+"""Hardware-in-the-loop exchange on loopback (docs/performance.md#hardware-in-the-loop-dcp):
 
-The slave is the test suite's non-real-time counter slave (tests/test_hil.py, a foreign .dcpx)
-in a process of its own (as a bench's would be); the swapped component steps every 10 ms.
+* ``free_run`` (default): free_run with its receiver ``rx`` swapped for ``railcosim dcp-slave
+  LocoReceiver.fmu`` (non-real-time, a process of its own) against the same run with the FMU:
+  real-time factors, whether results.csv is byte-identical, and the per-frame round trip
+  (median, p99, max) against the 10 ms frame;
+* ``counter``: the exchange alone, with the test suite's counter slave (tests/test_hil.py, a
+  foreign .dcpx) stepping every 10 ms beside a test FMU.
 
-    PYTHONPATH=. python benchmarks/bench_hil.py [SIM_SECONDS]
+    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|counter] [SIM_SECONDS]
+
+Needs `railcosim build` first. Record the machine's load with the figures: on a shared machine
+the exchange (eight datagrams per step, two processes) waits for the scheduler.
 """
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -15,14 +22,47 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(REPO / "tests"), str(REPO)]
 
-from conftest import build_test_fmus                       # noqa: E402
-from helpers import ComponentSpec, ConnectionSpec, write_ssd   # noqa: E402
-from test_hil import DCPX, CounterSlave                     # noqa: E402
+from helpers import ComponentSpec, ConnectionSpec, cli_environment, write_ssd   # noqa: E402
 from orchestrator.hil import parse_swap                     # noqa: E402
 from orchestrator.run import RunOptions, run_system         # noqa: E402
 
+FMUS = REPO / "build" / "fmus"
+_KEYS = ("exchanges", "rtt_median_ms", "rtt_p99_ms", "rtt_max_ms", "overruns", "lost")
 
-def main(sim_s: float = 60.0) -> dict:
+
+def _emulator(fmu: Path, dcpx: Path) -> tuple:
+    process = subprocess.Popen([sys.executable, "-m", "orchestrator", "dcp-slave", str(fmu), "--port", "0",
+                                "--dcpx-out", str(dcpx), "--quiet"], cwd=REPO, env=cli_environment(),
+                               stdout=subprocess.PIPE, text=True)
+    return process, process.stdout.readline().split()[1]
+
+
+def free_run(sim_s: float) -> dict:
+    from orchestrator.analysis.verdict import railway_verdicts
+
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        options = dict(stop_time=sim_s, fmu_dirs=[FMUS], summaries=railway_verdicts)
+        reference = run_system(REPO / "ssp" / "free_run", RunOptions(output_dir=folder / "fmu", **options))
+        process, address = _emulator(FMUS / "LocoReceiver.fmu", folder / "rx.dcpx")
+        try:
+            swap = parse_swap(f"rx=dcp://{address}?dcpx={folder / 'rx.dcpx'}")
+            swapped = run_system(REPO / "ssp" / "free_run",
+                                 RunOptions(output_dir=folder / "dcp", swaps={"rx": swap}, **options))
+        finally:
+            process.kill()
+            process.wait()
+        identical = (folder / "fmu" / "results.csv").read_bytes() == (folder / "dcp" / "results.csv").read_bytes()
+    return {"sim_time_s": sim_s, "load_average": os.getloadavg(),
+            "realtime_factor_fmu": reference.summary["realtime_factor"],
+            "realtime_factor_swapped": swapped.summary["realtime_factor"], "results_identical": identical,
+            **{k: swapped.summary["hil"]["rx"][k] for k in _KEYS}}
+
+
+def counter(sim_s: float) -> dict:
+    from conftest import build_test_fmus
+    from test_hil import DCPX
+
     fmus = build_test_fmus(4)
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
@@ -40,15 +80,15 @@ def main(sim_s: float = 60.0) -> dict:
         finally:
             server.kill()
             server.wait()
-    figures = {"sim_time_s": result.summary["sim_time_s"], "realtime_factor": result.summary["realtime_factor"],
-               **{k: result.summary["hil"]["dut"][k] for k in ("exchanges", "rtt_median_ms", "rtt_p99_ms",
-                                                              "rtt_max_ms", "overruns", "lost")}}
-    print(json.dumps(figures, indent=2))
-    return figures
+    return {"sim_time_s": sim_s, "load_average": os.getloadavg(),
+            "realtime_factor": result.summary["realtime_factor"],
+            **{k: result.summary["hil"]["dut"][k] for k in _KEYS}}
 
 
 def serve() -> None:
-    """The slave process: say the port, then answer until killed."""
+    """The counter slave's process: say the port, then answer until killed."""
+    from test_hil import CounterSlave
+
     slave = CounterSlave()
     print(slave.port, flush=True)
     slave.run()
@@ -58,4 +98,6 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--serve"]:
         serve()
     else:
-        main(float(sys.argv[1]) if len(sys.argv) > 1 else 60.0)
+        kind = sys.argv[1] if len(sys.argv) > 1 else "free_run"
+        seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 120.0
+        print(json.dumps({"free_run": free_run, "counter": counter}[kind](seconds), indent=2))

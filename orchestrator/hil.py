@@ -16,10 +16,12 @@ Operating modes (docs/_pending_hilmaster.md while docs/hil.md is written):
   runs on its own clock; the master is paced to the wall clock (orchestrator/pacing.py), sends
   the inputs each step and uses the newest outputs received.
 
-Loss: outputs not received within ``deadline_ms`` after the inputs are sent are *lost*: the
-component's outputs go to their fail-safe values at once (:data:`FAIL_SAFE`; never a
-permissive value held past the deadline), counted in summary.json ``hil``. Outputs arriving
-later are counted as *late* and dropped. A slave that does not answer a control request within
+Loss: outputs that do not arrive are *lost* — in non-real-time mode, those not received within
+``deadline_ms`` after the slave announced it sent them (RUNNING after STC_send_outputs); in soft
+real time, when the newest outputs are older than ``deadline_ms``. The component's outputs then
+go to their fail-safe values at once (:data:`FAIL_SAFE`; never a permissive value held past the
+deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are counted as
+*late* and dropped. A slave that does not answer a control request within
 ``timeout_s`` ends the run with one line naming it (results so far kept, exit 2).
 """
 from __future__ import annotations
@@ -533,10 +535,10 @@ class DcpSlave(Slave):
         if self.mode == "NRT":
             self._stc_do_step()
             before = self._fresh_outputs
-            self._stc(pdu.PduType.STC_send_outputs)
-            got = self._collect_outputs(before, began + self.target.deadline_s)
-            if self._state != pdu.State.RUNNING:
-                self._await_state(pdu.State.RUNNING, "STC_send_outputs", time.perf_counter() + self.target.timeout_s)
+            # the slave sends its outputs, then says RUNNING: outputs still missing then were
+            # lost on the way (however long the slave took), unless they trail within the deadline
+            self._stc(pdu.PduType.STC_send_outputs, reaches=pdu.State.RUNNING)
+            got = self._collect_outputs(before, time.perf_counter() + self.target.deadline_s)
         else:       # soft real time: the newest outputs, if they are recent enough
             while self._receive(time.perf_counter() + 1e-6):
                 pass
