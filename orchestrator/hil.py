@@ -37,6 +37,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from orchestrator.dcp import pdu
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.fmu import Interface, ValueBuffer, _make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
@@ -46,8 +47,14 @@ _NUMERIC = {"Real", "Integer", "Boolean"}
 #: data ids of the two DAT_input_output streams the master configures
 INPUTS_ID, OUTPUTS_ID = 1, 2
 SLAVE_ID = 1                                   # the one slave each DcpSlave drives
+#: set-up requests whose state change may take a model's initialisation (SETTLE_S)
+_SLOW = frozenset({pdu.PduType.STC_prepare, pdu.PduType.STC_configure, pdu.PduType.STC_initialize,
+                   pdu.PduType.STC_run, pdu.PduType.STC_stop})
 DEFAULT_DEADLINE_MS = 50.0
 DEFAULT_TIMEOUT_S = 2.0
+#: [U] the longest a slave may take to reach the state a set-up request leads to once it has
+#: acknowledged it (a model's initialisation: the ATO plans its whole trajectory there)
+SETTLE_S = 120.0
 
 #: fail-safe output values by model identifier (docs/interfaces.md: the receiver's no-code
 #: indication, the ATO's emergency brake); an output not listed keeps its last value (diagnostics)
@@ -230,8 +237,6 @@ class DcpSlave(Slave):
 
     def __init__(self, name: str, interface: Interface, target: DcpTarget, description: SlaveDescription,
                  step_ticks: int):
-        from orchestrator.dcp import pdu
-
         self.pdu = pdu
         self.name, self.interface, self.target, self.description = name, interface, target, description
         self.step_s = Fraction(step_ticks, TICKS_PER_SECOND)
@@ -341,13 +346,16 @@ class DcpSlave(Slave):
         if answer.type_id == pdu.PduType.RSP_nack:
             raise self._gone(f"refused {message.type_id.name}: {answer.error_code.name}")
         if reaches is not None:
-            self._await_state(reaches, message.type_id.name, until)
+            # the work behind a state change (loading, initialising a model) may take longer
+            # than an answer: the slave has acknowledged, so it is there
+            settle_s = max(self.target.timeout_s, SETTLE_S) if message.type_id in _SLOW else self.target.timeout_s
+            self._await_state(reaches, message.type_id.name, time.perf_counter() + settle_s, settle_s)
 
-    def _await_state(self, state, after: str, until: float) -> None:
+    def _await_state(self, state, after: str, until: float, within_s: Optional[float] = None) -> None:
         while self._state != state:
             if not self._receive(until):
                 raise self._gone(f"stopped answering (state {state.name} not reached after {after} within "
-                                 f"{self.target.timeout_s:g} s)")
+                                 f"{within_s or self.target.timeout_s:g} s)")
 
     def _next_seq(self) -> int:
         self._seq = self.pdu.next_seq(self._seq)
