@@ -48,8 +48,9 @@ class CounterSlave(threading.Thread):
     """A DCP slave (non-real-time) of a step counter: steps += 1, t_end = time after the step,
     u_seen = u. ``drop`` is the share of its output DAT PDUs it does not send."""
 
-    def __init__(self, drop=0.0, answer=True):
+    def __init__(self, drop=0.0, answer=True, noise=False):
         super().__init__(daemon=True)
+        self.noise = noise          # before each outputs PDU: malformed, truncated, oversized, stale ones
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.port = self.sock.getsockname()[1]
@@ -131,6 +132,10 @@ class CounterSlave(threading.Thread):
             return
         order = [vr for _, vr in sorted(self.outputs.items())]
         payload = P.PayloadCodec([(self.types[vr], 1) for vr in order]).encode([self.values[vr] for vr in order])
+        if self.noise and self.seq > 2:
+            stale = P.DatInputOutput(self.seq - 2, 2, payload).encode()    # out of sequence: older
+            for junk in (b"\xff\x00", stale[:5], bytes([0xF0]) + bytes(60000), stale, b"", bytes([0xB0, 1])):
+                self.sock.sendto(junk, self.target)
         self.seq = P.next_seq(self.seq)
         self.sock.sendto(P.DatInputOutput(self.seq, 2, payload).encode(), self.target)
 
@@ -176,6 +181,17 @@ def test_a_foreign_dcp_slave_stands_in_for_a_component_with_the_same_results(tmp
     assert seen[:5] == [P.State.CONFIGURATION, P.State.PREPARING, P.State.PREPARED, P.State.CONFIGURING,
                         P.State.CONFIGURED]
     assert seen[-3:] == [P.State.STOPPING, P.State.STOPPED, P.State.ALIVE]
+
+
+def test_malformed_truncated_oversized_and_stale_pdus_never_disturb_the_master(tmp_path, test_fmus, counter_slave):
+    slave, dcpx = counter_slave(noise=True)
+    system = _system(tmp_path, test_fmus, stop_time=0.5)
+    run_system(system, RunOptions(output_dir=tmp_path / "fmu"))
+    swap = parse_swap(f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}")
+    result = run_system(system, RunOptions(output_dir=tmp_path / "dcp", swaps={"dut": swap}))
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    hil = result.summary["hil"]["dut"]
+    assert hil["lost"] == 0 and hil["late"] >= 20           # each stale PDU counted and dropped
 
 
 def test_lost_outputs_are_counted_and_the_run_goes_on(tmp_path, test_fmus, counter_slave):
