@@ -4,10 +4,12 @@
   LocoReceiver.fmu`` (non-real-time, a process of its own) against the same run with the FMU:
   real-time factors, whether results.csv is byte-identical, and the per-frame round trip
   (median, p99, max) against the 10 ms frame;
+* ``ato``: the whole free_run with its ATO ``ato`` swapped for ``railcosim dcp-slave
+  AtoController.fmu``: the same stops and safety verdict as with the FMU;
 * ``counter``: the exchange alone, with the test suite's counter slave (tests/test_hil.py, a
   foreign .dcpx) stepping every 10 ms beside a test FMU.
 
-    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|counter] [SIM_SECONDS]
+    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|ato|counter] [SIM_SECONDS]
 
 Needs `railcosim build` first. Record the machine's load with the figures: on a shared machine
 the exchange (eight datagrams per step, two processes) waits for the scheduler.
@@ -37,26 +39,30 @@ def _emulator(fmu: Path, dcpx: Path) -> tuple:
     return process, process.stdout.readline().split()[1]
 
 
-def free_run(sim_s: float) -> dict:
-    from orchestrator.analysis.verdict import railway_verdicts
+def free_run(sim_s: float, component: str = "rx", unit: str = "LocoReceiver") -> dict:
+    from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
 
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         options = dict(stop_time=sim_s, fmu_dirs=[FMUS], summaries=railway_verdicts)
         reference = run_system(REPO / "ssp" / "free_run", RunOptions(output_dir=folder / "fmu", **options))
-        process, address = _emulator(FMUS / "LocoReceiver.fmu", folder / "rx.dcpx")
+        process, address = _emulator(FMUS / f"{unit}.fmu", folder / f"{component}.dcpx")
         try:
-            swap = parse_swap(f"rx=dcp://{address}?dcpx={folder / 'rx.dcpx'}")
+            swap = parse_swap(f"{component}=dcp://{address}?dcpx={folder / f'{component}.dcpx'}")
             swapped = run_system(REPO / "ssp" / "free_run",
-                                 RunOptions(output_dir=folder / "dcp", swaps={"rx": swap}, **options))
+                                 RunOptions(output_dir=folder / "dcp", swaps={component: swap}, **options))
         finally:
             process.kill()
             process.wait()
         identical = (folder / "fmu" / "results.csv").read_bytes() == (folder / "dcp" / "results.csv").read_bytes()
-    return {"sim_time_s": sim_s, "load_average": os.getloadavg(),
+    stops = [[s.get("station"), s.get("arrival_s")] for t in swapped.summary["trains"] for s in t.get("stops", [])]
+    return {"swapped": component, "sim_time_s": swapped.summary["sim_time_s"], "load_average": os.getloadavg(),
             "realtime_factor_fmu": reference.summary["realtime_factor"],
             "realtime_factor_swapped": swapped.summary["realtime_factor"], "results_identical": identical,
-            **{k: swapped.summary["hil"]["rx"][k] for k in _KEYS}}
+            "same_stops": swapped.summary["trains"] == reference.summary["trains"], "stops": stops,
+            "verdict": safety_verdict(swapped.summary)[1],
+            "same_verdict": safety_verdict(swapped.summary) == safety_verdict(reference.summary),
+            **{k: swapped.summary["hil"][component][k] for k in _KEYS}}
 
 
 def counter(sim_s: float) -> dict:
@@ -99,5 +105,7 @@ if __name__ == "__main__":
         serve()
     else:
         kind = sys.argv[1] if len(sys.argv) > 1 else "free_run"
-        seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 120.0
-        print(json.dumps({"free_run": free_run, "counter": counter}[kind](seconds), indent=2))
+        seconds = float(sys.argv[2]) if len(sys.argv) > 2 else None    # ato: the whole run
+        runs = {"free_run": lambda: free_run(seconds or 120.0), "counter": lambda: counter(seconds or 60.0),
+                "ato": lambda: free_run(seconds, "ato", "AtoController")}
+        print(json.dumps(runs[kind](), indent=2))

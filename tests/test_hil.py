@@ -297,3 +297,14 @@ def test_lost_receiver_outputs_show_restrictive_and_nothing_unsafe(tmp_path, pro
     lost_samples = running & (valid == 0)
     assert lost_samples.any()
     assert np.all(aspect[lost_samples] <= 1) and np.all(v_permitted[lost_samples] == 0)
+
+
+def test_the_ato_swapped_for_its_dcp_emulator_drives_the_same_train(tmp_path, product_fmus, emulator):
+    # the first SWAP_TEST_S of free_run (the whole run, with its stops and verdict:
+    # benchmarks/bench_hil.py ato)
+    address = emulator("AtoController")
+    reference = _free_run(tmp_path, product_fmus, "fmu", SWAP_TEST_S)
+    swapped = _free_run(tmp_path, product_fmus, "dcp", SWAP_TEST_S, [parse_swap(f"ato={address}")])
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    assert swapped.summary["trains"] == reference.summary["trains"]
+    assert swapped.summary["hil"]["ato"]["lost"] == 0
