@@ -605,6 +605,49 @@ def _own_address(peer_host: str) -> str:
         probe.close()
 
 
+def declared_targets(system) -> Dict[str, DcpTarget]:
+    """The system's components declared as DCP slaves (a .dcpx source and ``rcs:DcpSlave``)."""
+    targets = {}
+    for name, component in system.components.items():
+        address = component.dcp_slave
+        if address is None:
+            continue
+        options = "&".join(f"{key}={address[key]}" for key in ("deadline_ms", "timeout_s") if key in address)
+        text = f"{name}=dcp://{address.get('host', '')}:{address.get('port', '')}?dcpx={component.fmu_path}" \
+               + (f"&{options}" if options else "")
+        try:
+            targets[name] = parse_swap(text)
+        except UserError as error:
+            raise UserError(f"{component.origin}: DcpSlave of {name!r}: {str(error).partition(': ')[2]}") from None
+    return targets
+
+
+#: DCP data type → the FMI type a port of a .dcpx-declared component gets ([U] uint8 is Boolean,
+#: as railcosim dcp-slave carries FMI Booleans)
+_FMI_TYPES = {"float64": "Real", "float32": "Real", "uint8": "Boolean", "string": "String"}
+
+
+def dcpx_interface(path: Path) -> Interface:
+    """A component's ports from its .dcpx (a component declared as a DCP slave in the SSD): one
+    port per scalar variable, one per element of an array (``e_coil[3]``, ``u[2,1]``)."""
+    from orchestrator.fmu import Variable
+
+    description = read_dcpx(path)
+    variables = {}
+    for variable in description.variables.values():
+        names = [variable.name] if not variable.dims else \
+            [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
+        fmi_type = _FMI_TYPES.get(variable.data_type, "Integer")
+        for name in names:
+            # value references of their own: an array's elements share the slave's one
+            variables[name] = Variable(name, len(variables), fmi_type, variable.causality
+                                       if variable.causality != "structuralParameter" else "parameter",
+                                       "fixed" if "arameter" in variable.causality else "discrete"
+                                       if fmi_type != "Real" else "continuous", None, None)
+    return Interface(description.name or Path(path).stem, variables, {}, None, str(description.uuid),
+                     "DCP slave", None)
+
+
 def swapped_descriptions(swaps: Mapping[str, DcpTarget], graph) -> Dict[str, SlaveDescription]:
     """Each swap's slave description, checked against the system before anything starts: the
     component exists, the .dcpx reads, a time resolution fits the component's step."""

@@ -22,7 +22,7 @@ from orchestrator import interrupts
 from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.hil import DcpSlave, DcpTarget, SlaveDescription, swapped_descriptions
+from orchestrator.hil import DcpSlave, DcpTarget, SlaveDescription, declared_targets, swapped_descriptions
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
@@ -126,7 +126,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         workdir = new_workdir()
         setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
                        ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
-                       judges, plan.hil)
+                       judges, plan.hil, plan.targets)
         outcome = _run(setup, system.start_time, stop_s, stop_ticks, options.blas_threads)
         master = outcome.master
         end_s = master.time_s if master is not None and master.time_ticks >= start_ticks else system.start_time
@@ -169,6 +169,7 @@ class _Plan:
     captures: List[Capture] = field(default_factory=list)
     judges: Sequence[SummaryObserver] = ()
     hil: Dict[str, SlaveDescription] = field(default_factory=dict)   # swapped components' .dcpx
+    targets: Dict[str, DcpTarget] = field(default_factory=dict)      # … and their addresses
 
 
 def _plan(system: SystemDescription, options: RunOptions,
@@ -184,7 +185,8 @@ def _plan(system: SystemDescription, options: RunOptions,
     plan.interval_ticks = attempt(lambda: _output_interval_ticks(graph, options))
     plan.recorded = attempt(lambda: _recorded(graph, options.record)) or []
     plan.captures = attempt(lambda: _captures(graph, options.captures)) or []
-    plan.hil = attempt(lambda: swapped_descriptions(options.swaps, graph)) or {}
+    plan.targets = {**(attempt(lambda: declared_targets(system)) or {}), **options.swaps}
+    plan.hil = attempt(lambda: swapped_descriptions(plan.targets, graph)) or {}
     # the judges before the folder and the FMUs: making them checks the system's data files
     # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
@@ -571,6 +573,7 @@ class _Setup:
     flag: InterruptFlag
     judges: Sequence[SummaryObserver]
     hil: Dict[str, SlaveDescription] = field(default_factory=dict)
+    targets: Dict[str, DcpTarget] = field(default_factory=dict)
 
 
 @dataclass
@@ -627,7 +630,7 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
 
     def make(name: str, node) -> Slave:
         if name in setup.hil:
-            swapped[name] = DcpSlave(name, node.interface, options.swaps[name], setup.hil[name], node.step_ticks)
+            swapped[name] = DcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
             return swapped[name]
         return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
 

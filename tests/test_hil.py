@@ -308,3 +308,31 @@ def test_the_ato_swapped_for_its_dcp_emulator_drives_the_same_train(tmp_path, pr
     assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
     assert swapped.summary["trains"] == reference.summary["trains"]
     assert swapped.summary["hil"]["ato"]["lost"] == 0
+
+
+def test_a_dcp_slave_declared_in_the_ssd_is_a_component(tmp_path, test_fmus, counter_slave):
+    from lxml import etree
+
+    slave, dcpx = counter_slave()
+    reference = _system(tmp_path, test_fmus)
+    run_system(reference, RunOptions(output_dir=tmp_path / "fmu"))
+    system = tmp_path / "declared"
+    write_ssd(system, "declared", [
+        ComponentSpec("src", str(test_fmus / "TestCounter.fmu"), 0.01),
+        ComponentSpec("dut", str(test_fmus / "TestCounter.fmu"), 0.02),
+    ], [ConnectionSpec("src.t_end", "dut.u")], stop_time=2.0)
+    ssd = system / "SystemStructure.ssd"
+    tree = etree.parse(str(ssd))
+    rcs = "http://railcosim.org/SSP/1"
+    for component in tree.iter("{*}Component"):
+        if component.get("name") == "dut":
+            component.set("type", "application/x-dcp-slave")
+            component.set("source", str(dcpx))
+            annotation = etree.SubElement(component.find("{*}Annotations"),
+                                          "{http://ssp-standard.org/SSP1/SystemStructureCommon}Annotation",
+                                          type="org.railcosim")
+            etree.SubElement(annotation, f"{{{rcs}}}DcpSlave", host="127.0.0.1", port=str(slave.port))
+    tree.write(str(ssd))
+    result = run_system(system, RunOptions(output_dir=tmp_path / "dcp"))
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    assert result.summary["hil"]["dut"]["exchanges"] == 100
