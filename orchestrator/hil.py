@@ -487,8 +487,7 @@ class DcpSlave(Slave):
         if not self._exchanged:              # never exchanged (no input written): once now
             self._initialise()
         self._stc_run(pdu.State.SYNCHRONIZED)
-        if self.mode == "NRT":
-            self._stc_run(pdu.State.RUNNING)
+        self._stc_run(pdu.State.RUNNING)          # soft real time: the slave's clock starts here
 
     def _stc_run(self, reaches) -> None:
         pdu = self.pdu
@@ -555,7 +554,8 @@ class DcpSlave(Slave):
                 self._out_values = self._slot_values(self._fresh_outputs[1])
         elapsed = time.perf_counter() - began
         if got:
-            self.stats.rtt_s.append(elapsed)
+            # non-real-time: the round trip; soft real time: the age of the outputs used
+            self.stats.rtt_s.append(elapsed if self.mode == "NRT" else began - self._newest_at)
         else:
             self._apply_fail_safe()
         if elapsed > float(self.step_s):
