@@ -153,7 +153,14 @@ def _run_command(args) -> int:
         from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
-    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty())
+    from orchestrator.hil import parse_swap
+
+    swaps = {}
+    for text in args.swap or []:
+        target = parse_swap(text)
+        swaps[target.component] = target
+    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty(),
+                           real_time=args.real_time, swaps=swaps)
     result = run_system(system, options)
     summary = result.summary
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
@@ -457,6 +464,12 @@ def make_parser() -> argparse.ArgumentParser:
                           "earlier run's files in it are replaced")
     _add_run_setup_arguments(run)
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    run.add_argument("--real-time", type=float, nargs="?", const=1.0, default=None, metavar="FACTOR",
+                     help="pace the run to the wall clock, FACTOR simulated seconds per second (default 1: "
+                          "real time); late steps are counted in summary.json real_time")
+    run.add_argument("--swap", action="append", metavar="NAME=dcp://HOST:PORT[?dcpx=FILE]",
+                     help="drive component NAME as a remote DCP slave (hardware in the loop); its .dcpx "
+                          "beside the component's FMU unless given; options deadline_ms, timeout_s")
     run.set_defaults(func=cmd_run)
 
     report = sub.add_parser("report", help="pictures and the verdict table of a finished run")

@@ -69,7 +69,12 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
     for comp in system.components.values():
         if comp.fmu_path is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no source FMU")
-        interface = read_interface(comp.fmu_path)
+        if Path(comp.fmu_path).suffix == ".dcpx":      # a DCP slave (orchestrator/hil.py)
+            from orchestrator.hil import dcpx_interface
+
+            interface = dcpx_interface(comp.fmu_path)
+        else:
+            interface = read_interface(comp.fmu_path)
         step = comp.step_size_s if comp.step_size_s is not None else interface.default_step_s
         if step is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no step size "

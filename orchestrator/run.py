@@ -22,10 +22,12 @@ from orchestrator import interrupts
 from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
+from orchestrator.hil import DcpSlave, DcpTarget, SlaveDescription, declared_targets, swapped_descriptions
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
                                     scalar_outputs)
+from orchestrator.pacing import Pacer, check_factor
 from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
 from orchestrator.ssp import SystemDescription, load_parameter_set, open_system
@@ -60,8 +62,14 @@ class RunOptions:
     #: bound to ``warn`` with functools.partial for its warnings to go there too)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
     #: one line per suspicious thing that still runs: a capture window or scenario event beyond
-    #: the stop time, a rounded stop time (default: stderr)
+    #: the stop time, a rounded stop time, a paced run that could not keep pace (default: stderr)
     warn: Callable[[str], None] = field(default_factory=lambda: print_warning)
+    #: pace the master to the wall clock: simulated seconds per wall-clock second (1: real
+    #: time; orchestrator/pacing.py); None runs as fast as it can
+    real_time: Optional[float] = None
+    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/hil.py;
+    #: the CLI's --swap NAME=dcp://HOST:PORT)
+    swaps: Dict[str, "DcpTarget"] = field(default_factory=dict)
 
 
 @dataclass
@@ -118,7 +126,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         workdir = new_workdir()
         setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
                        ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
-                       judges)
+                       judges, plan.hil, plan.targets)
         outcome = _run(setup, system.start_time, stop_s, stop_ticks, options.blas_threads)
         master = outcome.master
         end_s = master.time_s if master is not None and master.time_ticks >= start_ticks else system.start_time
@@ -131,6 +139,8 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
             outcome.failure = Interrupted(flag.signum, "while the results were written")
             summary = _summary(graph, sim_time, outcome, scenario)
             problems = _write_results(out.path, summary, None) + problems
+        if outcome.pacer is not None and outcome.pacer.verdict_line():
+            options.warn(outcome.pacer.verdict_line())
         _raise_failure(outcome, problems, out.path)
         return RunResult(graph, summary, dict(outcome.steps_taken), end_s, out.path)
     finally:
@@ -158,6 +168,8 @@ class _Plan:
     recorded: List[tuple] = field(default_factory=list)
     captures: List[Capture] = field(default_factory=list)
     judges: Sequence[SummaryObserver] = ()
+    hil: Dict[str, SlaveDescription] = field(default_factory=dict)   # swapped components' .dcpx
+    targets: Dict[str, DcpTarget] = field(default_factory=dict)      # … and their addresses
 
 
 def _plan(system: SystemDescription, options: RunOptions,
@@ -173,6 +185,8 @@ def _plan(system: SystemDescription, options: RunOptions,
     plan.interval_ticks = attempt(lambda: _output_interval_ticks(graph, options))
     plan.recorded = attempt(lambda: _recorded(graph, options.record)) or []
     plan.captures = attempt(lambda: _captures(graph, options.captures)) or []
+    plan.targets = {**(attempt(lambda: declared_targets(system)) or {}), **options.swaps}
+    plan.hil = attempt(lambda: swapped_descriptions(plan.targets, graph)) or {}
     # the judges before the folder and the FMUs: making them checks the system's data files
     # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
@@ -318,6 +332,8 @@ def _check_options(options: RunOptions) -> None:
     for label, value in (("--stop-time", options.stop_time), ("--output-interval", options.output_interval)):
         if value is not None and not (math.isfinite(value) and abs(value) <= MAX_TIME_S):
             raise UserError(f"{label} {value!r}: must be a finite number of seconds up to {MAX_TIME_S:g}")
+    if options.real_time is not None:
+        check_factor(options.real_time)
     if options.output_interval is not None and options.output_interval <= 0:
         raise UserError(f"--output-interval {options.output_interval}: must be positive")
 
@@ -556,6 +572,8 @@ class _Setup:
     scenario: Optional[ScenarioManipulator]
     flag: InterruptFlag
     judges: Sequence[SummaryObserver]
+    hil: Dict[str, SlaveDescription] = field(default_factory=dict)
+    targets: Dict[str, DcpTarget] = field(default_factory=dict)
 
 
 @dataclass
@@ -566,21 +584,26 @@ class _Outcome:
     master: Optional[Master]
     steps_taken: Dict[str, int]
     judges: Sequence[SummaryObserver] = ()
+    pacer: Optional[Pacer] = None
+    hil: Dict[str, DcpSlave] = field(default_factory=dict)
 
 
 def _start(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
            make: Callable[[str, object], Slave], observers: List[Observer],
            scenario: Optional[ScenarioManipulator], flag: InterruptFlag, start_s: float,
-           stop_s: Optional[float], ready: Callable[[], bool] = lambda: True) -> Optional[Master]:
+           stop_s: Optional[float], ready: Callable[[], bool] = lambda: True,
+           pacer: Optional[Pacer] = None) -> Optional[Master]:
     """Make every component (into ``slaves``, so that whatever was made is shut down), then the
     master; bind and initialise. ``ready`` false after the components are made: no master
-    (validate: a component that cannot be instantiated)."""
+    (validate: a component that cannot be instantiated). A ``pacer`` comes first among the
+    manipulators: each tick's work starts once its wall-clock deadline has come."""
     for name, node in graph.nodes.items():
         flag.check("during initialisation")
         slaves[name] = make(name, node)
     if not ready():
         return None
-    manipulators = list(options.manipulators) + ([scenario] if scenario is not None else [])
+    manipulators = ([pacer] if pacer is not None else []) + list(options.manipulators) \
+        + ([scenario] if scenario is not None else [])
     master = Master(graph, slaves, options.algorithm, observers, manipulators, interrupt=flag)
     master.bind()
     master.initialize(start_s, stop_s)
@@ -598,8 +621,17 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     observers: List[Observer] = []
     judges = setup.judges
     master: Optional[Master] = None
+    # a slave that runs on its own clock (soft real time) needs the master at real time
+    factor = options.real_time
+    if factor is None and any(d.op_modes.isdisjoint({"NRT"}) for d in setup.hil.values()):
+        factor = 1.0
+    pacer = Pacer(factor, flag) if factor is not None else None
+    swapped: Dict[str, DcpSlave] = {}
 
     def make(name: str, node) -> Slave:
+        if name in setup.hil:
+            swapped[name] = DcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
+            return swapped[name]
         return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
 
     try:
@@ -608,7 +640,8 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
         with threadpool_limits(limits=blas_threads, user_api="blas"):
             observers = _observers(setup.out, setup.recorded, setup.interval_ticks, setup.captures,
                                    setup.progress, judges)
-            master = _start(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s)
+            master = _start(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s,
+                            pacer=pacer)
             master.run_until(stop_ticks)
     except BaseException as error:  # a failure or an interruption: results so far are still written
         failure = error
@@ -624,7 +657,7 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
                 problems.append(str(error))
     problems.extend(shutdown_slaves(graph.order, slaves))
     steps = dict(master.steps_taken) if master is not None else {name: 0 for name in graph.nodes}
-    return _Outcome(wall, failure, problems, master, steps, judges)
+    return _Outcome(wall, failure, problems, master, steps, judges, pacer, swapped)
 
 
 def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
@@ -643,6 +676,10 @@ def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
         summary["error"] = str(failure) or type(failure).__name__
     for judge in outcome.judges:
         summary.update(judge.summary_section())
+    if outcome.pacer is not None:
+        summary.update(outcome.pacer.summary_section())
+    if outcome.hil:
+        summary["hil"] = {name: slave.summary_section() for name, slave in outcome.hil.items()}
     if scenario is not None:
         summary["scenario"] = {"file": str(scenario.scenario.path), "description": scenario.scenario.description,
                                "events_applied": scenario.applied}

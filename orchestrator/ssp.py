@@ -69,6 +69,8 @@ class Component:
     connectors: Dict[str, Tuple[str, str, Optional[str]]]  # name → (kind, type, unit)
     parameters: List[ParameterValue]
     origin: str
+    #: a DCP slave's address (host, port and options as written in rcs:DcpSlave), else None
+    dcp_slave: Optional[Dict[str, str]] = None
 
 
 @dataclass
@@ -370,6 +372,23 @@ def _step_size(component, ssd_path: Path) -> Tuple[Optional[float], str]:
     return (chosen[0], chosen[1]) if chosen else (None, where(ssd_path, component.sourceline))
 
 
+#: [U] the component type of a DCP slave (SSP names no type for one)
+DCP_COMPONENT_TYPE = "application/x-dcp-slave"
+
+
+def _dcp_slave(component, ssd_path: Path) -> Optional[Dict[str, str]]:
+    """``<rcs:DcpSlave host=… port=… [deadline_ms=…] [timeout_s=…]/>`` in the component's
+    railcosim annotation; its source must be the slave's .dcpx."""
+    for annotation in component.findall("ssd:Annotations/ssc:Annotation", NS):
+        for child in annotation:
+            if _local(child) == "DcpSlave" and annotation.get("type") == RCS_ANNOTATION:
+                if not (component.get("source") or "").endswith(".dcpx"):
+                    raise UserError(f"{where(ssd_path, child.sourceline)}: component {component.get('name')!r}: "
+                                    "a DcpSlave's source must be its .dcpx")
+                return dict(child.attrib)
+    return None
+
+
 def _transition(connection, ssd_path: Path) -> str:
     for annotation in connection.findall("ssd:Annotations/ssc:Annotation", NS):
         if annotation.get("type") != RCS_ANNOTATION:
@@ -456,7 +475,8 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
         name = element.get("name")
         _check_unique_component(components, name, origin)
         kind = element.get("type", "application/x-fmu-sharedlibrary")
-        if kind != "application/x-fmu-sharedlibrary":
+        dcp = _dcp_slave(element, ssd_path)       # a DCP slave: a .dcpx and its address
+        if kind != "application/x-fmu-sharedlibrary" and not (dcp and kind == DCP_COMPONENT_TYPE):
             raise UserError(f"{origin}: component {name!r} of type {kind!r} is not supported")
         if element.get("implementation", "any") not in ("any", "CoSimulation"):
             raise UserError(f"{origin}: component {name!r} asks for implementation "
@@ -473,7 +493,7 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
             name=name, source=source, fmu_path=_resolve_fmu(folder, source, fmu_dirs),
             step_size_s=step, step_origin=step_origin, connectors=connectors,
             parameters=_read_bindings(element.find("ssd:ParameterBindings", NS), folder, ssd_path, units),
-            origin=origin)
+            origin=origin, dcp_slave=dcp)
     if not components:
         raise UserError(f"{ssd_path}: the system has no components")
     connections = []

@@ -1,0 +1,663 @@
+"""A DCP slave as a component of a system: the orchestrator as DCP master (hardware in the loop).
+
+:class:`DcpSlave` implements the slave protocol (orchestrator/protocols.py) by driving a remote
+DCP 1.0 slave over UDP_IPv4 with the PDUs of orchestrator/dcp/pdu.py, so the master steps it
+like any FMU. The component keeps the ports its FMU declares in the system; the slave's
+``.dcpx`` must have a variable of the same name for every port the system uses (connected,
+recorded or set). Which slave stands in for a component is said on the command line,
+``--swap NAME=dcp://HOST:PORT[?dcpx=FILE&deadline_ms=D&timeout_s=T]`` (:func:`parse_swap`).
+
+Operating modes (docs/_pending_hilmaster.md while docs/hil.md is written):
+
+* **non-real-time** (the slave offers NonRealTime): each step of the component sends its
+  inputs (DAT_input_output), then STC_do_step, waits for COMPUTED, then STC_send_outputs and
+  the outputs (DAT_input_output) — the slave steps exactly when the master says;
+* **soft real time** (a slave that offers only SoftRealTime, as bench hardware does): the slave
+  runs on its own clock; the master is paced to the wall clock (orchestrator/pacing.py), sends
+  the inputs each step and uses the newest outputs received.
+
+Loss: outputs that do not arrive are *lost* — in non-real-time mode, those not received within
+``deadline_ms`` after the slave announced it sent them (RUNNING after STC_send_outputs); in soft
+real time, when the newest outputs are older than ``deadline_ms``. The component's outputs then
+go to their fail-safe values at once (:data:`FAIL_SAFE`; never a permissive value held past the
+deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are counted as
+*late* and dropped. A slave that does not answer a control request within
+``timeout_s`` ends the run with one line naming it (results so far kept, exit 2).
+"""
+from __future__ import annotations
+
+import socket
+import time
+import urllib.parse
+import uuid as uuidlib
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+import numpy as np
+
+from orchestrator.dcp import pdu
+from orchestrator.errors import SimulationError, UserError
+from orchestrator.fmu import Interface, ValueBuffer, _make_buffers
+from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.protocols import Slave
+
+_NUMERIC = {"Real", "Integer", "Boolean"}
+#: data ids of the two DAT_input_output streams the master configures
+INPUTS_ID, OUTPUTS_ID = 1, 2
+SLAVE_ID = 1                                   # the one slave each DcpSlave drives
+#: set-up requests whose state change may take a model's initialisation (SETTLE_S)
+_SLOW = frozenset({pdu.PduType.STC_prepare, pdu.PduType.STC_configure, pdu.PduType.STC_initialize,
+                   pdu.PduType.STC_run, pdu.PduType.STC_stop})
+DEFAULT_DEADLINE_MS = 50.0
+DEFAULT_TIMEOUT_S = 2.0
+#: [U] the longest a slave may take to reach the state a set-up request leads to once it has
+#: acknowledged it (a model's initialisation: the ATO plans its whole trajectory there)
+SETTLE_S = 120.0
+
+#: fail-safe output values by model identifier (docs/interfaces.md: the receiver's no-code
+#: indication, the ATO's emergency brake); an output not listed keeps its last value (diagnostics)
+FAIL_SAFE: Dict[str, Dict[str, float]] = {
+    "LocoReceiver": {"aspect": 0.0, "code": 0.0, "code_valid": 0.0, "v_permitted": 0.0, "v_target": 0.0,
+                     "free_blocks": 0.0, "relay": 0.0},
+    "AtoController": {"emergency_brake": 1.0, "command": -1.0, "mode": 5.0, "atp_intervention": 2.0},
+}
+
+
+# ---- where the slave is ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DcpTarget:
+    """A swapped component's slave: its control address, its .dcpx and the loss parameters."""
+
+    component: str
+    host: str
+    port: int
+    dcpx: Optional[Path]
+    deadline_s: float = DEFAULT_DEADLINE_MS / 1e3
+    timeout_s: float = DEFAULT_TIMEOUT_S
+    text: str = ""
+
+    @property
+    def url(self) -> str:
+        return f"dcp://{self.host}:{self.port}"
+
+
+def parse_swap(text: str) -> DcpTarget:
+    """``NAME=dcp://HOST:PORT[?dcpx=FILE&deadline_ms=D&timeout_s=T]`` → :class:`DcpTarget`; a
+    malformed one is a UserError naming it."""
+    what = f"--swap {text}"
+    name, sep, url = text.partition("=")
+    if not sep or not name.strip():
+        raise UserError(f"{what}: expected NAME=dcp://HOST:PORT[?dcpx=FILE]")
+    parsed = urllib.parse.urlsplit(url.strip())
+    if parsed.scheme != "dcp":
+        raise UserError(f"{what}: only dcp:// addresses are supported (DCP 1.0 over UDP_IPv4)")
+    try:
+        host, port = parsed.hostname, parsed.port
+    except ValueError:
+        host, port = None, None
+    if not host or not port:
+        raise UserError(f"{what}: expected dcp://HOST:PORT with a port from 1 to 65535")
+    try:
+        socket.inet_aton(socket.gethostbyname(host))
+    except OSError:
+        raise UserError(f"{what}: host {host!r} cannot be resolved") from None
+    query = urllib.parse.parse_qs(parsed.query, keep_blank_values=True)
+    unknown = set(query) - {"dcpx", "deadline_ms", "timeout_s"}
+    if unknown:
+        raise UserError(f"{what}: unknown option(s) {', '.join(sorted(unknown))} (dcpx, deadline_ms, timeout_s)")
+
+    def number(key, default, low, high):
+        if key not in query:
+            return default
+        try:
+            value = float(query[key][-1])
+        except ValueError:
+            value = float("nan")
+        if not low <= value <= high:
+            raise UserError(f"{what}: {key} must be a number from {low:g} to {high:g}")
+        return value
+
+    deadline_ms = number("deadline_ms", DEFAULT_DEADLINE_MS, 0.1, 60_000)
+    timeout_s = number("timeout_s", DEFAULT_TIMEOUT_S, 0.01, 600)
+    dcpx = Path(query["dcpx"][-1]) if "dcpx" in query else None
+    return DcpTarget(name.strip(), socket.gethostbyname(host), port, dcpx, deadline_ms / 1e3, timeout_s, text)
+
+
+# ---- the slave description ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class DcpVariable:
+    name: str
+    vr: int
+    causality: str          # input, output, parameter, structuralParameter
+    data_type: str          # a DataType name: float64, int32, uint8, string …
+    dims: Tuple[int, ...] = ()          # () for a scalar; an array's dimensions (row-major)
+
+    @property
+    def count(self) -> int:
+        return int(np.prod(self.dims)) if self.dims else 1
+
+
+@dataclass
+class SlaveDescription:
+    """What the master needs of a .dcpx (the DCP slave description)."""
+
+    path: Path
+    name: str
+    uuid: uuidlib.UUID
+    op_modes: frozenset            # "HRT", "SRT", "NRT"
+    resolutions: List[Tuple[Fraction, bool]]      # (seconds per step, fixed)
+    resolution_ranges: List[Tuple[Fraction, Fraction]]   # (finest, coarsest) seconds per step, any between
+    variables: Dict[str, DcpVariable] = field(default_factory=dict)
+    host: Optional[str] = None
+    port: Optional[int] = None
+    supports_nrt_steps: object = lambda steps: True
+
+    def resolution_for(self, step_s: Fraction) -> Tuple[Fraction, int]:
+        """(time resolution, steps) with steps × resolution = ``step_s``: a resolution the
+        slave offers that divides the step, else the step itself where a range allows it."""
+        for resolution, _ in self.resolutions:
+            steps = step_s / resolution
+            if steps.denominator == 1 and steps >= 1:
+                return resolution, int(steps)
+        for finest, coarsest in self.resolution_ranges:
+            # a range offers every multiple of its finest resolution up to its coarsest one
+            if finest <= step_s <= coarsest and (step_s / finest).denominator == 1:
+                return step_s, 1
+        offered = [f"{float(r):g} s" for r, _ in self.resolutions] + \
+                  [f"{float(a):g}…{float(b):g} s" for a, b in self.resolution_ranges]
+        raise UserError(f"{self.path}: no time resolution divides the component's step {float(step_s):g} s "
+                        f"(offered: {', '.join(offered) or 'none'})")
+
+
+def read_dcpx(path: Path) -> SlaveDescription:
+    """The parts of a .dcpx the master uses, read and validated against the standard's schema
+    by orchestrator/dcp/dcpx.py; a missing or malformed file is one UserError."""
+    from orchestrator.dcp import dcpx
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserError(f"{path}: DCP slave description (.dcpx) not found")
+    read = dcpx.read_dcpx(path)
+    description = SlaveDescription(
+        path, read.name, read.uuid, frozenset(mode.name for mode in read.op_modes),
+        [(Fraction(num, den), bool(fixed)) for num, den, fixed, _ in read.resolutions],
+        [(Fraction(lo, den), Fraction(hi, den)) for lo, hi, den in read.resolution_ranges],
+        host=read.control_host, port=read.control_port)
+    if not read.resolutions and not read.resolution_ranges:
+        description.resolutions.append((Fraction(1, 1000), True))     # the schema's default
+    for variable in read.variables:
+        description.variables[variable.name] = DcpVariable(variable.name, variable.vr, variable.causality,
+                                                           variable.data_type.name, tuple(variable.dims))
+    description.supports_nrt_steps = read.supports_nrt_steps
+    return description
+
+
+def dcpx_for(target: DcpTarget, fmu_path: Path) -> Path:
+    """The .dcpx of a swap: the one given (``?dcpx=``), else the one beside the component's FMU
+    (``LocoReceiver.fmu`` → ``LocoReceiver.dcpx``, where ``railcosim dcp-slave`` writes it)."""
+    if target.dcpx is not None:
+        return target.dcpx
+    beside = Path(fmu_path).with_suffix(".dcpx")
+    if not beside.is_file():
+        raise UserError(f"--swap {target.text}: no {beside.name} beside {fmu_path}; give the slave's "
+                        f"description with ?dcpx=FILE (DCP has no request for it)")
+    return beside
+
+
+# ---- statistics ----------------------------------------------------------------------------------
+class HilStats:
+    """What summary.json ``hil`` says of one swapped component."""
+
+    def __init__(self, target: DcpTarget, mode: str):
+        self.target, self.mode = target, mode
+        self.sent = self.received = self.lost = self.late = self.overruns = 0
+        self.fail_safe_steps = 0
+        self.rtt_s: List[float] = []
+        self.error: Optional[str] = None
+
+    def section(self) -> Dict[str, object]:
+        rtt = np.asarray(self.rtt_s) * 1e3
+        pick = (lambda q: float(np.percentile(rtt, q))) if rtt.size else (lambda q: None)
+        return {"slave": self.target.url, "mode": self.mode, "pdus_sent": self.sent,
+                "pdus_received": self.received, "lost": self.lost, "late": self.late,
+                "fail_safe_steps": self.fail_safe_steps, "exchanges": int(rtt.size),
+                "rtt_median_ms": pick(50), "rtt_p99_ms": pick(99),
+                "rtt_max_ms": float(rtt.max()) if rtt.size else None,
+                "overruns": self.overruns, "deadline_ms": self.target.deadline_s * 1e3,
+                **({"error": self.error} if self.error else {})}
+
+
+# ---- the slave ---------------------------------------------------------------------------------
+class DcpSlave(Slave):
+    """One remote DCP slave driven as a component (see the module docstring)."""
+
+    in_process = False
+
+    def __init__(self, name: str, interface: Interface, target: DcpTarget, description: SlaveDescription,
+                 step_ticks: int):
+        self.pdu = pdu
+        self.name, self.interface, self.target, self.description = name, interface, target, description
+        self.step_s = Fraction(step_ticks, TICKS_PER_SECOND)
+        self.resolution, self.steps = description.resolution_for(self.step_s)
+        if "NRT" in description.op_modes and not description.supports_nrt_steps(self.steps):
+            raise UserError(f"{description.path}: the slave cannot step {self.steps} × {self.resolution} s "
+                            f"at a time (the component's step {float(self.step_s):g} s)")
+        if "NRT" in description.op_modes:
+            self.mode = "NRT"
+        elif "SRT" in description.op_modes:
+            self.mode = "SRT"
+        else:
+            raise UserError(f"{description.path}: the slave offers neither NonRealTime nor SoftRealTime "
+                            "(hard real time needs a real-time master)")
+        self.stats = HilStats(target, self.mode)
+        self.inputs: Dict[str, ValueBuffer] = {}
+        self.outputs: Dict[str, ValueBuffer] = {}
+        self._sock: Optional[socket.socket] = None
+        self._address = (target.host, target.port)
+        self._seq = 0
+        self._dat_seq = 0
+        self._state = pdu.State.ALIVE
+        self._acks: Dict[int, object] = {}
+        self._states: List[object] = []
+        self._fresh_outputs: Optional[Tuple[int, List]] = None     # (seq, values) of the newest outputs
+        self._newest_at = 0.0
+        self._last_out_seq: Optional[int] = None
+        self._registered = False
+        self._exchanged = False                 # an initialisation exchange took place
+        self._in_map: List[tuple] = []      # (buffer, index, payload entry, element, port name)
+        self._out_map: List[tuple] = []
+        self._out_values: Optional[List[float]] = None              # the values the outputs show now
+        self._fail_safe: List[Optional[float]] = []
+        self._in_codec = self._out_codec = None
+        self._in_remotes: List[DcpVariable] = []
+        self._out_remotes: List[DcpVariable] = []
+        self._in_arrays: List[np.ndarray] = []
+
+    # ---- transport -------------------------------------------------------------------------
+    def _send(self, message) -> None:
+        try:
+            self._sock.sendto(message.encode(), self._address)
+        except OSError as error:
+            raise self._gone(f"cannot send {message.type_id.name} ({error.strerror or error})") from None
+        self.stats.sent += 1
+
+    def _gone(self, why: str) -> SimulationError:
+        self.stats.error = f"{self.target.url} {why}"
+        return SimulationError(f"{self.name}: the DCP slave at {self.target.url} {why}")
+
+    def _receive(self, until: float) -> bool:
+        """Take one datagram (waiting at most until ``until``, perf_counter); False on timeout."""
+        pdu = self.pdu
+        wait = until - time.perf_counter()
+        if wait <= 0:
+            return False
+        self._sock.settimeout(wait)
+        try:
+            data, _ = self._sock.recvfrom(pdu.UDP_MAX_PDU_SIZE)
+        except socket.timeout:
+            return False
+        except OSError:               # e.g. ICMP port unreachable reported on the socket
+            return False
+        self.stats.received += 1
+        try:
+            message = pdu.decode(data)
+        except pdu.PduError:
+            return True               # a malformed datagram is dropped (it answers nothing we asked)
+        kind = message.type_id
+        if kind in (pdu.PduType.RSP_ack, pdu.PduType.RSP_nack, pdu.PduType.RSP_state_ack,
+                    pdu.PduType.RSP_error_ack):
+            self._acks[message.resp_seq_id] = message
+        elif kind == pdu.PduType.NTF_state_changed:
+            self._states.append(message.state_id)
+            self._state = message.state_id
+        elif kind == pdu.PduType.DAT_input_output and message.data_id == OUTPUTS_ID:
+            self._take_outputs(message)
+        return True
+
+    def _take_outputs(self, message) -> None:
+        if self._out_codec is None:
+            return
+        try:
+            values = self._out_codec.decode(message.payload)
+        except self.pdu.PduError:
+            return
+        seq = message.pdu_seq_id
+        if self._last_out_seq is not None and ((seq - self._last_out_seq) & 0xFFFF) >= 0x8000:
+            self.stats.late += 1       # older than what we have: out of sequence, dropped
+            return
+        self._last_out_seq = seq
+        self._fresh_outputs = (seq, values)
+        self._newest_at = time.perf_counter()
+
+    def _request(self, message, reaches=None) -> None:
+        """Send a request; wait for its RSP_ack (RSP_nack: an error naming the code) and, with
+        ``reaches``, for the slave to announce that state."""
+        pdu = self.pdu
+        self._send(message)
+        until = time.perf_counter() + self.target.timeout_s
+        seq = message.pdu_seq_id
+        while seq not in self._acks:
+            if not self._receive(until):
+                raise self._gone(f"stopped answering (no answer to {message.type_id.name} within "
+                                 f"{self.target.timeout_s:g} s)")
+        answer = self._acks.pop(seq)
+        if answer.type_id == pdu.PduType.RSP_nack:
+            raise self._gone(f"refused {message.type_id.name}: {answer.error_code.name}")
+        if reaches is not None:
+            # the work behind a state change (loading, initialising a model) may take longer
+            # than an answer: the slave has acknowledged, so it is there
+            settle_s = max(self.target.timeout_s, SETTLE_S) if message.type_id in _SLOW else self.target.timeout_s
+            self._await_state(reaches, message.type_id.name, time.perf_counter() + settle_s, settle_s)
+
+    def _await_state(self, state, after: str, until: float, within_s: Optional[float] = None) -> None:
+        while self._state != state:
+            if not self._receive(until):
+                raise self._gone(f"stopped answering (state {state.name} not reached after {after} within "
+                                 f"{within_s or self.target.timeout_s:g} s)")
+
+    def _next_seq(self) -> int:
+        self._seq = self.pdu.next_seq(self._seq)
+        return self._seq
+
+    def _stc(self, kind, reaches=None) -> None:
+        pdu = self.pdu
+        self._request(pdu.Stc(kind, self._next_seq(), SLAVE_ID, self._state), reaches)
+
+    # ---- lifecycle -------------------------------------------------------------------------
+    def instantiate(self) -> None:
+        pdu = self.pdu
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1" if self.target.host.startswith("127.") else "0.0.0.0", 0))
+        try:
+            self._request(pdu.StcRegister(self._next_seq(), SLAVE_ID, pdu.State.ALIVE, self.description.uuid,
+                                          pdu.OpMode[self.mode]), reaches=pdu.State.CONFIGURATION)
+        except SimulationError as error:
+            raise UserError(str(error)) from None     # never started: bad input (address), exit 2
+        self._registered = True
+
+    def bind(self, inputs: Mapping[str, Sequence[int]], outputs: Mapping[str, Sequence[int]]) -> None:
+        """Map every bound port to a slave variable of its name, or to an element of a DCP array
+        (``e_coil[3]`` → element 3 of ``e_coil``, row-major); one payload entry per variable."""
+        self.inputs, self.outputs = _make_buffers(dict(inputs)), _make_buffers(dict(outputs))
+        by_vr = {var.vr: var for var in self.interface.variables.values()}
+        fail_safe = FAIL_SAFE.get(self.interface.model_identifier, {})
+        codec = self.pdu.PayloadCodec
+        for direction, buffers, causality in (("in", self.inputs, "input"), ("out", self.outputs, "output")):
+            entries: Dict[str, int] = {}
+            remotes: List[DcpVariable] = []
+            slots = []
+            for buffer in buffers.values():
+                for index, vr in enumerate(buffer.vr_array):
+                    port = by_vr[int(vr)]
+                    remote, element = self._remote(port.name, causality)
+                    if (port.type in _NUMERIC) == (remote.data_type == "string"):
+                        raise UserError(f"{self.description.path}: {port.name!r} is {remote.data_type} on the "
+                                        f"slave but {port.type} on component {self.name!r}")
+                    if remote.name not in entries:
+                        entries[remote.name] = len(remotes)
+                        remotes.append(remote)
+                    slots.append((buffer, index, entries[remote.name], element, port.name))
+            arrays = [np.zeros(r.count) for r in remotes]
+            entry_codec = codec([(self.pdu.DataType[r.data_type], r.count) for r in remotes])
+            if direction == "in":
+                self._in_map, self._in_remotes, self._in_arrays, self._in_codec = slots, remotes, arrays, entry_codec
+            else:
+                self._out_map, self._out_remotes, self._out_codec = slots, remotes, entry_codec
+        self._fail_safe = [fail_safe.get(name) for *_, name in self._out_map]
+
+    def _remote(self, name: str, causality: str) -> Tuple[DcpVariable, int]:
+        variables = self.description.variables
+        remote, element = variables.get(name), 0
+        if remote is None and name.endswith("]") and "[" in name:
+            base, _, index = name[:-1].partition("[")
+            remote = variables.get(base)
+            if remote is not None and remote.dims:
+                try:
+                    position = tuple(int(i) - 1 for i in index.split(","))
+                    element = int(np.ravel_multi_index(position, remote.dims))
+                except ValueError:
+                    remote = None
+        if remote is None or remote.causality != causality:
+            raise UserError(f"{self.description.path}: the slave has no {causality} {name!r}, "
+                            f"which component {self.name!r} uses in this system")
+        return remote, element
+
+    def setup_experiment(self, start_time: float, stop_time: Optional[float]) -> None:
+        return None
+
+    def set_values(self, values: Mapping[str, object]) -> None:
+        """Parameters (and start values of inputs) as CFG_parameter, in the CONFIGURATION state."""
+        pdu = self.pdu
+        for name, value in values.items():
+            remote = self.description.variables.get(name)
+            if remote is None:
+                raise UserError(f"{self.description.path}: the slave has no parameter {name!r}, which the "
+                                f"system sets on component {self.name!r}")
+            data_type = pdu.DataType[remote.data_type]
+            if data_type == pdu.DataType.string:
+                value = str(value)
+            elif isinstance(value, str):
+                value = float(value.lower() in ("1", "true")) if value.lower() in ("true", "false") else float(value)
+            payload = pdu.PayloadCodec([(data_type, 1)]).encode([value])
+            self._request(pdu.CfgParameter(self._next_seq(), SLAVE_ID, remote.vr, data_type, payload))
+
+    def enter_initialization(self) -> None:
+        """Configure the exchange (CFG_*), prepare and configure the slave."""
+        pdu = self.pdu
+        sock_host, sock_port = self._sock.getsockname()
+        own_host = sock_host if sock_host != "0.0.0.0" else _own_address(self.target.host)
+        nxt = self._next_seq
+        requests = [pdu.CfgTimeRes(nxt(), SLAVE_ID, self.resolution.numerator, self.resolution.denominator)]
+        if self._out_map:
+            requests.append(pdu.CfgSteps(nxt(), SLAVE_ID, self.steps, OUTPUTS_ID))
+        for data_id, table in ((INPUTS_ID, self._in_map), (OUTPUTS_ID, self._out_map)):
+            if table:
+                requests.append(pdu.CfgScope(nxt(), SLAVE_ID, data_id, pdu.Scope.Initialization_Run_NonRealTime))
+        for pos, remote in enumerate(self._in_remotes):
+            requests.append(pdu.CfgInput(nxt(), SLAVE_ID, INPUTS_ID, pos, remote.vr, pdu.DataType[remote.data_type]))
+        for pos, remote in enumerate(self._out_remotes):
+            requests.append(pdu.CfgOutput(nxt(), SLAVE_ID, OUTPUTS_ID, pos, remote.vr))
+        if self._in_map:
+            requests.append(pdu.CfgNetworkInformation(pdu.PduType.CFG_source_network_information, nxt(), SLAVE_ID,
+                                                      INPUTS_ID, self.target.port, self.target.host))
+        if self._out_map:
+            requests.append(pdu.CfgNetworkInformation(pdu.PduType.CFG_target_network_information, nxt(), SLAVE_ID,
+                                                      OUTPUTS_ID, sock_port, own_host))
+        for request in requests:
+            self._request(request)
+        self._stc(pdu.PduType.STC_prepare, reaches=pdu.State.PREPARED)
+        self._stc(pdu.PduType.STC_configure, reaches=pdu.State.CONFIGURED)
+        # the first initialisation exchange waits for the inputs the master gathers
+        # (write_inputs), as an FMU's initial inputs are set before it leaves initialisation
+
+    def _initialise(self) -> None:
+        """One initialisation exchange: the inputs written, STC_initialize, the outputs sent."""
+        pdu = self.pdu
+        self._exchanged = True
+        self._send_inputs()
+        self._stc(pdu.PduType.STC_initialize, reaches=pdu.State.INITIALIZED)
+        before = self._fresh_outputs
+        self._stc(pdu.PduType.STC_send_outputs, reaches=pdu.State.CONFIGURED)
+        self._collect_outputs(before, time.perf_counter() + self.target.timeout_s, during="initialisation")
+
+    def exit_initialization(self) -> None:
+        pdu = self.pdu
+        if not self._exchanged:              # never exchanged (no input written): once now
+            self._initialise()
+        self._stc_run(pdu.State.SYNCHRONIZED)
+        self._stc_run(pdu.State.RUNNING)          # soft real time: the slave's clock starts here
+
+    def _stc_run(self, reaches) -> None:
+        pdu = self.pdu
+        self._request(pdu.StcRun(self._next_seq(), SLAVE_ID, self._state, 0), reaches)
+
+    # ---- the exchange each step ------------------------------------------------------------
+    def _send_inputs(self) -> None:
+        if not self._in_map:
+            return
+        arrays = self._in_arrays
+        for buffer, index, entry, element, _ in self._in_map:
+            arrays[entry][element] = buffer.values[index]
+        payload = self._in_codec.encode(arrays)
+        self._dat_seq = self.pdu.next_seq(self._dat_seq)
+        self._send(self.pdu.DatInputOutput(self._dat_seq, INPUTS_ID, payload))
+
+    def _collect_outputs(self, before, until: float, during: Optional[str] = None) -> bool:
+        """Wait for outputs newer than ``before`` (what was newest when they were asked for), at
+        most until ``until``; False: none came."""
+        if not self._out_map:
+            return True
+        while self._fresh_outputs is before:
+            if not self._receive(until):
+                if during is not None:
+                    raise self._gone(f"sent no outputs during {during} within {self.target.timeout_s:g} s")
+                return False
+        self._out_values = self._slot_values(self._fresh_outputs[1])
+        return True
+
+    def _slot_values(self, decoded) -> List:
+        """The value of each bound output from the decoded payload entries."""
+        return [decoded[entry] if isinstance(decoded[entry], str) else float(decoded[entry][element])
+                for _, _, entry, element, _ in self._out_map]
+
+    def _apply_fail_safe(self) -> None:
+        self.stats.lost += 1
+        self.stats.fail_safe_steps += 1
+        if self._out_values is not None:
+            self._out_values = [safe if safe is not None else value
+                                for safe, value in zip(self._fail_safe, self._out_values)]
+
+    def write_inputs(self) -> None:
+        """In initialisation: an initialisation exchange with these inputs; while running the
+        inputs go with the step (:meth:`do_step`)."""
+        if self._state == self.pdu.State.CONFIGURED:
+            self._initialise()
+
+    def do_step(self, time_s: float, step_s: float) -> None:
+        pdu = self.pdu
+        began = time.perf_counter()
+        self._send_inputs()
+        if self.mode == "NRT":
+            self._stc_do_step()
+            before = self._fresh_outputs
+            # the slave sends its outputs, then says RUNNING: outputs still missing then were
+            # lost on the way (however long the slave took), unless they trail within the deadline
+            self._stc(pdu.PduType.STC_send_outputs, reaches=pdu.State.RUNNING)
+            got = self._collect_outputs(before, time.perf_counter() + self.target.deadline_s)
+        else:       # soft real time: the newest outputs, if they are recent enough
+            while self._receive(time.perf_counter() + 1e-6):
+                pass
+            got = self._fresh_outputs is not None and began - self._newest_at <= self.target.deadline_s
+            if got:
+                self._out_values = self._slot_values(self._fresh_outputs[1])
+        elapsed = time.perf_counter() - began
+        if got:
+            # non-real-time: the round trip; soft real time: the age of the outputs used
+            self.stats.rtt_s.append(elapsed if self.mode == "NRT" else began - self._newest_at)
+        else:
+            self._apply_fail_safe()
+        if elapsed > float(self.step_s):
+            self.stats.overruns += 1
+
+    def _stc_do_step(self) -> None:
+        pdu = self.pdu
+        self._request(pdu.StcDoStep(self._next_seq(), SLAVE_ID, self._state, self.steps),
+                      reaches=pdu.State.COMPUTED)
+
+    def read_outputs(self, types=None) -> None:
+        values = self._out_values
+        if values is None:
+            return
+        for (buffer, index, *_), value in zip(self._out_map, values):
+            if types is None or buffer.type in types:
+                buffer.values[index] = value
+
+    def terminate(self) -> None:
+        """Stop and deregister (best effort: a slave already gone is not waited for long)."""
+        pdu = self.pdu
+        if self._sock is None or not self._registered or self.stats.error:
+            return
+        self._registered = False
+        try:
+            self._stc(pdu.PduType.STC_stop, reaches=pdu.State.STOPPED)
+            self._stc(pdu.PduType.STC_deregister, reaches=pdu.State.ALIVE)
+        except SimulationError as error:
+            raise SimulationError(f"{error} (while stopping)") from None
+
+    def free(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def summary_section(self) -> Dict[str, object]:
+        return self.stats.section()
+
+
+def _own_address(peer_host: str) -> str:
+    """The local address the slave reaches us at (the route towards it)."""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.connect((peer_host, 9))
+        return probe.getsockname()[0]
+    finally:
+        probe.close()
+
+
+def declared_targets(system) -> Dict[str, DcpTarget]:
+    """The system's components declared as DCP slaves (a .dcpx source and ``rcs:DcpSlave``)."""
+    targets = {}
+    for name, component in system.components.items():
+        address = component.dcp_slave
+        if address is None:
+            continue
+        options = "&".join(f"{key}={address[key]}" for key in ("deadline_ms", "timeout_s") if key in address)
+        text = f"{name}=dcp://{address.get('host', '')}:{address.get('port', '')}?dcpx={component.fmu_path}" \
+               + (f"&{options}" if options else "")
+        try:
+            targets[name] = parse_swap(text)
+        except UserError as error:
+            raise UserError(f"{component.origin}: DcpSlave of {name!r}: {str(error).partition(': ')[2]}") from None
+    return targets
+
+
+#: DCP data type → the FMI type a port of a .dcpx-declared component gets ([U] uint8 is Boolean,
+#: as railcosim dcp-slave carries FMI Booleans)
+_FMI_TYPES = {"float64": "Real", "float32": "Real", "uint8": "Boolean", "string": "String"}
+
+
+def dcpx_interface(path: Path) -> Interface:
+    """A component's ports from its .dcpx (a component declared as a DCP slave in the SSD): one
+    port per scalar variable, one per element of an array (``e_coil[3]``, ``u[2,1]``)."""
+    from orchestrator.fmu import Variable
+
+    description = read_dcpx(path)
+    variables = {}
+    for variable in description.variables.values():
+        names = [variable.name] if not variable.dims else \
+            [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
+        fmi_type = _FMI_TYPES.get(variable.data_type, "Integer")
+        for name in names:
+            # value references of their own: an array's elements share the slave's one
+            variables[name] = Variable(name, len(variables), fmi_type, variable.causality
+                                       if variable.causality != "structuralParameter" else "parameter",
+                                       "fixed" if "arameter" in variable.causality else "discrete"
+                                       if fmi_type != "Real" else "continuous", None, None)
+    return Interface(description.name or Path(path).stem, variables, {}, None, str(description.uuid),
+                     "DCP slave", None)
+
+
+def swapped_descriptions(swaps: Mapping[str, DcpTarget], graph) -> Dict[str, SlaveDescription]:
+    """Each swap's slave description, checked against the system before anything starts: the
+    component exists, the .dcpx reads, a time resolution fits the component's step."""
+    descriptions = {}
+    for name, target in swaps.items():
+        node = graph.nodes.get(name)
+        if node is None:
+            raise UserError(f"--swap {target.text}: the system has no component {name!r} "
+                            f"(components: {', '.join(graph.order)})")
+        description = read_dcpx(dcpx_for(target, Path(node.fmu_path)))
+        description.resolution_for(Fraction(node.step_ticks, TICKS_PER_SECOND))
+        descriptions[name] = description
+    return descriptions
