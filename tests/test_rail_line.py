@@ -7,7 +7,7 @@ from scipy.signal import hilbert
 from fmus.data.loader import load_line
 from fmus.errors import FmuInputError
 from fmus.rail_line.core import RailLineCore, RailSettings
-from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit, rail_impedance, two_port
+from fmus.rail_line.track_circuit import CircuitParameters, Faults, cascade_shunt_current, rail_impedance, two_port
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
 
 FS, N = 4000.0, 40
@@ -21,38 +21,6 @@ def test_worked_example_two_port_is_reproduced():
     assert abcd[0, 1] == pytest.approx(0.151 + 0.373j, abs=1.5e-3)
     assert abcd[1, 0] == pytest.approx(0.302 + 0.006j, abs=1e-3)
     assert np.linalg.det(abcd) == pytest.approx(1.0)
-
-
-def _analytic_shunt_current(circuit: TrackCircuit, x_m: float, params: CircuitParameters,
-                            train_length_m: float = 0.0) -> float:
-    """Cascade of two-ports: source ‖ bond at the feed, line to the train's first axle, then the
-    train as shunts at its first axle and at every other network node it covers, each behind
-    the line to the previous, down to the relay end terminated by relay ‖ bond;
-    unit source voltage. Returns the current arriving at the first axle from the feed."""
-    rail_r, rail_l = rail_impedance(params, 50.0)
-    z = rail_r + 1j * W50 * rail_l
-    y = 1.0 / params.ballast_ohm_km
-    z_bond = params.bond_r_ohm + 1j * W50 * params.bond_l_h
-
-    def through(length_m, z_end):
-        abcd = two_port(z, y, length_m / 1000.0)
-        return (abcd[0, 0] * z_end + abcd[0, 1]) / (abcd[1, 0] * z_end + abcd[1, 1])
-    # the model's lumping (docs/rail_line.md): a shunt at every node the train covers, its tail
-    # snapped to the nearest node, its first axle where it is (the node nearest to it replaced)
-    spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
-    head_node = round((x_m - circuit.start_m) / spacing)
-    tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
-    axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
-    z_load, previous = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond), circuit.start_m
-    for position in axles:
-        z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / through(position - previous, z_load))
-        previous = position
-    ahead = two_port(z, y, (circuit.feed_m - x_m) / 1000.0)
-    z_in = (ahead[0, 0] * z_load + ahead[0, 1]) / (ahead[1, 0] * z_load + ahead[1, 1])
-    z_feed = 1.0 / (1.0 / z_in + 1.0 / z_bond)
-    v_feed = z_feed / (params.feed_r_ohm + z_feed)
-    v_shunt = v_feed / (ahead[0, 0] + ahead[0, 1] / z_load)
-    return abs(v_shunt / z_load)
 
 
 def _steady_carrier_core(line=None, **settings):
@@ -78,10 +46,9 @@ def _run(core, seconds, x_of_t, v, u_amplitude=1.0, i_traction=0.0, sections=Non
 @pytest.mark.parametrize("x_m", [7850.0, 8600.0, 9137.0, 9900.0, 10350.0])
 def test_code_current_under_the_first_axle_matches_the_two_port_solution(x_m):
     core = _steady_carrier_core(transformer_ratio=1.0)
-    params = core.circuits[3].params
     _, _, axle = _run(core, 0.6, lambda t: x_m, 0.0, sections=[3])
     measured = axle[-20:].mean() * np.sqrt(2.0)          # rms over whole periods → amplitude
-    expected = _analytic_shunt_current(core.circuits[3], x_m, params, core.settings.train_length_m[0])
+    expected = cascade_shunt_current(core.circuits[3], x_m, core.settings.train_length_m[0])
     assert measured == pytest.approx(expected, rel=0.01)
 
 

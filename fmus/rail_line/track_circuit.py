@@ -117,3 +117,35 @@ class TrackCircuit:
         if shunt_node is not None:
             net.add(Conductance(f"n{shunt_node}", "0", 1.0 / p.shunt_r_ohm))
         return net
+
+
+def cascade_shunt_current(circuit: TrackCircuit, x_m: float, train_length_m: float = 0.0,
+                          carrier_hz: float = 50.0) -> float:
+    """The code current (amplitude per volt of source) reaching a standing train's first axle,
+    by a cascade of two-ports, the sourced worked example's method (docs/rail_line.md#validation):
+    source ‖ bond at the feed, the line to the first axle, the train as shunts at its first axle
+    and at every network node it covers (its tail snapped to the nearest node, as the network
+    lumps it), each behind the line to the previous, down to the relay end (relay ‖ bond).
+    Independent of the nodal network the rail line solves: the reference it is checked against."""
+    params = circuit.params
+    w = 2.0 * np.pi * carrier_hz
+    rail_r, rail_l = rail_impedance(params, carrier_hz)
+    z, y = rail_r + 1j * w * rail_l, 1.0 / params.ballast_ohm_km
+    z_bond = params.bond_r_ohm + 1j * w * params.bond_l_h
+
+    def through(length_m, z_end):
+        abcd = two_port(z, y, length_m / 1000.0)
+        return (abcd[0, 0] * z_end + abcd[0, 1]) / (abcd[1, 0] * z_end + abcd[1, 1])
+    spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
+    head_node = round((x_m - circuit.start_m) / spacing)
+    tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
+    axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
+    z_load, previous = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond), circuit.start_m
+    for position in axles:
+        z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / through(position - previous, z_load))
+        previous = position
+    ahead = two_port(z, y, (circuit.feed_m - x_m) / 1000.0)
+    z_in = (ahead[0, 0] * z_load + ahead[0, 1]) / (ahead[1, 0] * z_load + ahead[1, 1])
+    z_feed = 1.0 / (1.0 / z_in + 1.0 / z_bond)
+    v_feed = z_feed / (params.feed_r_ohm + z_feed)
+    return float(abs(v_feed / (ahead[0, 0] + ahead[0, 1] / z_load) / z_load))

@@ -23,6 +23,7 @@ from fmus.signalling.digital import stated_latency_s
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital import DigitalCoderCore
 from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.rail_line.track_circuit import cascade_shunt_current
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.vectors import DATA_DIR, FORMAT
 
@@ -555,36 +556,6 @@ def _rail_run(u_tx: np.ndarray, schedule: Callable[[float], tuple]):
     return np.array(rows), np.concatenate(emf)
 
 
-def _two_port_shunt_current(circuit, x_m: float, params, train_length_m: float, carrier_hz: float) -> float:
-    """The code current (amplitude, per volt at the feed) arriving at a standing train's first
-    axle by a cascade of two-ports (docs/rail_line.md#validation): source ‖ bond at the feed,
-    the line to the first axle, the train as shunts at its first axle and at every network node
-    it covers, each behind the line to the previous, down to the relay end (relay ‖ bond)."""
-    from fmus.rail_line.track_circuit import rail_impedance, two_port
-
-    w = 2 * np.pi * carrier_hz
-    rail_r, rail_l = rail_impedance(params, carrier_hz)
-    z, y = rail_r + 1j * w * rail_l, 1.0 / params.ballast_ohm_km
-    z_bond = params.bond_r_ohm + 1j * w * params.bond_l_h
-
-    def through(length_m, z_end):
-        abcd = two_port(z, y, length_m / 1000.0)
-        return (abcd[0, 0] * z_end + abcd[0, 1]) / (abcd[1, 0] * z_end + abcd[1, 1])
-    spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
-    head_node = round((x_m - circuit.start_m) / spacing)
-    tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
-    axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
-    z_load, previous = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond), circuit.start_m
-    for position in axles:
-        z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / through(position - previous, z_load))
-        previous = position
-    ahead = two_port(z, y, (circuit.feed_m - x_m) / 1000.0)
-    z_in = (ahead[0, 0] * z_load + ahead[0, 1]) / (ahead[1, 0] * z_load + ahead[1, 1])
-    z_feed = 1.0 / (1.0 / z_in + 1.0 / z_bond)
-    v_feed = z_feed / (params.feed_r_ohm + z_feed)
-    return float(abs(v_feed / (ahead[0, 0] + ahead[0, 1] / z_load) / z_load))
-
-
 def _check_worked_example() -> None:
     """two_port reproduces the sourced worked example (docs/sources.md#track-circuits-and-rail-impedance:
     z = 0.52 + j1.224 Ω/km, 1 Ω·km, 0.3 km → A 1.023 + j0.055, B 0.151 + j0.373 Ω, C 0.302 + j0.006 S)."""
@@ -617,7 +588,7 @@ def rail_vectors() -> RoleFile:
     seconds = place_s * len(places)
     u_tx = np.zeros((8, int(round(seconds * FS_HZ))))
     u_tx[section] = np.sin(2 * np.pi * carrier * np.arange(u_tx.shape[1]) / FS_HZ)
-    expected = [_two_port_shunt_current(circuit, x, circuit.params, plant.settings.train_length_m[0], carrier)
+    expected = [cascade_shunt_current(circuit, x, plant.settings.train_length_m[0], carrier)
                 / np.sqrt(2.0) for x in places]
     name = "two_port_first_axle"
     role.vectors.append({
