@@ -97,7 +97,8 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "if _fmus is not None and not all(_os.path.isdir(p) for p in getattr(_fmus, '__path__', ())):\n"
         "    for _name in [n for n in _sys.modules if n == 'fmus' or n.startswith('fmus.')]:\n"
         "        del _sys.modules[_name]\n\n"
-        f"from {spec.facade_module} import {spec.model_identifier} as _Facade\n\n"
+        f"from {spec.facade_module} import {spec.model_identifier} as _Facade\n"
+        "from fmus.fmi import bulk as _bulk\n\n"
         "_MODULE_DICT = globals()\n\n\n"
         f"class {spec.model_identifier}(_Facade):\n"
         f"    build_config = {config.as_dict()!r}\n\n"
@@ -105,6 +106,8 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "        if 'logger' in kwargs:  # instantiated by pythonfmu's C wrapper\n"
         "            _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(_MODULE_DICT))\n"
         "        super().__init__(**kwargs)\n"
+        "        if 'logger' in kwargs:  # its forwarding binary may claim bulk access (fmus/fmi/bulk.py)\n"
+        "            _bulk.created(self)\n"
     )
 
 
