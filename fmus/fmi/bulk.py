@@ -31,41 +31,37 @@ def created(slave) -> None:
     _created[slave.instance_name] = slave
 
 
-def take(instance_name: str) -> Tuple[Callable, Callable]:
-    """(get, set) for the Real values of the instance just created under ``instance_name``
-    (KeyError if none was registered: the forwarder then forwards every call)."""
+def take(instance_name: str) -> Tuple[Callable, Callable, Callable]:
+    """(resolve, get, set) for the Real values of the instance just created under
+    ``instance_name`` (KeyError if none was registered: the forwarder then forwards every call)."""
     slave = _created.pop(instance_name)
     accessors = real_accessors(slave)
     claimed.append(instance_name)
     return accessors
 
 
-def real_accessors(slave) -> Tuple[Callable, Callable]:
-    """get(refs, values) fills ``values``, set(refs, values) stores them: both buffers as the
-    host passed them (fmi2ValueReference = uint32, fmi2Real = float64). The references were
-    checked by the forwarder; a list of them is resolved to store slots once (a host sends the
-    same lists every step), a run of consecutive slots becomes a slice."""
+def real_accessors(slave) -> Tuple[Callable, Callable, Callable]:
+    """resolve(refs) → the number of that list of value references, get(number, values) fills
+    ``values``, set(number, values) stores them; the buffers as the host passed them
+    (fmi2ValueReference = uint32, fmi2Real = float64). The forwarder checked the references and
+    keeps the lists it resolved (a host sends the same lists every step), so a get or set costs
+    one slot lookup here; a run of consecutive slots is a slice."""
     store = slave._stores["Real"]
     values, slot_of_vr = store.values, store.slot_of_vr
-    resolved = {}
+    lists = []
 
-    def slots(ref_buffer):
-        refs = np.frombuffer(ref_buffer, dtype=np.uint32)
-        key = (refs.size, int(refs[0]), int(refs[-1]))
-        known = resolved.get(key)
-        if known is not None and (refs.size <= 2 or np.array_equal(known[0], refs)):
-            return known[1]
-        where = slot_of_vr[refs]
+    def resolve(ref_buffer) -> int:
+        where = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)]
         first = int(where[0])
         if where.size > 1 and np.array_equal(where, np.arange(first, first + where.size)):
             where = slice(first, first + where.size)
-        resolved[key] = (refs.copy(), where)
-        return where
+        lists.append(where)
+        return len(lists) - 1
 
-    def get(ref_buffer, value_buffer) -> None:
-        np.frombuffer(value_buffer, dtype=np.float64)[:] = values[slots(ref_buffer)]
+    def get(number: int, value_buffer) -> None:
+        np.frombuffer(value_buffer, dtype=np.float64)[:] = values[lists[number]]
 
-    def put(ref_buffer, value_buffer) -> None:
-        values[slots(ref_buffer)] = np.frombuffer(value_buffer, dtype=np.float64)
+    def put(number: int, value_buffer) -> None:
+        values[lists[number]] = np.frombuffer(value_buffer, dtype=np.float64)
 
-    return get, put
+    return resolve, get, put

@@ -27,9 +27,11 @@
  * Bulk Real values: pythonfmu's wrapper turns every fmi2GetReal/fmi2SetReal into Python lists
  * built value by value (about 0.1 us per value). For an instance whose references are checked
  * here, the forwarder claims the slave's Real accessors at fmi2Instantiate (fmus/fmi/bulk.py,
- * registered by the generated slave script) and hands them the host's two arrays as
- * memoryviews: one Python call per get or set, numpy moving the values. The host sees the
- * same functions and values. Without the accessors (another slave, an older FMU,
+ * registered by the generated slave script). It keeps each list of value references it sees
+ * (a host sends the same lists every step; up to BULK_LISTS per instance), resolved once to
+ * store slots by the slave, and hands a get or set the list's number and the host's value
+ * array as a memoryview: one Python call, numpy moving the values. The host sees the same
+ * functions and values. Without the accessors (another slave, an older FMU,
  * RAILCOSIM_NO_BULK=1 in the environment) or after an accessor failed once (logged as a
  * warning), calls go to pythonfmu as they are (docs/performance.md).
  *
@@ -287,6 +289,7 @@ static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "Str
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
 
 typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
+#define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
 
 typedef struct Instance {
     struct Instance *next;
@@ -296,7 +299,10 @@ typedef struct Instance {
     int checked;                       /* 0: the table was not read, calls are forwarded as they are */
     Bitmap valid[TYPES];               /* every variable of the type */
     Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
-    PyObject *get_real, *set_real;     /* the slave's bulk accessors (fmus/fmi/bulk.py), or NULL */
+    /* the slave's bulk accessors (fmus/fmi/bulk.py), or NULL; the reference lists they resolved */
+    PyObject *resolve_real, *get_real, *set_real;
+    struct { size_t n; fmi2ValueReference *vr; PyObject *number; } lists[BULK_LISTS];
+    int list_count;
 } Instance;
 
 static Instance *instances;            /* a short list, guarded by table_lock */
@@ -320,13 +326,28 @@ static int bitmap_has(const Bitmap *map, fmi2ValueReference vr) {
     return vr < map->size && (map->bits[vr / 8] >> (vr % 8)) & 1;
 }
 
-static void free_instance_entry(Instance *entry) {
-    if (entry->get_real || entry->set_real) {
-        PyGILState_STATE gil = pyGILState_Ensure();
-        py_DecRef(entry->get_real);
-        py_DecRef(entry->set_real);
-        pyGILState_Release(gil);
+/* the accessors and lists released (with the GIL held, or taken here) */
+static void release_bulk(Instance *entry) {
+    py_DecRef(entry->resolve_real);
+    py_DecRef(entry->get_real);
+    py_DecRef(entry->set_real);
+    entry->resolve_real = entry->get_real = entry->set_real = NULL;
+    for (int k = 0; k < entry->list_count; k++) {
+        py_DecRef(entry->lists[k].number);
+        free(entry->lists[k].vr);
     }
+    entry->list_count = 0;
+}
+
+static void drop_bulk(Instance *entry) {
+    if (!entry->get_real) return;
+    PyGILState_STATE gil = pyGILState_Ensure();
+    release_bulk(entry);
+    pyGILState_Release(gil);
+}
+
+static void free_instance_entry(Instance *entry) {
+    drop_bulk(entry);
     for (int t = 0; t < TYPES; t++) { free(entry->valid[t].bits); free(entry->settable[t].bits); }
     free(entry);
 }
@@ -448,10 +469,13 @@ static void claim_bulk(Instance *entry) {
     PyGILState_STATE gil = pyGILState_Ensure();
     PyObject *module = pyImport_ImportModule("fmus.fmi.bulk");
     PyObject *pair = module ? pyObject_CallMethod(module, "take", "s", entry->name) : NULL;
-    PyObject *get = pair ? pyTuple_GetItem(pair, 0) : NULL, *set = pair ? pyTuple_GetItem(pair, 1) : NULL;
-    if (get && set) {
+    PyObject *resolve = pair ? pyTuple_GetItem(pair, 0) : NULL, *get = resolve ? pyTuple_GetItem(pair, 1) : NULL,
+             *set = get ? pyTuple_GetItem(pair, 2) : NULL;
+    if (set) {
+        py_IncRef(resolve);
         py_IncRef(get);
         py_IncRef(set);
+        entry->resolve_real = resolve;
         entry->get_real = get;
         entry->set_real = set;
     } else {
@@ -462,27 +486,48 @@ static void claim_bulk(Instance *entry) {
     pyGILState_Release(gil);
 }
 
-/* one get or set of Reals through the accessor: 1 done, 0 failed (the accessors are dropped with
- * a warning, and this and later calls go to pythonfmu) */
-static int bulk_real(Instance *entry, PyObject *accessor, const fmi2ValueReference vr[], size_t n,
-                     const fmi2Real value[], int writable) {
+/* the number the slave gave this list of value references (resolved at its first use), or NULL
+ * when the instance keeps BULK_LISTS lists already; the GIL is held */
+static PyObject *list_number(Instance *entry, const fmi2ValueReference vr[], size_t n) {
+    for (int k = 0; k < entry->list_count; k++)
+        if (entry->lists[k].n == n && memcmp(entry->lists[k].vr, vr, n * sizeof *vr) == 0)
+            return entry->lists[k].number;
+    if (entry->list_count == BULK_LISTS) return NULL;
+    fmi2ValueReference *copy = malloc(n * sizeof *vr);
+    if (!copy) return NULL;
+    memcpy(copy, vr, n * sizeof *vr);
+    PyObject *refs = pyMemoryView_FromMemory((char *)copy, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
+    PyObject *number = refs ? pyObject_CallFunctionObjArgs(entry->resolve_real, refs, NULL) : NULL;
+    py_DecRef(refs);
+    if (!number) { free(copy); return NULL; }
+    int k = entry->list_count++;
+    entry->lists[k].n = n;
+    entry->lists[k].vr = copy;
+    entry->lists[k].number = number;
+    return number;
+}
+
+/* one get or set of Reals through the slave's accessor: 1 done, 0 not (pythonfmu's route then;
+ * after a Python error the accessors are dropped with a warning, for this and later calls) */
+static int bulk_real(Instance *entry, int setting, const fmi2ValueReference vr[], size_t n,
+                     const fmi2Real value[]) {
     PyGILState_STATE gil = pyGILState_Ensure();
-    PyObject *refs = pyMemoryView_FromMemory((char *)vr, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
-    PyObject *values = refs ? pyMemoryView_FromMemory((char *)value, (Py_ssize_t)(n * sizeof *value),
-                                                      writable ? PyBUF_WRITE : PyBUF_READ) : NULL;
-    PyObject *result = values ? pyObject_CallFunctionObjArgs(accessor, refs, values, NULL) : NULL;
+    PyObject *number = list_number(entry, vr, n);
+    int failed = number == NULL && entry->list_count < BULK_LISTS;
+    PyObject *values = number ? pyMemoryView_FromMemory((char *)value, (Py_ssize_t)(n * sizeof *value),
+                                                        setting ? PyBUF_READ : PyBUF_WRITE) : NULL;
+    PyObject *result = values ? pyObject_CallFunctionObjArgs(setting ? entry->set_real : entry->get_real,
+                                                             number, values, NULL) : NULL;
     int done = result != NULL;
+    failed = failed || (number && !done);
     py_DecRef(result);
     py_DecRef(values);
-    py_DecRef(refs);
-    if (!done) {
+    if (failed) {
         pyErr_Clear();
-        py_DecRef(entry->get_real);
-        py_DecRef(entry->set_real);
-        entry->get_real = entry->set_real = NULL;
+        release_bulk(entry);
     }
     pyGILState_Release(gil);
-    if (!done && entry->callbacks.logger)
+    if (failed && entry->callbacks.logger)
         entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Warning, "logStatusWarning",
                                 "bulk Real access failed; values go through pythonfmu from now on");
     return done;
@@ -568,7 +613,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     Instance *entry;
     if (!target_fmi2GetReal) return fmi2Error;
     if (check_references(c, vr, n, REAL, 0, &entry) != fmi2OK) return fmi2Error;
-    if (entry && entry->get_real && value && bulk_real(entry, entry->get_real, vr, n, value, 1)) return fmi2OK;
+    if (entry && entry->get_real && value && bulk_real(entry, 0, vr, n, value)) return fmi2OK;
     return target_fmi2GetReal(c, vr, n, value);
 }
 
@@ -576,7 +621,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     Instance *entry;
     if (!target_fmi2SetReal) return fmi2Error;
     if (check_references(c, vr, n, REAL, 1, &entry) != fmi2OK) return fmi2Error;
-    if (entry && entry->set_real && value && bulk_real(entry, entry->set_real, vr, n, value, 0)) return fmi2OK;
+    if (entry && entry->set_real && value && bulk_real(entry, 1, vr, n, value)) return fmi2OK;
     return target_fmi2SetReal(c, vr, n, value);
 }
 
