@@ -119,6 +119,14 @@ class ValueBuffer:
             self.values = np.ctypeslib.as_array(self.raw)[:self.count]
 
 
+def contiguous(index: np.ndarray):
+    """``index`` as a slice when it is a run of consecutive positions (numpy then copies a block
+    instead of gathering element by element), else as it is."""
+    if index.size > 1 and index[0] >= 0 and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+        return slice(int(index[0]), int(index[0]) + index.size)
+    return index
+
+
 def _coerce(type_name: str, value):
     if type_name == "Real":
         return float(value)
@@ -398,10 +406,11 @@ class InProcessSlave(_ExtractedComponent):
         slave = self._slave
         # numeric ports move straight between the master's buffers and the facade's value
         # store (slots resolved once); strings keep the facade's setters and getters
-        self._writes = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.inputs.values()
-                        if b.type != "String"]
-        self._reads = [(b.type, *slave.value_view(b.type, b.vr_array), b.values) for b in self.outputs.values()
-                       if b.type != "String"]
+        # (a run of consecutive slots, as frame ports are, is a slice: no index array, no temporary)
+        self._writes = [(store, contiguous(slots), b.values) for b in self.inputs.values() if b.type != "String"
+                        for store, slots in (slave.value_view(b.type, b.vr_array),)]
+        self._reads = [(b.type, store, contiguous(slots), b.values) for b in self.outputs.values()
+                       if b.type != "String" for store, slots in (slave.value_view(b.type, b.vr_array),)]
         self._string_inputs = [b for b in self.inputs.values() if b.type == "String"]
         self._string_outputs = [b for b in self.outputs.values() if b.type == "String"]
 
