@@ -194,6 +194,7 @@ class FmuSlave(_ExtractedComponent):
         except Exception:
             raise UserError(f"{self.name}: instantiation failed{self._last_message()}") from None
         self._component = self._fmu.component
+        self._component_arg = ctypes.c_void_p(self._component)
 
     def _call(self, what: str, function, *args):
         try:
@@ -240,28 +241,40 @@ class FmuSlave(_ExtractedComponent):
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
         self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
         # last written values (NaN: nothing written yet); strings are always written
-        self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b,
+        # the hot path calls the library's functions directly with arguments converted once
+        # (fmpy's wrappers convert every argument and add two Python calls per call), and
+        # raises fmpy's exception on an error status as they do
+        self._setters = [(self._raw(f"fmi2Set{b.type}"), b, ctypes.c_size_t(b.count),
                           None if b.type == "String" else np.full(b.count, np.nan)) for b in self.inputs.values()]
-        self._getters = [(getattr(self._fmu, f"fmi2Get{b.type}"), b) for b in self.outputs.values()]
+        self._getters = [(self._raw(f"fmi2Get{b.type}"), b, ctypes.c_size_t(b.count)) for b in self.outputs.values()]
+
+    def _raw(self, name: str):
+        function = self._fmu.dll[name]       # a new function object: fmpy's argtypes are on its own
+        function.restype = ctypes.c_int
+        return name, function
 
     def write_inputs(self) -> None:
-        component = self._component
-        for setter, buffer, last in self._setters:
+        component = self._component_arg
+        for (name, setter), buffer, count, last in self._setters:
             # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
             # buffer (occupancy, faults, commands between events) costs no call
             if last is not None:
                 if np.array_equal(last, buffer.values):
                     continue
                 last[:] = buffer.values
-            setter(component, buffer.vr, buffer.count, buffer.raw)
+            status = setter(component, buffer.vr, count, buffer.raw)
+            if status > _FMI2_WARNING:
+                raise _call_exception(name, status)
 
     def read_outputs(self, types=None) -> None:
         """Read the output buffers (all, or only those of the given FMI types)."""
-        component = self._component
-        for getter, buffer in self._getters:
+        component = self._component_arg
+        for (name, getter), buffer, count in self._getters:
             if types is not None and buffer.type not in types:
                 continue
-            getter(component, buffer.vr, buffer.count, buffer.raw)
+            status = getter(component, buffer.vr, count, buffer.raw)
+            if status > _FMI2_WARNING:
+                raise _call_exception(name, status)
             if buffer.type == "String":
                 buffer.values[:] = [s.decode() if s else "" for s in buffer.raw[:buffer.count]]
 
@@ -309,6 +322,16 @@ class FmuSlave(_ExtractedComponent):
             fmu.freeLibrary()
         except Exception:
             pass
+
+
+_FMI2_WARNING = 1
+
+
+def _call_exception(function: str, status: int) -> Exception:
+    """The exception fmpy's wrapper raises for an FMI call that returned ``status``."""
+    from fmpy.fmi1 import FMICallException
+
+    return FMICallException(function=function, status=status)
 
 
 _LIVE_LIBRARIES: Dict[str, int] = {}
