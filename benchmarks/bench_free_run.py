@@ -31,6 +31,7 @@ def run_once(stop_time: float, in_process: bool) -> float:
     train = summary["trains"][0]
     receiver = summary["receivers"][0]
     stops = ", ".join(f"{s['station']} {s['arrival_deviation_s']:+.1f} s / {s['stop_error_m']:+.2f} m"
+                      if s.get("arrival_deviation_s") is not None else f"{s['station']} not reached"
                       for s in train.get("stops", []))
     print(f"free_run {'in process' if in_process else 'through FMI'}: {stop_time:g} s simulated, "
           f"{summary['wall_time_s']:.1f} s stepping ({wall:.1f} s with loading), "

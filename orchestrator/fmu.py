@@ -119,6 +119,14 @@ class ValueBuffer:
             self.values = np.ctypeslib.as_array(self.raw)[:self.count]
 
 
+def contiguous(index: np.ndarray):
+    """``index`` as a slice when it is a run of consecutive positions (numpy then copies a block
+    instead of gathering element by element), else as it is."""
+    if index.size > 1 and index[0] >= 0 and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+        return slice(int(index[0]), int(index[0]) + index.size)
+    return index
+
+
 def _coerce(type_name: str, value):
     if type_name == "Real":
         return float(value)
@@ -186,6 +194,7 @@ class FmuSlave(_ExtractedComponent):
         except Exception:
             raise UserError(f"{self.name}: instantiation failed{self._last_message()}") from None
         self._component = self._fmu.component
+        self._component_arg = ctypes.c_void_p(self._component)
 
     def _call(self, what: str, function, *args):
         try:
@@ -232,28 +241,40 @@ class FmuSlave(_ExtractedComponent):
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
         self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
         # last written values (NaN: nothing written yet); strings are always written
-        self._setters = [(getattr(self._fmu, f"fmi2Set{b.type}"), b,
+        # the hot path calls the library's functions directly with arguments converted once
+        # (fmpy's wrappers convert every argument and add two Python calls per call), and
+        # raises fmpy's exception on an error status as they do
+        self._setters = [(self._raw(f"fmi2Set{b.type}"), b, ctypes.c_size_t(b.count),
                           None if b.type == "String" else np.full(b.count, np.nan)) for b in self.inputs.values()]
-        self._getters = [(getattr(self._fmu, f"fmi2Get{b.type}"), b) for b in self.outputs.values()]
+        self._getters = [(self._raw(f"fmi2Get{b.type}"), b, ctypes.c_size_t(b.count)) for b in self.outputs.values()]
+
+    def _raw(self, name: str):
+        function = self._fmu.dll[name]       # a new function object: fmpy's argtypes are on its own
+        function.restype = ctypes.c_int
+        return name, function
 
     def write_inputs(self) -> None:
-        component = self._component
-        for setter, buffer, last in self._setters:
+        component = self._component_arg
+        for (name, setter), buffer, count, last in self._setters:
             # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
             # buffer (occupancy, faults, commands between events) costs no call
             if last is not None:
                 if np.array_equal(last, buffer.values):
                     continue
                 last[:] = buffer.values
-            setter(component, buffer.vr, buffer.count, buffer.raw)
+            status = setter(component, buffer.vr, count, buffer.raw)
+            if status > _FMI2_WARNING:
+                raise _call_exception(name, status)
 
     def read_outputs(self, types=None) -> None:
         """Read the output buffers (all, or only those of the given FMI types)."""
-        component = self._component
-        for getter, buffer in self._getters:
+        component = self._component_arg
+        for (name, getter), buffer, count in self._getters:
             if types is not None and buffer.type not in types:
                 continue
-            getter(component, buffer.vr, buffer.count, buffer.raw)
+            status = getter(component, buffer.vr, count, buffer.raw)
+            if status > _FMI2_WARNING:
+                raise _call_exception(name, status)
             if buffer.type == "String":
                 buffer.values[:] = [s.decode() if s else "" for s in buffer.raw[:buffer.count]]
 
@@ -301,6 +322,16 @@ class FmuSlave(_ExtractedComponent):
             fmu.freeLibrary()
         except Exception:
             pass
+
+
+_FMI2_WARNING = 1
+
+
+def _call_exception(function: str, status: int) -> Exception:
+    """The exception fmpy's wrapper raises for an FMI call that returned ``status``."""
+    from fmpy.fmi1 import FMICallException
+
+    return FMICallException(function=function, status=status)
 
 
 _LIVE_LIBRARIES: Dict[str, int] = {}
@@ -398,10 +429,11 @@ class InProcessSlave(_ExtractedComponent):
         slave = self._slave
         # numeric ports move straight between the master's buffers and the facade's value
         # store (slots resolved once); strings keep the facade's setters and getters
-        self._writes = [(*slave.value_view(b.type, b.vr_array), b.values) for b in self.inputs.values()
-                        if b.type != "String"]
-        self._reads = [(b.type, *slave.value_view(b.type, b.vr_array), b.values) for b in self.outputs.values()
-                       if b.type != "String"]
+        # (a run of consecutive slots, as frame ports are, is a slice: no index array, no temporary)
+        self._writes = [(store, contiguous(slots), b.values) for b in self.inputs.values() if b.type != "String"
+                        for store, slots in (slave.value_view(b.type, b.vr_array),)]
+        self._reads = [(b.type, store, contiguous(slots), b.values) for b in self.outputs.values()
+                       if b.type != "String" for store, slots in (slave.value_view(b.type, b.vr_array),)]
         self._string_inputs = [b for b in self.inputs.values() if b.type == "String"]
         self._string_outputs = [b for b in self.outputs.values() if b.type == "String"]
 

@@ -24,6 +24,7 @@ from typing import Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
+from orchestrator.fmu import contiguous
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.interrupts import NEVER, InterruptFlag
 from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, StepRecord, Transition
@@ -71,6 +72,12 @@ class Link:
         self.source_slave, self.source_stale = source_slave, source_stale
         self.source_values = source_slave.outputs[self.type].values
         self.target_values = target_slave.inputs[self.type].values
+        source, target = contiguous(self.source_index), contiguous(self.target_index)
+        if self.transition == "hold" and self.factor is None and isinstance(source, slice) \
+                and isinstance(target, slice):
+            # a frame port wired whole: one block copy instead of a gather and a scatter
+            self.source_index, self.target_index = source, target
+            self.gather = self._gather_block
 
     def source_updated(self, time_s: float) -> None:
         """The source has new values at ``time_s`` (linear and mean links track them)."""
@@ -87,6 +94,9 @@ class Link:
             value = np.multiply(value, self.factor, out=self.scratch)
             value += self.offset
         self.target_values[self.target_index] = value
+
+    def _gather_block(self, time_s: float) -> None:
+        self.target_values[self.target_index] = self.source_values[self.source_index]
 
     def _gather_linear(self, time_s: float) -> None:
         if self.previous_t is not None and self.current_t > self.previous_t:

@@ -92,6 +92,9 @@ def resolve_inertia_s(inertia_s: float, digital: bool) -> float:
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
 
+# whole-frame extremes through the ufuncs directly (np.max / ndarray.max add a Python-level dispatch)
+_max, _min = np.maximum.reduce, np.minimum.reduce
+
 
 @dataclass
 class ReceiverSettings:
@@ -193,7 +196,7 @@ class LocoReceiverCore:
     def _gain_control(self, x: np.ndarray):
         """(gain-controlled signal, linear gain per sample or a scalar when constant)."""
         s = self.settings
-        peak = float(np.max(np.abs(x)))
+        peak = float(_max(np.abs(x)))
         if peak <= s.agc_limit_v:
             if self._gain_db >= 0.0:
                 return x, 1.0                               # the usual case: no overload, full gain
@@ -214,14 +217,14 @@ class LocoReceiverCore:
         reads the code amplitude, not the instant value: held = d^(N−1)·max(prev·d, max(e[m]·d^−m))."""
         n = input_envelope.size
         d = self._level_step
-        self._held = d ** (n - 1) * max(self._held * d, float(np.max(input_envelope * self._level_growth[:n])))
+        self._held = d ** (n - 1) * max(self._held * d, float(_max(input_envelope * self._level_growth[:n])))
         return self._held
 
     def _relay_states(self, envelope: np.ndarray):
         """(relay state per sample or None when it stays as it is for the whole frame, the
         envelope's maximum)."""
         s = self.settings
-        low, high = float(envelope.min()), float(envelope.max())
+        low, high = float(_min(envelope)), float(_max(envelope))
         if self._relay:
             if low >= s.drop_out_v:
                 return None, high

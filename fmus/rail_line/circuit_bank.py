@@ -34,6 +34,11 @@ from fmus.errors import FmuInputError
 from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
 
+try:        # np.interp's own routine, without its per-call checks (the arguments are float arrays)
+    from numpy._core.multiarray import interp as _interp
+except ImportError:          # another numpy layout: the public function
+    _interp = np.interp
+
 _CACHE_SIZE = 64
 SHUNT_BLEND_S = 0.1      # the front train's amplitude handed over from one node's model to the next
 # a section's configuration: (shunt nodes, sorted; head nodes, one per train head in it, front first)
@@ -127,6 +132,7 @@ class TrackCircuitBank:
         # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
         self.track_frequencies = np.array([sec.carrier_hz for sec in line.sections], dtype=float)
         self._spacing_list = [float(circuit.nodes_m[1] - circuit.nodes_m[0]) for circuit in self.circuits]
+        self._nodes_m = [np.ascontiguousarray(circuit.nodes_m, dtype=float) for circuit in self.circuits]
         self._segments_list = [circuit.segments for circuit in self.circuits]
         self._train_lengths = [float(length) for length in s.train_length_m]
         # positions where a train's head or tail changes section or clipping to the feed
@@ -393,10 +399,11 @@ class TrackCircuitBank:
         _, _, log_amplitude, at_node, front = self._active[k]
         if j != front:
             return 1.0
-        value = np.exp(np.interp(head, self.circuits[k].nodes_m, log_amplitude) - at_node)
+        value = np.exp(_interp(head, self._nodes_m[k], log_amplitude) - at_node)
         gain, since = self._handover[k]
         if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
-            value = value * (1.0 + (gain - 1.0) * np.clip(1.0 - (times - since) / SHUNT_BLEND_S, 0.0, 1.0))
+            blend = 1.0 - (times - since) / SHUNT_BLEND_S
+            value = value * (1.0 + (gain - 1.0) * np.minimum(np.maximum(blend, 0.0, out=blend), 1.0, out=blend))
         return value
 
     # ---- the trains' shunts -----------------------------------------------------------------

@@ -41,6 +41,11 @@ POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train p
 SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
 
 
+def _unit_clip(x: np.ndarray) -> np.ndarray:
+    """np.clip(x, 0, 1) in place, without np.clip's Python-level dispatch (the same values)."""
+    return np.minimum(np.maximum(x, 0.0, out=x), 1.0, out=x)
+
+
 @dataclass
 class RailSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
@@ -192,7 +197,7 @@ class RailLineCore:
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
         head = x_k + v_k * (times - t_k)
         if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
-            s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+            s = _unit_clip((times - t_k) / POSITION_BLEND_S)
             head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
         return head
 
@@ -206,7 +211,7 @@ class RailLineCore:
 
     def _speed_at(self, j: int, times: np.ndarray) -> np.ndarray:
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
-        s = np.clip((times - t_k) / POSITION_BLEND_S, 0.0, 1.0)
+        s = _unit_clip((times - t_k) / POSITION_BLEND_S)
         return v_k + gap * (6 * s ** 2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s ** 2 - 4 * s + 1)
 
     # ---- studies ------------------------------------------------------------------------------

@@ -83,7 +83,10 @@ class TractionInterference:
         ripple_hz = (300.0, 600.0) if self.dc else (50.0, 150.0, 250.0)
         self._ripple_period = period_samples([1.0 / f for f in ripple_hz], s.fs_hz, _RIPPLE_MAX_SAMPLES)
         if self._ripple_period is not None and (self.dc or self.ac):
-            self._ripple_table = self._ripple_wave(np.arange(self._ripple_period) * dt)
+            # one period and a frame's length of its continuation: a frame is a slice from
+            # (first sample mod period), no index array (the same values as a look-up per sample)
+            table = self._ripple_wave(np.arange(self._ripple_period) * dt)
+            self._ripple_table = table[np.arange(self._ripple_period + frame) % self._ripple_period]
 
     def new_frame(self, i_traction: np.ndarray, n: int) -> None:
         """The traction current reaches the rails through the traction circuit's inductance
@@ -112,7 +115,8 @@ class TractionInterference:
             return np.zeros(times.size)
         if self._ripple_first != first:       # the waveform is the same for every train: once a frame
             if self._ripple_period is not None:
-                self._ripple = self._ripple_table.take((first + self._index[:times.size]) % self._ripple_period)
+                start = first % self._ripple_period
+                self._ripple = self._ripple_table[start:start + times.size]    # a view: only read
             else:
                 self._ripple = self._ripple_wave(times)
             self._ripple_first = first

@@ -163,10 +163,13 @@ class WaysideCoderCore:
         self._omega_column = self.omega[:, None]
         self._logic_state = None
         self._period = self._wave_periods() if self._relay is None else None
-        self._waves = {}                                  # (section, code) → one period of u_tx
+        self._waves = {}              # (section, code) → one period of u_tx and the next frame's N samples
         if self._period is not None:
-            self._row_offset = np.arange(k)[:, None] * int(self._period.max())
-            self._wave_rows = np.zeros(k * int(self._period.max()))
+            # each section's row: one period followed by the frame's length of its continuation,
+            # so a frame is the N entries from (first sample mod period) on: no modulo per sample
+            width = int(self._period.max()) + frame
+            self._frame_index = np.arange(k)[:, None] * width + self._index
+            self._wave_rows = np.zeros(k * width)
         self.out = CoderOutputs(np.zeros((sections, frame)), np.zeros(sections, dtype=np.int64),
                                 np.zeros(sections, dtype=np.int64))
 
@@ -192,8 +195,7 @@ class WaysideCoderCore:
         # sample times from the integer sample index: no drift over long runs
         first = round(t * s.fs_hz)
         if self._period is not None:          # the periodic waveform of each section, from its table
-            index = np.remainder(self._index + (first % self._period)[:, None], self._period[:, None])
-            np.take(self._wave_rows, index + self._row_offset, out=out.u_tx[:k])
+            np.take(self._wave_rows, self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
             return out
         times = (first + self._index) / s.fs_hz
         key = keyed(np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None]), self._pulses)
@@ -217,7 +219,7 @@ class WaysideCoderCore:
         out.code_tx[:k] = codes
         out.signal[:k] = np.where(self.has_signal, signals, SIGNAL_DARK)
         if self._period is not None:
-            width = int(self._period.max())
+            width = int(self._period.max()) + self.frame
             for section, code in enumerate(codes.tolist()):
                 wave = self._wave(section, code)
                 self._wave_rows[section * width:section * width + wave.size] = wave
@@ -231,12 +233,13 @@ class WaysideCoderCore:
         return None if None in periods else np.array(periods, dtype=np.int64)
 
     def _wave(self, section: int, code: int) -> np.ndarray:
-        """One period of section ``section``'s output for ``code`` (samples 0 … period − 1: the
-        output at sample n is entry n mod period)."""
+        """One period of section ``section``'s output for ``code`` and the frame's length of its
+        continuation (the output at sample n is entry n mod period)."""
         key = (section, code)
         if key not in self._waves:
             s = self.settings
             times = np.arange(self._period[section]) / s.fs_hz
             key_on = keyed(np.mod(times + self.cam_offset_s[section], self.cycle_s[section]), self.pulses[section, code])
-            self._waves[key] = key_on * (np.sin(self.omega[section] * times) * s.amplitude_v)
+            wave = key_on * (np.sin(self.omega[section] * times) * s.amplitude_v)
+            self._waves[key] = wave[np.arange(wave.size + self.frame) % wave.size]   # + the frame's continuation
         return self._waves[key]

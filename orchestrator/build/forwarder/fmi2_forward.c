@@ -24,6 +24,17 @@
  * instance is untouched. Without the file the calls are forwarded unchecked
  * (docs/interfaces.md, "Bad parameters, inputs and calls").
  *
+ * Bulk Real values: pythonfmu's wrapper turns every fmi2GetReal/fmi2SetReal into Python lists
+ * built value by value (about 0.1 us per value). For an instance whose references are checked
+ * here, the forwarder claims the slave's Real accessors at fmi2Instantiate (fmus/fmi/bulk.py,
+ * registered by the generated slave script). It keeps each list of value references it sees
+ * (a host sends the same lists every step; up to BULK_LISTS per instance), resolved once to
+ * store slots by the slave, and hands a get or set the list's number and the host's value
+ * array as a memoryview: one Python call, numpy moving the values. The host sees the same
+ * functions and values. Without the accessors (another slave, an older FMU,
+ * RAILCOSIM_NO_BULK=1 in the environment) or after an accessor failed once (logged as a
+ * warning), calls go to pythonfmu as they are (docs/performance.md).
+ *
  * Release: at unload (dlclose of this library or process exit) it empties pythonfmu's
  * interpreter state through pythonfmu's finalizePythonInterpreter, before pythonfmu's own
  * exit-time destructors run, and closes pythonfmu's library if no instance is alive. It never
@@ -57,6 +68,18 @@ static PyStatus (*py_InitializeFromConfig)(const PyConfig *);
 static void (*pyConfig_Clear)(PyConfig *);
 static int (*pyStatus_Exception)(PyStatus);
 static PyThreadState *(*pyEval_SaveThread)(void);
+/* bulk Real values (resolved once Python runs; all NULL: no bulk access) */
+static PyGILState_STATE (*pyGILState_Ensure)(void);
+static void (*pyGILState_Release)(PyGILState_STATE);
+static PyObject *(*pyImport_ImportModule)(const char *);
+static PyObject *(*pyObject_CallMethod)(PyObject *, const char *, const char *, ...);
+static PyObject *(*pyObject_CallFunctionObjArgs)(PyObject *, ...);
+static PyObject *(*pyMemoryView_FromMemory)(char *, Py_ssize_t, int);
+static PyObject *(*pyTuple_GetItem)(PyObject *, Py_ssize_t);
+static void (*py_IncRef)(PyObject *);
+static void (*py_DecRef)(PyObject *);
+static void (*pyErr_Clear)(void);
+static int bulk_enabled;
 #ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
 static void (*pyEval_RestoreThread)(PyThreadState *);
 static int (*py_FinalizeEx)(void);
@@ -203,11 +226,30 @@ static int ensure_python(const char *folder) {
     return 1;
 }
 
+/* the Python functions bulk access needs, from the process's Python (ours is RTLD_GLOBAL) */
+static void resolve_bulk(void) {
+    const char *off = getenv("RAILCOSIM_NO_BULK");
+    if (off && *off && strcmp(off, "0") != 0) return;
+#define RESOLVE_BULK(var, name) if (!(*(void **)&var = dlsym(RTLD_DEFAULT, name))) return;
+    RESOLVE_BULK(pyGILState_Ensure, "PyGILState_Ensure")
+    RESOLVE_BULK(pyGILState_Release, "PyGILState_Release")
+    RESOLVE_BULK(pyImport_ImportModule, "PyImport_ImportModule")
+    RESOLVE_BULK(pyObject_CallMethod, "PyObject_CallMethod")
+    RESOLVE_BULK(pyObject_CallFunctionObjArgs, "PyObject_CallFunctionObjArgs")
+    RESOLVE_BULK(pyMemoryView_FromMemory, "PyMemoryView_FromMemory")
+    RESOLVE_BULK(pyTuple_GetItem, "PyTuple_GetItem")
+    RESOLVE_BULK(py_IncRef, "Py_IncRef")
+    RESOLVE_BULK(py_DecRef, "Py_DecRef")
+    RESOLVE_BULK(pyErr_Clear, "PyErr_Clear")
+    bulk_enabled = 1;
+}
+
 static int load(void) {
     char folder[4096], stem[512], library[4800];
     own_folder(folder, sizeof folder);
     own_stem(stem, sizeof stem);
     if (!ensure_python(folder)) return 0;
+    resolve_bulk();
     snprintf(library, sizeof library, "%s/%s_pythonfmu.so", folder, stem);
     pythonfmu_library = dlopen(library, RTLD_NOW | RTLD_LOCAL);
     if (!pythonfmu_library) { fail("cannot load pythonfmu's library: %s", dlerror()); return 0; }
@@ -247,6 +289,7 @@ static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "Str
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
 
 typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
+#define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
 
 typedef struct Instance {
     struct Instance *next;
@@ -256,6 +299,10 @@ typedef struct Instance {
     int checked;                       /* 0: the table was not read, calls are forwarded as they are */
     Bitmap valid[TYPES];               /* every variable of the type */
     Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
+    /* the slave's bulk accessors (fmus/fmi/bulk.py), or NULL; the reference lists they resolved */
+    PyObject *resolve_real, *get_real, *set_real;
+    struct { size_t n; fmi2ValueReference *vr; PyObject *number; } lists[BULK_LISTS];
+    int list_count;
 } Instance;
 
 static Instance *instances;            /* a short list, guarded by table_lock */
@@ -279,7 +326,28 @@ static int bitmap_has(const Bitmap *map, fmi2ValueReference vr) {
     return vr < map->size && (map->bits[vr / 8] >> (vr % 8)) & 1;
 }
 
+/* the accessors and lists released (with the GIL held, or taken here) */
+static void release_bulk(Instance *entry) {
+    py_DecRef(entry->resolve_real);
+    py_DecRef(entry->get_real);
+    py_DecRef(entry->set_real);
+    entry->resolve_real = entry->get_real = entry->set_real = NULL;
+    for (int k = 0; k < entry->list_count; k++) {
+        py_DecRef(entry->lists[k].number);
+        free(entry->lists[k].vr);
+    }
+    entry->list_count = 0;
+}
+
+static void drop_bulk(Instance *entry) {
+    if (!entry->get_real) return;
+    PyGILState_STATE gil = pyGILState_Ensure();
+    release_bulk(entry);
+    pyGILState_Release(gil);
+}
+
 static void free_instance_entry(Instance *entry) {
+    drop_bulk(entry);
     for (int t = 0; t < TYPES; t++) { free(entry->valid[t].bits); free(entry->settable[t].bits); }
     free(entry);
 }
@@ -364,8 +432,11 @@ static void log_error(const Instance *entry, const char *text) {
 }
 
 /* fmi2Error, logged, at the first value reference that is not a variable of `type` (or, setting,
- * one that cannot be set); fmi2OK when all are, or when the instance has no table */
-static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[], size_t n, int type, int setting) {
+ * one that cannot be set); fmi2OK when all are, or when the instance has no table. *checked is
+ * the instance's entry when its table was read (its references are then known good), else NULL */
+static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[], size_t n, int type, int setting,
+                                   Instance **checked) {
+    *checked = NULL;
     if (n == 0) return fmi2OK;
     Instance *entry = find_instance(c);
     if (!entry || !entry->checked) return fmi2OK;
@@ -388,7 +459,78 @@ static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[
         log_error(entry, text);
         return fmi2Error;
     }
+    *checked = entry;
     return fmi2OK;
+}
+
+/* the slave's bulk accessors, claimed right after pythonfmu created it (fmus/fmi/bulk.py) */
+static void claim_bulk(Instance *entry) {
+    if (!bulk_enabled || !entry->checked) return;
+    PyGILState_STATE gil = pyGILState_Ensure();
+    PyObject *module = pyImport_ImportModule("fmus.fmi.bulk");
+    PyObject *pair = module ? pyObject_CallMethod(module, "take", "s", entry->name) : NULL;
+    PyObject *resolve = pair ? pyTuple_GetItem(pair, 0) : NULL, *get = resolve ? pyTuple_GetItem(pair, 1) : NULL,
+             *set = get ? pyTuple_GetItem(pair, 2) : NULL;
+    if (set) {
+        py_IncRef(resolve);
+        py_IncRef(get);
+        py_IncRef(set);
+        entry->resolve_real = resolve;
+        entry->get_real = get;
+        entry->set_real = set;
+    } else {
+        pyErr_Clear();  /* not one of ours, or an older build: pythonfmu's path */
+    }
+    py_DecRef(pair);
+    py_DecRef(module);
+    pyGILState_Release(gil);
+}
+
+/* the number the slave gave this list of value references (resolved at its first use), or NULL
+ * when the instance keeps BULK_LISTS lists already; the GIL is held */
+static PyObject *list_number(Instance *entry, const fmi2ValueReference vr[], size_t n) {
+    for (int k = 0; k < entry->list_count; k++)
+        if (entry->lists[k].n == n && memcmp(entry->lists[k].vr, vr, n * sizeof *vr) == 0)
+            return entry->lists[k].number;
+    if (entry->list_count == BULK_LISTS) return NULL;
+    fmi2ValueReference *copy = malloc(n * sizeof *vr);
+    if (!copy) return NULL;
+    memcpy(copy, vr, n * sizeof *vr);
+    PyObject *refs = pyMemoryView_FromMemory((char *)copy, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
+    PyObject *number = refs ? pyObject_CallFunctionObjArgs(entry->resolve_real, refs, NULL) : NULL;
+    py_DecRef(refs);
+    if (!number) { free(copy); return NULL; }
+    int k = entry->list_count++;
+    entry->lists[k].n = n;
+    entry->lists[k].vr = copy;
+    entry->lists[k].number = number;
+    return number;
+}
+
+/* one get or set of Reals through the slave's accessor: 1 done, 0 not (pythonfmu's route then;
+ * after a Python error the accessors are dropped with a warning, for this and later calls) */
+static int bulk_real(Instance *entry, int setting, const fmi2ValueReference vr[], size_t n,
+                     const fmi2Real value[]) {
+    PyGILState_STATE gil = pyGILState_Ensure();
+    PyObject *number = list_number(entry, vr, n);
+    int failed = number == NULL && entry->list_count < BULK_LISTS;
+    PyObject *values = number ? pyMemoryView_FromMemory((char *)value, (Py_ssize_t)(n * sizeof *value),
+                                                        setting ? PyBUF_READ : PyBUF_WRITE) : NULL;
+    PyObject *result = values ? pyObject_CallFunctionObjArgs(setting ? entry->set_real : entry->get_real,
+                                                             number, values, NULL) : NULL;
+    int done = result != NULL;
+    failed = failed || (number && !done);
+    py_DecRef(result);
+    py_DecRef(values);
+    if (failed) {
+        pyErr_Clear();
+        release_bulk(entry);
+    }
+    pyGILState_Release(gil);
+    if (failed && entry->callbacks.logger)
+        entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Warning, "logStatusWarning",
+                                "bulk Real access failed; values go through pythonfmu from now on");
+    return done;
 }
 
 /* ---- the FMI functions -------------------------------------------------------------------- */
@@ -420,6 +562,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
             snprintf(entry->name, sizeof entry->name, "%s", instanceName ? instanceName : "FMU");
             if (functions) entry->callbacks = *functions;
             entry->checked = read_value_references(fmuResourceLocation, entry);
+            claim_bulk(entry);
             pthread_mutex_lock(&table_lock);
             entry->next = instances;
             instances = entry;
@@ -459,16 +602,32 @@ FORWARD(fmi2Reset, (fmi2Component c), (c))
 /* get and set: every value reference checked first (check_references) */
 #define CHECKED(name, type, setting, params) \
     fmi2Status name params { \
+        Instance *entry; \
         if (!target_##name) return fmi2Error; \
-        if (check_references(c, vr, n, type, setting) != fmi2OK) return fmi2Error; \
+        if (check_references(c, vr, n, type, setting, &entry) != fmi2OK) return fmi2Error; \
         return target_##name(c, vr, n, value); \
     }
 
-CHECKED(fmi2GetReal, REAL, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]))
+/* Reals: through the slave's bulk accessors when claimed, else pythonfmu's */
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]) {
+    Instance *entry;
+    if (!target_fmi2GetReal) return fmi2Error;
+    if (check_references(c, vr, n, REAL, 0, &entry) != fmi2OK) return fmi2Error;
+    if (entry && entry->get_real && value && bulk_real(entry, 0, vr, n, value)) return fmi2OK;
+    return target_fmi2GetReal(c, vr, n, value);
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]) {
+    Instance *entry;
+    if (!target_fmi2SetReal) return fmi2Error;
+    if (check_references(c, vr, n, REAL, 1, &entry) != fmi2OK) return fmi2Error;
+    if (entry && entry->set_real && value && bulk_real(entry, 1, vr, n, value)) return fmi2OK;
+    return target_fmi2SetReal(c, vr, n, value);
+}
+
 CHECKED(fmi2GetInteger, INTEGER, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]))
 CHECKED(fmi2GetBoolean, BOOLEAN, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]))
 CHECKED(fmi2GetString, STRING, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]))
-CHECKED(fmi2SetReal, REAL, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]))
 CHECKED(fmi2SetInteger, INTEGER, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]))
 CHECKED(fmi2SetBoolean, BOOLEAN, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]))
 CHECKED(fmi2SetString, STRING, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]))

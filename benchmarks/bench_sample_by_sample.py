@@ -1,0 +1,66 @@
+"""The signal chain sample by sample (the hardware-in-the-loop case, target ≥ 2× real time in
+process): free_run built with N = 1, so coder, rail line and receiver step every 0.25 ms
+sample (4000 steps per simulated second each) and the train and ATO every 0.5 s.
+
+    python benchmarks/bench_sample_by_sample.py [--stop-time 20] [--repeats 3] [--fmi]
+
+Builds the five FMUs with frame 1 into build/fmus_n1 (once; later runs find them up to
+date), writes a free_run system for them into a temporary folder (the shipped free_run's
+components and connections with one sample per frame) and runs it in process (with --fmi also
+through FMI, alternating). Prints each run's real-time factor and the medians.
+"""
+import argparse
+import statistics
+import tempfile
+from pathlib import Path
+
+from fmus.sizes import BuildConfig
+from orchestrator.analysis.systems import cab_settings, signal_chain, train_and_ato
+from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.build.builder import build_all
+from orchestrator.run import RunOptions, run_system
+from orchestrator.sspgen import write_ssd
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def sample_by_sample_system(folder: Path, fmus: Path) -> Path:
+    coder, rail, receiver, ato = cab_settings("ALSN")
+    components, connections = train_and_ato(ato_parameters=ato)
+    chain, links = signal_chain(frame=1, fmu_folder=str(fmus), coder=coder, rail=rail, receiver=receiver)
+    return write_ssd(folder / "free_run_n1", "free_run_n1", chain + components, connections + links,
+                     stop_time=1100.0).parent
+
+
+def run_once(system: Path, stop_time: float, in_process: bool, fmus: Path) -> float:
+    with tempfile.TemporaryDirectory() as folder:
+        options = RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=Path(folder),
+                             in_process=in_process, fmu_dirs=[fmus], record=["train.x", "train.v", "rx.aspect"])
+        summary = run_system(system, options).summary
+    print(f"free_run, N = 1, {'in process' if in_process else 'through FMI'}: {stop_time:g} s simulated, "
+          f"{summary['wall_time_s']:.1f} s stepping, {summary['realtime_factor']:.2f}x real time", flush=True)
+    return summary["realtime_factor"]
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--stop-time", type=float, default=20.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--fmi", action="store_true", help="also through FMI, alternating")
+    args = parser.parse_args()
+    fmus = REPO / "build" / "fmus_n1"
+    build_all(fmus, BuildConfig(frame=1))
+    modes = (True, False) if args.fmi else (True,)
+    factors = {mode: [] for mode in modes}
+    with tempfile.TemporaryDirectory() as folder:
+        system = sample_by_sample_system(Path(folder), fmus)
+        for _ in range(args.repeats):
+            for in_process in modes:
+                factors[in_process].append(run_once(system, args.stop_time, in_process, fmus))
+    for in_process, values in factors.items():
+        print(f"median real-time factor over {args.repeats} runs {'in process' if in_process else 'through FMI'}: "
+              f"{statistics.median(values):.2f}x (min {min(values):.2f}, max {max(values):.2f})")
+
+
+if __name__ == "__main__":
+    main()
