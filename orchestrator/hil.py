@@ -7,7 +7,7 @@ like any FMU. The component keeps the ports its FMU declares in the system; the 
 recorded or set). Which slave stands in for a component is said on the command line,
 ``--swap NAME=dcp://HOST:PORT[?dcpx=FILE&deadline_ms=D&timeout_s=T]`` (:func:`parse_swap`).
 
-Operating modes (docs/_pending_hilmaster.md while docs/hil.md is written):
+Operating modes (docs/hil.md):
 
 * **non-real-time** (the slave offers NonRealTime): each step of the component sends its
   inputs (DAT_input_output), then STC_do_step, waits for COMPUTED, then STC_send_outputs and

@@ -118,3 +118,29 @@ def test_every_declared_parameter_bound_is_enforced_in_the_ports_name(facade, po
     assert str(error.value) == message
     assert slave.core is None                          # refused before the core is made
     assert any(message in entry.msg for entry in slave.log_queue)
+
+
+def _fixture_modules():
+    return [n for n in sys.modules if n == "rcs_testfmus" or n.startswith("rcs_testfmus.")]
+
+
+def test_an_extra_package_imported_earlier_from_a_removed_folder_does_not_shadow_the_build(tmp_path, monkeypatch):
+    """A run in process imports a test package from an unpacked FMU, whose folder is then
+    removed; a later build in that process must import the package's modules from its own
+    staged copy (the copy imported first lacks the module the build needs)."""
+    import shutil
+
+    unpacked = tmp_path / "unpacked"
+    shutil.copytree(FIXTURE_PACKAGE, unpacked / "rcs_testfmus", ignore=shutil.ignore_patterns("broken.py", "__pycache__"))
+    for name in _fixture_modules():
+        monkeypatch.delitem(sys.modules, name)         # put back after the test
+    monkeypatch.syspath_prepend(str(unpacked))
+    try:
+        importlib.import_module("rcs_testfmus.facade")
+        shutil.rmtree(unpacked)
+        built = build_unit(UnitSpec("stuckreceiver", "rcs_testfmus.broken", "StuckReceiver"), tmp_path / "fmus",
+                           extra_packages=[FIXTURE_PACKAGE])
+        assert built.path.is_file()
+    finally:
+        for name in _fixture_modules():               # the unpacked copies, gone with their folder
+            del sys.modules[name]

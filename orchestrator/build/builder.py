@@ -218,6 +218,10 @@ def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path],
         script = staging / f"{slave_module_name(spec, config)}.py"
         script.write_text(slave_script(spec, config))
         out_dir = staging / "out"
+        # an extra package imported earlier in this process (e.g. from an FMU unpacked for a run
+        # and since removed) would shadow the staged copy the slave script imports from
+        shadowing = {name: sys.modules.pop(name) for name in list(sys.modules)
+                     if any(name == p.name or name.startswith(p.name + ".") for p in extra_packages)}
         sys.path.insert(0, str(staging))
         try:
             built = FmuBuilder.build_FMU(
@@ -226,6 +230,10 @@ def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path],
         finally:
             sys.path.remove(str(staging))
             sys.modules.pop(script.stem, None)
+            for name in [n for n in sys.modules
+                         if any(n == p.name or n.startswith(p.name + ".") for p in extra_packages)]:
+                del sys.modules[name]              # the staged copies: their folder goes next
+            sys.modules.update(shadowing)
         if isinstance(forwarder, fwd.Forwarder):
             fwd.install(Path(built), spec.model_identifier, forwarder)
         else:
