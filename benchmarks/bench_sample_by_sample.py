@@ -11,15 +11,17 @@ through FMI, alternating). Prints each run's real-time factor and the medians.
 """
 import argparse
 import statistics
+import sys
 import tempfile
 from pathlib import Path
 
 from fmus.sizes import BuildConfig
 from orchestrator.analysis.systems import cab_settings, signal_chain, train_and_ato
-from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.build.builder import build_all
-from orchestrator.run import RunOptions, run_system
 from orchestrator.sspgen import write_ssd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
+from benchmarks.harness.runs import scratch_run  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -33,10 +35,7 @@ def sample_by_sample_system(folder: Path, fmus: Path) -> Path:
 
 
 def run_once(system: Path, stop_time: float, in_process: bool, fmus: Path) -> float:
-    with tempfile.TemporaryDirectory() as folder:
-        options = RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=Path(folder),
-                             in_process=in_process, fmu_dirs=[fmus], record=["train.x", "train.v", "rx.aspect"])
-        summary = run_system(system, options).summary
+    summary = scratch_run(system, in_process, [fmus], stop_time).summary
     print(f"free_run, N = 1, {'in process' if in_process else 'through FMI'}: {stop_time:g} s simulated, "
           f"{summary['wall_time_s']:.1f} s stepping, {summary['realtime_factor']:.2f}x real time", flush=True)
     return summary["realtime_factor"]

@@ -7,12 +7,12 @@ The acceptance tests (tests/test_systems.py) run shortened versions of these.
 ``NAME:fmi`` runs that system through FMI instead of in process.
 """
 import sys
-import tempfile
 from pathlib import Path
 
 from orchestrator.cli import SSP_ROOT, _build_dir
-from orchestrator.analysis.verdict import railway_verdicts
-from orchestrator.run import RunOptions, run_system
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
+from benchmarks.harness.runs import scratch_run  # noqa: E402
 
 
 def describe(train: dict) -> str:
@@ -28,9 +28,7 @@ def main():
     names = sys.argv[1:] or sorted(p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file())
     for item in names:
         name, _, mode = item.partition(":")
-        with tempfile.TemporaryDirectory() as folder:
-            options = RunOptions(summaries=railway_verdicts, output_dir=Path(folder), in_process=mode != "fmi", fmu_dirs=[_build_dir()])
-            summary = run_system(SSP_ROOT / name, options).summary
+        summary = scratch_run(SSP_ROOT / name, mode != "fmi", [_build_dir()], record=None).summary
         wrong_side = sum(r["wrong_side_failures"] for r in summary["receivers"])
         unsafe = sum(r.get("unsafe_indications", 0) for r in summary["receivers"])
         print(f"{name}{' through FMI' if mode == 'fmi' else ''}: {summary['sim_time_s']:.0f} s simulated in "

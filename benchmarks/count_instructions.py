@@ -25,10 +25,9 @@ COUNTING = "RAILCOSIM_COUNTING"
 def counted_run(warm_s: float, stop_s: float, in_process: bool) -> None:
     """Inside valgrind: step free_run to ``warm_s`` uncounted, then to ``stop_s`` counted."""
     from orchestrator import master
-    from orchestrator.analysis.verdict import railway_verdicts
+    from benchmarks.harness.runs import scratch_run
     from orchestrator.cli import SSP_ROOT, _build_dir
     from orchestrator.graph import TICKS_PER_SECOND
-    from orchestrator.run import RunOptions, run_system
 
     run_until = master.Master.run_until
 
@@ -39,11 +38,7 @@ def counted_run(warm_s: float, stop_s: float, in_process: bool) -> None:
         subprocess.run(["callgrind_control", "-i", "off", str(os.getpid())], capture_output=True, check=True)
 
     master.Master.run_until = counted
-    with tempfile.TemporaryDirectory() as folder:
-        options = RunOptions(summaries=railway_verdicts, stop_time=stop_s, output_dir=Path(folder),
-                             in_process=in_process, fmu_dirs=[_build_dir()],
-                             record=["train.x", "train.v", "rx.aspect"])
-        run_system(SSP_ROOT / "free_run", options)
+    scratch_run(SSP_ROOT / "free_run", in_process, [_build_dir()], stop_s)
 
 
 def main():
