@@ -220,8 +220,9 @@ def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path],
         out_dir = staging / "out"
         # an extra package imported earlier in this process (e.g. from an FMU unpacked for a run
         # and since removed) would shadow the staged copy the slave script imports from
-        shadowing = {name: sys.modules.pop(name) for name in list(sys.modules)
-                     if any(name == p.name or name.startswith(p.name + ".") for p in extra_packages)}
+        extra = tuple(p.name for p in extra_packages)
+        in_extra = lambda name: name in extra or name.startswith(tuple(f"{e}." for e in extra))  # noqa: E731
+        shadowing = {name: sys.modules.pop(name) for name in list(sys.modules) if in_extra(name)}
         sys.path.insert(0, str(staging))
         try:
             built = FmuBuilder.build_FMU(
@@ -230,8 +231,7 @@ def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path],
         finally:
             sys.path.remove(str(staging))
             sys.modules.pop(script.stem, None)
-            for name in [n for n in sys.modules
-                         if any(n == p.name or n.startswith(p.name + ".") for p in extra_packages)]:
+            for name in [n for n in sys.modules if in_extra(n)]:
                 del sys.modules[name]              # the staged copies: their folder goes next
             sys.modules.update(shadowing)
         if isinstance(forwarder, fwd.Forwarder):
