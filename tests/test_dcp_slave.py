@@ -66,6 +66,15 @@ def _reference_outputs(fmu_path, alpha, frames):
         remove_workdir(workdir)
 
 
+def _end(proc, master):
+    master.close()
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=30)
+    proc.stdout.close()
+    proc.stderr.close()
+
+
 def test_state_sequence_and_dat_round_trip_match_the_fmu(frame_stage, test_fmus):
     proc, desc, master = frame_stage
     u, y, alpha = desc.by_name("u"), desc.by_name("y"), desc.by_name("alpha")
@@ -212,12 +221,7 @@ def test_soft_real_time_slave_runs_on_its_own_clock(test_fmus):
         master.stc(PduType.STC_deregister, State.STOPPED, State.ALIVE)
         assert proc.wait(timeout=30) == 0
     finally:
-        master.close()
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(timeout=30)
-        proc.stdout.close()
-        proc.stderr.close()
+        _end(proc, master)
 
 
 def test_drop_data_leaves_a_fraction_of_outputs_unsent(test_fmus):
@@ -240,11 +244,7 @@ def test_drop_data_leaves_a_fraction_of_outputs_unsent(test_fmus):
         assert 25 < len(seqs) < 58                        # about 70 % of 60
         assert seqs == sorted(seqs) and seqs[-1] <= 59    # gaps the master can count
     finally:
-        master.close()
-        proc.kill()
-        proc.wait(timeout=30)
-        proc.stdout.close()
-        proc.stderr.close()
+        _end(proc, master)
 
 
 def _cli(*args, timeout=120):
@@ -284,15 +284,6 @@ def test_sigterm_ends_the_slave_cleanly(test_fmus):
 def _serve(fmu):
     proc, address = start_slave(fmu)
     return proc, TestMaster(address)
-
-
-def _end(proc, master):
-    master.close()
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=30)
-    proc.stdout.close()
-    proc.stderr.close()
 
 
 def _run_to_running(master):
