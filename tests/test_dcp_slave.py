@@ -18,6 +18,15 @@ from orchestrator.dcp.pdu import (Basic, CfgInput, CfgTimeRes, DataType, ErrorCo
 STEP_NS = 1_000_000          # the test frame FMUs' step: 4 samples at 4 kHz
 
 
+def _end(proc, master):
+    master.close()
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=30)
+    proc.stdout.close()
+    proc.stderr.close()
+
+
 @pytest.fixture
 def frame_stage(test_fmus, tmp_path):
     """The slave serving TestFrameStage (frame input u[4], frame output y[4], parameter alpha),
@@ -26,12 +35,7 @@ def frame_stage(test_fmus, tmp_path):
     proc, address = start_slave(test_fmus / "TestFrameStage.fmu", "--dcpx-out", str(dcpx_path))
     master = TestMaster(address)
     yield proc, dcpx.read_dcpx(dcpx_path), master
-    master.close()
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=30)
-    proc.stdout.close()
-    proc.stderr.close()
+    _end(proc, master)
 
 
 def _reference_outputs(fmu_path, alpha, frames):
@@ -64,15 +68,6 @@ def _reference_outputs(fmu_path, alpha, frames):
     finally:
         slave.free()
         remove_workdir(workdir)
-
-
-def _end(proc, master):
-    master.close()
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=30)
-    proc.stdout.close()
-    proc.stderr.close()
 
 
 def test_state_sequence_and_dat_round_trip_match_the_fmu(frame_stage, test_fmus):
