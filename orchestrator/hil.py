@@ -237,7 +237,6 @@ class DcpSlave(Slave):
 
     def __init__(self, name: str, interface: Interface, target: DcpTarget, description: SlaveDescription,
                  step_ticks: int):
-        self.pdu = pdu
         self.name, self.interface, self.target, self.description = name, interface, target, description
         self.step_s = Fraction(step_ticks, TICKS_PER_SECOND)
         self.resolution, self.steps = description.resolution_for(self.step_s)
@@ -260,7 +259,6 @@ class DcpSlave(Slave):
         self._dat_seq = 0
         self._state = pdu.State.ALIVE
         self._acks: Dict[int, object] = {}
-        self._states: List[object] = []
         self._fresh_outputs: Optional[Tuple[int, List]] = None     # (seq, values) of the newest outputs
         self._newest_at = 0.0
         self._last_out_seq: Optional[int] = None
@@ -289,7 +287,6 @@ class DcpSlave(Slave):
 
     def _receive(self, until: float) -> bool:
         """Take one datagram (waiting at most until ``until``, perf_counter); False on timeout."""
-        pdu = self.pdu
         wait = until - time.perf_counter()
         if wait <= 0:
             return False
@@ -310,7 +307,6 @@ class DcpSlave(Slave):
                     pdu.PduType.RSP_error_ack):
             self._acks[message.resp_seq_id] = message
         elif kind == pdu.PduType.NTF_state_changed:
-            self._states.append(message.state_id)
             self._state = message.state_id
         elif kind == pdu.PduType.DAT_input_output and message.data_id == OUTPUTS_ID:
             self._take_outputs(message)
@@ -321,7 +317,7 @@ class DcpSlave(Slave):
             return
         try:
             values = self._out_codec.decode(message.payload)
-        except self.pdu.PduError:
+        except pdu.PduError:
             return
         seq = message.pdu_seq_id
         if self._last_out_seq is not None and ((seq - self._last_out_seq) & 0xFFFF) >= 0x8000:
@@ -334,7 +330,6 @@ class DcpSlave(Slave):
     def _request(self, message, reaches=None) -> None:
         """Send a request; wait for its RSP_ack (RSP_nack: an error naming the code) and, with
         ``reaches``, for the slave to announce that state."""
-        pdu = self.pdu
         self._send(message)
         until = time.perf_counter() + self.target.timeout_s
         seq = message.pdu_seq_id
@@ -358,16 +353,14 @@ class DcpSlave(Slave):
                                  f"{within_s or self.target.timeout_s:g} s)")
 
     def _next_seq(self) -> int:
-        self._seq = self.pdu.next_seq(self._seq)
+        self._seq = pdu.next_seq(self._seq)
         return self._seq
 
     def _stc(self, kind, reaches=None) -> None:
-        pdu = self.pdu
         self._request(pdu.Stc(kind, self._next_seq(), SLAVE_ID, self._state), reaches)
 
     # ---- lifecycle -------------------------------------------------------------------------
     def instantiate(self) -> None:
-        pdu = self.pdu
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1" if self.target.host.startswith("127.") else "0.0.0.0", 0))
         try:
@@ -383,7 +376,7 @@ class DcpSlave(Slave):
         self.inputs, self.outputs = _make_buffers(dict(inputs)), _make_buffers(dict(outputs))
         by_vr = {var.vr: var for var in self.interface.variables.values()}
         fail_safe = FAIL_SAFE.get(self.interface.model_identifier, {})
-        codec = self.pdu.PayloadCodec
+        codec = pdu.PayloadCodec
         for direction, buffers, causality in (("in", self.inputs, "input"), ("out", self.outputs, "output")):
             entries: Dict[str, int] = {}
             remotes: List[DcpVariable] = []
@@ -400,7 +393,7 @@ class DcpSlave(Slave):
                         remotes.append(remote)
                     slots.append((buffer, index, entries[remote.name], element, port.name))
             arrays = [np.zeros(r.count) for r in remotes]
-            entry_codec = codec([(self.pdu.DataType[r.data_type], r.count) for r in remotes])
+            entry_codec = codec([(pdu.DataType[r.data_type], r.count) for r in remotes])
             if direction == "in":
                 self._in_map, self._in_remotes, self._in_arrays, self._in_codec = slots, remotes, arrays, entry_codec
             else:
@@ -429,7 +422,6 @@ class DcpSlave(Slave):
 
     def set_values(self, values: Mapping[str, object]) -> None:
         """Parameters (and start values of inputs) as CFG_parameter, in the CONFIGURATION state."""
-        pdu = self.pdu
         for name, value in values.items():
             remote = self.description.variables.get(name)
             if remote is None:
@@ -445,7 +437,6 @@ class DcpSlave(Slave):
 
     def enter_initialization(self) -> None:
         """Configure the exchange (CFG_*), prepare and configure the slave."""
-        pdu = self.pdu
         sock_host, sock_port = self._sock.getsockname()
         own_host = sock_host if sock_host != "0.0.0.0" else _own_address(self.target.host)
         nxt = self._next_seq
@@ -474,7 +465,6 @@ class DcpSlave(Slave):
 
     def _initialise(self) -> None:
         """One initialisation exchange: the inputs written, STC_initialize, the outputs sent."""
-        pdu = self.pdu
         self._exchanged = True
         self._send_inputs()
         self._stc(pdu.PduType.STC_initialize, reaches=pdu.State.INITIALIZED)
@@ -483,14 +473,12 @@ class DcpSlave(Slave):
         self._collect_outputs(before, time.perf_counter() + self.target.timeout_s, during="initialisation")
 
     def exit_initialization(self) -> None:
-        pdu = self.pdu
         if not self._exchanged:              # never exchanged (no input written): once now
             self._initialise()
         self._stc_run(pdu.State.SYNCHRONIZED)
         self._stc_run(pdu.State.RUNNING)          # soft real time: the slave's clock starts here
 
     def _stc_run(self, reaches) -> None:
-        pdu = self.pdu
         self._request(pdu.StcRun(self._next_seq(), SLAVE_ID, self._state, 0), reaches)
 
     # ---- the exchange each step ------------------------------------------------------------
@@ -501,8 +489,8 @@ class DcpSlave(Slave):
         for buffer, index, entry, element, _ in self._in_map:
             arrays[entry][element] = buffer.values[index]
         payload = self._in_codec.encode(arrays)
-        self._dat_seq = self.pdu.next_seq(self._dat_seq)
-        self._send(self.pdu.DatInputOutput(self._dat_seq, INPUTS_ID, payload))
+        self._dat_seq = pdu.next_seq(self._dat_seq)
+        self._send(pdu.DatInputOutput(self._dat_seq, INPUTS_ID, payload))
 
     def _collect_outputs(self, before, until: float, during: Optional[str] = None) -> bool:
         """Wait for outputs newer than ``before`` (what was newest when they were asked for), at
@@ -532,11 +520,10 @@ class DcpSlave(Slave):
     def write_inputs(self) -> None:
         """In initialisation: an initialisation exchange with these inputs; while running the
         inputs go with the step (:meth:`do_step`)."""
-        if self._state == self.pdu.State.CONFIGURED:
+        if self._state == pdu.State.CONFIGURED:
             self._initialise()
 
     def do_step(self, time_s: float, step_s: float) -> None:
-        pdu = self.pdu
         began = time.perf_counter()
         self._send_inputs()
         if self.mode == "NRT":
@@ -562,7 +549,6 @@ class DcpSlave(Slave):
             self.stats.overruns += 1
 
     def _stc_do_step(self) -> None:
-        pdu = self.pdu
         self._request(pdu.StcDoStep(self._next_seq(), SLAVE_ID, self._state, self.steps),
                       reaches=pdu.State.COMPUTED)
 
@@ -576,7 +562,6 @@ class DcpSlave(Slave):
 
     def terminate(self) -> None:
         """Stop and deregister (best effort: a slave already gone is not waited for long)."""
-        pdu = self.pdu
         if self._sock is None or not self._registered or self.stats.error:
             return
         self._registered = False

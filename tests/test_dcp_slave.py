@@ -18,6 +18,15 @@ from orchestrator.dcp.pdu import (Basic, CfgInput, CfgTimeRes, DataType, ErrorCo
 STEP_NS = 1_000_000          # the test frame FMUs' step: 4 samples at 4 kHz
 
 
+def _end(proc, master):
+    master.close()
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=30)
+    proc.stdout.close()
+    proc.stderr.close()
+
+
 @pytest.fixture
 def frame_stage(test_fmus, tmp_path):
     """The slave serving TestFrameStage (frame input u[4], frame output y[4], parameter alpha),
@@ -26,12 +35,7 @@ def frame_stage(test_fmus, tmp_path):
     proc, address = start_slave(test_fmus / "TestFrameStage.fmu", "--dcpx-out", str(dcpx_path))
     master = TestMaster(address)
     yield proc, dcpx.read_dcpx(dcpx_path), master
-    master.close()
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=30)
-    proc.stdout.close()
-    proc.stderr.close()
+    _end(proc, master)
 
 
 def _reference_outputs(fmu_path, alpha, frames):
@@ -212,12 +216,7 @@ def test_soft_real_time_slave_runs_on_its_own_clock(test_fmus):
         master.stc(PduType.STC_deregister, State.STOPPED, State.ALIVE)
         assert proc.wait(timeout=30) == 0
     finally:
-        master.close()
-        if proc.poll() is None:
-            proc.kill()
-        proc.wait(timeout=30)
-        proc.stdout.close()
-        proc.stderr.close()
+        _end(proc, master)
 
 
 def test_drop_data_leaves_a_fraction_of_outputs_unsent(test_fmus):
@@ -240,11 +239,7 @@ def test_drop_data_leaves_a_fraction_of_outputs_unsent(test_fmus):
         assert 25 < len(seqs) < 58                        # about 70 % of 60
         assert seqs == sorted(seqs) and seqs[-1] <= 59    # gaps the master can count
     finally:
-        master.close()
-        proc.kill()
-        proc.wait(timeout=30)
-        proc.stdout.close()
-        proc.stderr.close()
+        _end(proc, master)
 
 
 def _cli(*args, timeout=120):
@@ -284,15 +279,6 @@ def test_sigterm_ends_the_slave_cleanly(test_fmus):
 def _serve(fmu):
     proc, address = start_slave(fmu)
     return proc, TestMaster(address)
-
-
-def _end(proc, master):
-    master.close()
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait(timeout=30)
-    proc.stdout.close()
-    proc.stderr.close()
 
 
 def _run_to_running(master):

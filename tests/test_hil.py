@@ -273,11 +273,18 @@ RECEIVER_SWAP_S = 120.0
 SWAP_TEST_S = 30.0
 
 
+def _free_run_swapped(tmp_path, product_fmus, seconds, swap):
+    """free_run with its FMUs ("fmu") and with one component swapped for a DCP slave ("dcp");
+    the two results.csv are the same bytes. → (reference, swapped)"""
+    reference = _free_run(tmp_path, product_fmus, "fmu", seconds)
+    swapped = _free_run(tmp_path, product_fmus, "dcp", seconds, [parse_swap(swap)])
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    return reference, swapped
+
+
 def test_the_receiver_swapped_for_its_dcp_emulator_gives_identical_results(tmp_path, product_fmus, emulator):
     address = emulator("LocoReceiver")
-    reference = _free_run(tmp_path, product_fmus, "fmu", RECEIVER_SWAP_S)
-    swapped = _free_run(tmp_path, product_fmus, "dcp", RECEIVER_SWAP_S, [parse_swap(f"rx={address}")])
-    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    reference, swapped = _free_run_swapped(tmp_path, product_fmus, RECEIVER_SWAP_S, f"rx={address}")
     assert swapped.summary["receivers"] == reference.summary["receivers"]
     hil = swapped.summary["hil"]["rx"]
     assert hil["lost"] == 0 and hil["exchanges"] == swapped.steps_taken["rx"]
@@ -306,9 +313,7 @@ def test_the_ato_swapped_for_its_dcp_emulator_drives_the_same_train(tmp_path, pr
     # the first SWAP_TEST_S of free_run (the whole run, with its stops and verdict:
     # benchmarks/bench_hil.py ato)
     address = emulator("AtoController")
-    reference = _free_run(tmp_path, product_fmus, "fmu", SWAP_TEST_S)
-    swapped = _free_run(tmp_path, product_fmus, "dcp", SWAP_TEST_S, [parse_swap(f"ato={address}")])
-    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    reference, swapped = _free_run_swapped(tmp_path, product_fmus, SWAP_TEST_S, f"ato={address}")
     assert swapped.summary["trains"] == reference.summary["trains"]
     assert swapped.summary["hil"]["ato"]["lost"] == 0
 
