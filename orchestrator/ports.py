@@ -11,11 +11,20 @@ import json
 import re
 import zipfile
 from pathlib import Path
-from typing import Dict
+from typing import Dict, Optional, Tuple
 
 from lxml import etree
 
-_INDEX = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9,]+)\])?$")
+_INDEX = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
+
+
+def split_element(name: str) -> Optional[Tuple[str, Tuple[int, ...]]]:
+    """``u_tx[2,7]`` → ("u_tx", (2, 7)); ``x`` → ("x", ()); None for a name of neither form."""
+    match = _INDEX.match(name)
+    if not match:
+        return None
+    index = match.group("index")
+    return match.group("base"), tuple(int(i) for i in index.split(",")) if index else ()
 
 
 def manifest_of(fmu_path: Path) -> Dict[str, dict]:
@@ -24,15 +33,13 @@ def manifest_of(fmu_path: Path) -> Dict[str, dict]:
     ports: Dict[str, dict] = {}
     for sv in root.find("ModelVariables"):
         typed = sv[0]
-        match = _INDEX.match(sv.get("name"))
-        base = match.group("base")
+        base, index = split_element(sv.get("name"))
         entry = {"causality": sv.get("causality", "local"), "variability": sv.get("variability", "continuous"),
                  "type": etree.QName(typed).localname, "unit": typed.get("unit"),
                  "min": typed.get("min"), "max": typed.get("max"), "start": typed.get("start"),
                  "description": sv.get("description")}
-        index = match.group("index")
         if index:
-            shape = [int(i) for i in index.split(",")]
+            shape = list(index)
             previous = ports.get(base)
             if previous is not None:
                 entry["shape"] = [max(a, b) for a, b in zip(previous["shape"], shape)]

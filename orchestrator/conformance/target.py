@@ -3,16 +3,21 @@ protocol (orchestrator/protocols.py), so the runner drives an FMU as the master 
 `dcp://host:port` device can be one more branch of :func:`open_target`."""
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Dict, List, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import FmuSlave, Interface, new_workdir, read_interface, remove_workdir
+from orchestrator.ports import split_element
 from orchestrator.protocols import Slave
 
-_ELEMENT = re.compile(r"^(?P<base>[^\[]+)\[(?P<index>[0-9, ]+)\]$")
+
+
+def _element(name: str) -> Optional[Tuple[str, Tuple[int, ...]]]:
+    """(base, index) of an array element's name, None for any other name."""
+    split = split_element(name)
+    return split if split and split[1] else None
 
 
 @dataclass
@@ -30,13 +35,12 @@ class Target:
         variables = self.interface.variables
         if port in variables:
             return [port]
-        match = _ELEMENT.match(port)
-        base, prefix = (match["base"], tuple(int(i) for i in match["index"].split(","))) if match else (port, ())
+        base, prefix = _element(port) or (port, ())
         found: List[Tuple[Tuple[int, ...], str]] = []
         for name in variables:
-            m = _ELEMENT.match(name)
-            if m and m["base"] == base:
-                index = tuple(int(i) for i in m["index"].split(","))
+            element = _element(name)
+            if element and element[0] == base:
+                index = element[1]
                 if index[:len(prefix)] == prefix and len(index) > len(prefix):
                     found.append((index, name))
         return [name for _, name in sorted(found)]
@@ -46,7 +50,7 @@ class Target:
         names = self.elements(port)
         if names == [port]:
             return ()
-        indices = [tuple(int(i) for i in _ELEMENT.match(n)["index"].split(",")) for n in names]
+        indices = [_element(n)[1] for n in names]
         return tuple(max(column) for column in zip(*indices))
 
 
@@ -77,7 +81,7 @@ def open_target(target: str, role: str, required_ports: List[str]) -> Target:
 def _has_port(interface: Interface, port: str) -> bool:
     if port in interface.variables:
         return True
-    return any(_ELEMENT.match(name) and _ELEMENT.match(name)["base"] == port for name in interface.variables)
+    return any((_element(name) or ("",))[0] == port for name in interface.variables)
 
 
 def variable_types(interface: Interface, names: List[str]) -> Dict[str, str]:

@@ -27,7 +27,7 @@ from typing import Dict, List, Optional, Sequence, TextIO
 
 from orchestrator.errors import UserError
 from orchestrator.study.collect import collect
-from orchestrator.study.spec import Run, StudySpec, point_label
+from orchestrator.study.spec import Run, StudySpec, point_label, set_text
 
 RECORD = "study_run.json"
 #: after SIGTERM at a timeout, the run has this long to write its files before SIGKILL
@@ -37,13 +37,6 @@ STATUSES = ("ok", "failed", "timeout", "lost")
 
 
 # ---- the worker's side ---------------------------------------------------------------------------
-def _text(value) -> str:
-    """A value as --set takes it."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
-
-
 def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
     from functools import partial
 
@@ -51,8 +44,8 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
     from orchestrator.run import RunOptions, run_system
 
     opts = job["options"]
-    overrides = {key: _text(v) for key, v in opts.get("set", {}).items()}
-    overrides.update({key: _text(v) for key, v in job["values"].items()})
+    overrides = {key: set_text(v) for key, v in opts.get("set", {}).items()}
+    overrides.update({key: set_text(v) for key, v in job["values"].items()})
     if job["seed"] is not None:
         overrides.update({key: str(job["seed"]) for key in job["seed_variables"]})
     scenario = job["scenario"] or opts.get("scenario")

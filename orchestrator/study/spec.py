@@ -71,6 +71,13 @@ class StudySpec:
         return digest.hexdigest()[:16]
 
 
+def set_text(value) -> str:
+    """A value as --set takes it."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
 def _read(path: Path) -> dict:
     if not path.is_file():
         raise UserError(f"study {path}: no such file")
@@ -251,8 +258,7 @@ def check_against_system(spec: StudySpec, system_path: Path, fmu_dirs: Sequence[
             comp, _, var = key.partition(".")
             variable = graph.nodes[comp].interface.variables[var]
             for value in seen:
-                text = ("true" if value else "false") if isinstance(value, bool) else (
-                    repr(value) if isinstance(value, float) else str(value))
+                text = set_text(value)
                 _parse_value(variable, text, f"study {spec.path}: field {fields[key]}: {key}={text}")
     finally:
         system.close()
