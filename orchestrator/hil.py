@@ -423,10 +423,7 @@ class DcpSlave(Slave):
     def set_values(self, values: Mapping[str, object]) -> None:
         """Parameters (and start values of inputs) as CFG_parameter, in the CONFIGURATION state."""
         for name, value in values.items():
-            remote = self.description.variables.get(name)
-            if remote is None:
-                raise UserError(f"{self.description.path}: the slave has no parameter {name!r}, which the "
-                                f"system sets on component {self.name!r}")
+            remote = self._parameter(name)
             data_type = pdu.DataType[remote.data_type]
             if data_type == pdu.DataType.string:
                 value = str(value)
@@ -434,6 +431,13 @@ class DcpSlave(Slave):
                 value = float(value.lower() in ("1", "true")) if value.lower() in ("true", "false") else float(value)
             payload = pdu.PayloadCodec([(data_type, 1)]).encode([value])
             self._request(pdu.CfgParameter(self._next_seq(), SLAVE_ID, remote.vr, data_type, payload))
+
+    def _parameter(self, name: str) -> DcpVariable:
+        remote = self.description.variables.get(name)
+        if remote is None:
+            raise UserError(f"{self.description.path}: the slave has no parameter {name!r}, which the "
+                            f"system sets on component {self.name!r}")
+        return remote
 
     def enter_initialization(self) -> None:
         """Configure the exchange (CFG_*), prepare and configure the slave."""
@@ -578,6 +582,33 @@ class DcpSlave(Slave):
 
     def summary_section(self) -> Dict[str, object]:
         return self.stats.section()
+
+
+class OfflineDcpSlave(DcpSlave):
+    """A DCP component as ``railcosim validate`` checks it: the slave description against the
+    system as :class:`DcpSlave` checks it (time resolution, operating mode, a variable of the
+    right causality and type for every port used, the parameters set), with nothing sent —
+    validating a hardware-in-the-loop system does not register with the rig (our emulator
+    would end after the deregistration). Its outputs read 0 while the others initialise."""
+
+    def instantiate(self) -> None:
+        return None
+
+    def set_values(self, values: Mapping[str, object]) -> None:
+        for name in values:
+            self._parameter(name)
+
+    def enter_initialization(self) -> None:
+        return None
+
+    def exit_initialization(self) -> None:
+        return None
+
+    def write_inputs(self) -> None:
+        return None
+
+    def do_step(self, time_s: float, step_s: float) -> None:
+        raise SimulationError(f"{self.name}: a DCP component checked offline is not stepped")
 
 
 def _own_address(peer_host: str) -> str:

@@ -22,7 +22,8 @@ from orchestrator import interrupts
 from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.hil import DcpSlave, DcpTarget, SlaveDescription, declared_targets, swapped_descriptions
+from orchestrator.hil import (DcpSlave, DcpTarget, OfflineDcpSlave, SlaveDescription, declared_targets,
+                             swapped_descriptions)
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
@@ -309,8 +310,11 @@ def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions
     slaves: Dict[str, Slave] = {}
     try:
         def make(name, node):
-            slave = _Checked(make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process),
-                             problems, refused=name in refused)
+            if name in plan.hil:          # a DCP slave: its description checked, the rig not contacted
+                made = OfflineDcpSlave(name, node.interface, plan.targets[name], plan.hil[name], node.step_ticks)
+            else:
+                made = make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
+            slave = _Checked(made, problems, refused=name in refused)
             slave.instantiate()
             return slave
 

@@ -20,7 +20,7 @@ from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.dcp import pdu as P
 from orchestrator.errors import UserError
 from orchestrator.hil import parse_swap
-from orchestrator.run import RunOptions, run_system
+from orchestrator.run import RunOptions, check_system, run_system
 
 DCPX = """<?xml version="1.0" encoding="UTF-8"?>
 <dcpSlaveDescription dcpMajorVersion="1" dcpMinorVersion="0" dcpSlaveName="counter"
@@ -318,12 +318,10 @@ def test_the_ato_swapped_for_its_dcp_emulator_drives_the_same_train(tmp_path, pr
     assert swapped.summary["hil"]["ato"]["lost"] == 0
 
 
-def test_a_dcp_slave_declared_in_the_ssd_is_a_component(tmp_path, test_fmus, counter_slave):
+def _declared_system(tmp_path, test_fmus, dcpx, port: int):
+    """The pair with ``dut`` declared in the SSD as a DCP slave (its .dcpx, host and port)."""
     from lxml import etree
 
-    slave, dcpx = counter_slave()
-    reference = _system(tmp_path, test_fmus)
-    run_system(reference, RunOptions(output_dir=tmp_path / "fmu"))
     system = tmp_path / "declared"
     write_ssd(system, "declared", [
         ComponentSpec("src", str(test_fmus / "TestCounter.fmu"), 0.01),
@@ -339,8 +337,38 @@ def test_a_dcp_slave_declared_in_the_ssd_is_a_component(tmp_path, test_fmus, cou
             annotation = etree.SubElement(component.find("{*}Annotations"),
                                           "{http://ssp-standard.org/SSP1/SystemStructureCommon}Annotation",
                                           type="org.railcosim")
-            etree.SubElement(annotation, f"{{{rcs}}}DcpSlave", host="127.0.0.1", port=str(slave.port))
+            etree.SubElement(annotation, f"{{{rcs}}}DcpSlave", host="127.0.0.1", port=str(port))
     tree.write(str(ssd))
+    return system
+
+
+def test_a_dcp_slave_declared_in_the_ssd_is_a_component(tmp_path, test_fmus, counter_slave):
+    slave, dcpx = counter_slave()
+    reference = _system(tmp_path, test_fmus)
+    run_system(reference, RunOptions(output_dir=tmp_path / "fmu"))
+    system = _declared_system(tmp_path, test_fmus, dcpx, slave.port)
     result = run_system(system, RunOptions(output_dir=tmp_path / "dcp"))
     assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
     assert result.summary["hil"]["dut"]["exchanges"] == 100
+
+
+def test_validate_checks_a_declared_dcp_slave_without_contacting_it(tmp_path, test_fmus):
+    """`railcosim validate` reads and checks the .dcpx (its ports against the connections) but
+    registers with no slave: validating a hardware-in-the-loop system must not start the rig
+    (our emulator would even end after the deregistration)."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    listener.bind(("127.0.0.1", 0))
+    listener.settimeout(0.2)
+    port = listener.getsockname()[1]
+    dcpx = tmp_path / "counter.dcpx"
+    dcpx.write_text(DCPX.format(port=port))
+    try:
+        system = _declared_system(tmp_path, test_fmus, dcpx, port)
+        assert check_system(system, RunOptions()) == []
+        with pytest.raises(socket.timeout):
+            listener.recvfrom(2048)                   # nothing was sent to the slave
+        dcpx.write_text(DCPX.format(port=port).replace('name="u"', 'name="w"'))
+        problems = check_system(system, RunOptions())
+        assert len(problems) == 1 and "u" in problems[0] and "dut" in problems[0], problems
+    finally:
+        listener.close()
