@@ -37,7 +37,8 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.dcp import pdu
+from orchestrator.dcp import dcpx, pdu
+from orchestrator.dcp.dcpx import DcpVariable
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.fmu import Interface, ValueBuffer, _make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
@@ -126,19 +127,6 @@ def parse_swap(text: str) -> DcpTarget:
 
 
 # ---- the slave description ---------------------------------------------------------------------
-@dataclass(frozen=True)
-class DcpVariable:
-    name: str
-    vr: int
-    causality: str          # input, output, parameter, structuralParameter
-    data_type: str          # a DataType name: float64, int32, uint8, string …
-    dims: Tuple[int, ...] = ()          # () for a scalar; an array's dimensions (row-major)
-
-    @property
-    def count(self) -> int:
-        return int(np.prod(self.dims)) if self.dims else 1
-
-
 @dataclass
 class SlaveDescription:
     """What the master needs of a .dcpx (the DCP slave description)."""
@@ -173,9 +161,8 @@ class SlaveDescription:
 
 def read_dcpx(path: Path) -> SlaveDescription:
     """The parts of a .dcpx the master uses, read and validated against the standard's schema
-    by orchestrator/dcp/dcpx.py; a missing or malformed file is one UserError."""
-    from orchestrator.dcp import dcpx
-
+    by orchestrator/dcp/dcpx.py (whose variables it keeps, by name); a missing or malformed file
+    is one UserError."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: DCP slave description (.dcpx) not found")
@@ -187,9 +174,7 @@ def read_dcpx(path: Path) -> SlaveDescription:
         host=read.control_host, port=read.control_port)
     if not read.resolutions and not read.resolution_ranges:
         description.resolutions.append((Fraction(1, 1000), True))     # the schema's default
-    for variable in read.variables:
-        description.variables[variable.name] = DcpVariable(variable.name, variable.vr, variable.causality,
-                                                           variable.data_type.name, tuple(variable.dims))
+    description.variables.update((variable.name, variable) for variable in read.variables)
     description.supports_nrt_steps = read.supports_nrt_steps
     return description
 
@@ -385,15 +370,15 @@ class DcpSlave(Slave):
                 for index, vr in enumerate(buffer.vr_array):
                     port = by_vr[int(vr)]
                     remote, element = self._remote(port.name, causality)
-                    if (port.type in _NUMERIC) == (remote.data_type == "string"):
-                        raise UserError(f"{self.description.path}: {port.name!r} is {remote.data_type} on the "
+                    if (port.type in _NUMERIC) == (remote.data_type == pdu.DataType.string):
+                        raise UserError(f"{self.description.path}: {port.name!r} is {remote.data_type.name} on the "
                                         f"slave but {port.type} on component {self.name!r}")
                     if remote.name not in entries:
                         entries[remote.name] = len(remotes)
                         remotes.append(remote)
                     slots.append((buffer, index, entries[remote.name], element, port.name))
             arrays = [np.zeros(r.count) for r in remotes]
-            entry_codec = codec([(pdu.DataType[r.data_type], r.count) for r in remotes])
+            entry_codec = codec([(r.data_type, r.count) for r in remotes])
             if direction == "in":
                 self._in_map, self._in_remotes, self._in_arrays, self._in_codec = slots, remotes, arrays, entry_codec
             else:
@@ -424,7 +409,7 @@ class DcpSlave(Slave):
         """Parameters (and start values of inputs) as CFG_parameter, in the CONFIGURATION state."""
         for name, value in values.items():
             remote = self._parameter(name)
-            data_type = pdu.DataType[remote.data_type]
+            data_type = remote.data_type
             if data_type == pdu.DataType.string:
                 value = str(value)
             elif isinstance(value, str):
@@ -451,7 +436,7 @@ class DcpSlave(Slave):
             if table:
                 requests.append(pdu.CfgScope(nxt(), SLAVE_ID, data_id, pdu.Scope.Initialization_Run_NonRealTime))
         for pos, remote in enumerate(self._in_remotes):
-            requests.append(pdu.CfgInput(nxt(), SLAVE_ID, INPUTS_ID, pos, remote.vr, pdu.DataType[remote.data_type]))
+            requests.append(pdu.CfgInput(nxt(), SLAVE_ID, INPUTS_ID, pos, remote.vr, remote.data_type))
         for pos, remote in enumerate(self._out_remotes):
             requests.append(pdu.CfgOutput(nxt(), SLAVE_ID, OUTPUTS_ID, pos, remote.vr))
         if self._in_map:
@@ -653,7 +638,7 @@ def dcpx_interface(path: Path) -> Interface:
     for variable in description.variables.values():
         names = [variable.name] if not variable.dims else \
             [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
-        fmi_type = _FMI_TYPES.get(variable.data_type, "Integer")
+        fmi_type = _FMI_TYPES.get(variable.data_type.name, "Integer")
         for name in names:
             # value references of their own: an array's elements share the slave's one
             variables[name] = Variable(name, len(variables), fmi_type, variable.causality
