@@ -218,6 +218,10 @@ class RailLineCore:
             head[0] = self.head_at_time(j, float(times[0]))
             return head
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        if v_k == 0.0 and not (gap or speed_gap) and x_k != 0.0:
+            # a train standing (or parked off the line): x_k + 0·(t − t_k) is x_k
+            head.fill(x_k)
+            return head
         np.subtract(times, t_k, out=head)
         if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
             s = np.divide(head, POSITION_BLEND_S, out=self._blend_s[:head.size])
