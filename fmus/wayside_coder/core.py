@@ -207,7 +207,7 @@ class WaysideCoderCore:
         # sample times from the integer sample index: no drift over long runs
         first = round(t * s.fs_hz)
         if self._period is not None:          # the periodic waveform of each section, from its table
-            np.take(self._wave_rows, self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
+            self._wave_rows.take(self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
             return out
         times = (first + self._index) / s.fs_hz
         key = keyed(np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None]), self._pulses)
