@@ -10,6 +10,9 @@ model generation, the first cycles), switches counting on with ``callgrind_contr
 ``--frames`` frames and prints the instructions per frame. In process by default; ``--fmi``
 through FMI (needs `railcosim build`), ``--no-bulk`` with the forwarding binary's bulk route
 off (RAILCOSIM_NO_BULK=1, docs/performance.md).
+
+The train of free_run stands at its first station until about 65 s: ``--warm 20`` counts a
+standing train, ``--warm 150`` one running at about 22 m/s (most of the timetable).
 """
 import argparse
 import os

@@ -247,6 +247,8 @@ class FmuSlave(_ExtractedComponent):
         self._setters = [(self._raw(f"fmi2Set{b.type}"), b, ctypes.c_size_t(b.count),
                           None if b.type == "String" else np.full(b.count, np.nan)) for b in self.inputs.values()]
         self._getters = [(self._raw(f"fmi2Get{b.type}"), b, ctypes.c_size_t(b.count)) for b in self.outputs.values()]
+        self._do_step = self._raw("fmi2DoStep")[1]
+        self._unchanged = {id(b): np.zeros(b.count, dtype=bool) for b in self.inputs.values()}
 
     def _raw(self, name: str):
         function = self._fmu.dll[name]       # a new function object: fmpy's argtypes are on its own
@@ -259,7 +261,9 @@ class FmuSlave(_ExtractedComponent):
             # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
             # buffer (occupancy, faults, commands between events) costs no call
             if last is not None:
-                if np.array_equal(last, buffer.values):
+                # the ufuncs directly (np.array_equal's Python layer costs more than the test);
+                # NaN never equals, as there
+                if _all_true(np.equal(last, buffer.values, out=self._unchanged[id(buffer)])):
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)
@@ -279,11 +283,11 @@ class FmuSlave(_ExtractedComponent):
                 buffer.values[:] = [s.decode() if s else "" for s in buffer.raw[:buffer.count]]
 
     def do_step(self, time_s: float, step_s: float) -> None:
-        try:
-            self._fmu.fmi2DoStep(self._component, time_s, step_s, 1)
-        except Exception as error:
-            status = getattr(error, "status", None)
-            if status is not None and status >= 4:
+        # the library's function directly, as for the gets and sets (fmpy's wrapper converts the
+        # arguments and checks the status in two more Python calls)
+        status = self._do_step(self._component_arg, ctypes.c_double(time_s), ctypes.c_double(step_s), 1)
+        if status > _FMI2_WARNING:
+            if status >= _FMI2_FATAL:
                 self._fatal = True
             raise SimulationError(f"component {self.name!r} failed its step at t = {time_s:.6g} s"
                                   f"{self._last_message()}") from None
@@ -324,7 +328,8 @@ class FmuSlave(_ExtractedComponent):
             pass
 
 
-_FMI2_WARNING = 1
+_FMI2_WARNING, _FMI2_FATAL = 1, 4
+_all_true = np.logical_and.reduce
 
 
 def _call_exception(function: str, status: int) -> Exception:

@@ -89,7 +89,7 @@ class Link:
             self.count += 1
 
     def _gather_hold(self, time_s: float) -> None:
-        value = np.take(self.source_values, self.source_index, out=self.scratch)
+        value = self.source_values.take(self.source_index, out=self.scratch)
         if self.factor is not None:
             value = np.multiply(value, self.factor, out=self.scratch)
             value += self.offset

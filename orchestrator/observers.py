@@ -87,7 +87,15 @@ class Recorder(Observer):
         return needed
 
     def started(self, master: MasterView, step: StepRecord) -> None:
-        self._slots = [master.output_slot(c, v) for c, v in self.variables]
+        slots = [master.output_slot(c, v) for c, v in self.variables]
+        # one gather per output buffer per row: (buffer, its indices, their columns, Real)
+        groups: Dict[int, tuple] = {}
+        for column, (buffer, index) in enumerate(slots):
+            group = groups.setdefault(id(buffer), (buffer, [], []))
+            group[1].append(index)
+            group[2].append(column + 1)
+        self._groups = [(buffer, np.array(indices, dtype=np.intp), columns, buffer.type == "Real")
+                        for buffer, indices, columns in groups.values()]
         self._components = sorted({c for c, _ in self.variables})
         self._file = open_for_writing(self.path)
         self._writer = csv.writer(self._file)
@@ -104,10 +112,11 @@ class Recorder(Observer):
     def _write(self, master: MasterView, tick: int) -> None:
         for component in self._components:
             master.fresh(component)
-        row = [repr(tick / TICKS_PER_SECOND)]
-        for buffer, index in self._slots:
-            value = buffer.values[index]
-            row.append(repr(float(value)) if buffer.type == "Real" else str(int(value)))
+        row = [repr(tick / TICKS_PER_SECOND)] * (len(self.variables) + 1)
+        for buffer, indices, columns, real in self._groups:
+            values = buffer.values.take(indices).tolist()
+            for column, value in zip(columns, values):
+                row[column] = repr(value) if real else str(int(value))
         try:    # whole rows only reach the file: a row is written, the buffer flushed per 100 rows
             self._writer.writerow(row)
             self.rows_written += 1

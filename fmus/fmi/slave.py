@@ -160,6 +160,8 @@ class _InputCheck:
 
 #: at most this many range-checked inputs of a type are tested in plain Python
 _FEW_BOUNDED = 8
+#: all(bool array) without ndarray.all's Python-level wrapper (checked before every step)
+_all_true = np.logical_and.reduce
 
 
 @dataclass
@@ -202,6 +204,7 @@ class FrameSlave(Fmi2Slave):
         self.state = INSTANTIATED
         self._next_time_s: Optional[float] = None      # where the next doStep must start
         self._call_error: Optional[str] = None          # a refused get/set, reported at the next step
+        self._output_plans: Dict[tuple, tuple] = {}      # write_outputs: the ports of each field list
 
     # ---- to be provided by a facade -------------------------------------------------------
     @classmethod
@@ -247,10 +250,17 @@ class FrameSlave(Fmi2Slave):
                     raise FmuInputError(problem)
 
     def write_outputs(self, out, fields) -> None:
-        """Copy a core's output record to the ports: ``fields`` is ((port, attribute), ...)."""
-        io = self.io
-        for port, attribute in fields:
-            io[port][...] = getattr(out, attribute)
+        """Copy a core's output record to the ports: ``fields`` is ((port, attribute), ...).
+        A scalar port is written only when its value differs (most of a receiver's or a
+        train's outputs change seldom, and reading a port costs less than writing it); a zero
+        float always, so that −0.0 and 0.0 are told apart; arrays are always copied."""
+        plan = self._output_plans.get(fields)
+        if plan is None:
+            plan = self._output_plans[fields] = tuple((self.io[port], attribute) for port, attribute in fields)
+        for port, attribute in plan:
+            value = getattr(out, attribute)
+            if isinstance(value, np.ndarray) or value != port.item() or (value == 0.0 and isinstance(value, float)):
+                port[...] = value
 
     def resource_path(self, path: str) -> str:
         """A data file named by a parameter: absolute, or relative to the working folder, else
@@ -336,17 +346,17 @@ class FrameSlave(Fmi2Slave):
             values = check.view if check.view is not None else self._stores[type_name].values[check.index]
             if check.finite:
                 finite = np.isfinite(values, out=check.scratch)
-                if not finite.all():
+                if not _all_true(finite):
                     return self._input_message(check, int(np.argmin(finite)), values)
             if check.few is not None:
-                listed = values.tolist()
+                item = values.item
                 for k, low, high in check.few:
-                    if not low <= listed[k] <= high:
+                    if not low <= item(k) <= high:
                         return self._input_message(check, k, values)
             elif check.bounded is not None:
                 inside = values[check.bounded]
                 good = (inside >= check.low) & (inside <= check.high)
-                if not good.all():
+                if not _all_true(good):
                     return self._input_message(check, int(check.bounded[int(np.argmin(good))]), values)
         return None
 
@@ -538,12 +548,13 @@ class FrameSlave(Fmi2Slave):
         if not (math.isfinite(current_time) and math.isfinite(step_size) and step_size > 0.0):
             return f"doStep(t={current_time:g} s, h={step_size:g} s): time and step must be finite, the step positive"
         expected = self._next_time_s
-        if expected is not None and not math.isclose(current_time, expected, rel_tol=_TIME_REL_TOL,
-                                                     abs_tol=_TIME_ABS_TOL):
+        if expected is not None and not abs(current_time - expected) <= _TIME_ABS_TOL \
+                and not math.isclose(current_time, expected, rel_tol=_TIME_REL_TOL, abs_tol=_TIME_ABS_TOL):
             return (f"doStep from t={current_time:.9g} s refused: the last communication point is "
                     f"{expected:.9g} s (time must continue from it)")
         required = self.required_step_s
-        if required is not None and not math.isclose(step_size, required, rel_tol=1e-9, abs_tol=1e-12):
+        if required is not None and step_size != required \
+                and not math.isclose(step_size, required, rel_tol=1e-9, abs_tol=1e-12):
             return (f"communication step {step_size:.9g} s refused; "
                     f"this build needs exactly {required:.9g} s (frame/fs)")
         problem = self.input_error()

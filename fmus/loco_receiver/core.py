@@ -194,23 +194,24 @@ class LocoReceiverCore:
 
     # ---- signal chain -------------------------------------------------------------------------
     def _gain_control(self, x: np.ndarray):
-        """(gain-controlled signal, linear gain per sample or a scalar when constant)."""
+        """(gain-controlled signal, linear gain per sample or a scalar when constant, |x| when
+        the signal is x itself, else None)."""
         s = self.settings
-        peak = float(_max(np.abs(x)))
+        magnitude = np.abs(x)
+        peak = float(_max(magnitude))
         if peak <= s.agc_limit_v:
             if self._gain_db >= 0.0:
-                return x, 1.0                               # the usual case: no overload, full gain
+                return x, 1.0, magnitude                    # the usual case: no overload, full gain
             gain_db = np.minimum(self._gain_db + self._ramp[:x.size], 0.0)   # recovering
         else:
-            magnitude = np.abs(x)
-            with np.errstate(divide="ignore"):
-                required = np.where(magnitude > s.agc_limit_v,
-                                    20.0 * np.log10(s.agc_limit_v / np.maximum(magnitude, 1e-30)), 0.0)
+            # agc_limit_v > 0 (checked when the core is made): the log of a positive ratio never warns
+            required = np.where(magnitude > s.agc_limit_v,
+                                20.0 * np.log10(s.agc_limit_v / np.maximum(magnitude, 1e-30)), 0.0)
             ramp = self._ramp[:x.size]
             gain_db = ramp + np.minimum(self._gain_db, np.minimum.accumulate(required - ramp))
         self._gain_db = float(gain_db[-1])
         gain = 10.0 ** (gain_db / 20.0)
-        return x * gain, gain
+        return x * gain, gain, None
 
     def _level(self, input_envelope: np.ndarray) -> float:
         """Peak-hold of the input-referred envelope with a 1 s exponential release, so the level
@@ -243,9 +244,9 @@ class LocoReceiverCore:
             self._started_s = t
         x = np.asarray(e_coil, dtype=float)
         band, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
-        scaled, gain = self._gain_control(band)
-        envelope, self._env_state = filter_frame(self.envelope_lp.b, self.envelope_lp.a, np.abs(scaled),
-                                                  self._env_state)
+        scaled, gain, magnitude = self._gain_control(band)
+        envelope, self._env_state = filter_frame(self.envelope_lp.b, self.envelope_lp.a,
+                                                  np.abs(scaled) if magnitude is None else magnitude, self._env_state)
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
         relay, drive_max = self._relay_states(envelope)
@@ -269,7 +270,7 @@ class LocoReceiverCore:
                 self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
                 self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
         elif self._relay:
-            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else float(level.max()))
+            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else float(_max(level)))
             self._pulse_drive = max(self._pulse_drive, drive_max)
         if self._pending is not None:
             self._settle_pending(t + x.size * self.dt)

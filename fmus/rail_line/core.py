@@ -41,9 +41,9 @@ POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train p
 SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
 
 
-def _unit_clip(x: np.ndarray) -> np.ndarray:
-    """np.clip(x, 0, 1) in place, without np.clip's Python-level dispatch (the same values)."""
-    return np.minimum(np.maximum(x, 0.0, out=x), 1.0, out=x)
+def _unit(x: float) -> float:
+    """x clipped to [0, 1] as numpy's maximum/minimum clip it (−0.0 → 0.0)."""
+    return (x if x < 1.0 else 1.0) if x > 0.0 else 0.0
 
 
 @dataclass
@@ -117,12 +117,25 @@ class RailLineCore:
         self.bank = TrackCircuitBank(line, s, trains, frame)
         self.interference = TractionInterference(line, s, trains, frame, self.bank)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
-        self._index = np.arange(frame)
+        self._index_f = np.arange(frame, dtype=float)
+        self._times = np.empty(frame)
+        # scratch of the position blend (head_at)
+        self._blend_s, self._blend_s2, self._blend_s3, self._blend_shape, self._blend_term = np.empty((5, frame))
         # (x_k, v_k, t_k, gap_k, speed_gap_k): head_at
         self._anchors: List[Optional[Tuple[float, float, float, float, float]]] = [None] * trains
         self._heads = np.zeros((trains, frame))
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
+
+    def bind_outputs(self, out: RailOutputs) -> None:
+        """Write every frame's outputs into ``out``'s arrays (a host's port buffers, of the
+        shapes ``self.out`` has) instead of the core's own: no copy per frame."""
+        for name in ("e_coil", "occupied", "i_axle", "off_line", "coil_section"):
+            mine, theirs = getattr(self.out, name), getattr(out, name)
+            if theirs.shape != mine.shape:
+                raise ValueError(f"bind_outputs: {name} has shape {theirs.shape}, the core's {mine.shape}")
+            theirs[...] = mine
+        self.out = out
 
     @property
     def circuits(self):
@@ -139,14 +152,16 @@ class RailLineCore:
     def step(self, t: float, u_tx: np.ndarray, x_head: np.ndarray, v: np.ndarray, i_traction: np.ndarray) -> RailOutputs:
         n = u_tx.shape[1] if u_tx.ndim == 2 else self.frame
         first = round(t * self.settings.fs_hz)
-        times = (first + self._index[:n]) * self.dt
+        times = np.add(self._index_f[:n], first, out=self._times[:n])
+        times *= self.dt
         tick = math.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
         at_tick = []
         heads = self._heads
+        positions, speeds = x_head.tolist(), v.tolist()
         for j in range(self.trains):
-            self._update_anchor(j, t, float(x_head[j]), float(v[j]))
+            self._update_anchor(j, t, positions[j], speeds[j])
             at_tick.append(self.head_at_time(j, tick))
-            heads[j, :n] = self.head_at(j, times)
+            self._head_into(j, times, heads[j, :n])
         self.interference.new_frame(i_traction, n)
         self.bank.follow_shunts(at_tick, tick)        # every wheelset of every train shunts its section
         currents = self.bank.advance(u_tx[:self.count], n)
@@ -184,9 +199,8 @@ class RailLineCore:
             return
         gap = speed_gap = 0.0
         if anchor is not None:
-            at = np.array([t])
             gap = self.head_at_time(j, t) - x
-            speed_gap = float(self._speed_at(j, at)[0]) - v
+            speed_gap = self._speed_at_time(j, t) - v
             if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS \
                     or (abs(gap) < 1e-6 and abs(speed_gap) < 1e-6):      # a jump, or nothing to close
                 gap = speed_gap = 0.0
@@ -194,25 +208,57 @@ class RailLineCore:
 
     def head_at(self, j: int, times: np.ndarray) -> np.ndarray:
         """Train j's first-wheelset position at ``times`` (after its latest update)."""
+        return self._head_into(j, times, np.empty(times.shape))
+
+    def _head_into(self, j: int, times: np.ndarray, head: np.ndarray) -> np.ndarray:
+        """``head_at`` written into ``head``: in place, so a frame allocates nothing; one sample
+        (a build with N = 1) in floats. The operations and their order are those of the formula
+        in head_at_time, so the two agree bit for bit."""
+        if head.size == 1:
+            head[0] = self.head_at_time(j, float(times[0]))
+            return head
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
-        head = x_k + v_k * (times - t_k)
+        if v_k == 0.0 and not (gap or speed_gap) and x_k != 0.0:
+            # a train standing (or parked off the line): x_k + 0·(t − t_k) is x_k
+            head.fill(x_k)
+            return head
+        np.subtract(times, t_k, out=head)
         if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
-            s = _unit_clip((times - t_k) / POSITION_BLEND_S)
-            head = head + gap * (2 * s ** 3 - 3 * s ** 2 + 1) + speed_gap * POSITION_BLEND_S * (s ** 3 - 2 * s ** 2 + s)
+            s = np.divide(head, POSITION_BLEND_S, out=self._blend_s[:head.size])
+            np.minimum(np.maximum(s, 0.0, out=s), 1.0, out=s)
+            s2 = np.multiply(s, s, out=self._blend_s2[:head.size])
+            s3 = np.power(s, 3.0, out=self._blend_s3[:head.size])
+            shape = np.multiply(s3, 2.0, out=self._blend_shape[:head.size])         # 2s³ − 3s² + 1
+            shape -= np.multiply(s2, 3.0, out=self._blend_term[:head.size])
+            shape += 1.0
+            head *= v_k
+            head += x_k
+            head += np.multiply(shape, gap, out=shape)
+            shape = np.multiply(s2, 2.0, out=self._blend_shape[:head.size])         # s³ − 2s² + s
+            np.subtract(s3, shape, out=shape)
+            shape += s
+            head += np.multiply(shape, speed_gap * POSITION_BLEND_S, out=shape)
+            return head
+        head *= v_k
+        head += x_k
         return head
 
     def head_at_time(self, j: int, t: float) -> float:
-        """``head_at`` at one time, without an array: the straight line's arithmetic is the same
-        in floats; while a correction is being blended in, the array formula is used as it is."""
+        """``head_at`` at one time, in floats."""
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
-        if (gap or speed_gap) and t - t_k < POSITION_BLEND_S:
-            return float(self.head_at(j, np.array([t]))[0])
-        return x_k + v_k * (t - t_k)
+        tau = t - t_k
+        head = x_k + v_k * tau
+        if (gap or speed_gap) and tau < POSITION_BLEND_S:
+            s = _unit(tau / POSITION_BLEND_S)
+            s2, s3 = s * s, s ** 3
+            head = head + gap * (2 * s3 - 3 * s2 + 1) + speed_gap * POSITION_BLEND_S * (s3 - 2 * s2 + s)
+        return head
 
-    def _speed_at(self, j: int, times: np.ndarray) -> np.ndarray:
+    def _speed_at_time(self, j: int, t: float) -> float:
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
-        s = _unit_clip((times - t_k) / POSITION_BLEND_S)
-        return v_k + gap * (6 * s ** 2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s ** 2 - 4 * s + 1)
+        s = _unit((t - t_k) / POSITION_BLEND_S)
+        s2 = s * s
+        return v_k + gap * (6 * s2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s2 - 4 * s + 1)
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:

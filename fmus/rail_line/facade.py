@@ -1,7 +1,7 @@
 """RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.fmi.slave import FrameSlave, Port, line_file_port, sample_rate_port
-from fmus.rail_line.core import RailLineCore, RailSettings
+from fmus.rail_line.core import RailLineCore, RailOutputs, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters
 
 OFF_LINE_M = -1000.0
@@ -102,6 +102,8 @@ class RailLine(FrameSlave):
             supply_tolerance=p("supply_tolerance"), shunt_margin=p("shunt_margin"), carrier_hz=p("carrier"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
+        # the core writes its outputs straight into the output ports
+        core.bind_outputs(RailOutputs(io["e_coil"], io["occupied"], io["i_axle"], io["off_line"], io["coil_section"]))
         self.required_step_s = self.build.frame / settings.fs_hz
         # the trains' initial positions (the traction units publish x0 in initialisation mode):
         # trains on the line occupy their circuits from the first sample
@@ -110,15 +112,9 @@ class RailLine(FrameSlave):
 
     def publish_initial_outputs(self):
         self.io["off_line"][...] = True
-        self.io["occupied"][...] = self.core.out.occupied
 
     def step_core(self, current_time, step_size):
         io = self.io
         core = self.core
         core.set_faults(float(io["broken_rail_at"]), io["ballast_override"], io["feed_open"])
-        out = core.step(current_time, io["u_tx"], io["x_head"], io["v"], io["i_traction"])
-        io["e_coil"][...] = out.e_coil
-        io["occupied"][...] = out.occupied
-        io["i_axle"][...] = out.i_axle
-        io["off_line"][...] = out.off_line
-        io["coil_section"][...] = out.coil_section
+        core.step(current_time, io["u_tx"], io["x_head"], io["v"], io["i_traction"])     # into the output ports

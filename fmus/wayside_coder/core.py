@@ -70,6 +70,18 @@ class CoderOutputs:
     status: int = STATUS_OK
 
 
+def bind_outputs(core, u_tx: np.ndarray, code_tx: np.ndarray, signal: np.ndarray) -> None:
+    """Let a coder core (ALSN or digital) write its array outputs straight into these arrays
+    (a host's port buffers, of the shapes of ``core.out``'s): no copy per frame."""
+    out = core.out
+    for name, theirs in (("u_tx", u_tx), ("code_tx", code_tx), ("signal", signal)):
+        mine = getattr(out, name)
+        if theirs.shape != mine.shape:
+            raise ValueError(f"bind_outputs: {name} has shape {theirs.shape}, the core's {mine.shape}")
+        theirs[...] = mine
+        setattr(out, name, theirs)
+
+
 def check_settings(line: Line, sections: int, s: CoderSettings) -> None:
     """What every coder (ALSN or digital) checks of its line and parameters."""
     if len(line.sections) > sections:
@@ -195,7 +207,7 @@ class WaysideCoderCore:
         # sample times from the integer sample index: no drift over long runs
         first = round(t * s.fs_hz)
         if self._period is not None:          # the periodic waveform of each section, from its table
-            np.take(self._wave_rows, self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
+            self._wave_rows.take(self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
             return out
         times = (first + self._index) / s.fs_hz
         key = keyed(np.mod(times + self.cam_offset_s[:, None], self.cycle_s[:, None]), self._pulses)

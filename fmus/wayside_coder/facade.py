@@ -3,7 +3,7 @@ FIRE_DQPSK). No logic here (see core.py, digital.py)."""
 from fmus.signalling import alsn, cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.fmi.slave import FrameSlave, Port, line_file_port, cab_system_port, sample_rate_port
-from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
+from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore, bind_outputs
 from fmus.wayside_coder.digital import DigitalCoderCore
 
 
@@ -77,13 +77,12 @@ class WaysideCoder(FrameSlave):
         else:
             core = DigitalCoderCore(system, line, self.build.sections, self.build.frame, settings)
         self.required_step_s = self.build.frame / settings.fs_hz
+        bind_outputs(core, self.io["u_tx"], self.io["code_tx"], self.io["signal"])    # written in place
         return core
 
     def step_core(self, current_time, step_size):
         io = self.io
         out = self.core.step(current_time, io["occupied"], bool(io["fault_main"]), bool(io["fault_reserve"]),
                              int(io["wrong_command_main"]), int(io["wrong_command_reserve"]))
-        io["u_tx"][...] = out.u_tx
-        io["code_tx"][...] = out.code_tx
-        io["signal"][...] = out.signal
-        io["status"][...] = out.status
+        if out.status != io["status"].item():           # u_tx, code_tx and signal are written in place
+            io["status"][...] = out.status

@@ -283,6 +283,7 @@ class _Track:
         self.broken_rail_start_m = float(_parameter(graph, rail, "broken_rail_at", -1.0))
         self._broken_rail = None
         self._cache = (None, None)
+        self._codes = (None, None)          # (occupancy bytes, its block rules)
 
     def bind(self, master: MasterView, slots: Dict[tuple, tuple]) -> None:
 
@@ -319,7 +320,11 @@ class _Track:
 
         if self._cache[0] != tick:
             heads = self.heads_m(master)
-            self._cache = (tick, (heads, block_codes(self.occupied(heads), self.block_of, self.block_aspects)))
+            occupied = self.occupied(heads)
+            key = occupied.tobytes()
+            if key != self._codes[0]:        # the rules change only with the occupancy
+                self._codes = (key, block_codes(occupied, self.block_of, self.block_aspects))
+            self._cache = (tick, (heads, self._codes[1]))
         return self._cache[1]
 
     def occupied_ahead_in_block(self, heads_m, train: int, coil_m: float, circuit: int) -> bool:
