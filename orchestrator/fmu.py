@@ -18,6 +18,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from fmus.reductions import all_true
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.protocols import Causality, Slave
 from orchestrator.ssp import UnitDef, safe_extract
@@ -261,9 +262,9 @@ class FmuSlave(_ExtractedComponent):
             # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
             # buffer (occupancy, faults, commands between events) costs no call
             if last is not None:
-                # the ufuncs directly (np.array_equal's Python layer costs more than the test);
+                # a ufunc and a count (np.array_equal's Python layer costs more than the test);
                 # NaN never equals, as there
-                if _all_true(np.equal(last, buffer.values, out=self._unchanged[id(buffer)])):
+                if all_true(np.equal(last, buffer.values, out=self._unchanged[id(buffer)])):
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)
@@ -329,7 +330,6 @@ class FmuSlave(_ExtractedComponent):
 
 
 _FMI2_WARNING, _FMI2_FATAL = 1, 4
-_all_true = np.logical_and.reduce
 
 
 def _call_exception(function: str, status: int) -> Exception:

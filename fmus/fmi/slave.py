@@ -44,6 +44,7 @@ from pythonfmu.variables import Boolean, Integer, Real, String
 
 from fmus.errors import FmuInputError
 from fmus.fmi.units import unit_definition
+from fmus.reductions import all_true
 from fmus.sizes import BuildConfig
 
 _TYPE_CLASSES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
@@ -160,8 +161,6 @@ class _InputCheck:
 
 #: at most this many range-checked inputs of a type are tested in plain Python
 _FEW_BOUNDED = 8
-#: all(bool array) without ndarray.all's Python-level wrapper (checked before every step)
-_all_true = np.logical_and.reduce
 
 
 @dataclass
@@ -346,7 +345,7 @@ class FrameSlave(Fmi2Slave):
             values = check.view if check.view is not None else self._stores[type_name].values[check.index]
             if check.finite:
                 finite = np.isfinite(values, out=check.scratch)
-                if not _all_true(finite):
+                if not all_true(finite):
                     return self._input_message(check, int(np.argmin(finite)), values)
             if check.few is not None:
                 item = values.item
@@ -356,7 +355,7 @@ class FrameSlave(Fmi2Slave):
             elif check.bounded is not None:
                 inside = values[check.bounded]
                 good = (inside >= check.low) & (inside <= check.high)
-                if not _all_true(good):
+                if not all_true(good):
                     return self._input_message(check, int(check.bounded[int(np.argmin(good))]), values)
         return None
 

@@ -58,6 +58,7 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
+from fmus.reductions import largest, smallest
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.units import MPS_PER_KMH
 
@@ -91,9 +92,6 @@ def resolve_inertia_s(inertia_s: float, digital: bool) -> float:
 
 # the digital receiver's redundant channels (2-out-of-3); every receiver reports one code per channel
 CHANNELS = 3
-
-# whole-frame extremes through the ufuncs directly (np.max / ndarray.max add a Python-level dispatch)
-_max, _min = np.maximum.reduce, np.minimum.reduce
 
 
 @dataclass
@@ -198,7 +196,7 @@ class LocoReceiverCore:
         the signal is x itself, else None)."""
         s = self.settings
         magnitude = np.abs(x)
-        peak = float(_max(magnitude))
+        peak = largest(magnitude)
         if peak <= s.agc_limit_v:
             if self._gain_db >= 0.0:
                 return x, 1.0, magnitude                    # the usual case: no overload, full gain
@@ -218,14 +216,14 @@ class LocoReceiverCore:
         reads the code amplitude, not the instant value: held = d^(N−1)·max(prev·d, max(e[m]·d^−m))."""
         n = input_envelope.size
         d = self._level_step
-        self._held = d ** (n - 1) * max(self._held * d, float(_max(input_envelope * self._level_growth[:n])))
+        self._held = d ** (n - 1) * max(self._held * d, largest(input_envelope * self._level_growth[:n]))
         return self._held
 
     def _relay_states(self, envelope: np.ndarray):
         """(relay state per sample or None when it stays as it is for the whole frame, the
         envelope's maximum)."""
         s = self.settings
-        low, high = float(_min(envelope)), float(_max(envelope))
+        low, high = smallest(envelope), largest(envelope)
         if self._relay:
             if low >= s.drop_out_v:
                 return None, high
@@ -270,7 +268,7 @@ class LocoReceiverCore:
                 self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
                 self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
         elif self._relay:
-            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else float(_max(level)))
+            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else largest(level))
             self._pulse_drive = max(self._pulse_drive, drive_max)
         if self._pending is not None:
             self._settle_pending(t + x.size * self.dt)

@@ -31,6 +31,7 @@ import numpy as np
 
 from fmus.data.loader import Line, check_carrier_under_traction
 from fmus.errors import FmuInputError
+from fmus.reductions import any_true
 from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
 
@@ -40,7 +41,6 @@ except ImportError:          # another numpy layout: the public function
     _interp = np.interp
 
 _CACHE_SIZE = 64
-_any_true = np.logical_or.reduce      # any(bool array) without ndarray.any's Python-level wrapper
 SHUNT_BLEND_S = 0.1      # the front train's amplitude handed over from one node's model to the next
 # a section's configuration: (shunt nodes, sorted; head nodes, one per train head in it, front first)
 Config = Tuple[Tuple[int, ...], Tuple[int, ...]]
@@ -535,14 +535,14 @@ class TrackCircuitBank:
         levels = self._relay_levels
         wants_up = np.where(self.relay_up, levels > s.relay_drop_out, levels >= s.relay_pick_up)
         changing = wants_up != self.relay_up
-        if not _any_true(changing):
+        if not any_true(changing):
             self._relay_timer[:] = 0.0
             self._relays_settled = True              # nothing to do until a level changes
             return
         self._relay_timer = np.where(changing, self._relay_timer + step_s, 0.0)
         delay = np.where(wants_up, s.relay_pick_up_delay_s, s.relay_drop_out_delay_s)
         done = changing & (self._relay_timer >= delay - 1e-12)
-        if _any_true(done):
+        if any_true(done):
             self.relay_up = np.where(done, wants_up, self.relay_up)
             self._relay_timer[done] = 0.0
 
