@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import operator
 import traceback
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
@@ -250,16 +251,36 @@ class FrameSlave(Fmi2Slave):
 
     def write_outputs(self, out, fields) -> None:
         """Copy a core's output record to the ports: ``fields`` is ((port, attribute), ...).
-        A scalar port is written only when its value differs (most of a receiver's or a
-        train's outputs change seldom, and reading a port costs less than writing it); a zero
-        float always, so that −0.0 and 0.0 are told apart; arrays are always copied."""
+        The scalar ports of each type are written together, one assignment of all their values
+        into the type's store (a receiver has a dozen, read every frame); array ports are
+        copied one by one."""
         plan = self._output_plans.get(fields)
         if plan is None:
-            plan = self._output_plans[fields] = tuple((self.io[port], attribute) for port, attribute in fields)
-        for port, attribute in plan:
-            value = getattr(out, attribute)
-            if isinstance(value, np.ndarray) or value != port.item() or (value == 0.0 and isinstance(value, float)):
-                port[...] = value
+            plan = self._output_plans[fields] = self._output_plan(fields)
+        arrays, scalars = plan
+        for port, attribute in arrays:
+            port[...] = getattr(out, attribute)
+        for values, slots, read in scalars:
+            values[slots] = read(out)
+
+    def _output_plan(self, fields):
+        """(array ports and their attributes; per type of scalar port: the type's store, the
+        ports' slots in it, a getter of their attributes' values in that order)."""
+        shapes = {port.name: port.shape for port in self.ports}
+        arrays = tuple((self.io[port], attribute) for port, attribute in fields if shapes[port])
+        by_type: Dict[str, List[Tuple[int, str]]] = {}
+        for port, attribute in fields:
+            if not shapes[port]:
+                type_name, slot = self._port_slots[port]
+                by_type.setdefault(type_name, []).append((slot, attribute))
+        scalars = []
+        for type_name, entries in by_type.items():
+            slots = [slot for slot, _ in entries]
+            contiguous = slots == list(range(slots[0], slots[0] + len(slots)))
+            index = slice(slots[0], slots[0] + len(slots)) if contiguous else np.array(slots, dtype=np.int64)
+            read = operator.attrgetter(*(attribute for _, attribute in entries))
+            scalars.append((self._stores[type_name].values, index if len(slots) > 1 else slots[0], read))
+        return arrays, tuple(scalars)
 
     def resource_path(self, path: str) -> str:
         """A data file named by a parameter: absolute, or relative to the working folder, else
@@ -289,6 +310,7 @@ class FrameSlave(Fmi2Slave):
             store.slot_of_vr = np.full(total_vrs, -1, dtype=np.int64)
         next_slot = {t: 0 for t in _TYPE_CLASSES}
         self._string_ports: Dict[str, int] = {}
+        self._port_slots: Dict[str, Tuple[str, int]] = {}      # numeric port → (type, its first slot)
         for port in ports:
             store = self._stores[port.type]
             first = next_slot[port.type]
@@ -297,6 +319,7 @@ class FrameSlave(Fmi2Slave):
                 self._string_ports[port.name] = first
                 self.io[port.name] = store.values[first]
             else:
+                self._port_slots[port.name] = (port.type, first)
                 view = store.values[first:first + port.size]
                 view[:] = port.start
                 self.io[port.name] = view.reshape(port.shape) if port.shape else view.reshape(())
