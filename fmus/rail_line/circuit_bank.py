@@ -148,6 +148,8 @@ class TrackCircuitBank:
         self._phasor_families: Dict[Tuple[int, Faults], PhasorFamily] = {}
         self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._zeros = np.zeros(frame)
+        # per section: (position, amplitude table, node amplitude, scale) of a standing front train
+        self._standing_scale: List[Optional[tuple]] = [None] * self.count
         self.calibration = self._calibrate()
         self._refresh_faults()
         size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
@@ -391,16 +393,24 @@ class TrackCircuitBank:
         family = self._phasor_family(k, faults)
         return supply * abs(family.with_shunts(list(shunts), self.g_shunt, 0)) / self._reference[k]
 
-    def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray):
+    def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray, standing_at: Optional[float] = None):
         """Code-current amplitude at the exact wheelset position over the one at the model's node,
         for the train whose head is the section's front-most shunt (1 for any other train).
         The shape between nodes is the one-shunt table's; a whole train's shunts make the
         amplitude at the next node differ from it by a few per cent, and that difference is
-        spread over ``SHUNT_BLEND_S`` after the head moves on to the next node."""
+        spread over ``SHUNT_BLEND_S`` after the head moves on to the next node. A train
+        standing at ``standing_at`` over the frame gets the frame before's values again when
+        nothing else changed (the same computation on the same positions)."""
         _, _, log_amplitude, at_node, front = self._active[k]
         if j != front:
             return 1.0
-        value = np.exp(_interp(head, self._nodes_m[k], log_amplitude) - at_node)
+        kept = self._standing_scale[k]
+        if standing_at is not None and kept is not None and kept[0] == standing_at and kept[1] is log_amplitude \
+                and kept[2] == at_node and kept[3].size == head.size:
+            value = kept[3]
+        else:
+            value = np.exp(_interp(head, self._nodes_m[k], log_amplitude) - at_node)
+            self._standing_scale[k] = (standing_at, log_amplitude, at_node, value) if standing_at is not None else None
         gain, since = self._handover[k]
         if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
             blend = 1.0 - (times - since) / SHUNT_BLEND_S

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from typing import List
+from typing import List, Optional, Sequence
 
 import numpy as np
 
@@ -54,10 +54,12 @@ class CoilPickup:
         self._band_lo = [lo for lo, _ in merged]
         self._band_hi = [hi for _, hi in merged]
 
-    def sense(self, first: int, times: np.ndarray, heads: np.ndarray, currents: FrameCurrents, out) -> None:
+    def sense(self, first: int, times: np.ndarray, heads: np.ndarray, currents: FrameCurrents, out,
+              standing_at: Sequence[Optional[float]] = ()) -> None:
         """Every train's coil EMF, code current under its first wheelset, coil section and
         off-line flag for the frame of sample index ``first`` (``times`` its sample times,
-        ``heads`` the trains' first-wheelset positions per sample); written into ``out``."""
+        ``heads`` the trains' first-wheelset positions per sample, ``standing_at`` the position
+        of each train that stands over the whole frame, else None); written into ``out``."""
         s, bank, interference = self.settings, self.bank, self.interference
         n = times.size
         ends, feeds = bank.ends_list, bank.feed_list
@@ -79,7 +81,8 @@ class CoilPickup:
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
-                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times)
+                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times,
+                                                                 standing_at[j] if standing_at else None)
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
             else:

@@ -124,6 +124,9 @@ class RailLineCore:
         # (x_k, v_k, t_k, gap_k, speed_gap_k): head_at
         self._anchors: List[Optional[Tuple[float, float, float, float, float]]] = [None] * trains
         self._heads = np.zeros((trains, frame))
+        # per train: its position when it stands over the whole frame (every sample of its
+        # row in _heads is that value), else None
+        self.standing_at: List[Optional[float]] = [None] * trains
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
 
@@ -166,7 +169,7 @@ class RailLineCore:
         self.bank.follow_shunts(at_tick, tick)        # every wheelset of every train shunts its section
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
-        self.pickup.sense(first, times, heads[:, :n], currents, out)
+        self.pickup.sense(first, times, heads[:, :n], currents, out, self.standing_at)
         out.occupied[:self.count] = ~self.bank.relay_up
         return out
 
@@ -216,12 +219,15 @@ class RailLineCore:
         in head_at_time, so the two agree bit for bit."""
         if head.size == 1:
             head[0] = self.head_at_time(j, float(times[0]))
+            self.standing_at[j] = None
             return head
         x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
         if v_k == 0.0 and not (gap or speed_gap) and x_k != 0.0:
             # a train standing (or parked off the line): x_k + 0·(t − t_k) is x_k
             head.fill(x_k)
+            self.standing_at[j] = x_k
             return head
+        self.standing_at[j] = None
         np.subtract(times, t_k, out=head)
         if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
             s = np.divide(head, POSITION_BLEND_S, out=self._blend_s[:head.size])

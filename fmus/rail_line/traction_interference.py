@@ -76,6 +76,7 @@ class TractionInterference:
         self._lag_powers = lag ** np.arange(1, frame + 1)
         self._traction_last = [0.0] * trains                   # smoothed current at the last sample
         self._traction_on = [False] * trains
+        self._traction_settled = [False] * trains             # the row is the held value at every sample
         self._i_traction = np.zeros((trains, frame))
         self._index = np.arange(frame)
         self._ripple_first = None                              # the frame's ripple waveform, once computed
@@ -101,11 +102,15 @@ class TractionInterference:
                 if self._traction_on[j]:
                     row[:] = 0.0
                     self._traction_on[j] = False
+                    self._traction_settled[j] = False
                 continue
+            if held == last and self._traction_settled[j]:
+                continue                   # the lag has reached the held value: the row is all held
             np.multiply(self._lag_powers[:n], last - held, out=row)
             row += held
             self._traction_last[j] = float(row[-1])
             self._traction_on[j] = True
+            self._traction_settled[j] = held == last and n == self._i_traction.shape[1]
         self._ripple_first = None
 
     def wave(self, j: int, first: int, times: np.ndarray) -> np.ndarray:
