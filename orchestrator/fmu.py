@@ -18,7 +18,6 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from fmus.reductions import all_true
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.protocols import Causality, Slave
 from orchestrator.ssp import UnitDef, safe_extract
@@ -262,9 +261,10 @@ class FmuSlave(_ExtractedComponent):
             # an FMU keeps its inputs until they are set again (FMI 2.0 §4.2.1): an unchanged
             # buffer (occupancy, faults, commands between events) costs no call
             if last is not None:
-                # a ufunc and a count (np.array_equal's Python layer costs more than the test);
-                # NaN never equals, as there
-                if all_true(np.equal(last, buffer.values, out=self._unchanged[id(buffer)])):
+                # a ufunc and a count of the equal values (np.array_equal's Python layer costs
+                # more than the test); NaN never equals, as there
+                unchanged = np.equal(last, buffer.values, out=self._unchanged[id(buffer)])
+                if _count_nonzero(unchanged) == unchanged.size:
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)
@@ -330,6 +330,10 @@ class FmuSlave(_ExtractedComponent):
 
 
 _FMI2_WARNING, _FMI2_FATAL = 1, 4
+try:        # np.count_nonzero's own routine, without its Python-level argument handling
+    from numpy._core.multiarray import count_nonzero as _count_nonzero
+except ImportError:          # another numpy layout: the public function
+    _count_nonzero = np.count_nonzero
 
 
 def _call_exception(function: str, status: int) -> Exception:
