@@ -231,7 +231,10 @@ class RailLineCore:
         np.subtract(times, t_k, out=head)
         if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
             s = np.divide(head, POSITION_BLEND_S, out=self._blend_s[:head.size])
-            np.minimum(np.maximum(s, 0.0, out=s), 1.0, out=s)
+            if not (times[0] >= t_k and times[-1] - t_k <= POSITION_BLEND_S):
+                # the clip to [0, 1]; a frame inside the blend (as every frame is when the
+                # master updates the position each frame) needs none: 0 ≤ τ ≤ B gives 0 ≤ τ/B ≤ 1
+                np.minimum(np.maximum(s, 0.0, out=s), 1.0, out=s)
             s2 = np.multiply(s, s, out=self._blend_s2[:head.size])
             s3 = np.power(s, 3.0, out=self._blend_s3[:head.size])
             shape = np.multiply(s3, 2.0, out=self._blend_shape[:head.size])         # 2s³ − 3s² + 1
