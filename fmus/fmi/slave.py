@@ -164,6 +164,14 @@ class _InputCheck:
 _FEW_BOUNDED = 8
 
 
+def _slot_index(slots: List[int]):
+    """Store slots as an index: a slice when they are consecutive (numpy then copies a block,
+    and a slice of a store is a view of it), else an index array."""
+    if slots == list(range(slots[0], slots[0] + len(slots))):
+        return slice(slots[0], slots[0] + len(slots))
+    return np.array(slots, dtype=np.int64)
+
+
 @dataclass
 class _Store:
     """Flat value store of one FMI type plus the value-reference → slot table."""
@@ -266,20 +274,17 @@ class FrameSlave(Fmi2Slave):
     def _output_plan(self, fields):
         """(array ports and their attributes; per type of scalar port: the type's store, the
         ports' slots in it, a getter of their attributes' values in that order)."""
-        shapes = {port.name: port.shape for port in self.ports}
-        arrays = tuple((self.io[port], attribute) for port, attribute in fields if shapes[port])
+        arrays = tuple((self.io[port], attribute) for port, attribute in fields if self.io[port].ndim)
         by_type: Dict[str, List[Tuple[int, str]]] = {}
         for port, attribute in fields:
-            if not shapes[port]:
+            if not self.io[port].ndim:
                 type_name, slot = self._port_slots[port]
                 by_type.setdefault(type_name, []).append((slot, attribute))
         scalars = []
         for type_name, entries in by_type.items():
             slots = [slot for slot, _ in entries]
-            contiguous = slots == list(range(slots[0], slots[0] + len(slots)))
-            index = slice(slots[0], slots[0] + len(slots)) if contiguous else np.array(slots, dtype=np.int64)
             read = operator.attrgetter(*(attribute for _, attribute in entries))
-            scalars.append((self._stores[type_name].values, index if len(slots) > 1 else slots[0], read))
+            scalars.append((self._stores[type_name].values, _slot_index(slots) if len(slots) > 1 else slots[0], read))
         return arrays, tuple(scalars)
 
     def resource_path(self, path: str) -> str:
@@ -349,10 +354,9 @@ class FrameSlave(Fmi2Slave):
                 first += port.size
             if not slots or (type_name == "Integer" and not bounded):
                 continue                  # an integer without a declared range cannot be wrong
-            contiguous = slots == list(range(slots[0], slots[0] + len(slots)))
-            index = slice(slots[0], slots[0] + len(slots)) if contiguous else np.array(slots, dtype=np.int64)
+            index = _slot_index(slots)
             # the stores are allocated once and written in place, so a slice stays their view
-            view = self._stores[type_name].values[index] if contiguous else None
+            view = self._stores[type_name].values[index] if isinstance(index, slice) else None
             few = list(zip(bounded, low, high)) if 0 < len(bounded) <= _FEW_BOUNDED else None
             checks.append((type_name, _InputCheck(
                 view, index, type_name == "Real", np.zeros(len(slots), dtype=bool), few,

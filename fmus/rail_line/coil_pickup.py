@@ -55,7 +55,7 @@ class CoilPickup:
         self._band_hi = [hi for _, hi in merged]
 
     def sense(self, first: int, times: np.ndarray, heads: np.ndarray, currents: FrameCurrents, out,
-              standing_at: Sequence[Optional[float]] = ()) -> None:
+              standing_at: Sequence[Optional[float]]) -> None:
         """Every train's coil EMF, code current under its first wheelset, coil section and
         off-line flag for the frame of sample index ``first`` (``times`` its sample times,
         ``heads`` the trains' first-wheelset positions per sample, ``standing_at`` the position
@@ -81,8 +81,7 @@ class CoilPickup:
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
-                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times,
-                                                                 standing_at[j] if standing_at else None)
+                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times, standing_at[j])
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
             else:
