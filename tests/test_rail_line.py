@@ -185,6 +185,46 @@ def test_frame_length_does_not_change_the_coil_emf():
     assert np.allclose(results[1], results[40], rtol=1e-9, atol=1e-12)
 
 
+def _keyed_run(core, seconds, x0_m, v_mps, ballast_at=None):
+    """Keyed code in every section, the train from x0_m at v_mps; ``ballast_at`` (t0, t1, k):
+    section k's ballast overridden to 3 Ω·km from t0 to t1. Returns (e_coil, i_axle, occupied)."""
+    emf, axle, occupied, parked = [], [], [], set()
+    for frame in range(int(round(seconds * FS / N))):
+        t = frame * N / FS
+        times = t + np.arange(N) / FS
+        ballast = np.zeros(8)
+        if ballast_at is not None and ballast_at[0] <= t < ballast_at[1]:
+            ballast[ballast_at[2]] = 3.0
+        core.set_faults(-1.0, ballast, np.zeros(8, dtype=bool))
+        u = np.where(np.sin(2 * np.pi * 0.9 * times + 2.0 * np.arange(8)[:, None]) > 0, 4.0, 0.0) * np.sin(W50 * times)
+        out = core.step(t, u, np.array([x0_m + v_mps * t, -1000.0]), np.array([v_mps, 0.0]), np.zeros(2))
+        emf.append(out.e_coil[0].copy())
+        axle.append(out.i_axle[0])
+        occupied.append(out.occupied.copy())
+        parked.update(k for k, at in enumerate(core.bank._parked_at) if at is not None)
+    return np.concatenate(emf), np.array(axle), np.array(occupied), parked
+
+
+def test_sections_without_a_train_parked_and_caught_up_give_the_same_currents(monkeypatch):
+    """A section no train or coil needs is not advanced; when a train or a coil needs it again
+    (here section 2 after 6 s, and every parked section when a fault changes), it is caught up
+    from its code input's history: the coil sees what it sees when every section advances
+    every frame (docs/rail_line.md, performance)."""
+    line = load_line()
+    parked_core = RailLineCore(line, 8, 2, N, RailSettings())
+    from fmus.rail_line import circuit_bank
+    monkeypatch.setattr(circuit_bank, "_HISTORY_FLOATS", 0)       # no history: nothing parked
+    live_core = RailLineCore(line, 8, 2, N, RailSettings())
+    run = dict(seconds=9.0, x0_m=2300.0, v_mps=40.0, ballast_at=(3.0, 4.5, 5))
+    emf, axle, occupied, parked = _keyed_run(parked_core, **run)
+    emf_live, axle_live, occupied_live, never = _keyed_run(live_core, **run)
+    assert not never and {1, 5, 7} <= parked
+    assert emf.std() > 0.05 and axle[-1] > 0.5                       # the coil over section 2's code
+    assert np.allclose(emf, emf_live, rtol=0.0, atol=1e-12 * np.abs(emf_live).max())
+    assert np.allclose(axle, axle_live, rtol=1e-12, atol=0.0)
+    assert (occupied == occupied_live).all()
+
+
 def test_bad_parameters_are_named_and_off_line_trains_reported(tmp_path):
     with pytest.raises(FmuInputError, match="parameter coil_gain"):
         RailLineCore(load_line(), 8, 2, N, RailSettings(coil_gain_h=0.0))

@@ -41,6 +41,12 @@ except ImportError:          # another numpy layout: the public function
     _interp = np.interp
 
 _CACHE_SIZE = 64
+# a parked section (no train, no coil over it) is caught up from its inputs' history when it is
+# needed again: over as many frames as its free network's slowest mode takes to fall below
+# this share (a few units in the last place of the states), the history at most this many
+# floats; a section that would need more is never parked
+_SETTLED_SHARE = 2.0 ** -64
+_HISTORY_FLOATS = 2 ** 20
 SHUNT_BLEND_S = 0.1      # the front train's amplitude handed over from one node's model to the next
 # a section's configuration: (shunt nodes, sorted; head nodes, one per train head in it, front first)
 Config = Tuple[Tuple[int, ...], Tuple[int, ...]]
@@ -62,6 +68,8 @@ class _Model:
     front_response: complex         # the same for the current arriving at the front head (0: no head)
     carrier_system: np.ndarray      # (2·nx, 2) the states at a sample and the next → the carrier's
                                     # phasor (re, im), by least squares (_carry_states_over)
+    settle_frames: int = 0          # frames for every mode to fall below _SETTLED_SHARE (0: not yet known)
+    padded: Optional[tuple] = None  # (step, ahead, entry) on a section's padded [states | frame input]
 
 
 @dataclass(frozen=True)
@@ -79,12 +87,12 @@ class Calibration:
 
 class FrameCurrents:
     """A frame's per-sample currents of a section, computed only for the sections a coil sees
-    (from the states at the frame start and the frame's code input)."""
+    (from each section's states at the frame start followed by the frame's code input)."""
 
-    __slots__ = ("bank", "states", "u")
+    __slots__ = ("bank", "start")
 
-    def __init__(self, bank: "TrackCircuitBank", states: np.ndarray, u: np.ndarray):
-        self.bank, self.states, self.u = bank, states, u
+    def __init__(self, bank: "TrackCircuitBank", start: np.ndarray):
+        self.bank, self.start = bank, start
 
     def ahead(self, k: int, j: int) -> np.ndarray:
         """Rail current arriving from the feed at train j's first axle in section k (zero when
@@ -93,12 +101,15 @@ class FrameCurrents:
         row = bank._rows[k].get(j)
         if row is None:
             return bank._zeros
-        model = bank._active[k][1]
-        return model.ahead_o[row] @ self.states[k, :model.ahead_o.shape[2]] + model.ahead_t[row] @ self.u[k]
+        if bank._parked_at[k] is not None:
+            bank._wake_in_frame(k)
+        return bank._active[k][1].padded[1][row] @ self.start[k]
 
     def entry(self, k: int) -> np.ndarray:
-        model = self.bank._active[k][1]
-        return model.entry_o @ self.states[k, :model.entry_o.shape[1]] + model.entry_t @ self.u[k]
+        bank = self.bank
+        if bank._parked_at[k] is not None:
+            bank._wake_in_frame(k)
+        return bank._active[k][1].padded[2] @ self.start[k]
 
 
 class TrackCircuitBank:
@@ -152,12 +163,25 @@ class TrackCircuitBank:
         self._standing_scale: List[Optional[tuple]] = [None] * self.count
         self.calibration = self._calibrate()
         self._refresh_faults()
-        size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
-        self.states = np.zeros((self.count, size))
-        self._spare_states = np.zeros((self.count, size))       # the two alternate frame by frame
-        self._input_response = np.zeros((self.count, size, 1))
-        self._phi_stack = np.zeros((self.count, size, size))
-        self._psi_stack = np.zeros((self.count, size, frame))
+        size = self._size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
+        # per section and frame: its states at the frame start (padded to one size) followed by
+        # the frame's code input, so one product [Φᴺ | Ψ]·[x; u] advances it and one gives the
+        # currents a coil sees; the two arrays alternate frame by frame
+        self._frame_start = np.zeros((self.count, size + frame))
+        self._frame_end = np.zeros((self.count, size + frame))
+        self.states = self._frame_start[:, :size]
+        self._step = np.zeros((self.count, size, size + frame))     # [Φᴺ | Ψ] per section, padded
+        # sections advanced every frame (the others parked: their states at the start of frame
+        # _parked_at[k] in _parked, caught up from the inputs' history when needed again)
+        self._frame_index = 0
+        self._live = list(range(self.count))
+        self._wanted = set(range(self.count))
+        self._review_parking = False
+        self._parked_at: List[Optional[int]] = [None] * self.count
+        self._parked = np.zeros((self.count, size))
+        history = max(self._settle_frames(self._model(k, _NO_TRAIN)) for k in range(self.count))
+        self._history = np.zeros((min(history, _HISTORY_FLOATS // (self.count * frame)), self.count, frame))
+        self._lookahead_m = max(self._spacing_list) + s.coil_offset_m + s.coil_length_m + 1.0
         self.relay_up = np.ones(self.count, dtype=bool)
         self._relay_timer = np.zeros(self.count)
         self._carry_over: List[Tuple[int, _Model, _Model]] = []
@@ -283,6 +307,9 @@ class TrackCircuitBank:
             self._refresh_faults()
 
     def _refresh_faults(self) -> None:
+        for k in range(self.count) if hasattr(self, "_parked_at") else ():
+            if self._parked_at[k] is not None:       # caught up under the models it was parked with
+                self._wake(k)
         self._effective_faults = [
             Faults(f.ballast_ohm_km, self.broken_rail_m if self.starts[k] <= self.broken_rail_m < self.ends[k] else -1.0,
                    f.feed_open) for k, f in enumerate(self.faults)]
@@ -429,6 +456,15 @@ class TrackCircuitBank:
                 self._rows[k] = rows[k]
                 self._activate(k, config, rows[k], tick_s)
         self._configs = configs
+        # advanced every frame: the sections with a wheelset, and those a coil may reach before
+        # the next configuration change (the head moves less than a node spacing till then)
+        wanted = {k for k, (shunts, _) in enumerate(configs) if shunts}
+        for head in heads:
+            first = bisect.bisect_right(self.ends_list, head)
+            last = bisect.bisect_right(self._starts_list, head + self._lookahead_m)
+            wanted.update(range(first, last))
+        self._wanted = wanted
+        self._review_parking = True
 
     def _configuration(self, heads: List[float]):
         """Per section: (its shunt nodes, the head nodes of the trains whose head is in it, front
@@ -472,6 +508,8 @@ class TrackCircuitBank:
 
     def _activate(self, k: int, config: Config, rows: Dict[int, int], tick_s: float) -> None:
         model = self._model(k, config)
+        if self._parked_at[k] is not None:         # caught up under the model it was parked with
+            self._wake(k)
         previous = self._active[k]
         self._handover[k] = (1.0, 0.0)
         if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
@@ -488,10 +526,9 @@ class TrackCircuitBank:
             if before > 0.0 and after > 0.0:     # an opened feed carries no code to hand over
                 self._handover[k] = (before / after, tick_s)
         size = model.phi_n.shape[0]
-        self._phi_stack[k] = 0.0                             # sections padded to one size:
-        self._psi_stack[k] = 0.0                             # one product advances them all
-        self._phi_stack[k, :size, :size] = model.phi_n
-        self._psi_stack[k, :size] = model.psi
+        if model.padded is None:
+            model.padded = self._padded(model)
+        self._step[k] = model.padded[0]
         self.states[k, size:] = 0.0       # a branch the new network lacks (feed opened) carries nothing
         self._relay_levels[k] = model.relay_level
         self._relays_settled = False
@@ -506,18 +543,97 @@ class TrackCircuitBank:
         self._relay_timer[:] = 0.0
         self._relays_settled = False
 
+    def _padded(self, model: _Model) -> tuple:
+        """The model's matrices on a section's padded [states | frame input] row: the step
+        [Φᴺ | Ψ] (size, size + N), the currents at the heads (H, N, size + N) and at the entry
+        end (N, size + N); a state the model lacks has zero columns and a zero row."""
+        size, nx = self._size, model.phi_n.shape[0]
+        step = np.zeros((size, size + self.frame))
+        step[:nx, :nx], step[:nx, size:] = model.phi_n, model.psi
+        ahead = np.zeros((model.ahead_o.shape[0], self.frame, size + self.frame))
+        ahead[..., :nx], ahead[..., size:] = model.ahead_o, model.ahead_t
+        entry = np.zeros((self.frame, size + self.frame))
+        entry[:, :nx], entry[:, size:] = model.entry_o, model.entry_t
+        return step, ahead, entry
+
+    def _settle_frames(self, model: _Model) -> int:
+        """Frames after which whatever a section's states held has decayed below
+        _SETTLED_SHARE (its network's slowest mode over a frame)."""
+        if not model.settle_frames:
+            radius = float(np.abs(np.linalg.eigvals(model.phi_n)).max())
+            model.settle_frames = 1 if radius < 1e-300 else 1 << 62 if radius >= 1.0 \
+                else math.ceil(math.log(_SETTLED_SHARE) / math.log(radius))
+        return model.settle_frames
+
     def advance(self, u: np.ndarray, n: int) -> FrameCurrents:
-        """Every section's states over a frame of code input ``u`` (K, n) and the relays; the
-        frame's currents, computed on demand from the states it started from."""
+        """The states over a frame of code input ``u`` (K, n) of the sections a train or a coil
+        may need (the others parked, caught up when needed), and the relays; the frame's
+        currents, computed on demand from the states it started from."""
         if self._carry_over:
             self._carry_states_over(u)
-        before = self.states
-        self.states, self._spare_states = self._spare_states, before
-        np.matmul(self._phi_stack, before[..., None], out=self.states[..., None])
-        self.states += np.matmul(self._psi_stack, u[..., None], out=self._input_response)[..., 0]
+        start, end, size = self._frame_start, self._frame_end, self._size
+        if len(self._live) < self.count:
+            self._history[self._frame_index % len(self._history)] = u
+        if 2 * len(self._live) > self.count:       # most sections: one stacked product
+            start[:, size:] = u
+            np.matmul(self._step, start[..., None], out=end[:, :size, None])
+        else:
+            step = self._step
+            for k in self._live:
+                start[k, size:] = u[k]
+                np.matmul(step[k], start[k], out=end[k, :size])
+        self._frame_index += 1
+        if self._review_parking:
+            self._park()
+        self._frame_start, self._frame_end = end, start
+        self.states = end[:, :size]
         if not self._relays_settled:
             self._update_relays(n * self.dt)
-        return FrameCurrents(self, before, u)
+        return FrameCurrents(self, start)
+
+    def _park(self) -> None:
+        """Stop advancing the live sections no train or coil needs (after this frame's step),
+        when their history would be long enough to catch them up."""
+        self._review_parking = False
+        keep = []
+        for k in self._live:
+            model = self._active[k][1]
+            if k in self._wanted or self._settle_frames(model) > len(self._history):
+                keep.append(k)
+            else:
+                self._parked[k] = self._frame_end[k, :self._size]
+                self._parked_at[k] = self._frame_index
+        self._live = keep
+
+    def _caught_up(self, k: int, until: int) -> np.ndarray:
+        """A parked section's states at the start of frame ``until``: its parked states stepped
+        through the code input of the frames since, or only of the last frames its slowest mode
+        needs to forget where it started (the difference is below rounding)."""
+        size, history = self._size, self._history
+        first = max(self._parked_at[k], until - self._settle_frames(self._active[k][1]))
+        row, following = np.empty(size + self.frame), np.empty(size)
+        row[:size] = self._parked[k]
+        step = self._step[k]
+        for index in range(first, until):
+            row[size:] = history[index % len(history), k]
+            np.matmul(step, row, out=following)
+            row[:size] = following
+        self._parked_at[k] = None
+        self._wanted.add(k)
+        self._live = sorted(self._live + [k])
+        return row[:size]
+
+    def _wake(self, k: int) -> None:
+        """Before a frame's step: a parked section caught up, advanced from this frame on."""
+        self.states[k] = self._caught_up(k, self._frame_index)
+
+    def _wake_in_frame(self, k: int) -> None:
+        """After a frame's step, when a coil reads a parked section: caught up to the frame
+        start, then stepped over the frame (the history holds the frame's input)."""
+        size, start = self._size, self._frame_end          # the arrays have alternated
+        start[k, :size] = self._caught_up(k, self._frame_index - 1)
+        start[k, size:] = self._history[(self._frame_index - 1) % len(self._history), k]
+        np.matmul(self._step[k], start[k], out=self._frame_start[k, :size])
 
     def _carry_states_over(self, u: np.ndarray) -> None:
         """A wheelset shunt moved to the next node (the train's lumped shunts step by up to 50 m):

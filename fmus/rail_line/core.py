@@ -119,10 +119,9 @@ class RailLineCore:
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index_f = np.arange(frame, dtype=float)
         self._times = np.empty(frame)
-        # scratch of the position blend (head_at)
-        self._blend_s, self._blend_s2, self._blend_s3, self._blend_shape, self._blend_term = np.empty((5, frame))
-        # (x_k, v_k, t_k, gap_k, speed_gap_k): head_at
-        self._anchors: List[Optional[Tuple[float, float, float, float, float]]] = [None] * trains
+        self._blend_tau, self._blend_term = np.empty((2, frame))        # scratch of the position blend
+        # (x_k, v_k, t_k, gap_k, speed_gap_k, c2, c3): head_at; c2, c3 the blend's τ², τ³ coefficients
+        self._anchors: List[Optional[Tuple[float, ...]]] = [None] * trains
         self._heads = np.zeros((trains, frame))
         # per train: its position when it stands over the whole frame (every sample of its
         # row in _heads is that value), else None
@@ -207,7 +206,12 @@ class RailLineCore:
             if abs(gap) > POSITION_JUMP_M or abs(speed_gap) > SPEED_JUMP_MPS \
                     or (abs(gap) < 1e-6 and abs(speed_gap) < 1e-6):      # a jump, or nothing to close
                 gap = speed_gap = 0.0
-        self._anchors[j] = (x, v, t, gap, speed_gap)
+        # gap·(2s³ − 3s² + 1) + speed_gap·B·(s³ − 2s² + s) with s = τ/B, as a polynomial in τ:
+        # gap + speed_gap·τ + c2·τ² + c3·τ³
+        blend = POSITION_BLEND_S
+        c2 = -(3.0 * gap / blend + 2.0 * speed_gap) / blend
+        c3 = (2.0 * gap / blend + speed_gap) / (blend * blend)
+        self._anchors[j] = (x, v, t, gap, speed_gap, c2, c3)
 
     def head_at(self, j: int, times: np.ndarray) -> np.ndarray:
         """Train j's first-wheelset position at ``times`` (after its latest update)."""
@@ -215,56 +219,61 @@ class RailLineCore:
 
     def _head_into(self, j: int, times: np.ndarray, head: np.ndarray) -> np.ndarray:
         """``head_at`` written into ``head``: in place, so a frame allocates nothing; one sample
-        (a build with N = 1) in floats. The operations and their order are those of the formula
-        in head_at_time, so the two agree bit for bit."""
+        (a build with N = 1) in floats. Inside the blend and after it, the operations and their
+        order are those of head_at_time, so the two agree bit for bit (a frame reaching over
+        the blend's end continues the polynomial instead: the same values to rounding)."""
         if head.size == 1:
             head[0] = self.head_at_time(j, float(times[0]))
             self.standing_at[j] = None
             return head
-        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        x_k, v_k, t_k, gap, speed_gap, c2, c3 = self._anchors[j]
         if v_k == 0.0 and not (gap or speed_gap) and x_k != 0.0:
             # a train standing (or parked off the line): x_k + 0·(t − t_k) is x_k
             head.fill(x_k)
             self.standing_at[j] = x_k
             return head
         self.standing_at[j] = None
-        np.subtract(times, t_k, out=head)
-        if (gap or speed_gap) and times[0] - t_k < POSITION_BLEND_S:
-            s = np.divide(head, POSITION_BLEND_S, out=self._blend_s[:head.size])
-            if not (times[0] >= t_k and times[-1] - t_k <= POSITION_BLEND_S):
-                # the clip to [0, 1]; a frame inside the blend (as every frame is when the
-                # master updates the position each frame) needs none: 0 ≤ τ ≤ B gives 0 ≤ τ/B ≤ 1
-                np.minimum(np.maximum(s, 0.0, out=s), 1.0, out=s)
-            s2 = np.multiply(s, s, out=self._blend_s2[:head.size])
-            s3 = np.power(s, 3.0, out=self._blend_s3[:head.size])
-            shape = np.multiply(s3, 2.0, out=self._blend_shape[:head.size])         # 2s³ − 3s² + 1
-            shape -= np.multiply(s2, 3.0, out=self._blend_term[:head.size])
-            shape += 1.0
+        tau = np.subtract(times, t_k, out=head)
+        if not (gap or speed_gap) or times[0] - t_k >= POSITION_BLEND_S:
             head *= v_k
             head += x_k
-            head += np.multiply(shape, gap, out=shape)
-            shape = np.multiply(s2, 2.0, out=self._blend_shape[:head.size])         # s³ − 2s² + s
-            np.subtract(s3, shape, out=shape)
-            shape += s
-            head += np.multiply(shape, speed_gap * POSITION_BLEND_S, out=shape)
             return head
-        head *= v_k
-        head += x_k
+        if times[0] >= t_k and times[-1] - t_k <= POSITION_BLEND_S:
+            # the frame inside the blend (every frame when the master updates the position each
+            # frame): one polynomial, x_k + gap + (v_k + speed_gap)·τ + c2·τ² + c3·τ³, by Horner
+            term = np.multiply(tau, c3, out=self._blend_term[:head.size])
+            term += c2
+            term *= tau
+            term += v_k + speed_gap
+            term *= tau
+            return np.add(term, x_k + gap, out=head)
+        # a frame reaching outside the blend: the polynomial at τ clipped to [0, B], continued
+        # at v_k beyond (the blend is flat at both ends: gap and its slope at 0, nothing at B)
+        clipped = np.minimum(np.maximum(tau, 0.0, out=self._blend_tau[:head.size]), POSITION_BLEND_S,
+                             out=self._blend_tau[:head.size])
+        term = np.multiply(clipped, c3, out=self._blend_term[:head.size])
+        term += c2
+        term *= clipped
+        term += v_k + speed_gap
+        term *= clipped
+        term += x_k + gap
+        tau -= clipped
+        tau *= v_k
+        head += term
         return head
 
     def head_at_time(self, j: int, t: float) -> float:
         """``head_at`` at one time, in floats."""
-        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        x_k, v_k, t_k, gap, speed_gap, c2, c3 = self._anchors[j]
         tau = t - t_k
-        head = x_k + v_k * tau
-        if (gap or speed_gap) and tau < POSITION_BLEND_S:
-            s = _unit(tau / POSITION_BLEND_S)
-            s2, s3 = s * s, s ** 3
-            head = head + gap * (2 * s3 - 3 * s2 + 1) + speed_gap * POSITION_BLEND_S * (s3 - 2 * s2 + s)
-        return head
+        if not (gap or speed_gap) or tau >= POSITION_BLEND_S:
+            return x_k + v_k * tau
+        if tau >= 0.0:
+            return ((tau * c3 + c2) * tau + (v_k + speed_gap)) * tau + (x_k + gap)
+        return (x_k + gap) + v_k * tau
 
     def _speed_at_time(self, j: int, t: float) -> float:
-        x_k, v_k, t_k, gap, speed_gap = self._anchors[j]
+        x_k, v_k, t_k, gap, speed_gap = self._anchors[j][:5]
         s = _unit((t - t_k) / POSITION_BLEND_S)
         s2 = s * s
         return v_k + gap * (6 * s2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s2 - 4 * s + 1)
