@@ -1,6 +1,6 @@
-"""Our FMUs' forwarding binary moves Real values to and from the slave in bulk (fmus/fmi/bulk.py):
-a host calling plain fmi2GetReal/fmi2SetReal gets exactly the values pythonfmu's own route gives,
-and the checks of the value references still come first."""
+"""Our FMUs' forwarding binary moves Real, Integer and Boolean values straight between the host's
+arrays and the slave's store (fmus/fmi/bulk.py): a host calling plain fmi2Get/fmi2Set gets exactly
+the values pythonfmu's own route gives, and the checks of the value references still come first."""
 import json
 import os
 import subprocess
@@ -60,12 +60,57 @@ HOST = textwrap.dedent("""
 """)
 
 
-def host_run(fmu, bulk: bool):
+INTEGERS_AND_BOOLEANS = textwrap.dedent("""
+    import ctypes, json, sys
+    from fmpy import read_model_description, extract
+    from fmpy.fmi2 import FMU2Slave
+
+    path = sys.argv[1]
+    md = read_model_description(path)
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="gain")
+    fmu.instantiate()
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    lib, c = fmu.dll, fmu.component
+
+    def refs(*names):
+        return (ctypes.c_uint * len(names))(*[vr[name] for name in names])
+
+    def integers(*values):
+        return (ctypes.c_int * len(values))(*values)
+
+    status, seen = {}, {}
+    status["set_mode"] = lib.fmi2SetInteger(c, refs("mode"), 1, integers(-123456))
+    status["set_enabled"] = lib.fmi2SetBoolean(c, refs("enabled"), 1, integers(2))    # any non-zero is true
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    for k, (mode, enabled) in enumerate([(7, 0), (-1, 1)]):
+        status[f"set{k}"] = (lib.fmi2SetInteger(c, refs("mode"), 1, integers(mode)),
+                             lib.fmi2SetBoolean(c, refs("enabled"), 1, integers(enabled)))
+        out_i, out_b = integers(0, 0, 0), integers(5, 5, 5)
+        # out of order, with a repeat and a parameter among the outputs
+        status[f"get{k}"] = (lib.fmi2GetInteger(c, refs("mode", "mode_out", "mode"), 3, out_i),
+                             lib.fmi2GetBoolean(c, refs("enabled_out", "enabled", "enabled_out"), 3, out_b))
+        seen[k] = [list(out_i), list(out_b)]
+    status["set_output"] = lib.fmi2SetInteger(c, refs("mode_out"), 1, integers(3))
+    status["wrong_type"] = lib.fmi2GetBoolean(c, refs("mode"), 1, integers(0))
+    after = integers(0)
+    lib.fmi2GetInteger(c, refs("mode_out"), 1, after)
+    bulk = sys.modules.get("fmus.fmi.bulk")
+    print(json.dumps({"seen": seen, "status": status, "mode_out_after": after[0],
+                      "claimed": list(bulk.claimed) if bulk else []}))
+    fmu.terminate()
+    fmu.freeInstance()
+""")
+
+
+def host_run(fmu, bulk: bool, script: str = HOST):
     env = dict(os.environ)
     env.pop("RAILCOSIM_NO_BULK", None)
     if not bulk:
         env["RAILCOSIM_NO_BULK"] = "1"
-    done = subprocess.run([sys.executable, "-c", HOST, str(fmu)], env=env, capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", script, str(fmu)], env=env, capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -88,3 +133,15 @@ def test_bulk_values_equal_pythonfmus_route_and_checks_still_come_first(test_fmu
     assert bulk["status"]["set_alpha"] == 0 and bulk["status"]["get0"] == 0
     assert bulk["status"]["set_output"] == 3          # fmi2Error: an output cannot be set
     assert bulk["y1_after"] == bulk["frames"][-1][1][1]  # and it was not written
+
+
+def test_integers_and_booleans_go_straight_to_the_store_with_the_same_answers(test_fmus):
+    fmu = test_fmus / "TestGain.fmu"
+    direct, plain = host_run(fmu, True, INTEGERS_AND_BOOLEANS), host_run(fmu, False, INTEGERS_AND_BOOLEANS)
+    assert direct["claimed"] == ["gain"] and plain["claimed"] == []
+    assert direct == dict(plain, claimed=["gain"])
+    # the parameters as set (a Boolean reads back 1 for any non-zero set), the outputs as
+    # published at initialisation (mode −123456, enabled true)
+    assert direct["seen"] == {"0": [[7, -123456, 7], [1, 0, 1]], "1": [[-1, -123456, -1], [1, 1, 1]]}
+    assert direct["status"]["set_output"] == 3 and direct["status"]["wrong_type"] == 3     # fmi2Error
+    assert direct["mode_out_after"] == -123456                                            # not written

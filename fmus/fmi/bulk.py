@@ -1,18 +1,23 @@
-"""Bulk access to a slave's Real values for our FMUs' forwarding binary (docs/performance.md,
-"Frames across the FMI boundary").
+"""Direct access to a slave's Real, Integer and Boolean values for our FMUs' forwarding binary
+(docs/performance.md, "Frames across the FMI boundary").
 
-pythonfmu's C wrapper answers fmi2GetReal/fmi2SetReal by building a Python list of value
-references and one of values element by element: about 0.1 µs per value, 30 µs for a
-320-sample frame. Our forwarding binary (orchestrator/build/forwarder/fmi2_forward.c) checks the
-value references itself and then hands the host's two C arrays to the accessors made here as
-memoryviews, which numpy reads or fills in place: one Python call per get or set whatever its
-length. The host still calls plain fmi2GetReal/fmi2SetReal and gets the same values.
+pythonfmu's C wrapper answers every fmi2Get/fmi2Set of a number type by taking the GIL,
+building a Python list of value references and one of values element by element and calling
+the slave: about 0.1 µs per value, 30 µs for a 320-sample frame. Our forwarding binary
+(orchestrator/build/forwarder/fmi2_forward.c) checks the value references itself; for each list
+of references a host sends (the same lists every step) it asks the resolvers made here, once,
+where those values live in the slave's value store (fmus/fmi/slave.py): the store's address
+and either the first of a run of consecutive slots or the address of an array of slots. From
+then on a get or set of that list is a copy in C between the host's array and the store, with
+no Python call. The host still calls plain fmi2Get/fmi2Set and gets the values pythonfmu's
+route gives (tests/test_bulk_values.py).
 
 The generated slave script registers each instance pythonfmu's C wrapper creates
-(``created``); the forwarder claims its instance's accessors right after fmi2Instantiate
-(``take``). The registry holds the slaves weakly, so a plain pythonfmu FMU (built without the
-forwarder) leaves nothing behind. Setting RAILCOSIM_NO_BULK=1 in the environment makes the
-forwarder leave every call to pythonfmu (a comparison of the two routes).
+(``created``); the forwarder claims its instance's resolvers right after fmi2Instantiate
+(``take``) and keeps them (and with them the store and the slot arrays) until
+fmi2FreeInstance. The registry holds the slaves weakly, so a plain pythonfmu FMU (built
+without the forwarder) leaves nothing behind. Setting RAILCOSIM_NO_BULK=1 in the environment
+makes the forwarder leave every call to pythonfmu (a comparison of the two routes).
 """
 from __future__ import annotations
 
@@ -22,8 +27,12 @@ from typing import Callable, Tuple
 import numpy as np
 
 _created: "weakref.WeakValueDictionary[str, object]" = weakref.WeakValueDictionary()
-#: instance names whose accessors a forwarder claimed (tests read it)
+#: instance names whose resolvers a forwarder claimed (tests read it)
 claimed = []
+
+#: the store's element type per FMI type, as the forwarder copies it (fmi2Real ↔ float64,
+#: fmi2Integer ↔ int64, fmi2Boolean ↔ one byte 0 or 1)
+STORE_TYPES = (("Real", np.float64), ("Integer", np.int64), ("Boolean", np.bool_))
 
 
 def created(slave) -> None:
@@ -31,37 +40,36 @@ def created(slave) -> None:
     _created[slave.instance_name] = slave
 
 
-def take(instance_name: str) -> Tuple[Callable, Callable, Callable]:
-    """(resolve, get, set) for the Real values of the instance just created under
-    ``instance_name`` (KeyError if none was registered: the forwarder then forwards every call)."""
+def take(instance_name: str) -> Tuple[Callable, ...]:
+    """The Real, Integer and Boolean resolvers of the instance just created under
+    ``instance_name`` (KeyError if none was registered: the forwarder then forwards every
+    call)."""
     slave = _created.pop(instance_name)
-    accessors = real_accessors(slave)
+    resolvers = tuple(store_resolver(slave, type_name, dtype) for type_name, dtype in STORE_TYPES)
     claimed.append(instance_name)
-    return accessors
+    return resolvers
 
 
-def real_accessors(slave) -> Tuple[Callable, Callable, Callable]:
-    """resolve(refs) → the number of that list of value references, get(number, values) fills
-    ``values``, set(number, values) stores them; the buffers as the host passed them
-    (fmi2ValueReference = uint32, fmi2Real = float64). The forwarder checked the references and
-    keeps the lists it resolved (a host sends the same lists every step), so a get or set costs
-    one slot lookup here; a run of consecutive slots is a slice."""
-    store = slave._stores["Real"]
+def store_resolver(slave, type_name: str, dtype) -> Callable:
+    """resolve(refs) → (the store's address, first slot, 0) for a list of value references
+    (uint32, as the host passed them) whose slots are consecutive, else (address, 0, the
+    address of an int64 array of their slots, kept here while the forwarder holds this
+    resolver). The forwarder checked the references first."""
+    store = slave._stores[type_name]
     values, slot_of_vr = store.values, store.slot_of_vr
-    lists = []
+    if values.dtype != dtype or not values.flags.c_contiguous:
+        raise TypeError(f"{type_name} store: {values.dtype}, not a contiguous {np.dtype(dtype)}")
+    address = values.ctypes.data
+    kept = []
 
-    def resolve(ref_buffer) -> int:
-        where = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)]
-        first = int(where[0])
-        if where.size > 1 and np.array_equal(where, np.arange(first, first + where.size)):
-            where = slice(first, first + where.size)
-        lists.append(where)
-        return len(lists) - 1
+    def resolve(ref_buffer) -> Tuple[int, int, int]:
+        slots = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)]
+        if slots.min() < 0:
+            raise KeyError(f"{type_name} value references without a slot")
+        first = int(slots[0])
+        if np.array_equal(slots, np.arange(first, first + slots.size)):
+            return address, first, 0
+        kept.append(np.ascontiguousarray(slots, dtype=np.int64))
+        return address, 0, kept[-1].ctypes.data
 
-    def get(number: int, value_buffer) -> None:
-        np.frombuffer(value_buffer, dtype=np.float64)[:] = values[lists[number]]
-
-    def put(number: int, value_buffer) -> None:
-        values[lists[number]] = np.frombuffer(value_buffer, dtype=np.float64)
-
-    return resolve, get, put
+    return resolve

@@ -24,16 +24,18 @@
  * instance is untouched. Without the file the calls are forwarded unchecked
  * (docs/interfaces.md, "Bad parameters, inputs and calls").
  *
- * Bulk Real values: pythonfmu's wrapper turns every fmi2GetReal/fmi2SetReal into Python lists
- * built value by value (about 0.1 us per value). For an instance whose references are checked
- * here, the forwarder claims the slave's Real accessors at fmi2Instantiate (fmus/fmi/bulk.py,
- * registered by the generated slave script). It keeps each list of value references it sees
- * (a host sends the same lists every step; up to BULK_LISTS per instance), resolved once to
- * store slots by the slave, and hands a get or set the list's number and the host's value
- * array as a memoryview: one Python call, numpy moving the values. The host sees the same
- * functions and values. Without the accessors (another slave, an older FMU,
- * RAILCOSIM_NO_BULK=1 in the environment) or after an accessor failed once (logged as a
- * warning), calls go to pythonfmu as they are (docs/performance.md).
+ * Direct values: pythonfmu's wrapper turns every fmi2Get/fmi2Set of Reals, Integers and
+ * Booleans into Python lists built value by value (about 0.1 us per value) and a Python call.
+ * For an instance whose references are checked here, the forwarder claims the slave's store
+ * resolvers at fmi2Instantiate (fmus/fmi/bulk.py, registered by the generated slave script).
+ * It keeps each list of value references it sees (a host sends the same lists every step; up
+ * to BULK_LISTS per instance), checked and resolved once by the slave to where the values live
+ * in its store (the store's address and a first slot, or an array of slots); a get or set of a
+ * list it knows is then a copy in C between the host's array and the store, without the GIL
+ * and without checking the same references again. The host sees the same functions and
+ * values. Without the resolvers (another slave, an older FMU, RAILCOSIM_NO_BULK=1 in the
+ * environment) or after a resolver failed once (logged as a warning), calls go to pythonfmu as
+ * they are (docs/performance.md).
  *
  * Release: at unload (dlclose of this library or process exit) it empties pythonfmu's
  * interpreter state through pythonfmu's finalizePythonInterpreter, before pythonfmu's own
@@ -55,7 +57,7 @@
 #include "fmi2Functions.h"
 
 /* marker checked by tests/test_third_party_host.py */
-FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 2";
+FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 3";
 
 #define SETTINGS_FILE "railcosim_python.txt"
 #define VALUE_REFERENCES_FILE "railcosim_value_references.txt"
@@ -76,6 +78,10 @@ static PyObject *(*pyObject_CallMethod)(PyObject *, const char *, const char *, 
 static PyObject *(*pyObject_CallFunctionObjArgs)(PyObject *, ...);
 static PyObject *(*pyMemoryView_FromMemory)(char *, Py_ssize_t, int);
 static PyObject *(*pyTuple_GetItem)(PyObject *, Py_ssize_t);
+static Py_ssize_t (*pyTuple_Size)(PyObject *);
+static void *(*pyLong_AsVoidPtr)(PyObject *);
+static Py_ssize_t (*pyLong_AsSsize_t)(PyObject *);
+static PyObject *(*pyErr_Occurred)(void);
 static void (*py_IncRef)(PyObject *);
 static void (*py_DecRef)(PyObject *);
 static void (*pyErr_Clear)(void);
@@ -238,6 +244,10 @@ static void resolve_bulk(void) {
     RESOLVE_BULK(pyObject_CallFunctionObjArgs, "PyObject_CallFunctionObjArgs")
     RESOLVE_BULK(pyMemoryView_FromMemory, "PyMemoryView_FromMemory")
     RESOLVE_BULK(pyTuple_GetItem, "PyTuple_GetItem")
+    RESOLVE_BULK(pyTuple_Size, "PyTuple_Size")
+    RESOLVE_BULK(pyLong_AsVoidPtr, "PyLong_AsVoidPtr")
+    RESOLVE_BULK(pyLong_AsSsize_t, "PyLong_AsSsize_t")
+    RESOLVE_BULK(pyErr_Occurred, "PyErr_Occurred")
     RESOLVE_BULK(py_IncRef, "Py_IncRef")
     RESOLVE_BULK(py_DecRef, "Py_DecRef")
     RESOLVE_BULK(pyErr_Clear, "PyErr_Clear")
@@ -284,12 +294,25 @@ static void release_at_unload(void) {
 }
 
 /* ---- per instance: its name, the host's callbacks and its valid value references ---------- */
-enum { REAL, INTEGER, BOOLEAN, STRING, TYPES };
+enum { REAL, INTEGER, BOOLEAN, STRING, TYPES, DIRECT_TYPES = STRING };  /* direct: the number types */
 static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "String"};
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
 
 typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
 #define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
+
+/* a list of value references of one number type, checked for a get or for a set, resolved by
+ * the slave to where its values live in the slave's store (the store's elements: double,
+ * int64_t, one byte 0/1), consecutive from `first` or at `slots` */
+typedef struct {
+    int type;
+    int setting;                       /* checked as settable */
+    size_t n;
+    fmi2ValueReference *vr;
+    char *store;
+    Py_ssize_t first;
+    const int64_t *slots;
+} DirectList;
 
 typedef struct Instance {
     struct Instance *next;
@@ -299,10 +322,12 @@ typedef struct Instance {
     int checked;                       /* 0: the table was not read, calls are forwarded as they are */
     Bitmap valid[TYPES];               /* every variable of the type */
     Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
-    /* the slave's bulk accessors (fmus/fmi/bulk.py), or NULL; the reference lists they resolved */
-    PyObject *resolve_real, *get_real, *set_real;
-    struct { size_t n; fmi2ValueReference *vr; PyObject *number; } lists[BULK_LISTS];
+    /* the slave's store resolvers per number type (fmus/fmi/bulk.py), or NULL; the reference
+     * lists they resolved */
+    PyObject *resolvers[DIRECT_TYPES];
+    DirectList lists[BULK_LISTS];
     int list_count;
+    int direct;                        /* the resolvers are held */
 } Instance;
 
 static Instance *instances;            /* a short list, guarded by table_lock */
@@ -326,21 +351,19 @@ static int bitmap_has(const Bitmap *map, fmi2ValueReference vr) {
     return vr < map->size && (map->bits[vr / 8] >> (vr % 8)) & 1;
 }
 
-/* the accessors and lists released (with the GIL held, or taken here) */
+/* the resolvers and lists released (with the GIL held, or taken here) */
 static void release_bulk(Instance *entry) {
-    py_DecRef(entry->resolve_real);
-    py_DecRef(entry->get_real);
-    py_DecRef(entry->set_real);
-    entry->resolve_real = entry->get_real = entry->set_real = NULL;
-    for (int k = 0; k < entry->list_count; k++) {
-        py_DecRef(entry->lists[k].number);
-        free(entry->lists[k].vr);
+    for (int t = 0; t < DIRECT_TYPES; t++) {
+        py_DecRef(entry->resolvers[t]);
+        entry->resolvers[t] = NULL;
     }
+    for (int k = 0; k < entry->list_count; k++) free(entry->lists[k].vr);
     entry->list_count = 0;
+    entry->direct = 0;
 }
 
 static void drop_bulk(Instance *entry) {
-    if (!entry->get_real) return;
+    if (!entry->direct) return;
     PyGILState_STATE gil = pyGILState_Ensure();
     release_bulk(entry);
     pyGILState_Release(gil);
@@ -463,74 +486,123 @@ static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[
     return fmi2OK;
 }
 
-/* the slave's bulk accessors, claimed right after pythonfmu created it (fmus/fmi/bulk.py) */
+/* the slave's store resolvers, claimed right after pythonfmu created it (fmus/fmi/bulk.py) */
 static void claim_bulk(Instance *entry) {
     if (!bulk_enabled || !entry->checked) return;
     PyGILState_STATE gil = pyGILState_Ensure();
     PyObject *module = pyImport_ImportModule("fmus.fmi.bulk");
-    PyObject *pair = module ? pyObject_CallMethod(module, "take", "s", entry->name) : NULL;
-    PyObject *resolve = pair ? pyTuple_GetItem(pair, 0) : NULL, *get = resolve ? pyTuple_GetItem(pair, 1) : NULL,
-             *set = get ? pyTuple_GetItem(pair, 2) : NULL;
-    if (set) {
-        py_IncRef(resolve);
-        py_IncRef(get);
-        py_IncRef(set);
-        entry->resolve_real = resolve;
-        entry->get_real = get;
-        entry->set_real = set;
+    PyObject *resolvers = module ? pyObject_CallMethod(module, "take", "s", entry->name) : NULL;
+    if (resolvers && pyTuple_Size(resolvers) == DIRECT_TYPES) {
+        for (int t = 0; t < DIRECT_TYPES; t++) {
+            entry->resolvers[t] = pyTuple_GetItem(resolvers, t);
+            py_IncRef(entry->resolvers[t]);
+        }
+        entry->direct = 1;
     } else {
         pyErr_Clear();  /* not one of ours, or an older build: pythonfmu's path */
     }
-    py_DecRef(pair);
+    py_DecRef(resolvers);
     py_DecRef(module);
     pyGILState_Release(gil);
 }
 
-/* the number the slave gave this list of value references (resolved at its first use), or NULL
- * when the instance keeps BULK_LISTS lists already; the GIL is held */
-static PyObject *list_number(Instance *entry, const fmi2ValueReference vr[], size_t n) {
+/* the list of value references of `type` the instance checked (for a get, or for a set) and
+ * resolved before, or -1 (no GIL needed: a host does not call one instance from two threads at
+ * once) */
+static int known_list(const Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n) {
     for (int k = 0; k < entry->list_count; k++)
-        if (entry->lists[k].n == n && memcmp(entry->lists[k].vr, vr, n * sizeof *vr) == 0)
-            return entry->lists[k].number;
-    if (entry->list_count == BULK_LISTS) return NULL;
-    fmi2ValueReference *copy = malloc(n * sizeof *vr);
-    if (!copy) return NULL;
-    memcpy(copy, vr, n * sizeof *vr);
-    PyObject *refs = pyMemoryView_FromMemory((char *)copy, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
-    PyObject *number = refs ? pyObject_CallFunctionObjArgs(entry->resolve_real, refs, NULL) : NULL;
-    py_DecRef(refs);
-    if (!number) { free(copy); return NULL; }
-    int k = entry->list_count++;
-    entry->lists[k].n = n;
-    entry->lists[k].vr = copy;
-    entry->lists[k].number = number;
-    return number;
+        if (entry->lists[k].type == type && entry->lists[k].setting == setting && entry->lists[k].n == n &&
+            memcmp(entry->lists[k].vr, vr, n * sizeof *vr) == 0)
+            return k;
+    return -1;
 }
 
-/* one get or set of Reals through the slave's accessor: 1 done, 0 not (pythonfmu's route then;
- * after a Python error the accessors are dropped with a warning, for this and later calls) */
-static int bulk_real(Instance *entry, int setting, const fmi2ValueReference vr[], size_t n,
-                     const fmi2Real value[]) {
+/* a checked list resolved by the slave and kept: its index, or -1 when the instance keeps
+ * BULK_LISTS lists already or the resolver failed (its resolvers are then dropped with a
+ * warning, for this and later calls) */
+static int resolve_list(Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n) {
+    if (entry->list_count == BULK_LISTS) return -1;
+    fmi2ValueReference *copy = malloc(n * sizeof *vr);
+    if (!copy) return -1;
+    memcpy(copy, vr, n * sizeof *vr);
     PyGILState_STATE gil = pyGILState_Ensure();
-    PyObject *number = list_number(entry, vr, n);
-    int failed = number == NULL && entry->list_count < BULK_LISTS;
-    PyObject *values = number ? pyMemoryView_FromMemory((char *)value, (Py_ssize_t)(n * sizeof *value),
-                                                        setting ? PyBUF_READ : PyBUF_WRITE) : NULL;
-    PyObject *result = values ? pyObject_CallFunctionObjArgs(setting ? entry->set_real : entry->get_real,
-                                                             number, values, NULL) : NULL;
-    int done = result != NULL;
-    failed = failed || (number && !done);
-    py_DecRef(result);
-    py_DecRef(values);
+    PyObject *refs = pyMemoryView_FromMemory((char *)copy, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
+    PyObject *where = refs ? pyObject_CallFunctionObjArgs(entry->resolvers[type], refs, NULL) : NULL;
+    char *store = NULL;
+    Py_ssize_t first = 0;
+    const int64_t *slots = NULL;
+    if (where && pyTuple_Size(where) == 3) {
+        store = pyLong_AsVoidPtr(pyTuple_GetItem(where, 0));
+        first = pyLong_AsSsize_t(pyTuple_GetItem(where, 1));
+        slots = pyLong_AsVoidPtr(pyTuple_GetItem(where, 2));
+    }
+    int failed = !store || pyErr_Occurred() != NULL;
+    py_DecRef(where);
+    py_DecRef(refs);
     if (failed) {
         pyErr_Clear();
         release_bulk(entry);
     }
     pyGILState_Release(gil);
-    if (failed && entry->callbacks.logger)
-        entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Warning, "logStatusWarning",
-                                "bulk Real access failed; values go through pythonfmu from now on");
-    return done;
+    if (failed) {
+        free(copy);
+        if (entry->callbacks.logger)
+            entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Warning,
+                                    "logStatusWarning", "direct value access failed; values go through pythonfmu from now on");
+        return -1;
+    }
+    int k = entry->list_count++;
+    entry->lists[k].type = type;
+    entry->lists[k].setting = setting;
+    entry->lists[k].n = n;
+    entry->lists[k].vr = copy;
+    entry->lists[k].store = store;
+    entry->lists[k].first = first;
+    entry->lists[k].slots = slots;
+    return k;
+}
+
+#define COPY_VALUES(store_type, get_expression, set_expression) { \
+        store_type *base = (store_type *)list->store + list->first; \
+        for (size_t i = 0; i < list->n; i++) { \
+            store_type *slot = list->slots ? (store_type *)list->store + list->slots[i] : base + i; \
+            if (setting) { set_expression; } else { get_expression; } \
+        } \
+    }
+
+/* a get or set of `type` straight between the host's array and the slave's store: 1 done
+ * (*status the answer: fmi2Error for a reference the checks refuse), 0 not (pythonfmu's route) */
+static int direct_values(fmi2Component c, int type, int setting, const fmi2ValueReference vr[], size_t n,
+                         void *value, fmi2Status *status) {
+    if (!bulk_enabled || n == 0 || !vr || !value) return 0;
+    Instance *entry = find_instance(c);
+    if (!entry || !entry->direct) return 0;
+    int k = known_list(entry, type, setting, vr, n);
+    if (k < 0) {
+        Instance *checked;
+        if (check_references(c, vr, n, type, setting, &checked) != fmi2OK) {
+            *status = fmi2Error;
+            return 1;
+        }
+        if ((k = resolve_list(entry, type, setting, vr, n)) < 0) return 0;
+    }
+    const DirectList *list = &entry->lists[k];
+    if (type == REAL && !list->slots) {
+        double *run = (double *)list->store + list->first;
+        if (setting) memcpy(run, value, n * sizeof *run);
+        else memcpy(value, run, n * sizeof *run);
+    } else if (type == REAL) {
+        fmi2Real *values = value;
+        COPY_VALUES(double, values[i] = *slot, *slot = values[i])
+    } else if (type == INTEGER) {
+        fmi2Integer *values = value;
+        COPY_VALUES(int64_t, values[i] = (fmi2Integer)*slot, *slot = values[i])
+    } else {
+        fmi2Boolean *values = value;
+        COPY_VALUES(unsigned char, values[i] = *slot ? fmi2True : fmi2False, *slot = values[i] != fmi2False)
+    }
+    *status = fmi2OK;
+    return 1;
 }
 
 /* ---- the FMI functions -------------------------------------------------------------------- */
@@ -599,35 +671,23 @@ FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2Terminate, (fmi2Component c), (c))
 FORWARD(fmi2Reset, (fmi2Component c), (c))
-/* get and set: every value reference checked first (check_references) */
+/* get and set: every value reference checked first (check_references); the number types
+ * straight between the host's array and the slave's store when the instance allows it */
 #define CHECKED(name, type, setting, params) \
     fmi2Status name params { \
         Instance *entry; \
+        fmi2Status status; \
         if (!target_##name) return fmi2Error; \
+        if (type < DIRECT_TYPES && direct_values(c, type, setting, vr, n, (void *)value, &status)) return status; \
         if (check_references(c, vr, n, type, setting, &entry) != fmi2OK) return fmi2Error; \
         return target_##name(c, vr, n, value); \
     }
 
-/* Reals: through the slave's bulk accessors when claimed, else pythonfmu's */
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]) {
-    Instance *entry;
-    if (!target_fmi2GetReal) return fmi2Error;
-    if (check_references(c, vr, n, REAL, 0, &entry) != fmi2OK) return fmi2Error;
-    if (entry && entry->get_real && value && bulk_real(entry, 0, vr, n, value)) return fmi2OK;
-    return target_fmi2GetReal(c, vr, n, value);
-}
-
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]) {
-    Instance *entry;
-    if (!target_fmi2SetReal) return fmi2Error;
-    if (check_references(c, vr, n, REAL, 1, &entry) != fmi2OK) return fmi2Error;
-    if (entry && entry->set_real && value && bulk_real(entry, 1, vr, n, value)) return fmi2OK;
-    return target_fmi2SetReal(c, vr, n, value);
-}
-
+CHECKED(fmi2GetReal, REAL, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]))
 CHECKED(fmi2GetInteger, INTEGER, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer value[]))
 CHECKED(fmi2GetBoolean, BOOLEAN, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean value[]))
 CHECKED(fmi2GetString, STRING, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String value[]))
+CHECKED(fmi2SetReal, REAL, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real value[]))
 CHECKED(fmi2SetInteger, INTEGER, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]))
 CHECKED(fmi2SetBoolean, BOOLEAN, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]))
 CHECKED(fmi2SetString, STRING, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]))
