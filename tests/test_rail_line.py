@@ -225,6 +225,36 @@ def test_sections_without_a_train_parked_and_caught_up_give_the_same_currents(mo
     assert (occupied == occupied_live).all()
 
 
+def test_sections_of_one_design_share_their_network_models_with_the_same_results(monkeypatch):
+    """Sections alike relative to their start (the default line's first four) share their
+    network models: a train entering section 2 meets the configurations it had at the start of
+    section 1 again, and gets the very same numbers as with a model made per section."""
+    from fmus.rail_line import circuit_bank
+
+    made = []
+    discretise = circuit_bank.discretise
+    monkeypatch.setattr(circuit_bank, "discretise", lambda *args: made.append(1) or discretise(*args))
+    run = dict(seconds=6.0, x0_m=2450.0, v_mps=50.0)
+
+    def models_made(per_section):
+        if per_section:
+            fault_key = circuit_bank.TrackCircuitBank._fault_key
+            monkeypatch.setattr(circuit_bank.TrackCircuitBank, "_fault_key",
+                                lambda bank, k, faults: (k, fault_key(bank, k, faults)))
+        made.clear()
+        core = RailLineCore(load_line(), 8, 2, N, RailSettings())
+        core.step(0.0, np.zeros((8, N)), np.array([-1000.0, -1000.0]), np.zeros(2), np.zeros(2))
+        for head_m in range(0, 450, 10):        # section 1's first configurations (section 2's after 2600 m)
+            core.bank.follow_shunts([float(head_m), -1000.0])
+        made.clear()
+        return _keyed_run(core, **run), len(made)
+
+    (emf, axle, occupied, _), shared = models_made(per_section=False)
+    (emf_own, axle_own, occupied_own, _), own = models_made(per_section=True)
+    assert own - shared >= 3, (shared, own)       # section 2 (index 1) made nothing new
+    assert np.array_equal(emf, emf_own) and np.array_equal(axle, axle_own) and (occupied == occupied_own).all()
+
+
 def test_bad_parameters_are_named_and_off_line_trains_reported(tmp_path):
     with pytest.raises(FmuInputError, match="parameter coil_gain"):
         RailLineCore(load_line(), 8, 2, N, RailSettings(coil_gain_h=0.0))

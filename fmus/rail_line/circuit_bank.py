@@ -40,7 +40,7 @@ try:        # np.interp's own routine, without its per-call checks (the argument
 except ImportError:          # another numpy layout: the public function
     _interp = np.interp
 
-_CACHE_SIZE = 64
+_CACHE_SIZE = 64          # network models kept per section (shared by the sections of one design)
 # a parked section (no train, no coil over it) is caught up from its inputs' history when it is
 # needed again: over as many frames as its free network's slowest mode takes to fall below
 # this share (a few units in the last place of the states), the history at most this many
@@ -154,7 +154,6 @@ class TrackCircuitBank:
         self._relays_settled = False
         self.faults = [Faults() for _ in range(self.count)]
         self.broken_rail_m = -1.0
-        self._models: List[OrderedDict] = [OrderedDict() for _ in range(self.count)]
         self._families: Dict[Tuple[int, Faults], Tuple[ShuntFamily, Dict[str, int]]] = {}
         self._phasor_families: Dict[Tuple[int, Faults], PhasorFamily] = {}
         self._phasors: Dict[Tuple[int, Faults], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
@@ -162,6 +161,14 @@ class TrackCircuitBank:
         # per section: (position, amplitude table, node amplitude, scale) of a standing front train
         self._standing_scale: List[Optional[tuple]] = [None] * self.count
         self.calibration = self._calibrate()
+        # sections of one design (the same circuit relative to its start, carrier and calibration)
+        # share their network models: a train passing one meets the same configurations again
+        designs = [(circuit.segments, float(circuit.feed_m - circuit.start_m), circuit.params,
+                    float(self.carriers[k]), float(self.track_frequencies[k]), float(self._reference[k]))
+                   for k, circuit in enumerate(self.circuits)]
+        shared = {design: OrderedDict() for design in designs}
+        self._models: List[OrderedDict] = [shared[design] for design in designs]
+        self._cache_size = [_CACHE_SIZE * designs.count(design) for design in designs]
         self._refresh_faults()
         size = self._size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
         # per section and frame: its states at the frame start (padded to one size) followed by
@@ -321,7 +328,7 @@ class TrackCircuitBank:
     # ---- models -----------------------------------------------------------------------------
     def _model(self, k: int, config: Config) -> _Model:
         faults = self._effective_faults[k]
-        key = (config, faults)
+        key = (config, self._fault_key(k, faults))
         cache = self._models[k]
         if key in cache:
             cache.move_to_end(key)
@@ -381,9 +388,19 @@ class TrackCircuitBank:
                        self.relay_level(k, shunts), phi, response,
                        complex(ahead_response[0]) if heads else 0j, carrier_system)
         cache[key] = model
-        if len(cache) > _CACHE_SIZE:
+        if len(cache) > self._cache_size[k]:
             cache.popitem(last=False)
         return model
+
+    def _fault_key(self, k: int, faults: Faults) -> tuple:
+        """What of section k's faults its network depends on, relative to the section (its
+        ballast, the segment a broken rail opens, an open feed), so sections of one design
+        share models under the same faults (TrackCircuit.network)."""
+        circuit, broken = self.circuits[k], -1
+        if faults.broken_rail_m >= 0:
+            nodes = circuit.nodes_m
+            broken = next((i for i in range(circuit.segments) if nodes[i] <= faults.broken_rail_m < nodes[i + 1]), -1)
+        return circuit.ballast(faults), broken, faults.feed_open
 
     def _phasor_family(self, k: int, faults: Faults) -> PhasorFamily:
         key = (k, faults)
