@@ -13,18 +13,21 @@ from orchestrator.build import forwarder as fwd
 
 pytestmark = pytest.mark.skipif(isinstance(fwd.plan(), fwd.NoForwarder), reason="no forwarding binary here")
 
-HOST = textwrap.dedent("""
+# a host's first steps: the FMU (argv[1]) instantiated under the name argv[2], its value references
+OPEN = textwrap.dedent("""
     import ctypes, json, sys
-    import numpy as np
     from fmpy import read_model_description, extract
     from fmpy.fmi2 import FMU2Slave
 
     path = sys.argv[1]
     md = read_model_description(path)
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="stage")
+                    instanceName=sys.argv[2])
     fmu.instantiate()
     vr = {v.name: v.valueReference for v in md.modelVariables}
+""")
+
+HOST = OPEN + textwrap.dedent("""
     u = [vr[f"u[{i}]"] for i in range(1, 5)]
     y = [vr[f"y[{i}]"] for i in range(1, 5)]
 
@@ -60,17 +63,7 @@ HOST = textwrap.dedent("""
 """)
 
 
-INTEGERS_AND_BOOLEANS = textwrap.dedent("""
-    import ctypes, json, sys
-    from fmpy import read_model_description, extract
-    from fmpy.fmi2 import FMU2Slave
-
-    path = sys.argv[1]
-    md = read_model_description(path)
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="gain")
-    fmu.instantiate()
-    vr = {v.name: v.valueReference for v in md.modelVariables}
+INTEGERS_AND_BOOLEANS = OPEN + textwrap.dedent("""
     lib, c = fmu.dll, fmu.component
 
     def refs(*names):
@@ -105,12 +98,12 @@ INTEGERS_AND_BOOLEANS = textwrap.dedent("""
 """)
 
 
-def host_run(fmu, bulk: bool, script: str = HOST):
+def host_run(fmu, bulk: bool, script: str = HOST, instance: str = "stage"):
     env = dict(os.environ)
     env.pop("RAILCOSIM_NO_BULK", None)
     if not bulk:
         env["RAILCOSIM_NO_BULK"] = "1"
-    done = subprocess.run([sys.executable, "-c", script, str(fmu)], env=env, capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", script, str(fmu), instance], env=env, capture_output=True, text=True,
                           timeout=120)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -137,7 +130,7 @@ def test_bulk_values_equal_pythonfmus_route_and_checks_still_come_first(test_fmu
 
 def test_integers_and_booleans_go_straight_to_the_store_with_the_same_answers(test_fmus):
     fmu = test_fmus / "TestGain.fmu"
-    direct, plain = host_run(fmu, True, INTEGERS_AND_BOOLEANS), host_run(fmu, False, INTEGERS_AND_BOOLEANS)
+    direct, plain = (host_run(fmu, bulk, INTEGERS_AND_BOOLEANS, "gain") for bulk in (True, False))
     assert direct["claimed"] == ["gain"] and plain["claimed"] == []
     assert direct == dict(plain, claimed=["gain"])
     # the parameters as set (a Boolean reads back 1 for any non-zero set), the outputs as
