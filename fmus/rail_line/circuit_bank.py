@@ -186,7 +186,8 @@ class TrackCircuitBank:
         self._review_parking = False
         self._parked_at: List[Optional[int]] = [None] * self.count
         self._parked = np.zeros((self.count, size))
-        history = max(self._settle_frames(self._model(k, _NO_TRAIN)) for k in range(self.count))
+        # a catch-up within a frame reads its slowest mode's frames and the frame itself
+        history = 1 + max(self._settle_frames(self._model(k, _NO_TRAIN)) for k in range(self.count))
         self._history = np.zeros((min(history, _HISTORY_FLOATS // (self.count * frame)), self.count, frame))
         self._lookahead_m = max(self._spacing_list) + s.coil_offset_m + s.coil_length_m + 1.0
         self.relay_up = np.ones(self.count, dtype=bool)
@@ -615,7 +616,7 @@ class TrackCircuitBank:
         keep = []
         for k in self._live:
             model = self._active[k][1]
-            if k in self._wanted or self._settle_frames(model) > len(self._history):
+            if k in self._wanted or self._settle_frames(model) >= len(self._history):
                 keep.append(k)
             else:
                 self._parked[k] = self._frame_end[k, :self._size]
