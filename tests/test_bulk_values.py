@@ -55,8 +55,18 @@ HOST = OPEN + textwrap.dedent("""
                                            array(ctypes.c_double, [9.0]))
     after = (ctypes.c_double * 1)()
     lib.fmi2GetReal(fmu.component, array(ctypes.c_uint, [y[0]]), 1, after)
+    # a reset gives a new slave (pythonfmu makes one): the same lists reach the new one's values
+    status["reset"] = lib.fmi2Reset(fmu.component)
+    lib.fmi2SetReal(fmu.component, array(ctypes.c_uint, [vr["alpha"]]), 1, array(ctypes.c_double, [0.0]))
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    lib.fmi2SetReal(fmu.component, array(ctypes.c_uint, u), 4, array(ctypes.c_double, [1.5, -2.0, 0.75, 3.25]))
+    fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    out = (ctypes.c_double * 6)()
+    lib.fmi2GetReal(fmu.component, array(ctypes.c_uint, order), 6, out)
     bulk = sys.modules.get("fmus.fmi.bulk")
-    print(json.dumps({"frames": frames, "status": status, "y1_after": after[0],
+    print(json.dumps({"frames": frames, "status": status, "y1_after": after[0], "after_reset": list(out),
                       "claimed": list(bulk.claimed) if bulk else []}))
     fmu.terminate()
     fmu.freeInstance()
@@ -112,8 +122,10 @@ def host_run(fmu, bulk: bool, script: str = HOST, instance: str = "stage"):
 def test_bulk_values_equal_pythonfmus_route_and_checks_still_come_first(test_fmus):
     fmu = test_fmus / "TestFrameStage.fmu"
     bulk, plain = host_run(fmu, True), host_run(fmu, False)
-    assert bulk["claimed"] == ["stage"] and plain["claimed"] == []
+    assert bulk["claimed"] == ["stage", "stage"] and plain["claimed"] == []       # again after the reset
     assert bulk["frames"] == plain["frames"]
+    # after fmi2Reset (alpha 0: y = u, a fresh filter) the values reach the new slave
+    assert bulk["after_reset"] == plain["after_reset"] == [3.25, 1.5, -2.0, 0.75, 1.5, -2.0]
     # the slave's own answer: y = 0.5·u + 0.5·y[-1] per sample, read back in the order asked
     y_prev = 0.0
     for values, out in bulk["frames"]:

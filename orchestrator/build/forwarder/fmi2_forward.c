@@ -32,8 +32,9 @@
  * to BULK_LISTS per instance), checked and resolved once by the slave to where the values live
  * in its store (the store's address and a first slot, or an array of slots); a get or set of a
  * list it knows is then a copy in C between the host's array and the store, without the GIL
- * and without checking the same references again. The host sees the same functions and
- * values. Without the resolvers (another slave, an older FMU, RAILCOSIM_NO_BULK=1 in the
+ * and without checking the same references again. fmi2Reset (pythonfmu makes a new slave
+ * object with new stores) drops the route and claims it again from the new slave. The host
+ * sees the same functions and values. Without the resolvers (another slave, an older FMU, RAILCOSIM_NO_BULK=1 in the
  * environment) or after a resolver failed once (logged as a warning), calls go to pythonfmu as
  * they are (docs/performance.md).
  *
@@ -670,7 +671,17 @@ FORWARD(fmi2SetupExperiment, (fmi2Component c, fmi2Boolean tolerance_defined, fm
 FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
 FORWARD(fmi2Terminate, (fmi2Component c), (c))
-FORWARD(fmi2Reset, (fmi2Component c), (c))
+
+/* pythonfmu's reset makes a new slave object (with new stores): the direct route is dropped
+ * before it and claimed again from the new slave after it */
+fmi2Status fmi2Reset(fmi2Component c) {
+    if (!target_fmi2Reset) return fmi2Error;
+    Instance *entry = bulk_enabled ? find_instance(c) : NULL;
+    if (entry) drop_bulk(entry);
+    fmi2Status status = target_fmi2Reset(c);
+    if (entry && status <= fmi2Warning) claim_bulk(entry);
+    return status;
+}
 /* get and set: every value reference checked first (check_references); the number types
  * straight between the host's array and the slave's store when the instance allows it */
 #define CHECKED(name, type, setting, params) \
