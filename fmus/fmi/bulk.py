@@ -26,6 +26,8 @@ from typing import Callable, Tuple
 
 import numpy as np
 
+from fmus.fmi.slave import _slot_index
+
 _created: "weakref.WeakValueDictionary[str, object]" = weakref.WeakValueDictionary()
 #: instance names whose resolvers a forwarder claimed (tests read it)
 claimed = []
@@ -63,13 +65,13 @@ def store_resolver(slave, type_name: str, dtype) -> Callable:
     kept = []
 
     def resolve(ref_buffer) -> Tuple[int, int, int]:
-        slots = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)]
-        if slots.min() < 0:
+        slots = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)].tolist()
+        if min(slots) < 0:
             raise KeyError(f"{type_name} value references without a slot")
-        first = int(slots[0])
-        if np.array_equal(slots, np.arange(first, first + slots.size)):
-            return address, first, 0
-        kept.append(np.ascontiguousarray(slots, dtype=np.int64))
-        return address, 0, kept[-1].ctypes.data
+        where = _slot_index(slots)
+        if isinstance(where, slice):
+            return address, where.start, 0
+        kept.append(where)
+        return address, 0, where.ctypes.data
 
     return resolve

@@ -169,6 +169,9 @@ class TrackCircuitBank:
         shared = {design: OrderedDict() for design in designs}
         self._models: List[OrderedDict] = [shared[design] for design in designs]
         self._cache_size = [_CACHE_SIZE * designs.count(design) for design in designs]
+        # sections advanced every frame (the others parked: their states at the start of frame
+        # _parked_at[k] in _parked, caught up from the inputs' history when needed again)
+        self._parked_at: List[Optional[int]] = [None] * self.count
         self._refresh_faults()
         size = self._size = max(self._model(k, _NO_TRAIN).phi_n.shape[0] for k in range(self.count))
         # per section and frame: its states at the frame start (padded to one size) followed by
@@ -176,15 +179,11 @@ class TrackCircuitBank:
         # currents a coil sees; the two arrays alternate frame by frame
         self._frame_start = np.zeros((self.count, size + frame))
         self._frame_end = np.zeros((self.count, size + frame))
-        self.states = self._frame_start[:, :size]
         self._step = np.zeros((self.count, size, size + frame))     # [Φᴺ | Ψ] per section, padded
-        # sections advanced every frame (the others parked: their states at the start of frame
-        # _parked_at[k] in _parked, caught up from the inputs' history when needed again)
         self._frame_index = 0
         self._live = list(range(self.count))
         self._wanted = set(range(self.count))
         self._review_parking = False
-        self._parked_at: List[Optional[int]] = [None] * self.count
         self._parked = np.zeros((self.count, size))
         # a catch-up within a frame reads its slowest mode's frames and the frame itself
         history = 1 + max(self._settle_frames(self._model(k, _NO_TRAIN)) for k in range(self.count))
@@ -315,8 +314,8 @@ class TrackCircuitBank:
             self._refresh_faults()
 
     def _refresh_faults(self) -> None:
-        for k in range(self.count) if hasattr(self, "_parked_at") else ():
-            if self._parked_at[k] is not None:       # caught up under the models it was parked with
+        for k, parked_at in enumerate(self._parked_at):
+            if parked_at is not None:                # caught up under the models it was parked with
                 self._wake(k)
         self._effective_faults = [
             Faults(f.ballast_ohm_km, self.broken_rail_m if self.starts[k] <= self.broken_rail_m < self.ends[k] else -1.0,
@@ -462,6 +461,11 @@ class TrackCircuitBank:
             value = value * (1.0 + (gain - 1.0) * np.minimum(np.maximum(blend, 0.0, out=blend), 1.0, out=blend))
         return value
 
+    @property
+    def states(self) -> np.ndarray:
+        """Every section's states at the start of the coming frame (a view, padded)."""
+        return self._frame_start[:, :self._size]
+
     # ---- the trains' shunts -----------------------------------------------------------------
     def follow_shunts(self, heads: List[float], tick_s: float = 0.0) -> None:
         """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts,
@@ -604,7 +608,6 @@ class TrackCircuitBank:
         if self._review_parking:
             self._park()
         self._frame_start, self._frame_end = end, start
-        self.states = end[:, :size]
         if not self._relays_settled:
             self._update_relays(n * self.dt)
         return FrameCurrents(self, start)
