@@ -41,11 +41,6 @@ POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train p
 SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
 
 
-def _unit(x: float) -> float:
-    """x clipped to [0, 1] as numpy's maximum/minimum clip it (−0.0 → 0.0)."""
-    return (x if x < 1.0 else 1.0) if x > 0.0 else 0.0
-
-
 @dataclass
 class RailSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
@@ -238,26 +233,22 @@ class RailLineCore:
             head *= v_k
             head += x_k
             return head
-        if times[0] >= t_k and times[-1] - t_k <= POSITION_BLEND_S:
-            # the frame inside the blend (every frame when the master updates the position each
-            # frame): one polynomial, x_k + gap + (v_k + speed_gap)·τ + c2·τ² + c3·τ³, by Horner
-            term = np.multiply(tau, c3, out=self._blend_term[:head.size])
-            term += c2
-            term *= tau
-            term += v_k + speed_gap
-            term *= tau
-            return np.add(term, x_k + gap, out=head)
-        # a frame reaching outside the blend: the polynomial at τ clipped to [0, B], continued
-        # at v_k beyond (the blend is flat at both ends: gap and its slope at 0, nothing at B)
-        clipped = np.minimum(np.maximum(tau, 0.0, out=self._blend_tau[:head.size]), POSITION_BLEND_S,
-                             out=self._blend_tau[:head.size])
-        term = np.multiply(clipped, c3, out=self._blend_term[:head.size])
+        # the polynomial x_k + gap + (v_k + speed_gap)·τ + c2·τ² + c3·τ³ by Horner, at τ itself
+        # when the frame lies inside the blend (every frame when the master updates the position
+        # each frame), else at τ clipped to [0, B] and continued at v_k beyond (the blend is
+        # flat at both ends: the gap and its slope at 0, nothing at B)
+        inside = times[0] >= t_k and times[-1] - t_k <= POSITION_BLEND_S
+        at = tau if inside else np.minimum(np.maximum(tau, 0.0, out=self._blend_tau[:head.size]),
+                                           POSITION_BLEND_S, out=self._blend_tau[:head.size])
+        term = np.multiply(at, c3, out=self._blend_term[:head.size])
         term += c2
-        term *= clipped
+        term *= at
         term += v_k + speed_gap
-        term *= clipped
+        term *= at
+        if inside:
+            return np.add(term, x_k + gap, out=head)
         term += x_k + gap
-        tau -= clipped
+        tau -= at
         tau *= v_k
         head += term
         return head
@@ -273,10 +264,10 @@ class RailLineCore:
         return (x_k + gap) + v_k * tau
 
     def _speed_at_time(self, j: int, t: float) -> float:
-        x_k, v_k, t_k, gap, speed_gap = self._anchors[j][:5]
-        s = _unit((t - t_k) / POSITION_BLEND_S)
-        s2 = s * s
-        return v_k + gap * (6 * s2 - 6 * s) / POSITION_BLEND_S + speed_gap * (3 * s2 - 4 * s + 1)
+        """The head's speed at one time: the blend polynomial's derivative at τ clipped to [0, B]."""
+        _, v_k, t_k, _, speed_gap, c2, c3 = self._anchors[j]
+        tau = min(max(t - t_k, 0.0), POSITION_BLEND_S)
+        return v_k + speed_gap + (2.0 * c2 + 3.0 * c3 * tau) * tau
 
     # ---- studies ------------------------------------------------------------------------------
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:
