@@ -169,20 +169,29 @@ def test_joint_crossing_null_and_weak_zones_scale_with_speed(speed_kmh):
 
 
 def test_frame_length_does_not_change_the_coil_emf():
+    # a train running under traction current (its position updated every 0.5 s) and one
+    # standing in another section: a build with one sample per frame (its own float path)
+    # gives the 10 ms frames' EMF and axle current
     line = load_line()
     results = {}
     v = 100 / 3.6
     for frame in (1, 40):
         core = RailLineCore(line, 8, 2, frame, RailSettings())
-        emf = []
+        emf, axle = [], []
         for k in range(int(1.2 * FS / frame)):
             t = k * frame / FS
             times = t + np.arange(frame) / FS
             u = np.tile(np.where(np.sin(2 * np.pi * 0.9 * times) > 0, 4.0, 0.0) * np.sin(W50 * times), (8, 1))
             x = 2580.0 + v * np.floor(t / 0.5) * 0.5
-            emf.append(core.step(t, u, np.array([x, -1000.0]), np.array([v, 0.0]), np.array([500.0, 0.0])).e_coil[0].copy())
-        results[frame] = np.concatenate(emf)
-    assert np.allclose(results[1], results[40], rtol=1e-9, atol=1e-12)
+            out = core.step(t, u, np.array([x, 4200.0]), np.array([v, 0.0]), np.array([500.0, 0.0]))
+            emf.append(out.e_coil.copy())
+            axle.append(out.i_axle.copy())          # the rms of the frame's samples
+        results[frame] = np.concatenate(emf, axis=1), np.array(axle)
+    (emf_1, axle_1), (emf_40, axle_40) = results[1], results[40]
+    assert np.abs(emf_40).max(axis=1).min() > 0.01           # both coils see code
+    np.testing.assert_allclose(emf_1, emf_40, rtol=1e-9, atol=1e-12)
+    rms_of_40 = np.sqrt(np.mean(axle_1.reshape(-1, 40, 2) ** 2, axis=1))
+    np.testing.assert_allclose(rms_of_40, axle_40, rtol=1e-9, atol=1e-12)
 
 
 def _keyed_run(core, seconds, x0_m, v_mps, ballast_at=None):

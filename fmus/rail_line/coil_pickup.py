@@ -36,8 +36,8 @@ class CoilPickup:
         self.line_length_m = line_length_m
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
         self._emf_gain = s.fs_hz * s.coil_gain_h
-        self._last_current = np.zeros(trains)
-        self._sensing = np.zeros(trains, dtype=bool)
+        self._last_current = [0.0] * trains
+        self._sensing = [False] * trains
         # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones
         # and from each feed to its section's end, widened by the coil length
         margin = s.coil_length_m
@@ -81,6 +81,9 @@ class CoilPickup:
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
+                if n == 1:
+                    self._usual_sample(out, j, k, first, float(times[0]), head_first, currents, standing_at[j])
+                    continue
                 shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times, standing_at[j])
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
@@ -89,13 +92,27 @@ class CoilPickup:
             self._emf(out.e_coil[j], j, current, n)
             out.i_axle[j] = math.sqrt(float(np.dot(i_axle, i_axle)) / n)
 
+    def _usual_sample(self, out, j: int, k: int, first: int, time_s: float, head_m: float,
+                      currents: FrameCurrents, standing_at: Optional[float]) -> None:
+        """The usual frame of a build with one sample per frame (the hardware-in-the-loop case)
+        in Python floats: the same quantities as the frame path's, without a dozen numpy calls
+        on one-element arrays."""
+        interference = self.interference
+        shunt_current = currents.ahead_sample(k, j) * self.bank.scale_sample(k, head_m, j, time_s, standing_at)
+        current = shunt_current + interference.asymmetry.item(k) * interference.wave_sample(j, first, time_s)
+        previous = self._last_current[j] if self._sensing[j] else current      # no step at the first sample
+        out.e_coil[j, 0] = (current - previous) * self._emf_gain
+        self._last_current[j] = current
+        self._sensing[j] = True
+        out.i_axle[j] = abs(shunt_current)            # the rms of one sample
+
     def _emf(self, emf: np.ndarray, j: int, current: np.ndarray, n: int) -> None:
         """EMF = M·di/dt on the sampled current, continuing from the previous frame's last sample."""
         previous = self._last_current[j] if self._sensing[j] else current[0]   # no step at the first sample
         emf[0] = current[0] - previous
         np.subtract(current[1:], current[:-1], out=emf[1:n])
         emf[:n] *= self._emf_gain
-        self._last_current[j] = current[-1]
+        self._last_current[j] = float(current[-1])
         self._sensing[j] = True
 
     def _near_joint(self, lo: float, hi: float) -> bool:

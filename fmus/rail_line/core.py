@@ -123,6 +123,7 @@ class RailLineCore:
         self.standing_at: List[Optional[float]] = [None] * trains
         self.out = RailOutputs(np.zeros((trains, frame)), np.zeros(sections, dtype=bool),
                                np.zeros(trains), np.zeros(trains, dtype=bool), np.zeros(trains, dtype=np.int64))
+        self._occupancy_of: Optional[np.ndarray] = None     # the relay states ``out.occupied`` shows
 
     def bind_outputs(self, out: RailOutputs) -> None:
         """Write every frame's outputs into ``out``'s arrays (a host's port buffers, of the
@@ -149,8 +150,12 @@ class RailLineCore:
     def step(self, t: float, u_tx: np.ndarray, x_head: np.ndarray, v: np.ndarray, i_traction: np.ndarray) -> RailOutputs:
         n = u_tx.shape[1] if u_tx.ndim == 2 else self.frame
         first = round(t * self.settings.fs_hz)
-        times = np.add(self._index_f[:n], first, out=self._times[:n])
-        times *= self.dt
+        times = self._times[:n]
+        if n == 1:
+            times[0] = first * self.dt                  # (0 + first)·dt, as below
+        else:
+            np.add(self._index_f[:n], first, out=times)
+            times *= self.dt
         tick = math.floor(t / CONFIG_TICK_S + 1e-9) * CONFIG_TICK_S
         at_tick = []
         heads = self._heads
@@ -164,7 +169,9 @@ class RailLineCore:
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
         self.pickup.sense(first, times, heads[:, :n], currents, out, self.standing_at)
-        out.occupied[:self.count] = ~self.bank.relay_up
+        if self.bank.relay_up is not self._occupancy_of:      # the bank makes a new array when a relay moves
+            self._occupancy_of = self.bank.relay_up
+            out.occupied[:self.count] = ~self._occupancy_of
         return out
 
     def start(self, x_head: np.ndarray) -> RailOutputs:
@@ -182,7 +189,8 @@ class RailLineCore:
                         f"{spans[b][1] - spans[b][0]:g} m) overlaps train {a + 1} (head {spans[a][1]:g} m, length "
                         f"{spans[a][1] - spans[a][0]:g} m) at initialisation")
         self.bank.start([float(x) for x in x_head[:self.trains]])
-        self.out.occupied[:self.count] = ~self.bank.relay_up
+        self._occupancy_of = self.bank.relay_up
+        self.out.occupied[:self.count] = ~self._occupancy_of
         return self.out
 
     def _update_anchor(self, j: int, t: float, x: float, v: float) -> None:
@@ -217,10 +225,6 @@ class RailLineCore:
         (a build with N = 1) in floats. Inside the blend and after it, the operations and their
         order are those of head_at_time, so the two agree bit for bit (a frame reaching over
         the blend's end continues the polynomial instead: the same values to rounding)."""
-        if head.size == 1:
-            head[0] = self.head_at_time(j, float(times[0]))
-            self.standing_at[j] = None
-            return head
         x_k, v_k, t_k, gap, speed_gap, c2, c3 = self._anchors[j]
         if v_k == 0.0 and not (gap or speed_gap) and x_k != 0.0:
             # a train standing (or parked off the line): x_k + 0·(t − t_k) is x_k
@@ -228,6 +232,9 @@ class RailLineCore:
             self.standing_at[j] = x_k
             return head
         self.standing_at[j] = None
+        if head.size == 1:
+            head[0] = self.head_at_time(j, float(times[0]))
+            return head
         tau = np.subtract(times, t_k, out=head)
         if not (gap or speed_gap) or times[0] - t_k >= POSITION_BLEND_S:
             head *= v_k

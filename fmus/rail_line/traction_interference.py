@@ -74,6 +74,7 @@ class TractionInterference:
         dt = 1.0 / s.fs_hz
         lag = np.exp(-dt / s.traction_time_constant_s)
         self._lag_powers = lag ** np.arange(1, frame + 1)
+        self._lag = float(self._lag_powers[0])
         self._traction_last = [0.0] * trains                   # smoothed current at the last sample
         self._traction_on = [False] * trains
         self._traction_settled = [False] * trains             # the row is the held value at every sample
@@ -88,6 +89,7 @@ class TractionInterference:
             # (first sample mod period), no index array (the same values as a look-up per sample)
             table = self._ripple_wave(np.arange(self._ripple_period) * dt)
             self._ripple_table = table[np.arange(self._ripple_period + frame) % self._ripple_period]
+            self._ripple_samples = table.tolist()
 
     def new_frame(self, i_traction: np.ndarray, n: int) -> None:
         """The traction current reaches the rails through the traction circuit's inductance
@@ -95,20 +97,23 @@ class TractionInterference:
         turns the steps of a slowly sampled traction FMU into ramps, which the coils would
         otherwise see as EMF spikes of tens of volts. The input is held over the frame, so the
         lag's response is closed-form: y[i] = c + (y[−1] − c)·λ^(i+1)."""
-        for j in range(self.trains):
-            held, last = float(i_traction[j]), self._traction_last[j]
-            row = self._i_traction[j, :n]
+        for j, held in zip(range(self.trains), i_traction.tolist()):
+            last = self._traction_last[j]
             if held == last == 0.0:
                 if self._traction_on[j]:
-                    row[:] = 0.0
+                    self._i_traction[j, :n] = 0.0
                     self._traction_on[j] = False
                     self._traction_settled[j] = False
                 continue
             if held == last and self._traction_settled[j]:
                 continue                   # the lag has reached the held value: the row is all held
-            np.multiply(self._lag_powers[:n], last - held, out=row)
-            row += held
-            self._traction_last[j] = float(row[-1])
+            if n == 1:                     # one sample a frame: the same operations in floats
+                self._traction_last[j] = self._i_traction[j, 0] = self._lag * (last - held) + held
+            else:
+                row = self._i_traction[j, :n]
+                np.multiply(self._lag_powers[:n], last - held, out=row)
+                row += held
+                self._traction_last[j] = float(row[-1])
             self._traction_on[j] = True
             self._traction_settled[j] = held == last and n == self._i_traction.shape[1]
         self._ripple_first = None
@@ -126,6 +131,16 @@ class TractionInterference:
                 self._ripple = self._ripple_wave(times)
             self._ripple_first = first
         return self._i_traction[j, :times.size] * self._ripple     # smoothed per sample (new_frame)
+
+    def wave_sample(self, j: int, first: int, time_s: float) -> float:
+        """``wave`` for a frame of one sample (index ``first``, at ``time_s``), as a float."""
+        if not (self.ac or self.dc) or not self._traction_on[j]:
+            return 0.0
+        if self._ripple_period is not None:
+            ripple = self._ripple_samples[first % self._ripple_period]
+        else:
+            ripple = float(self._ripple_wave(np.array([time_s]))[0])
+        return self._i_traction.item(j, 0) * ripple
 
     def _ripple_wave(self, times: np.ndarray) -> np.ndarray:
         """Waveform of a unit traction current: DC with 300/600 Hz rectifier ripple, AC 50 Hz
