@@ -200,6 +200,29 @@ def test_results_do_not_depend_on_the_frame_length():
     assert states[1] == states[40]
 
 
+def test_overload_recovery_and_loss_decode_the_same_sample_by_sample():
+    # the gain control at work (a coil EMF 30× the usual, 6 V: twelve times its limit), its
+    # recovery, a code loss beyond the inertia and the code back: a build with one sample per
+    # frame (which filters and decides in floats) shows what the 10 ms frames show, when they
+    # show it, with the same level
+    gain = lambda t: np.where(t < 4.0, 1.0, np.where(t < 8.0, 30.0, np.where((t >= 10.0) & (t < 17.0), 0.0, 1.0)))
+    disturb = lambda t, e: e * gain(t)
+    shown = {}
+    for frame in (1, 40):
+        chain = Chain(1, frame=frame, cam_phase=0.55, receiver=ReceiverSettings())
+        rows, levels = [], []
+        for _ in range(int(22.0 * FS / 40)):       # 10 ms at a time, the receiver's state read after each
+            rows.append(chain.run(0.01, CODE_OCCUPANCY[sig.YELLOW](1), disturb=disturb)[-1])
+            levels.append(chain.receiver.out.level_v)
+        out = chain.receiver.out
+        shown[frame] = (np.array(rows), np.array(levels), out.decoded_codes, out.errors, out.joints)
+    (rows_1, levels_1, *counts_1), (rows_40, levels_40, *counts_40) = shown[1], shown[40]
+    assert np.array_equal(rows_1[:, 1:], rows_40[:, 1:]) and counts_1 == counts_40
+    np.testing.assert_allclose(levels_1, levels_40, rtol=1e-9, atol=1e-12)
+    # the overload was seen, the code was lost (beyond the 5.5 s inertia) and shown again
+    assert levels_40.max() > 3.0 and not rows_40[1600:1700, 2].any() and rows_40[-1, 1] == sig.YELLOW
+
+
 def test_receiver_reports_speeds_per_category_and_transmitter_type():
     chain = Chain(1, receiver=ReceiverSettings(train_category="freight"))
     chain.run(6.0, _occupied(3))   # section 1 sees Ж

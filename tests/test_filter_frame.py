@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from fmus.dsp.filter_design import chebyshev_band_pass, filter_frame
+from fmus.dsp.filter_design import SampleFilter, chebyshev_band_pass, filter_frame
 from fmus.loco_receiver import filters
 
 
@@ -23,3 +23,16 @@ def test_frame_by_frame_equals_lfilter_over_the_whole_signal(design, rows):
     whole, final = lfilter(design.b, design.a, x, axis=-1, zi=np.zeros_like(state))
     np.testing.assert_array_equal(np.concatenate(pieces, axis=-1), whole)
     np.testing.assert_array_equal(state, final)
+
+
+@pytest.mark.parametrize("design", [filters.band_pass(50.0, 20.0, 4, 4000.0), filters.band_pass(25.0, 10.0, 4, 4000.0),
+                                    filters.envelope_low_pass(12.0, 4000.0)],
+                         ids=["alsn-band-pass-50", "alsn-band-pass-25", "envelope"])
+def test_sample_by_sample_filter_gives_lfilters_samples_bit_for_bit(design):
+    """A build with one sample per frame filters in floats: the same samples as lfilter."""
+    x = np.random.default_rng(7).standard_normal(3000)
+    one_at_a_time = SampleFilter(design.b, design.a)
+    samples = [one_at_a_time(value) for value in x.tolist()]
+    whole, final = lfilter(design.b, design.a, x, zi=np.zeros(design.a.size - 1))
+    assert samples == whole.tolist()
+    assert one_at_a_time.state == final.tolist()

@@ -34,6 +34,32 @@ def filter_frame(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray,
     return lfilter(b, a, x, axis=axis, zi=state)
 
 
+class SampleFilter:
+    """lfilter(b, a) one sample at a time in Python floats, for a build with one sample per
+    frame: there a call of the C routine on a one-element array costs twice the arithmetic.
+    Transposed direct form II with the operations in the order of scipy's routine, so the
+    samples are lfilter's bit for bit (tests/test_filter_frame.py); ``state`` is its zi."""
+
+    __slots__ = ("_b", "_a", "state", "_last")
+
+    def __init__(self, b: np.ndarray, a: np.ndarray):
+        if a[0] != 1.0:
+            raise ValueError("SampleFilter: a[0] must be 1 (normalise the coefficients)")
+        size = max(a.size, b.size)             # lfilter pads the shorter with zeros
+        self._b = np.pad(np.asarray(b, dtype=float), (0, size - b.size)).tolist()
+        self._a = np.pad(np.asarray(a, dtype=float), (0, size - a.size)).tolist()
+        self.state = [0.0] * (size - 1)
+        self._last = size - 2
+
+    def __call__(self, x: float) -> float:
+        z, b, a, last = self.state, self._b, self._a, self._last
+        y = z[0] + b[0] * x
+        for i in range(last):
+            z[i] = z[i + 1] + x * b[i + 1] - y * a[i + 1]
+        z[last] = x * b[last + 1] - y * a[last + 1]
+        return y
+
+
 @dataclass(frozen=True)
 class DiscreteFilter:
     b: np.ndarray

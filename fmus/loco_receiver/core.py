@@ -48,11 +48,12 @@ acquisition within two cycles + 0.5 s from any cam phase.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from fmus.dsp.filter_design import filter_frame
+from fmus.dsp.filter_design import SampleFilter, filter_frame
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
@@ -158,6 +159,9 @@ class LocoReceiverCore:
         self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
+        # a build with one sample per frame filters in floats (the same samples as lfilter)
+        self._sample_filters = (SampleFilter(self.band_pass.b, self.band_pass.a),
+                                SampleFilter(self.envelope_lp.b, self.envelope_lp.a)) if frame == 1 else None
         self._gain_db = 0.0
         self._relay = False
         self._ramp = (np.arange(frame) + 1) * (s.agc_recovery_db_per_s * self.dt)
@@ -241,6 +245,10 @@ class LocoReceiverCore:
         if self._started_s is None:
             self._started_s = t
         x = np.asarray(e_coil, dtype=float)
+        if self._sample_filters is not None:
+            if x.size != 1:
+                raise ValueError(f"LocoReceiverCore built for one sample per frame stepped with {x.size}")
+            return self._step_sample(t, x.item(0))
         band, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
         scaled, gain, magnitude = self._gain_control(band)
         envelope, self._env_state = filter_frame(self.envelope_lp.b, self.envelope_lp.a,
@@ -279,6 +287,49 @@ class LocoReceiverCore:
         return out
 
     # ---- decoder ------------------------------------------------------------------------------
+    def _step_sample(self, t: float, e_coil_v: float) -> ReceiverOutputs:
+        """``step`` for a build with one sample per frame, in Python floats: the frame path's
+        operations on its one sample, without two dozen numpy calls on one-element arrays."""
+        s = self.settings
+        band_pass, envelope_lp = self._sample_filters
+        band = band_pass(e_coil_v)
+        magnitude = abs(band)
+        if magnitude <= s.agc_limit_v and self._gain_db >= 0.0:
+            gain = 1.0                                  # the usual case: no overload, full gain
+            envelope = envelope_lp(magnitude) * (np.pi / 2.0)
+            level = envelope
+        else:                                           # as _gain_control, on one sample
+            ramp = self._ramp.item(0)
+            if magnitude <= s.agc_limit_v:
+                self._gain_db = min(self._gain_db + ramp, 0.0)       # recovering
+            else:
+                required = 20.0 * math.log10(s.agc_limit_v / max(magnitude, 1e-30))
+                self._gain_db = ramp + min(self._gain_db, required - ramp)
+            gain = 10.0 ** (self._gain_db / 20.0)
+            envelope = envelope_lp(abs(band * gain)) * (np.pi / 2.0)
+            level = envelope / gain
+        relay = self._relay
+        if relay:
+            if envelope < s.drop_out_v:
+                relay = envelope > s.pick_up_v
+        elif envelope > s.pick_up_v:
+            relay = True
+        if relay != self._relay:
+            self._edge(round(t * s.fs_hz) * self.dt, relay)
+            self._relay = relay
+        if relay:
+            self._pulse_peak = max(self._pulse_peak, level)
+            self._pulse_drive = max(self._pulse_drive, envelope)
+        end_s = t + self.dt
+        if self._pending is not None:
+            self._settle_pending(end_s)
+        self._watchdog(end_s)
+        self._held = max(self._held * self._level_step, level)     # _level of one sample
+        out = self.out
+        out.level_v = self._held
+        out.relay = relay
+        return out
+
     def _edge(self, time_s: float, rising: bool) -> None:
         self._last_edge_s = time_s
         if not rising:
