@@ -122,7 +122,7 @@ class ValueBuffer:
 def contiguous(index: np.ndarray):
     """``index`` as a slice when it is a run of consecutive positions (numpy then copies a block
     instead of gathering element by element), else as it is."""
-    if index.size > 1 and index[0] >= 0 and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+    if index.size and index[0] >= 0 and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
         return slice(int(index[0]), int(index[0]) + index.size)
     return index
 

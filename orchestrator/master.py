@@ -165,6 +165,9 @@ class Master:
         self.interrupt = interrupt
         self._components = {name: _Component(name, slaves[name], graph.nodes[name].step_ticks)
                             for name in graph.order}
+        # the plan of each phase of the steps' common period, kept across run_until calls (a
+        # caller stepping in pieces plans each phase once, as one call does)
+        self._plans: Dict[int, tuple] = {}
 
     # ---- setup ------------------------------------------------------------------------------
     def bind(self, extra_outputs: Mapping[str, Sequence[str]] = None,
@@ -356,7 +359,7 @@ class Master:
         # the due components repeat with the least common multiple of the steps: one plan per
         # phase, made once (a layout with too many phases is planned at each tick)
         period = math.lcm(*(c.step_ticks for c in self._components.values())) if self._components else base
-        plans: Dict[int, tuple] = {}
+        plans = self._plans
         manipulators = self.manipulators
         observers = self.observers
         gather, step, conclude = self._gather, self._step, self._conclude
