@@ -166,7 +166,8 @@ class Master:
         self._components = {name: _Component(name, slaves[name], graph.nodes[name].step_ticks)
                             for name in graph.order}
         # the plan of each phase of the steps' common period, kept across run_until calls (a
-        # caller stepping in pieces plans each phase once, as one call does)
+        # caller stepping in pieces plans each phase once, as one call does): the components,
+        # their steps and the algorithm do not change after construction
         self._plans: Dict[int, tuple] = {}
 
     # ---- setup ------------------------------------------------------------------------------

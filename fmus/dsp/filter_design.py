@@ -46,6 +46,8 @@ class SampleFilter:
         if a[0] != 1.0:
             raise ValueError("SampleFilter: a[0] must be 1 (normalise the coefficients)")
         size = max(a.size, b.size)             # lfilter pads the shorter with zeros
+        if size < 2:
+            raise ValueError("SampleFilter: a filter of order 0 is a gain, not a filter")
         self._b = np.pad(np.asarray(b, dtype=float), (0, size - b.size)).tolist()
         self._a = np.pad(np.asarray(a, dtype=float), (0, size - a.size)).tolist()
         self.state = [0.0] * (size - 1)
