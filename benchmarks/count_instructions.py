@@ -31,7 +31,6 @@ COUNTING = "RAILCOSIM_COUNTING"
 
 def counted_run(warm_s: float, stop_s: float, in_process: bool, sample_by_sample: bool) -> None:
     """Inside valgrind: step free_run to ``warm_s`` uncounted, then to ``stop_s`` counted."""
-    from benchmarks.bench_sample_by_sample import REPO, sample_by_sample_system
     from orchestrator import master
     from benchmarks.harness.runs import scratch_run
     from orchestrator.cli import SSP_ROOT, _build_dir
@@ -66,6 +65,7 @@ def counted_run(warm_s: float, stop_s: float, in_process: bool, sample_by_sample
     if not sample_by_sample:
         scratch_run(SSP_ROOT / "free_run", in_process, [_build_dir()], stop_s)
         return
+    from benchmarks.bench_sample_by_sample import REPO, sample_by_sample_system
     fmus = REPO / "build" / "fmus_n1"
     with tempfile.TemporaryDirectory() as folder:
         scratch_run(sample_by_sample_system(Path(folder), fmus), in_process, [fmus], stop_s)
