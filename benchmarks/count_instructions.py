@@ -35,26 +35,18 @@ def counted_run(warm_s: float, stop_s: float, in_process: bool, sample_by_sample
     from benchmarks.harness.runs import scratch_run
     from orchestrator.cli import SSP_ROOT, _build_dir
     from orchestrator.graph import TICKS_PER_SECOND
+    from orchestrator.protocols import Observer
 
     run_until = master.Master.run_until
     warm_ticks = round(warm_s * TICKS_PER_SECOND)
 
-    class CountFromWarm:
+    class CountFromWarm(Observer):
         """Switches counting on after the tick that reaches ``warm_s``: one run_until, as a
         user's run makes (two calls would plan the master's steps twice)."""
-
-        def outputs_needed(self):
-            return {}
-
-        def started(self, master_view, step):
-            pass
 
         def after_tick(self, master_view, step):
             if step.tick == warm_ticks:
                 subprocess.run(["callgrind_control", "-i", "on", str(os.getpid())], capture_output=True, check=True)
-
-        def close(self):
-            pass
 
     def counted(self, stop_ticks):
         self.observers.append(CountFromWarm())

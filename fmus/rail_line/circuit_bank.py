@@ -105,16 +105,6 @@ class FrameCurrents:
             bank._wake_in_frame(k)
         return bank._active[k][1].padded[1][row] @ self.start[k]
 
-    def ahead_sample(self, k: int, j: int) -> float:
-        """``ahead`` of a frame of one sample, as a float."""
-        bank = self.bank
-        row = bank._rows[k].get(j)
-        if row is None:
-            return 0.0
-        if bank._parked_at[k] is not None:
-            bank._wake_in_frame(k)
-        return float(bank._active[k][1].padded[1][row, 0] @ self.start[k])
-
     def entry(self, k: int) -> np.ndarray:
         bank = self.bank
         if bank._parked_at[k] is not None:
@@ -170,7 +160,6 @@ class TrackCircuitBank:
         self._zeros = np.zeros(frame)
         # per section: (position, amplitude table, node amplitude, scale) of a standing front train
         self._standing_scale: List[Optional[tuple]] = [None] * self.count
-        self._standing_sample: List[Optional[tuple]] = [None] * self.count     # the same, one sample a frame
         self.calibration = self._calibrate()
         # sections of one design (the same circuit relative to its start, carrier and calibration)
         # share their network models: a train passing one meets the same configurations again
@@ -470,25 +459,6 @@ class TrackCircuitBank:
         if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
             blend = 1.0 - (times - since) / SHUNT_BLEND_S
             value = value * (1.0 + (gain - 1.0) * np.minimum(np.maximum(blend, 0.0, out=blend), 1.0, out=blend))
-        return value
-
-    def scale_sample(self, k: int, head_m: float, j: int, time_s: float, standing_at: Optional[float] = None) -> float:
-        """``scale`` of a frame of one sample, at the head position ``head_m`` and time
-        ``time_s``, as a float (the same operations on floats)."""
-        _, _, log_amplitude, at_node, front = self._active[k]
-        if j != front:
-            return 1.0
-        kept = self._standing_sample[k]
-        if standing_at is not None and kept is not None and kept[0] == standing_at and kept[1] is log_amplitude \
-                and kept[2] == at_node:
-            value = kept[3]
-        else:
-            value = math.exp(float(_interp(head_m, self._nodes_m[k], log_amplitude)) - at_node)
-            self._standing_sample[k] = (standing_at, log_amplitude, at_node, value) if standing_at is not None else None
-        gain, since = self._handover[k]
-        if gain != 1.0 and time_s - since < SHUNT_BLEND_S:
-            blend = 1.0 - (time_s - since) / SHUNT_BLEND_S
-            value = value * (1.0 + (gain - 1.0) * min(max(blend, 0.0), 1.0))
         return value
 
     @property

@@ -82,7 +82,7 @@ class CoilPickup:
                     and not self._near_joint(first_coil, last_coil)):
                 # the usual frame: wheelset and whole coil over the same section, clear of joints
                 if n == 1:
-                    self._usual_sample(out, j, k, first, float(times[0]), head_first, currents, standing_at[j])
+                    self._usual_sample(out, j, k, first, times, head, currents, standing_at[j])
                     continue
                 shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times, standing_at[j])
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
@@ -92,14 +92,15 @@ class CoilPickup:
             self._emf(out.e_coil[j], j, current, n)
             out.i_axle[j] = math.sqrt(float(np.dot(i_axle, i_axle)) / n)
 
-    def _usual_sample(self, out, j: int, k: int, first: int, time_s: float, head_m: float,
+    def _usual_sample(self, out, j: int, k: int, first: int, times: np.ndarray, head: np.ndarray,
                       currents: FrameCurrents, standing_at: Optional[float]) -> None:
-        """The usual frame of a build with one sample per frame (the hardware-in-the-loop case)
-        in Python floats: the same quantities as the frame path's, without a dozen numpy calls
-        on one-element arrays."""
+        """The usual frame of a build with one sample per frame (the hardware-in-the-loop case):
+        the frame path's quantities, the EMF and the rms in Python floats instead of numpy
+        calls on one-element arrays."""
         interference = self.interference
-        shunt_current = currents.ahead_sample(k, j) * self.bank.scale_sample(k, head_m, j, time_s, standing_at)
-        current = shunt_current + interference.asymmetry.item(k) * interference.wave_sample(j, first, time_s)
+        scale = self.bank.scale(k, head, j, times, standing_at)
+        shunt_current = currents.ahead(k, j).item(0) * (scale if isinstance(scale, float) else scale.item(0))
+        current = shunt_current + interference.asymmetry.item(k) * interference.wave_sample(j, first, times)
         previous = self._last_current[j] if self._sensing[j] else current      # no step at the first sample
         out.e_coil[j, 0] = (current - previous) * self._emf_gain
         self._last_current[j] = current

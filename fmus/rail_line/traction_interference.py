@@ -89,7 +89,6 @@ class TractionInterference:
             # (first sample mod period), no index array (the same values as a look-up per sample)
             table = self._ripple_wave(np.arange(self._ripple_period) * dt)
             self._ripple_table = table[np.arange(self._ripple_period + frame) % self._ripple_period]
-            self._ripple_samples = table.tolist()
 
     def new_frame(self, i_traction: np.ndarray, n: int) -> None:
         """The traction current reaches the rails through the traction circuit's inductance
@@ -132,14 +131,12 @@ class TractionInterference:
             self._ripple_first = first
         return self._i_traction[j, :times.size] * self._ripple     # smoothed per sample (new_frame)
 
-    def wave_sample(self, j: int, first: int, time_s: float) -> float:
-        """``wave`` for a frame of one sample (index ``first``, at ``time_s``), as a float."""
+    def wave_sample(self, j: int, first: int, times: np.ndarray) -> float:
+        """``wave`` for a frame of one sample, as a float (a look-up, not a view and a product)."""
         if not (self.ac or self.dc) or not self._traction_on[j]:
             return 0.0
-        if self._ripple_period is not None:
-            ripple = self._ripple_samples[first % self._ripple_period]
-        else:
-            ripple = float(self._ripple_wave(np.array([time_s]))[0])
+        ripple = self._ripple_table.item(first % self._ripple_period) if self._ripple_period is not None \
+            else self._ripple_wave(times).item(0)
         return self._i_traction.item(j, 0) * ripple
 
     def _ripple_wave(self, times: np.ndarray) -> np.ndarray:

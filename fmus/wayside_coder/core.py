@@ -28,7 +28,7 @@ any length N give the same samples (docs/wayside_coder.md#model-corepy).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Tuple
+from typing import Optional
 
 import numpy as np
 from scipy.signal import lfilter
@@ -182,11 +182,10 @@ class WaysideCoderCore:
             width = int(self._period.max()) + frame
             self._frame_index = np.arange(k)[:, None] * width + self._index
             self._wave_rows = np.zeros(k * width)
-        # a build with one sample per frame reads each section's sample from its period as a
-        # list (a look-up in Python, not three numpy calls on one-sample arrays): the same values
-        self._sample_waves: Optional[List[List[float]]] = \
-            [[0.0] * int(period) for period in self._period.tolist()] if self._period is not None and frame == 1 else None
-        self._wave_lists: Dict[Tuple[int, int], List[float]] = {}
+        # one sample per frame: each section's sample read from its row by (row start, period),
+        # look-ups in Python instead of three numpy calls on one-sample arrays
+        self._sample_rows = list(zip(range(0, k * width, width), self._period.tolist())) \
+            if self._period is not None and frame == 1 else None
         self.out = CoderOutputs(np.zeros((sections, frame)), np.zeros(sections, dtype=np.int64),
                                 np.zeros(sections, dtype=np.int64))
 
@@ -211,8 +210,9 @@ class WaysideCoderCore:
             self._block_logic(t, np.asarray(occupied[:k], dtype=bool), fault_main, fault_reserve)
         # sample times from the integer sample index: no drift over long runs
         first = round(t * s.fs_hz)
-        if self._sample_waves is not None:
-            out.u_tx[:k, 0] = [wave[first % len(wave)] for wave in self._sample_waves]
+        if self._sample_rows is not None:
+            rows = self._wave_rows
+            out.u_tx[:k, 0] = [rows.item(start + first % period) for start, period in self._sample_rows]
             return out
         if self._period is not None:          # the periodic waveform of each section, from its table
             self._wave_rows.take(self._frame_index + (first % self._period)[:, None], out=out.u_tx[:k])
@@ -243,11 +243,6 @@ class WaysideCoderCore:
             for section, code in enumerate(codes.tolist()):
                 wave = self._wave(section, code)
                 self._wave_rows[section * width:section * width + wave.size] = wave
-                if self._sample_waves is not None:
-                    listed = self._wave_lists.get((section, code))
-                    if listed is None:
-                        listed = self._wave_lists[(section, code)] = wave[:self._period[section]].tolist()
-                    self._sample_waves[section] = listed
 
     def _wave_periods(self) -> Optional[np.ndarray]:
         """Samples after which each section's output repeats (its cam cycle and carrier period
