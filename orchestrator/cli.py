@@ -153,7 +153,7 @@ def _run_command(args) -> int:
         from orchestrator.build.builder import build_all
 
         build_all(_build_dir())
-    from orchestrator.hil import parse_swap
+    from orchestrator.dcp.master import parse_swap
 
     swaps = {}
     for text in args.swap or []:
@@ -441,7 +441,8 @@ def cmd_dcp_slave(args) -> int:
     if not 0 <= args.port <= 65535:
         raise UserError(f"dcp-slave: --port {args.port}: a UDP port 0..65535 is expected")
     return serve(Path(args.fmu), args.host, args.port, args.real_time,
-                 Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet)
+                 Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet,
+                 dcpx_in=Path(args.dcpx) if args.dcpx else None)
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -522,6 +523,9 @@ def make_parser() -> argparse.ArgumentParser:
     dcp.add_argument("--real-time", action="store_true",
                      help="offer soft real-time mode only (the slave's own clock) instead of non-real-time")
     dcp.add_argument("--dcpx-out", metavar="FILE", help="write the slave's DCP description (.dcpx) here")
+    dcp.add_argument("--dcpx", metavar="FILE",
+                     help="serve this description (a bench device's .dcpx: its uuid, modes, time resolutions and "
+                          "variables, matched to the FMU's by name) instead of the FMU's own")
     dcp.add_argument("--drop-data", type=float, default=0.0, metavar="FRACTION",
                      help="test option: leave this fraction of the DAT PDUs it should send unsent")
     dcp.add_argument("--seed", type=int, default=None, help="seed of --drop-data's random choice")

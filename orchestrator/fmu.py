@@ -145,7 +145,7 @@ def _extract_once(fmu_path: Path, workdir: Path) -> Path:
     return folder
 
 
-def _make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
+def make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
     return {t: ValueBuffer(t, vrs) for t, vrs in table.items() if vrs}
 
 
@@ -239,7 +239,7 @@ class FmuSlave(_ExtractedComponent):
                        buffer.vr, buffer.count, buffer.raw)
 
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
-        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
+        self.inputs, self.outputs = make_buffers(inputs), make_buffers(outputs)
         # last written values (NaN: nothing written yet); strings are always written
         # the hot path calls the library's functions directly with arguments converted once
         # (fmpy's wrappers convert every argument and add two Python calls per call), and
@@ -434,7 +434,7 @@ class InProcessSlave(_ExtractedComponent):
             getattr(self._slave, f"set_{var.type.lower()}")([var.vr], [_coerce(var.type, value)])
 
     def bind(self, inputs, outputs) -> None:
-        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
+        self.inputs, self.outputs = make_buffers(inputs), make_buffers(outputs)
         slave = self._slave
         # numeric ports move straight between the master's buffers and the facade's value
         # store (slots resolved once); strings keep the facade's setters and getters

@@ -69,8 +69,8 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
     for comp in system.components.values():
         if comp.fmu_path is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no source FMU")
-        if Path(comp.fmu_path).suffix == ".dcpx":      # a DCP slave (orchestrator/hil.py)
-            from orchestrator.hil import dcpx_interface
+        if Path(comp.fmu_path).suffix == ".dcpx":      # a DCP slave (orchestrator/dcp/master.py)
+            from orchestrator.dcp.master import dcpx_interface
 
             interface = dcpx_interface(comp.fmu_path)
         else:

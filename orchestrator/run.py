@@ -22,8 +22,10 @@ from orchestrator import interrupts
 from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.hil import (DcpSlave, DcpTarget, OfflineDcpSlave, SlaveDescription, declared_targets,
-                             swapped_descriptions)
+from orchestrator.dcp.dcpx import SlaveDescription
+from orchestrator.dcp.pdu import OpMode
+from orchestrator.dcp.master import (DcpTarget, OfflineRemoteDcpSlave, RemoteDcpSlave, declared_targets,
+                                     swapped_descriptions)
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
@@ -68,7 +70,7 @@ class RunOptions:
     #: pace the master to the wall clock: simulated seconds per wall-clock second (1: real
     #: time; orchestrator/pacing.py); None runs as fast as it can
     real_time: Optional[float] = None
-    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/hil.py;
+    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/dcp/master.py;
     #: the CLI's --swap NAME=dcp://HOST:PORT)
     swaps: Dict[str, "DcpTarget"] = field(default_factory=dict)
 
@@ -311,7 +313,7 @@ def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions
     try:
         def make(name, node):
             if name in plan.hil:          # a DCP slave: its description checked, the rig not contacted
-                made = OfflineDcpSlave(name, node.interface, plan.targets[name], plan.hil[name], node.step_ticks)
+                made = OfflineRemoteDcpSlave(name, node.interface, plan.targets[name], plan.hil[name], node.step_ticks)
             else:
                 made = make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
             slave = _Checked(made, problems, refused=name in refused)
@@ -589,7 +591,7 @@ class _Outcome:
     steps_taken: Dict[str, int]
     judges: Sequence[SummaryObserver] = ()
     pacer: Optional[Pacer] = None
-    hil: Dict[str, DcpSlave] = field(default_factory=dict)
+    hil: Dict[str, RemoteDcpSlave] = field(default_factory=dict)
 
 
 def _start(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
@@ -627,14 +629,14 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     master: Optional[Master] = None
     # a slave that runs on its own clock (soft real time) needs the master at real time
     factor = options.real_time
-    if factor is None and any(d.op_modes.isdisjoint({"NRT"}) for d in setup.hil.values()):
+    if factor is None and any(OpMode.NRT not in d.op_modes for d in setup.hil.values()):
         factor = 1.0
     pacer = Pacer(factor, flag) if factor is not None else None
-    swapped: Dict[str, DcpSlave] = {}
+    swapped: Dict[str, RemoteDcpSlave] = {}
 
     def make(name: str, node) -> Slave:
         if name in setup.hil:
-            swapped[name] = DcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
+            swapped[name] = RemoteDcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
             return swapped[name]
         return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
 
