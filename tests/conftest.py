@@ -9,7 +9,7 @@ FIXTURE_PACKAGE = Path(__file__).resolve().parent / "fixture_fmus" / "rcs_testfm
 sys.path.insert(0, str(FIXTURE_PACKAGE.parent))
 sys.path.insert(0, str(REPO))  # benchmarks.harness: the cores coupled without FMI
 
-TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule")
+TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule", "TestSine")
 
 
 def build_test_fmus(frame: int) -> Path:

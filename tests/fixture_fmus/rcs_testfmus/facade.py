@@ -3,6 +3,8 @@
 They exercise the master (rates, ordering, latency, frame semantics) and the SSP loader
 (bindings, mappings, transformations) without any railway model.
 """
+import math
+
 import numpy as np
 from scipy.signal import lfilter
 
@@ -143,3 +145,27 @@ class TestSchedule(FrameSlave):
     def step_core(self, t, h):
         # Gauss-Seidel hands this to consumers stepping over [t, t+h): the value in force at t
         self.io["command"][...] = self._value(t)
+
+
+class TestSine(FrameSlave):
+    """The DCP reference implementation's example slave as an FMU: y = sin(k + a) after step k
+    (k = 0, 1, …, counted before the step, whatever its length), y = sin(a) at initialisation;
+    input a starts at 10. tests/test_dcp_interop.py serves it with that example's description."""
+
+    @classmethod
+    def declare_ports(cls, build):
+        return [Port("y", "output", unit="1"),
+                Port("a", "input", unit="1", start=10.0)]
+
+    def make_default_experiment(self):
+        return DefaultExperiment(step_size=0.01)
+
+    def create_core(self):
+        return {"steps": 0}
+
+    def publish_initial_outputs(self):
+        self.io["y"][...] = math.sin(float(self.io["a"]))
+
+    def step_core(self, t, h):
+        self.io["y"][...] = math.sin(self.core["steps"] + float(self.io["a"]))
+        self.core["steps"] += 1
