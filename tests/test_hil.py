@@ -212,6 +212,10 @@ def test_an_unreachable_slave_ends_the_run_in_one_line_with_exit_2(tmp_path, tes
                              "--swap", f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}&timeout_s=0.5")
     assert code == 2
     assert err.count("\n") == 1 and "dut" in err and f"dcp://127.0.0.1:{slave.port}" in err and "answer" in err
+    # paced, the same failure says nothing of a pace it never had to keep
+    code, _, err = railcosim("run", system, "--no-build", "--output", tmp_path / "paced", "--real-time",
+                             "--swap", f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}&timeout_s=0.5")
+    assert code == 2 and err.count("\n") == 1 and "pace" not in err
 
 
 @pytest.mark.parametrize("text, complaint", [
