@@ -219,12 +219,13 @@ def cmd_inspect(args) -> int:
             var = by_base[label.partition("[")[0]][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
+    from orchestrator.dcp.master import component_interface
     from orchestrator.graph import TICKS_PER_SECOND, build_graph
     from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
-        graph = build_graph(system)
+        graph = build_graph(system, interface_of=component_interface)
         print(f"{system.name}: base step {graph.base_ticks / TICKS_PER_SECOND:g} s, "
               f"order {' → '.join(graph.order)}")
         for name, node in graph.nodes.items():

@@ -18,9 +18,9 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from orchestrator.archives import safe_extract
 from orchestrator.errors import SimulationError, UserError
-from orchestrator.protocols import Causality, Slave
-from orchestrator.ssp import UnitDef, safe_extract
+from orchestrator.protocols import Causality, Slave, UnitDef
 
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
 _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}

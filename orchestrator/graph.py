@@ -12,7 +12,7 @@ import zipfile
 from dataclasses import dataclass, field
 from functools import reduce
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
@@ -64,17 +64,14 @@ class SystemGraph:
 
 
 def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
-                extra_parameters=()) -> SystemGraph:
+                extra_parameters=(), interface_of: Callable[[str], Interface] = read_interface) -> SystemGraph:
+    """The graph of ``system``: ``interface_of`` reads a component's ports from its source (an
+    FMU by default; a run passes one that also reads a DCP slave's .dcpx, orchestrator/dcp/)."""
     nodes: Dict[str, Node] = {}
     for comp in system.components.values():
         if comp.fmu_path is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no source FMU")
-        if Path(comp.fmu_path).suffix == ".dcpx":      # a DCP slave (orchestrator/dcp/master.py)
-            from orchestrator.dcp.master import dcpx_interface
-
-            interface = dcpx_interface(comp.fmu_path)
-        else:
-            interface = read_interface(comp.fmu_path)
+        interface = interface_of(comp.fmu_path)
         step = comp.step_size_s if comp.step_size_s is not None else interface.default_step_s
         if step is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no step size "

@@ -24,14 +24,14 @@ from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.dcp.pdu import OpMode
-from orchestrator.dcp.master import (DcpTarget, OfflineRemoteDcpSlave, RemoteDcpSlave, declared_targets,
-                                     swapped_descriptions)
+from orchestrator.dcp.master import (DcpTarget, OfflineRemoteDcpSlave, RemoteDcpSlave, component_interface,
+                                     declared_targets, swapped_descriptions)
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
                                     scalar_outputs)
 from orchestrator.pacing import Pacer, check_factor
-from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, SummaryObserver
+from orchestrator.protocols import ALGORITHMS, AlgorithmName, Manipulator, Observer, Slave, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
 from orchestrator.ssp import SystemDescription, load_parameter_set, open_system
 
@@ -51,7 +51,7 @@ class RunOptions:
     param_sets: Sequence[str] = ()
     output_interval: Optional[float] = None   # None: 0.1 s, rounded up to a multiple of the base step
     captures: Sequence[str] = ()
-    algorithm: Algorithm = "gauss-seidel"
+    algorithm: AlgorithmName = "gauss-seidel"
     in_process: bool = False
     fmu_dirs: Sequence[Path] = ()
     record: Optional[Sequence[str]] = None    # "comp.var"; None → all scalar outputs
@@ -348,7 +348,7 @@ def _load_graph(system: SystemDescription, options: RunOptions) -> SystemGraph:
     """The system's graph with the parameter sets and --set overrides applied (relative data
     files resolved by the graph: graph.resolve_data_file)."""
     extra = [v for name in options.param_sets for v in load_parameter_set(system, name)]
-    return build_graph(system, options.overrides, extra)
+    return build_graph(system, options.overrides, extra, interface_of=component_interface)
 
 
 def _refuse_connected_overrides(graph: SystemGraph, overrides: Dict[str, str]) -> None:
