@@ -264,7 +264,7 @@ class FmuSlave(_ExtractedComponent):
                 # a ufunc and a count of the equal values (np.array_equal's Python layer costs
                 # more than the test); NaN never equals, as there
                 unchanged = np.equal(last, buffer.values, out=self._unchanged[id(buffer)])
-                if _count_nonzero(unchanged) == unchanged.size:
+                if np.count_nonzero(unchanged) == unchanged.size:
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)
@@ -330,10 +330,6 @@ class FmuSlave(_ExtractedComponent):
 
 
 _FMI2_WARNING, _FMI2_FATAL = 1, 4
-try:        # np.count_nonzero's own routine, without its Python-level argument handling
-    from numpy._core.multiarray import count_nonzero as _count_nonzero
-except ImportError:          # another numpy layout: the public function
-    _count_nonzero = np.count_nonzero
 
 
 def _call_exception(function: str, status: int) -> Exception:
