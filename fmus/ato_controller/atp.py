@@ -60,6 +60,8 @@ NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # red never
 DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
+# below this the train stands (a tachometer's resolution; the ATO's arrival test uses the same)
+STANDSTILL_MPS = 1e-3
 # driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
 # curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
 T_DRIVER_S = 4.0
@@ -364,7 +366,7 @@ class Atp:
             self.interventions += 1
 
     def _intervene(self, v: float, permitted: float) -> int:
-        if self.emergency_latched and v <= 1e-3:
+        if self.emergency_latched and v <= STANDSTILL_MPS:
             self.emergency_latched = False
         if v > permitted + dv_ebi_mps(v):
             self._emergency()
