@@ -14,7 +14,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Tuple
 
-from fmus.errors import FmuInputError
+from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling.aspects import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
 
@@ -52,7 +52,8 @@ MAX_JSON_DEPTH = 64
 
 def read_json_file(path) -> object:
     """A JSON data file's document; every failure an FmuInputError naming the file: missing or
-    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON."""
+    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON, a number that
+    is not finite (NaN, Infinity, 1e400: Python's json reads them; named by its field)."""
     path = Path(path)
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
@@ -70,11 +71,16 @@ def read_json_file(path) -> object:
         raise FmuInputError(f"{path}: not a data file: arrays and objects nested {depth} deep "
                             f"(at most {MAX_JSON_DEPTH})")
     try:
-        return json.loads(text)
+        document = json.loads(text)
     except json.JSONDecodeError as error:
         raise FmuInputError(f"{path}: not valid JSON (line {error.lineno}: {error.msg})") from None
     except RecursionError:           # (not reached below MAX_JSON_DEPTH; a last guard)
         raise FmuInputError(f"{path}: not a data file: nested too deeply") from None
+    # before the schema, whose minimum and maximum let NaN through (every comparison is false)
+    bad = non_finite_number(document)
+    if bad is not None:
+        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    return document
 
 
 _BRACKETS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
