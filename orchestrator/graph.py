@@ -20,6 +20,7 @@ from orchestrator.protocols import TRANSITIONS, Transition
 from orchestrator.ssp import Connection, SystemDescription, check_connectors, convert_unit
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
+MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
 
 def seconds_to_ticks(seconds: float, what: str) -> int:

@@ -121,7 +121,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
     start_ticks = plan.start_ticks
-    stop_ticks = round(stop_s * TICKS_PER_SECOND)
+    stop_ticks = _stop_ticks(plan)
     interval_ticks, recorded, captures = plan.interval_ticks, plan.recorded, plan.captures
     workdir: Optional[Path] = None
     try:
@@ -448,12 +448,19 @@ def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulato
                              f"{stop_s:g} s; not applied")
 
 
+def _stop_ticks(plan: _Plan) -> int:
+    """The stop time on the master's clock: whole nanoseconds, at least one after the start (a
+    stop time after the start by less than half a nanosecond, 1e-12 s, is not the start)."""
+    return max(round(plan.stop_s * TICKS_PER_SECOND), plan.start_ticks + 1)
+
+
 def _warn_rounded_stop(options: RunOptions, plan: _Plan) -> None:
     """The master steps in whole base steps: a stop time between two of them ends the run at
-    the next one, said in one warning line."""
+    the next one, said in one warning line (also a stop time too close to the start to be a
+    whole nanosecond after it)."""
     base = plan.graph.base_ticks
     start_ticks = plan.start_ticks
-    span = round(plan.stop_s * TICKS_PER_SECOND) - start_ticks
+    span = _stop_ticks(plan) - start_ticks
     if span % base:
         end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
         options.warn(f"stop time {plan.stop_s:g} s is not a whole number of base steps "

@@ -89,6 +89,15 @@ TSR_SLOTS = 4
 DIGITAL_CODE_LOSS_GRACE_S = 3.0
 
 
+def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
+    """The measurements whose impossible values the ATP answers with the emergency brake
+    (AtoCore.measurement_fault) in a cab-signal mode: position and speed always, the aspect
+    with a cab signal, the digital speeds and free blocks with a digital one. The others the
+    controller does not read in that mode."""
+    return ("x", "v") + {"off": (), "ALSN": ("aspect",),
+                         "digital": ("aspect", "v_permitted", "v_target", "free_blocks")}.get(cab_signal, ())
+
+
 def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
     """The restrictions in force among the FMU's ``tsr_*`` slots: speed > 0 and end > start."""
     return [TemporaryRestriction(float(a), float(b), float(v), name=f"tsr[{k + 1}]")
@@ -344,7 +353,8 @@ class AtoCore:
 
     def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
                           free_blocks: int) -> Optional[Tuple[str, str]]:
-        """(input, why) when a measurement the ATP relies on cannot be true, else None."""
+        """(input, why) when a measurement the ATP relies on cannot be true, else None. Which
+        measurements it judges: :func:`judged_measurements`."""
         if not math.isfinite(x):
             return "x", f"measured position x = {x:g} m is not finite"
         if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:

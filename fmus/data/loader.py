@@ -14,7 +14,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Tuple
 
-from fmus.errors import FmuInputError
+from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling.aspects import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
 
@@ -24,14 +24,17 @@ DATA = HERE / "shipped"
 DEFAULT_LINE = DATA / "default_line.json"
 DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
 DEFAULT_TIMETABLE = DATA / "default_timetable.json"
+# read now: inside an FMU this folder is the extraction the interpreter first imported the package
+# from, which a host may remove while an instance of another FMU still uses the package
+# (docs/third_party.md); the shipped defaults are each instance's own (FrameSlave.resource_path)
+_SCHEMA_TEXTS = {path.name: path.read_text(encoding="utf-8") for path in SCHEMAS.glob("*.json")}
 
 
 @lru_cache(maxsize=None)
 def _validator(name: str):
     import jsonschema
 
-    schema = json.loads((SCHEMAS / name).read_text())
-    return jsonschema.Draft202012Validator(schema)
+    return jsonschema.Draft202012Validator(json.loads(_SCHEMA_TEXTS[name]))
 
 
 def _field(path) -> str:
@@ -49,7 +52,8 @@ MAX_JSON_DEPTH = 64
 
 def read_json_file(path) -> object:
     """A JSON data file's document; every failure an FmuInputError naming the file: missing or
-    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON."""
+    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON, a number that
+    is not finite (NaN, Infinity, 1e400: Python's json reads them; named by its field)."""
     path = Path(path)
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
@@ -67,11 +71,16 @@ def read_json_file(path) -> object:
         raise FmuInputError(f"{path}: not a data file: arrays and objects nested {depth} deep "
                             f"(at most {MAX_JSON_DEPTH})")
     try:
-        return json.loads(text)
+        document = json.loads(text)
     except json.JSONDecodeError as error:
         raise FmuInputError(f"{path}: not valid JSON (line {error.lineno}: {error.msg})") from None
     except RecursionError:           # (not reached below MAX_JSON_DEPTH; a last guard)
         raise FmuInputError(f"{path}: not a data file: nested too deeply") from None
+    # before the schema, whose minimum and maximum let NaN through (every comparison is false)
+    bad = non_finite_number(document)
+    if bad is not None:
+        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    return document
 
 
 _BRACKETS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')

@@ -14,7 +14,8 @@ route gives (tests/test_bulk_values.py).
 
 The generated slave script registers each instance pythonfmu's C wrapper creates
 (``created``); the forwarder claims its instance's resolvers right after fmi2Instantiate
-(``take``) and keeps them (and with them the store and the slot arrays) until
+(``take``, with references to what pythonfmu holds of the slave: see the forwarder's "After
+fmi2Fatal") and keeps them (and with them the store and the slot arrays) until
 fmi2FreeInstance. The registry holds the slaves weakly, so a plain pythonfmu FMU (built
 without the forwarder) leaves nothing behind. Setting RAILCOSIM_NO_BULK=1 in the environment
 makes the forwarder leave every call to pythonfmu (a comparison of the two routes).
@@ -42,14 +43,18 @@ def created(slave) -> None:
     _created[slave.instance_name] = slave
 
 
-def take(instance_name: str) -> Tuple[Callable, ...]:
-    """The Real, Integer and Boolean resolvers of the instance just created under
-    ``instance_name`` (KeyError if none was registered: the forwarder then forwards every
-    call)."""
+def take(instance_name: str, resolvers: bool = True) -> tuple:
+    """What pythonfmu's C wrapper holds of the instance just created under ``instance_name`` —
+    the slave, its class and its log queue, of which the forwarder keeps a reference each so
+    that pythonfmu's double release after fmi2Fatal frees nothing in use — followed, when
+    ``resolvers``, by its Real, Integer and Boolean resolvers (KeyError if no instance was
+    registered under that name: the forwarder then forwards every call)."""
     slave = _created.pop(instance_name)
-    resolvers = tuple(store_resolver(slave, type_name, dtype) for type_name, dtype in STORE_TYPES)
+    held = (slave, type(slave), slave._get_log_queue())
+    if not resolvers:
+        return held
     claimed.append(instance_name)
-    return resolvers
+    return held + tuple(store_resolver(slave, type_name, dtype) for type_name, dtype in STORE_TYPES)
 
 
 def store_resolver(slave, type_name: str, dtype) -> Callable:

@@ -69,7 +69,8 @@ class Port:
     frame: bool = False                 # last index runs over the samples of a frame
     # an input outside its declared range or not finite: "refuse" the step (FrameSlave),
     # "clamp" (finite values outside min/max are the unit's to clamp; non-finite refused) or
-    # "unit" (the unit handles every value itself: the ATO's measurements fail safe)
+    # "unit" (the unit handles every value itself: the ATO's measurements fail safe), where the
+    # facade's unit_handled_inputs says the unit reads it with its parameters; else "refuse"
     bad_input: str = "refuse"
 
     def __post_init__(self):
@@ -228,6 +229,13 @@ class FrameSlave(Fmi2Slave):
     def make_default_experiment(self) -> Optional[DefaultExperiment]:
         return None
 
+    def unit_handled_inputs(self) -> Optional[Sequence[str]]:
+        """The ``bad_input="unit"`` inputs the unit reads and judges itself with the parameters
+        now set (asked at exitInitializationMode), or None for all of them. An input the unit
+        ignores in this configuration (the ATO's aspect with ``cab_signal = off``) is checked as
+        any other: an impossible value is refused, not accepted unread."""
+        return None
+
     def step_refusal(self, current_time: float, step_size: float) -> Optional[str]:
         """Why the core cannot take this step (checked before anything changes), or None."""
         return None
@@ -335,8 +343,10 @@ class FrameSlave(Fmi2Slave):
                 store.slot_of_vr[var.value_reference] = slot
             next_slot[port.type] += port.size
 
-    def _make_input_checks(self, ports: Sequence[Port]) -> List[Tuple[str, _InputCheck]]:
-        """Per numeric type, the input slots checked before each step and their bounds."""
+    def _make_input_checks(self, ports: Sequence[Port], unit_handled: Optional[Sequence[str]] = None
+                           ) -> List[Tuple[str, _InputCheck]]:
+        """Per numeric type, the input slots checked before each step and their bounds; a
+        ``bad_input="unit"`` port is left to the unit when ``unit_handled`` is None or names it."""
         checks = []
         for type_name in ("Real", "Integer"):
             slots, bounded, low, high, elements = [], [], [], [], []
@@ -344,7 +354,8 @@ class FrameSlave(Fmi2Slave):
             for port in ports:
                 if port.type != type_name:
                     continue
-                if port.causality == "input" and port.bad_input != "unit":
+                left_to_unit = port.bad_input == "unit" and (unit_handled is None or port.name in unit_handled)
+                if port.causality == "input" and not left_to_unit:
                     if port.bad_input != "clamp" and (port.min is not None or port.max is not None):
                         bounded.extend(range(len(slots), len(slots) + port.size))
                         low.extend([-math.inf if port.min is None else port.min] * port.size)
@@ -537,6 +548,9 @@ class FrameSlave(Fmi2Slave):
                          Fmi2Status.error)
                 raise FmuCallError(message)
             self.check_parameter_ranges()
+            handled = self.unit_handled_inputs()
+            if handled is not None:             # the unit's own judgement depends on its parameters
+                self._input_checks = self._make_input_checks(self.ports, handled)
             problem = self.input_error()        # the inputs a core reads when it is made
             if problem is not None:
                 raise FmuInputError(problem)

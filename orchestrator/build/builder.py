@@ -85,10 +85,19 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
     The ``fmus`` package is imported once per interpreter, from the resources folder of the
     first instance (pythonfmu puts each instance's resources first on ``sys.path``). A host
     that removes that folder after freeing its instance (``fmpy.simulate_fmu`` does, after
-    every call) would leave later instances, of this FMU or another of ours, with a package
-    whose files and not yet imported modules are gone: the script then drops the ``fmus``
-    modules so that the import below takes this instance's own copy. Data files come from
-    each instance's ``resources`` argument (``FrameSlave.resource_path``).
+    every call; libcosim does when an execution is dropped) would leave later instances, of
+    this FMU or another of ours, with a package whose files and not yet imported modules are
+    gone: the script then drops the ``fmus`` modules so that the import below takes this
+    instance's own copy. Data files come from each instance's ``resources`` argument
+    (``FrameSlave.resource_path``); the package reads its own files at import
+    (``fmus.data.loader``), so a folder removed while an instance of another FMU still uses
+    the package costs nothing.
+
+    findClass executes the script with the module's dict as globals but a new dict as locals,
+    and then takes the class from the module, not from those locals: the class of the first
+    execution, bound to the first ``fmus`` import. The script's last line publishes what this
+    execution defined into the module (at the import itself globals and locals are one dict),
+    so each instance is made from the class bound to the ``fmus`` modules imported for it.
 
     Each instance the C wrapper creates is registered with ``fmus.fmi.bulk``, from which the
     forwarding binary claims its bulk Real accessors (docs/performance.md).
@@ -112,7 +121,9 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "            _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(_MODULE_DICT))\n"
         "        super().__init__(**kwargs)\n"
         "        if 'logger' in kwargs:  # its forwarding binary may claim bulk access (fmus/fmi/bulk.py)\n"
-        "            _bulk.created(self)\n"
+        "            _bulk.created(self)\n\n\n"
+        "# pythonfmu takes the class from the module after executing this again: the one just defined\n"
+        "globals().update(locals())\n"
     )
 
 
