@@ -9,6 +9,10 @@ class FmuInputError(ValueError):
     """A parameter or data file given to an FMU is invalid; the message names what and where."""
 
 
+class FmuCallError(RuntimeError):
+    """An FMI call out of order or with unknown value references (the host's mistake)."""
+
+
 def non_finite_number(document) -> Optional[Tuple[str, float]]:
     """The field (``gradients[1].permille``) and value of the first number in a parsed JSON or
     TOML document that is not finite, or None. Python's json reads NaN, Infinity and -Infinity,

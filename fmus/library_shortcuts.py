@@ -15,12 +15,6 @@ needs without checks: contiguous float64 arrays of the right shapes.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
-
-
-def _public_linear_filter(b, a, x, axis, zi):
-    return lfilter(b, a, x, axis=axis, zi=zi)
-
 
 try:
     from numpy._core.multiarray import count_nonzero
@@ -32,22 +26,39 @@ try:
 except ImportError:
     interp = np.interp
 
-try:
-    from scipy.signal._sigtools import _linear_filter as _internal_linear_filter
-except ImportError:
-    _internal_linear_filter = None
+
+
+def _linear_filter_routine():
+    """scipy's routine, or None; looked up at the first filter (scipy is not imported by the
+    units that filter nothing: the traction and ATO FMUs need only numpy)."""
+    global _internal_linear_filter
+    if _internal_linear_filter is _UNKNOWN:
+        try:
+            from scipy.signal._sigtools import _linear_filter as routine
+        except ImportError:
+            routine = None
+        _internal_linear_filter = routine
+    return _internal_linear_filter
+
+
+_UNKNOWN = object()
+_internal_linear_filter = _UNKNOWN
 
 
 def linear_filter(b: np.ndarray, a: np.ndarray, x: np.ndarray, axis: int, zi: np.ndarray):
     """lfilter(b, a, x, axis, zi=zi) through its C routine where scipy has it (float64 in)."""
-    if _internal_linear_filter is not None and x.dtype == np.float64 and zi.dtype == np.float64:
+    routine = _internal_linear_filter if _internal_linear_filter is not _UNKNOWN else _linear_filter_routine()
+    if routine is not None and x.dtype == np.float64 and zi.dtype == np.float64:
         try:
-            return _internal_linear_filter(b, a, x, axis, zi)
+            return routine(b, a, x, axis, zi)
         except (TypeError, ValueError):               # pragma: no cover - a changed signature
             pass
-    return _public_linear_filter(b, a, x, axis, zi)
+    from scipy.signal import lfilter
+
+    return lfilter(b, a, x, axis=axis, zi=zi)
 
 
-#: which shortcuts this machine takes (False: the public function is used)
-IN_USE = {"count_nonzero": count_nonzero is not np.count_nonzero, "interp": interp is not np.interp,
-          "linear_filter": _internal_linear_filter is not None}
+def in_use() -> dict:
+    """Which shortcuts this machine takes (False: the public function is used)."""
+    return {"count_nonzero": count_nonzero is not np.count_nonzero, "interp": interp is not np.interp,
+            "linear_filter": _linear_filter_routine() is not None}

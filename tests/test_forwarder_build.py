@@ -129,7 +129,7 @@ def test_the_value_reference_table_rules():
 
 
 def test_the_built_table_is_the_facades_value_reference_table(product_fmus):
-    """What the forwarder reads is what FrameSlave.value_reference_table() gives: every reference
+    """What the forwarder reads is what FacadeSlave.value_reference_table() gives: every reference
     per type; settable exactly the parameters and inputs."""
     from fmus.loco_receiver.facade import LocoReceiver
     from fmus.traction.facade import Traction

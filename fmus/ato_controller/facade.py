@@ -3,12 +3,12 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
-from fmus.fmi.slave import FrameSlave, Port, line_file_port
+from fmus.fmi.slave import FacadeSlave, Port, line_file_port
 from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions,
                                       judged_measurements)
 
 
-class AtoController(FrameSlave):
+class AtoController(FacadeSlave):
     description = "ATP speed supervision from the cab signal + ATO timetable driving, energy-efficient, precise stopping"
 
     @classmethod

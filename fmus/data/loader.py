@@ -26,7 +26,7 @@ DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
 DEFAULT_TIMETABLE = DATA / "default_timetable.json"
 # read now: inside an FMU this folder is the extraction the interpreter first imported the package
 # from, which a host may remove while an instance of another FMU still uses the package
-# (docs/third_party.md); the shipped defaults are each instance's own (FrameSlave.resource_path)
+# (docs/third_party.md); the shipped defaults are each instance's own (FacadeSlave.resource_path)
 _SCHEMA_TEXTS = {path.name: path.read_text(encoding="utf-8") for path in SCHEMAS.glob("*.json")}
 
 

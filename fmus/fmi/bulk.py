@@ -6,7 +6,7 @@ building a Python list of value references and one of values element by element 
 the slave: about 0.1 µs per value, 30 µs for a 320-sample frame. Our forwarding binary
 (orchestrator/build/forwarder/fmi2_forward.c) checks the value references itself; for each list
 of references a host sends (the same lists every step) it asks the resolvers made here, once,
-where those values live in the slave's value store (fmus/fmi/slave.py): the store's address
+where those values live in the slave's value store (fmus/fmi/value_store.py): the store's address
 and either the first of a run of consecutive slots or the address of an array of slots. From
 then on a get or set of that list is a copy in C between the host's array and the store, with
 no Python call. The host still calls plain fmi2Get/fmi2Set and gets the values pythonfmu's
@@ -27,7 +27,7 @@ from typing import Callable, Tuple
 
 import numpy as np
 
-from fmus.fmi.slave import _slot_index
+from fmus.fmi.value_store import slot_index
 
 _created: "weakref.WeakValueDictionary[str, object]" = weakref.WeakValueDictionary()
 #: instance names whose resolvers a forwarder claimed (tests read it)
@@ -62,7 +62,7 @@ def store_resolver(slave, type_name: str, dtype) -> Callable:
     (uint32, as the host passed them) whose slots are consecutive, else (address, 0, the
     address of an int64 array of their slots, kept here while the forwarder holds this
     resolver). The forwarder checked the references first."""
-    store = slave._stores[type_name]
+    store = slave.store.types[type_name]
     values, slot_of_vr = store.values, store.slot_of_vr
     if values.dtype != dtype or not values.flags.c_contiguous:
         raise TypeError(f"{type_name} store: {values.dtype}, not a contiguous {np.dtype(dtype)}")
@@ -73,7 +73,7 @@ def store_resolver(slave, type_name: str, dtype) -> Callable:
         slots = slot_of_vr[np.frombuffer(ref_buffer, dtype=np.uint32)].tolist()
         if min(slots) < 0:
             raise KeyError(f"{type_name} value references without a slot")
-        where = _slot_index(slots)
+        where = slot_index(slots)
         if isinstance(where, slice):
             return address, where.start, 0
         kept.append(where)

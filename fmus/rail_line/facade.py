@@ -1,15 +1,14 @@
 """RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
 from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.fmi.slave import FrameSlave, Port, line_file_port, sample_rate_port
+from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, sample_rate_port
 from fmus.rail_line.core import RailLineCore, RailOutputs, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters
 
 OFF_LINE_M = -1000.0
 
 
-class RailLine(FrameSlave):
+class RailLine(FrameFacadeSlave):
     description = "Rail line plant: coded track circuits (MNA networks), coil EMF with joints and traction interference, track relays"
-    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -104,7 +103,7 @@ class RailLine(FrameSlave):
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
         # the core writes its outputs straight into the output ports
         core.bind_outputs(RailOutputs(io["e_coil"], io["occupied"], io["i_axle"], io["off_line"], io["coil_section"]))
-        self.required_step_s = self.build.frame / settings.fs_hz
+        self.require_frame_step(settings.fs_hz)
         # the trains' initial positions (the traction units publish x0 in initialisation mode):
         # trains on the line occupy their circuits from the first sample
         core.start(io["x_head"])

@@ -89,7 +89,7 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
     this FMU or another of ours, with a package whose files and not yet imported modules are
     gone: the script then drops the ``fmus`` modules so that the import below takes this
     instance's own copy. Data files come from each instance's ``resources`` argument
-    (``FrameSlave.resource_path``); the package reads its own files at import
+    (``FacadeSlave.resource_path``); the package reads its own files at import
     (``fmus.data.loader``), so a folder removed while an instance of another FMU still uses
     the package costs nothing.
 
@@ -115,7 +115,8 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "from fmus.fmi import bulk as _bulk\n\n"
         "_MODULE_DICT = globals()\n\n\n"
         f"class {spec.model_identifier}(_Facade):\n"
-        f"    build_config = {config.as_dict()!r}\n\n"
+        f"    build_config = {config.as_dict()!r}\n"
+        f"    version = {railcosim_version()!r}\n\n"
         "    def __init__(self, **kwargs):\n"
         "        if 'logger' in kwargs:  # instantiated by pythonfmu's C wrapper\n"
         "            _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(_MODULE_DICT))\n"
@@ -125,6 +126,17 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "# pythonfmu takes the class from the module after executing this again: the one just defined\n"
         "globals().update(locals())\n"
     )
+
+
+def railcosim_version() -> str:
+    """The version the FMUs carry in their modelDescription: the installed railcosim's
+    (pyproject.toml is the one place it is written)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("railcosim")
+    except PackageNotFoundError:            # a checkout used without installing it
+        return "0+unknown"
 
 
 @functools.lru_cache(maxsize=None)

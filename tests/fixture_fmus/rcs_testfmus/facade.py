@@ -10,10 +10,10 @@ from scipy.signal import lfilter
 
 from pythonfmu.default_experiment import DefaultExperiment
 
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FacadeSlave, Port
 
 
-class TestCounter(FrameSlave):
+class TestCounter(FacadeSlave):
     """Counts its own steps; echoes its input; reports the end time of its last step."""
 
     @classmethod
@@ -40,7 +40,7 @@ class TestCounter(FrameSlave):
         self.io["u_seen"][...] = self.io["u"]
 
 
-class TestGain(FrameSlave):
+class TestGain(FacadeSlave):
     """y = k·u + bias, with units on every port (unit conversion tests)."""
 
     @classmethod
@@ -69,7 +69,7 @@ class TestGain(FrameSlave):
         self.io["y"][...] = gain * self.io["u"] + self.param("bias")
 
 
-class _FrameUnit(FrameSlave):
+class _FrameUnit(FacadeSlave):
     @classmethod
     def sample_rate_port(cls):
         return Port("fs", "parameter", unit="Hz", start=4000.0)
@@ -120,7 +120,7 @@ class TestFrameStage(_FrameUnit):
         self.io["y"][:], core["zi"] = lfilter(core["b"], core["a"], self.io["u"], zi=core["zi"])
 
 
-class TestSchedule(FrameSlave):
+class TestSchedule(FacadeSlave):
     """A timed command: ``schedule`` = "t0:value0;t1:value1;…" (seconds), held between entries."""
 
     @classmethod
@@ -147,7 +147,7 @@ class TestSchedule(FrameSlave):
         self.io["command"][...] = self._value(t)
 
 
-class TestSine(FrameSlave):
+class TestSine(FacadeSlave):
     """The DCP reference implementation's example slave as an FMU: y = sin(k + a) after step k
     (k = 0, 1, …, counted before the step, whatever its length), y = sin(a) at initialisation;
     input a starts at 10. tests/test_dcp_interop.py serves it with that example's description."""
