@@ -38,7 +38,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _build_dir() -> Path:
-    from orchestrator.build.builder import default_build_dir
+    from orchestrator.packaging.builder import default_build_dir
 
     return default_build_dir(WORK_ROOT)
 
@@ -76,9 +76,9 @@ def _system_path(name: Optional[str]) -> Path:
 
 
 def cmd_build(args) -> int:
-    from orchestrator.build.builder import build_all
+    from orchestrator.packaging.builder import build_all
     from fmus.sizes import BuildConfig
-    from orchestrator.build.packing import pack_systems
+    from orchestrator.packaging.packing import pack_systems
 
     for label, value, most in (("--sections", args.sections, MAX_SECTIONS), ("--trains", args.trains, MAX_TRAINS),
                                ("--frame", args.frame, MAX_FRAME)):
@@ -150,7 +150,7 @@ def _run_command(args) -> int:
     system = _system_path(args.system)
     overrides = _overrides(args)    # a malformed --set is refused before the build
     if not args.no_build:
-        from orchestrator.build.builder import build_all
+        from orchestrator.packaging.builder import build_all
 
         build_all(_build_dir())
     from orchestrator.dcp.master import parse_swap
@@ -310,7 +310,7 @@ def cmd_study(args) -> int:
         system = beside if beside.exists() else _system_path(given)
         system = system.resolve()
         if not args.no_build:
-            from orchestrator.build.builder import build_all
+            from orchestrator.packaging.builder import build_all
 
             build_all(_build_dir())
         check_against_system(spec, system, [_build_dir()])
@@ -371,7 +371,7 @@ def cmd_contract(args) -> int:
     """``railcosim contract snapshot|check``: an FMU's interface manifest, or the FMU against a
     manifest or a role's shipped one (docs/contracts.md); exit 1 when the check fails."""
     from orchestrator import contracts
-    from orchestrator.build.contract import resolve_manifest
+    from orchestrator.conformance.roles import resolve_manifest
 
     if args.action == "snapshot":
         if args.output:
@@ -387,7 +387,7 @@ def cmd_contract(args) -> int:
 
 
 def add_contract_command(sub) -> None:
-    from orchestrator.build.contract import ROLES
+    from orchestrator.conformance.roles import ROLES
 
     contract = sub.add_parser("contract", help="an FMU's interface manifest, or the FMU checked against one")
     actions = contract.add_subparsers(dest="action", required=True, parser_class=_Parser)

@@ -63,11 +63,11 @@ def _forbidden_for(module: str):
                 *(f"fmus.{u}.facade" for u in UNITS)), set()
     if parts[0] == "orchestrator":
         if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study"):   # railway knowledge on the engine
-            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.build", "orchestrator.cli"), set()
-        if len(parts) > 1 and parts[1] in ("build", "cli", "__main__"):
+            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
+        if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__"):
             return ("benchmarks",), set()
         # the engine: FMU-agnostic, knows no railway
-        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.build",
+        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.packaging",
                 "orchestrator.cli"), set()
     return (), set()
 
@@ -92,7 +92,7 @@ def test_every_product_module_keeps_its_import_rules():
 
 def test_the_bundled_package_holds_no_build_tooling_or_harness():
     names = {p.stem for p in (REPO / "fmus").rglob("*.py")}
-    assert not names & {"build", "builder", "contract", "loop", "closed_loop", "channel"}
+    assert not names & {"build", "builder", "packaging", "packing", "contract", "loop", "closed_loop", "channel"}
 
 
 def test_cores_data_signalling_and_analysis_import_without_any_fmi_library():

@@ -244,7 +244,7 @@ def _line(tmp_path, name="line.json", **change) -> Path:
 
 
 def test_missing_data_file_inside_an_ssp_names_the_archive(tmp_path, product_fmus):
-    from orchestrator.build.packing import pack_system
+    from orchestrator.packaging.packing import pack_system
 
     archive = pack_system(REPO / "ssp" / "ato_only", product_fmus, tmp_path)   # as `railcosim build` packs it
     code, _, stderr = _run(archive, tmp_path, "--set", "train.line_file=missing.json")

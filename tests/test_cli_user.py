@@ -92,7 +92,7 @@ def test_the_bare_command_says_what_to_do_once():
 
 
 def test_packing_again_without_changes_leaves_the_archive_alone(tmp_path, test_fmus):
-    from orchestrator.build.packing import pack_system, pack_systems
+    from orchestrator.packaging.packing import pack_system, pack_systems
 
     folder = tmp_path / "systems" / "pair"
     write_ssd(folder, "pair", [ComponentSpec("a", str(test_fmus / "TestCounter.fmu"), 0.1),

@@ -218,7 +218,7 @@ def test_without_the_table_the_facade_answers_ok_and_refuses_the_next_step(produ
     message, nothing read, the next doStep refused once, then the instance goes on."""
     import zipfile
 
-    from orchestrator.build.forwarder import VALUE_REFERENCES_MEMBER
+    from orchestrator.packaging.forwarder import VALUE_REFERENCES_MEMBER
 
     stripped = tmp_path / "Traction.fmu"
     with zipfile.ZipFile(_fmu(product_fmus, "Traction")) as source, zipfile.ZipFile(stripped, "w") as target:

@@ -1,4 +1,4 @@
-"""The forwarding binary at build time (orchestrator/build/forwarder/) and the FMUs without it:
+"""The forwarding binary at build time (orchestrator/packaging/forwarder/) and the FMUs without it:
 the fallback without a C compiler, a Python without a shared libpython, foreign (plain
 pythonfmu) FMUs in our orchestrator, an FMU without a binary for this platform."""
 import dataclasses
@@ -10,8 +10,8 @@ from conftest import FIXTURE_PACKAGE
 from fmus.sizes import BuildConfig
 from helpers import ComponentSpec, ConnectionSpec, railcosim, write_ssd
 from orchestrator import hostenv
-from orchestrator.build import forwarder as fwd
-from orchestrator.build.builder import UnitSpec, build_unit, content_hash
+from orchestrator.packaging import forwarder as fwd
+from orchestrator.packaging.builder import UnitSpec, build_unit, content_hash
 from orchestrator.errors import UserError
 
 COUNTER = UnitSpec("testcounter", "rcs_testfmus.facade", "TestCounter")

@@ -53,7 +53,7 @@ def test_wheel_holds_the_two_packages_with_all_their_data(wheel):
     assert not missing, f"not in the wheel: {missing}"
     for data in ("fmus/data/schemas/line.schema.json", "fmus/data/shipped/default_line.json",
                  "fmus/signalling/alsn_codes.json", "fmus/traction/contract.json",
-                 "orchestrator/build/builder.py"):
+                 "orchestrator/packaging/builder.py"):
         assert data in names
 
 

@@ -3,7 +3,7 @@
 A non-Python host (tests/host/fmi2_host.c, compiled here: what fmusim or an S-function does)
 runs every product FMU with nothing set in its environment (no LD_PRELOAD, PYTHONHOME or
 PYTHONPATH) and exits 0 every time, thanks to the forwarding binary of every built FMU
-(orchestrator/build/forwarder/); fmpy.simulate_fmu runs each FMU three times in one process.
+(orchestrator/packaging/forwarder/); fmpy.simulate_fmu runs each FMU three times in one process.
 fmpy, libcosim and the C host load, free and load again in one process with the first
 extraction removed, and a host calling on after fmi2Fatal gets fmi2Error, not a crash.
 """
@@ -20,7 +20,7 @@ import fmpy
 import pytest
 from fmpy import read_model_description
 
-from orchestrator.build.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
+from orchestrator.packaging.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
 
 HOST_SOURCE = Path(__file__).resolve().parent / "host" / "fmi2_host.c"
 PRODUCT = ("Traction", "AtoController", "WaysideCoder", "RailLine", "LocoReceiver")
@@ -218,7 +218,7 @@ RELOAD_RUNNER = Path(__file__).resolve().parent / "host" / "reload_run.py"
 def packed(product_fmus, tmp_path_factory):
     """The shipped systems packed as .ssp archives (what `railcosim build` writes to build/)."""
     from orchestrator.analysis.systems import SSP_ROOT
-    from orchestrator.build.packing import pack_systems
+    from orchestrator.packaging.packing import pack_systems
 
     dest = tmp_path_factory.mktemp("ssp")
     pack_systems(SSP_ROOT, product_fmus, dest)

@@ -4,7 +4,7 @@
 pythonfmu's C wrapper answers every fmi2Get/fmi2Set of a number type by taking the GIL,
 building a Python list of value references and one of values element by element and calling
 the slave: about 0.1 µs per value, 30 µs for a 320-sample frame. Our forwarding binary
-(orchestrator/build/forwarder/fmi2_forward.c) checks the value references itself; for each list
+(orchestrator/packaging/forwarder/fmi2_forward.c) checks the value references itself; for each list
 of references a host sends (the same lists every step) it asks the resolvers made here, once,
 where those values live in the slave's value store (fmus/fmi/value_store.py): the store's address
 and either the first of a run of consecutive slots or the address of an array of slots. From

@@ -6,7 +6,7 @@ script whose module name encodes the build sizes, so FMUs of one unit built with
 frame sizes can live in one process. A content hash stored in the FMU lets a rebuild skip
 units whose sources, data, build sizes and forwarding binary did not change.
 
-Every FMU's linux64 binary is our forwarder (orchestrator/build/forwarder/) in front of
+Every FMU's linux64 binary is our forwarder (orchestrator/packaging/forwarder/) in front of
 pythonfmu's, when a C compiler is there (docs/architecture.md, "Forwarding binary").
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Iterable, List, Optional
 
 from fmus.sizes import BuildConfig
-from orchestrator.build import forwarder as fwd
+from orchestrator.packaging import forwarder as fwd
 
 import fmus
 
