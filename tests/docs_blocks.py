@@ -208,7 +208,8 @@ def runnable(line: str, directives: Dict[str, str]) -> str:
     if "add" in directives and words and words[0] not in ("cd", "cmp", "for", "do", "done", "echo", "mkdir", "cp"):
         extra.append(directives["add"])
     for name, options in directives.items():      # "add to count_instructions.py: --warm 2"
-        if name.startswith("add to ") and name[len("add to "):].strip() in words[:3]:
+        target = name[len("add to "):].strip() if name.startswith("add to ") else None
+        if target and any(word == target or word.endswith("/" + target) for word in words[:3]):
             extra.append(options)
     command = " ".join([command, *extra])
     return command + (" &" if background else "")

@@ -454,5 +454,6 @@ def test_an_annotation_changes_only_what_it_declares():
         'railcosim run free_run --swap "rx=dcp://h:1?a=b#c" --stop-time 20'
     assert docs.runnable("python bench_x.py [--frames 3000]", directives) == "python bench_x.py --repeats 1"
     assert docs.runnable("python bench_y.py --frames 10", directives) == "python bench_y.py --frames 10"
+    assert docs.runnable("python benchmarks/bench_x.py", directives) == "python benchmarks/bench_x.py --repeats 1"
     mixed = Block(ROOT / "README.md", 1, "", "railcosim run\nthis is not a command")
     assert docs.classify(mixed) == "mixed"
