@@ -1,5 +1,5 @@
-"""`railcosim` command line: build, run, report, inspect, validate, new, contract, conform, study,
-dcp-slave, fmu-env.
+"""`railcosim` command line: build, run, report, inspect, validate, new, list, contract, conform,
+study, dcp-slave, fmu-env.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
 SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
@@ -344,6 +344,20 @@ def cmd_new(args) -> int:
     return 0
 
 
+def cmd_list(args) -> int:
+    """``railcosim list``: the shipped systems, studies and roles, one line each (read-only)."""
+    from orchestrator.analysis.catalogue import catalogue, format_text
+
+    listing = catalogue(_shipped_names(), DEFAULT_SYSTEM)
+    if args.kind != "all":
+        listing = {args.kind: listing[args.kind]}
+    if args.format == "json":
+        print(json.dumps(listing, indent=1, ensure_ascii=False))
+    else:
+        print(format_text(listing))
+    return 0
+
+
 def add_new_command(sub) -> None:
     new = sub.add_parser("new", help="write a system folder from your line, timetable(s) and rolling stock")
     new.add_argument("name", help="folder to write (must not exist yet)")
@@ -504,6 +518,12 @@ def make_parser() -> argparse.ArgumentParser:
 
     add_new_command(sub)
     add_contract_command(sub)
+
+    listing = sub.add_parser("list", help="the shipped systems, studies and roles, one line each")
+    listing.add_argument("kind", nargs="?", default="all", choices=["all", "systems", "studies", "roles"],
+                         help="list one kind only (default: all three)")
+    listing.add_argument("--format", choices=["text", "json"], default="text")
+    listing.set_defaults(func=cmd_list)
 
     conform = sub.add_parser("conform", help="run a role's behavioural test vectors against an FMU "
                                              "(pass/fail table; exit 1 when a vector fails)")
