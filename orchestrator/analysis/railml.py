@@ -392,7 +392,7 @@ def _candidate_paths(doc: _Doc, elements: Dict[str, _NetElement], allowed: Itera
     return paths
 
 
-def _choose_path(doc: _Doc, elements, line_id: Optional[str], notes: List[str]) -> _Path:
+def _choose_path(doc: _Doc, elements, line_id: Optional[str], via: Sequence[str], notes: List[str]) -> _Path:
     links = _relations(doc, elements)
     macro = _macro_members(doc)
     allowed = list(elements)
@@ -408,6 +408,14 @@ def _choose_path(doc: _Doc, elements, line_id: Optional[str], notes: List[str]) 
         if not allowed:
             doc.fail(lines[line_id], "its linearLocation names no netElement of the topology")
     candidates = _candidate_paths(doc, elements, allowed, links)
+    if via:
+        unknown = [v for v in via if v not in elements]
+        if unknown:
+            raise UserError(f"--sidecar: via {unknown[0]!r}: {doc.path} has no micro netElement of that id")
+        candidates = [c for c in candidates if set(via) <= {i for i, _ in c}]
+        if not candidates:
+            raise UserError(f"--sidecar: via {', '.join(via)}: no path through the topology passes them all "
+                            "(check the netRelations' navigability)")
     scores = _PathScores(doc, elements, macro)
     best = max(candidates, key=lambda p: scores.score(p))
     offset, steps = 0, []
@@ -420,7 +428,7 @@ def _choose_path(doc: _Doc, elements, line_id: Optional[str], notes: List[str]) 
         notes.append(f"running path chosen among {len(candidates)} ways through the topology (most stations, "
                      "then most block signals facing the train, then the longest, then main tracks): "
                      + " → ".join(f"{s.id}{'' if s.forward else ' (reversed)'}" for s in steps)
-                     + ("" if line_id else "; name a railML line with --line-id to choose another"))
+                     + "; choose another with --line-id or the sidecar's via")
     return chosen
 
 
@@ -457,7 +465,9 @@ class _PathScores:
             direction in (None, "both") or (direction == "normal") == forward[ident]))
         length = sum(self.elements[i].length for i in idents)
         main = sum(1 for i in idents if i in self.main_tracks)
-        return stations, facing, round(length, 3), main, [(i, f) for i, f in path]
+        # last: run the netElements forward (the direction of increasing kilometres), then ids
+        forward_steps = sum(1 for _, f in path if f)
+        return stations, facing, round(length, 3), main, forward_steps, [(i, f) for i, f in path]
 
 
 # ---- locations along the path ---------------------------------------------------------------------
@@ -509,6 +519,8 @@ class _Locator:
             position = self._pos_on(ref, spot, "pos", "intrinsicCoord")
             if position is not None:
                 return position
+        elif ref in self.elements:
+            return None           # on a track the path does not run on
         return self.measure(self.doc.find(spot, "linearCoordinate"))
 
     def spots(self, entity) -> List[Tuple[float, object]]:
@@ -534,13 +546,15 @@ class _Locator:
                     length = self.elements[ref].length
                     b = self._pos_on(ref, piece, "posBegin", "intrinsicCoordBegin")
                     e = self._pos_on(ref, piece, "posEnd", "intrinsicCoordEnd")
-                    begin = b if b is not None else (begin if begin is not None else self.path.at(ref, 0.0))
+                    begin = b if b is not None else (begin if begin is not None else self.path.at(ref, 0))
                     end = e if e is not None else (end if end is not None else self.path.at(ref, length))
                     piece_direction = direction
                     if direction in ("normal", "reverse") and piece.get("keepsOrientation") == "false":
                         piece_direction = "reverse" if direction == "normal" else "normal"
                     faces = self.path.faces_running(ref, piece_direction)
                     forward = self.path.by_id[ref].forward
+                elif ref in self.elements:
+                    continue          # a track the path does not run on
                 elif begin is not None and end is not None:
                     faces, forward = True, end >= begin
                 elif members:        # a macro element without coordinates: its members on the path
@@ -620,7 +634,7 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
     if extras.get("line_id") and line_id is None:
         line_id = extras["line_id"]
     elements = _net_elements(doc, notes)
-    path_ = _choose_path(doc, elements, line_id, notes)
+    path_ = _choose_path(doc, elements, line_id, extras.get("via", []), notes)
     macro = _macro_members(doc)
     locate = _Locator(doc, path_, elements, macro)
     fi = doc.find(doc.root, "infrastructure", "functionalInfrastructure")
@@ -631,9 +645,11 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
     line_element = None
     if line_id is not None:
         line_element = doc.by_id.get(line_id)
-    else:
-        lines = doc.findall(fi, "lines", "line")
-        line_element = lines[0] if len(lines) == 1 else None
+    else:       # the railML line the path runs on (the first whose netElements hold the path)
+        on_path = set(path_.by_id)
+        line_element = next((line for line in doc.findall(fi, "lines", "line") if on_path <= {
+            m for location in doc.findall(line, "linearLocation") for a in doc.findall(location, "associatedNetElement")
+            for m in macro.get(a.get("netElementRef"), [a.get("netElementRef")])}), None)
     name = extras.get("name") or (doc.name_of(line_element) if line_element is not None else None) \
         or _metadata(doc, "title") or Path(path).stem
     document = {"name": name}
@@ -772,7 +788,8 @@ def _block_signals(doc: _Doc, fi, locate: _Locator, notes) -> List[_Signal]:
             off_path += 1
             continue
         if kind not in SIGNAL_FUNCTIONS_CLOSING_A_BLOCK:
-            other_kinds[kind or "no train movement function"] = other_kinds.get(kind or "no train movement function", 0) + 1
+            label = kind or "speed or other (no train movement)"
+            other_kinds[label] = other_kinds.get(label, 0) + 1
             continue
         position, spot = spots[0]
         if not locate.path.faces_running(spot.get("netElementRef"), spot.get("applicationDirection")):
@@ -903,8 +920,8 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
         if transmitter is None:
             transmitter = transmitter_default
             assumed["transmitter"] += 1
-        if transmitter == "alternate":
-            transmitter = "KPT-5" if k % 2 == 0 else "KPT-7"
+        if transmitter == "alternate":     # the other type than the section before (docs/wayside_coder.md)
+            transmitter = "KPT-7" if result and result[-1]["transmitter"] == "KPT-5" else "KPT-5"
         carrier = own.get("carrier_hz") or (doc.float_attr(tvd, "frequency") if tvd is not None else None)
         if carrier is None:
             carrier = carrier_default
@@ -1035,14 +1052,16 @@ def _curves(doc: _Doc, locate: _Locator, notes) -> List[dict]:
     curves, skipped = [], 0
     for curve in doc.findall(doc.root, "infrastructure", "geometry", "horizontalCurves", "horizontalCurve"):
         radius = doc.float_attr(curve, "radius")
+        if curve.get("curveType") == "straight":
+            continue
         if curve.get("curveType") != "arc" or not radius or abs(radius) < 100:
             skipped += 1
             continue
         for start, end, _, _ in locate.intervals(curve):
             curves.append({"start_m": _clean(start), "end_m": _clean(end), "radius_m": abs(radius)})
     if skipped:
-        notes.append(f"{skipped} horizontal curve(s) that are no arc of radius ≥ 100 m (straights, "
-                     "transitions, tight yard curves) ignored")
+        notes.append(f"{skipped} horizontal curve(s) that are no arc of radius ≥ 100 m (transitions, tight "
+                     "yard curves) ignored")
     return sorted(curves, key=lambda c: c["start_m"])
 
 
@@ -1390,3 +1409,46 @@ def validate_railml(path, schema_dir) -> Tuple[bool, List[str]]:
     document = etree.parse(str(path), etree.XMLParser(resolve_entities=False, no_network=True))
     valid = schema.validate(document)
     return valid, [f"line {e.line}: {e.message}" for e in schema.error_log]
+
+
+def system_line_file(system_path) -> Path:
+    """The line file the components of a system (folder or .ssp) read: the one every
+    ``line_file`` parameter names, else the bundled default line."""
+    from fmus.data.loader import DEFAULT_LINE
+    from orchestrator.analysis.system_checks import FMU_RESOURCES_ROOT
+    from orchestrator.graph import resolve_data_file
+    from orchestrator.ssp import open_system
+
+    system = open_system(Path(system_path))
+    try:
+        found = {}
+        for component in system.components.values():
+            for parameter in component.parameters:
+                if parameter.name.rpartition(".")[2] == "line_file" and parameter.value:
+                    value = resolve_data_file(parameter.value, system.folder)
+                    path = Path(value)
+                    if not path.is_absolute() and not path.is_file() and (FMU_RESOURCES_ROOT / path).is_file():
+                        path = FMU_RESOURCES_ROOT / path
+                    if not path.is_file():
+                        raise UserError(f"{parameter.origin}: {component.name}.line_file {parameter.value!r}: "
+                                        "no such file in the system")
+                    found.setdefault(path.resolve(), (component.name, path, json.loads(path.read_text("utf-8"))))
+        documents = {json.dumps(doc, sort_keys=True) for _, _, doc in found.values()}
+        if len(documents) > 1:
+            (a, pa, _), (b, pb, _) = list(found.values())[:2]
+            raise UserError(f"{system_path}: {a}.line_file ({pa}) and {b}.line_file ({pb}) differ: a system "
+                            "exports one line")
+        if found:
+            return next(iter(found.values()))[1] if system.temp_dir is None else _copy_out(next(iter(found.values()))[1])
+        return Path(DEFAULT_LINE)
+    finally:
+        system.close()
+
+
+def _copy_out(path: Path) -> Path:
+    """A file of an unpacked .ssp, copied out before the extraction folder goes."""
+    import tempfile
+
+    target = Path(tempfile.mkdtemp(prefix="railcosim_line_")) / path.name
+    target.write_bytes(path.read_bytes())
+    return target
