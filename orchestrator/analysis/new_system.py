@@ -172,10 +172,15 @@ def timetable_for(line_path: Path, stock_path: Path) -> dict:
     from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
     from fmus.ato_controller.train_model import NominalTrain
 
-    line, stock = load_line(line_path), load_rolling_stock(stock_path)
-    settings = AtoSettings()
-    planner = StagePlanner(NominalTrain(stock, line), line, stock.category, min(0.5, 0.6 * stock.service_decel),
-                           settings.speed_margin_mps)
+    line = _load(load_line, Path(line_path), "--railml")
+    stock = _load(load_rolling_stock, Path(stock_path), "--rolling-stock")
+    try:
+        train = NominalTrain(stock, line)
+    except FmuInputError as error:
+        raise UserError(f"--rolling-stock: {stock_path} cannot run on the imported line "
+                        f"(electrification {line.electrification!r}): {error}") from None
+    planner = StagePlanner(train, line, stock.category, min(0.5, 0.6 * stock.service_decel),
+                           AtoSettings().speed_margin_mps)
     stations = [s for s in line.stations if s.stop_m - stock.length_m >= 0.0]
     if len(stations) < 2:
         raise UserError(f"--railml: the line has {len(stations)} station(s) with room for the {stock.length_m:g} m "

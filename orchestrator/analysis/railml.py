@@ -50,6 +50,11 @@ LENGTH_TOLERANCE_SHARE = 1e-3
 #: a block signal belongs to the section whose end lies this far ahead of it at most (m): a
 #: signal stands at, or a little before, the joint it protects
 SIGNAL_TO_JOINT_M = 60.0
+#: the longest coded track circuit the import makes (m): a longer TVD section (an axle-counter
+#: section of kilometres) becomes several track circuits in one block. At the normative minimum
+#: ballast (1 Ω·km) a 50 Hz track circuit calibrates up to about 2.7 km (the rail line says so at
+#: initialisation, docs/rail_line.md); the shipped lines' longest is 2.6 km
+MAX_TRACK_CIRCUIT_M = 2600.0
 #: candidate paths enumerated through a topology before the import gives up (a large station
 #: layout without a --line-id)
 MAX_PATHS = 20000
@@ -580,6 +585,9 @@ def _signal_kind(doc: _Doc, signal) -> Optional[str]:
     movement = doc.find(signal, "isTrainMovementSignal")
     if movement is not None:
         return movement.get("type") or movement.get("function") or "main"
+    if not any(_local(child).startswith("is") and _local(child).endswith("Signal") or _local(child) in (
+            "isMilepost", "isStopPost") for child in signal):
+        return "main"          # no function given at all: taken as a main signal (docs/railml.md#defaults)
     return None
 
 
@@ -700,7 +708,12 @@ def _electrification(doc: _Doc, fi, locate: _Locator, extras, notes) -> dict:
     systems = {s.get("id"): s for s in doc.findall(doc.root, "common", "electrificationSystems",
                                                    "electrificationSystem")}
     found, covered = {}, 0.0
-    for section in doc.findall(fi, "electrifications", "electrificationSection"):
+    sections = doc.findall(fi, "electrifications", "electrificationSection")
+    if not sections:
+        notes.append("no electrificationSection: DC 3 kV assumed (railcosim's trains are electric; a sidecar's "
+                     "electrification says otherwise)")
+        return {"system": "DC3000"}
+    for section in sections:
         stretches = locate.intervals(section)
         if not stretches or section.get("contactLineType") == "none":
             continue
@@ -864,7 +877,12 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
             if a.kind == "pathEnd" or b.kind == "pathEnd":
                 open_ends.append((a, b))    # track beyond the first or last detector: checked below
                 continue
-            owners = [t.get("id") for t in demarcates.get(a.id, []) + demarcates.get(b.id, [])]
+            made_so_far = {id(s["_tvd"]) for s in sections}
+            # the TVD section left open here: one of the two detectors demarcates it, and it is
+            # not closed elsewhere on the path
+            owners = [t.get("id") for t in demarcates.get(a.id, []) + demarcates.get(b.id, [])
+                      if id(t) not in made_so_far] or [t.get("id") for t in demarcates.get(a.id, []) +
+                                                       demarcates.get(b.id, [])]
             where = f"between {a.id!r} ({a.position:g} m) and {b.id!r} ({b.position:g} m)"
             if not owners:
                 raise UserError(f"{doc.path}: trainDetectionElement {a.id!r}: no tvdSection is demarcated by it "
@@ -938,6 +956,7 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
             entry["name"] = own["name"]
         entry.update({"transmitter": transmitter, "carrier_hz": int(carrier), "ballast_ohm_km": ballast})
         result.append(entry)
+    result = _split_long(result, notes)
     unused = [s.name for s in signals if s.id not in used]
     if unused:
         notes.append(f"block signals not at a section's exit (more than {SIGNAL_TO_JOINT_M:g} m before its end) "
@@ -1149,10 +1168,33 @@ def _speeds(doc: _Doc, fi, locate: _Locator, line_element, extras, notes):
     for entry in entries:
         entry["freight_kmh"] = min(entry["freight_kmh"], 200)
     if uncovered > 1.0:
-        source = "the sidecar's" if defaults.get("speed_kmh") else (
-            "the line's linePerformance maxSpeed" if line_speed else f"the default {DEFAULTS['speed_kmh']:g} km/h")
+        source = "the sidecar's default speed" if defaults.get("speed_kmh") else (
+            "the line's linePerformance maxSpeed" if line_speed else "the default speed")
         notes.append(f"no speedSection over {uncovered:g} m of the path: {source} ({default_speed:g} km/h) there")
     return entries, sorted(restrictions, key=lambda r: r["start_m"])
+
+
+def _split_long(sections: List[dict], notes) -> List[dict]:
+    """Sections longer than MAX_TRACK_CIRCUIT_M as equal track circuits in one block: the signal
+    at the last one's exit only, the transmitters alternating."""
+    result = []
+    for section in sections:
+        length = section["end_m"] - section["start_m"]
+        pieces = math.ceil(length / MAX_TRACK_CIRCUIT_M - 1e-9)
+        if pieces <= 1:
+            result.append(section)
+            continue
+        bounds = [_clean(section["start_m"] + length * k / pieces) for k in range(pieces)] + [section["end_m"]]
+        for k in range(pieces):
+            transmitter = section["transmitter"] if k == 0 else (
+                "KPT-7" if result[-1]["transmitter"] == "KPT-5" else "KPT-5")
+            result.append({**section, "name": f"{section['name']}/{k + 1}", "start_m": bounds[k],
+                           "end_m": bounds[k + 1], "signal": section["signal"] if k == pieces - 1 else "",
+                           "transmitter": transmitter})
+        notes.append(f"block section {section['name']} ({length:g} m) made {pieces} coded track circuits of "
+                     f"{length / pieces:g} m in one block (a track circuit calibrates up to about "
+                     f"{MAX_TRACK_CIRCUIT_M / 1000:g} km, docs/rail_line.md)")
+    return result
 
 
 #: functionalInfrastructure containers the import reads (others are listed as not read)
