@@ -1,4 +1,4 @@
-"""`railcosim` command line: build, run, report, inspect, validate, new, list, contract, conform,
+"""`railcosim` command line: build, run, report, inspect, validate, new, export, list, contract, conform,
 study, dcp-slave, fmu-env.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
@@ -335,11 +335,29 @@ def cmd_study(args) -> int:
 
 
 def cmd_new(args) -> int:
-    """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md)."""
-    from orchestrator.analysis.new_system import new_system
+    """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md), from a line
+    file or from a railML 3 file (docs/railml.md)."""
+    from orchestrator.analysis.new_system import new_system, new_system_from_railml
 
-    path = new_system(Path(args.name), Path(args.line), args.timetable, args.rolling_stock, args.system,
-                      args.trains, args.traction, _build_dir())
+    if (args.line is None) == (args.railml is None):
+        raise UserError("new: give the line as --line FILE (JSON) or as --railml FILE (railML 3), one of them")
+    if args.line is not None:
+        for option, value in (("--line-id", args.line_id), ("--sidecar", args.sidecar), ("--schema", args.schema)):
+            if value is not None:
+                raise UserError(f"new: {option} goes with --railml, not with --line")
+        if not args.timetable:
+            raise UserError("new: --timetable is required with --line (give one per train)")
+        path = new_system(Path(args.name), Path(args.line), args.timetable, args.rolling_stock, args.system,
+                          args.trains, args.traction, _build_dir())
+    else:
+        path, notes = new_system_from_railml(Path(args.name), Path(args.railml), args.timetable or [], args.line_id,
+                                             args.sidecar, args.schema, args.rolling_stock, args.system, args.trains,
+                                             args.traction, _build_dir())
+        if notes:
+            print(f"railcosim: warning: {args.railml}: what the railML import ignored or assumed "
+                  "(docs/railml.md):", file=sys.stderr)
+            for note in notes:
+                print(f"  - {' '.join(note.split())}", file=sys.stderr)
     print(f"wrote {path.parent} (SystemStructure.ssd, line.ssv, resources/); run it with: railcosim run {args.name}")
     return 0
 
@@ -361,9 +379,15 @@ def cmd_list(args) -> int:
 def add_new_command(sub) -> None:
     new = sub.add_parser("new", help="write a system folder from your line, timetable(s) and rolling stock")
     new.add_argument("name", help="folder to write (must not exist yet)")
-    new.add_argument("--line", required=True, metavar="FILE", help="line file (JSON, docs/interfaces.md)")
-    new.add_argument("--timetable", required=True, action="append", metavar="FILE",
-                     help="timetable file; give one per train (train j starts at its first station)")
+    new.add_argument("--line", metavar="FILE", help="line file (JSON, docs/interfaces.md)")
+    new.add_argument("--railml", metavar="FILE", help="the line from a railML 3.1 or 3.2 infrastructure file "
+                                                      "instead of --line (docs/railml.md)")
+    new.add_argument("--line-id", metavar="ID", help="with --railml: the railML line to import")
+    new.add_argument("--sidecar", metavar="FILE", help="with --railml: what the railML file has no place for (JSON)")
+    new.add_argument("--schema", metavar="DIR", help="with --railml: validate the file against the railML XSD in DIR")
+    new.add_argument("--timetable", action="append", metavar="FILE",
+                     help="timetable file; give one per train (train j starts at its first station); with "
+                          "--railml optional (one is made)")
     new.add_argument("--rolling-stock", metavar="FILE",
                      help="rolling-stock file for every train (default: the bundled passenger train; "
                           "freight_vl80 for --traction ac)")
@@ -371,6 +395,47 @@ def add_new_command(sub) -> None:
     new.add_argument("--trains", type=int, help="number of trains (default: one per --timetable)")
     new.add_argument("--traction", help="dc, ac or none (default: the line's electrification; must agree)")
     new.set_defaults(func=cmd_new)
+
+
+def cmd_export(args) -> int:
+    """``railcosim export railml SYSTEM -o FILE``: a system's line as railML (docs/railml.md)."""
+    import json
+
+    from orchestrator.analysis.railml import export_railml, system_line_file, validate_railml
+    from fmus.data.loader import load_line
+    from fmus.errors import FmuInputError
+
+    line_file = system_line_file(_system_path(args.system))
+    try:
+        load_line(line_file)
+    except FmuInputError as error:
+        raise UserError(str(error)) from None
+    output = Path(args.output)
+    if output.is_dir():
+        raise UserError(f"-o {output}: is a folder; give the railML file to write")
+    try:
+        output.write_bytes(export_railml(json.loads(line_file.read_text("utf-8")), args.railml_version))
+    except OSError as error:
+        raise UserError(f"-o {output}: cannot be written ({error.strerror or error})") from None
+    print(f"wrote {output} (railML {args.railml_version}) from {line_file}")
+    if args.schema:
+        valid, errors = validate_railml(output, args.schema)
+        if not valid:
+            more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+            raise UserError(f"{output}: not valid against the railML schema in {args.schema}: {errors[0]}{more}")
+        print(f"{output}: valid against {args.schema}")
+    return 0
+
+
+def add_export_command(sub) -> None:
+    export = sub.add_parser("export", help="write a system's line in another format: railml")
+    formats = export.add_subparsers(dest="format", required=True, parser_class=_Parser)
+    railml = formats.add_parser("railml", help="the system's line as railML 3.2 infrastructure (docs/railml.md)")
+    railml.add_argument("system", metavar="SYSTEM", help="folder, .ssp archive or shipped system name")
+    railml.add_argument("-o", "--output", required=True, metavar="FILE", help="railML file to write")
+    railml.add_argument("--railml-version", choices=["3.2", "3.1"], default="3.2", help="default 3.2")
+    railml.add_argument("--schema", metavar="DIR", help="validate the file written against the railML XSD in DIR")
+    export.set_defaults(func=cmd_export)
 
 
 def cmd_conform(args) -> int:
@@ -517,6 +582,7 @@ def make_parser() -> argparse.ArgumentParser:
     study.set_defaults(func=cmd_study)
 
     add_new_command(sub)
+    add_export_command(sub)
     add_contract_command(sub)
 
     listing = sub.add_parser("list", help="the shipped systems, studies and roles, one line each")
