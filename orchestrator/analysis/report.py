@@ -307,7 +307,7 @@ def _energy(output: Path, results, trains) -> Path:
 
 def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]) -> Optional[Path]:
     import matplotlib.pyplot as plt
-    from scipy.signal import lfilter
+    from scipy.signal import sosfilt
 
     captures = sorted(run_dir.glob("capture_*e_coil*.csv"))
     if not captures:
@@ -319,7 +319,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
     params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
-    filtered = lfilter(band.b, band.a, emf) if band is not None else None
+    filtered = sosfilt(band.sos, emf) if band is not None else None
     centre = at_s if at_s is not None else 0.5 * (t[0] + t[-1])
     window = (t >= centre - 1.0) & (t <= centre + 1.0)
     if not window.any():
