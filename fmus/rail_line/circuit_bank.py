@@ -139,7 +139,11 @@ class TrackCircuitBank:
         self.feed_list = [float(circuit.feed_m) for circuit in self.circuits]
         if s.carrier_hz:          # the parameter overrides the line file's carriers: the same rule holds
             check_carrier_under_traction(s.carrier_hz, line.electrification, "parameter carrier")
-        self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
+        # a code of several tones (ALSU, ``tone_band_hz``): the rails follow the √f law across the
+        # band (TrackCircuit.network), the phasor tables stand at its geometric centre
+        self.band_hz = tuple(s.tone_band_hz) if s.tone_band_hz[1] > 0 else None
+        centre = float(np.sqrt(s.tone_band_hz[0] * s.tone_band_hz[1])) if self.band_hz else 0.0
+        self.carriers = np.array([s.carrier_hz or centre or sec.carrier_hz for sec in line.sections], dtype=float)
         # train detection works at the track circuit's own frequency (the line file's): a digital
         # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
         self.track_frequencies = np.array([sec.carrier_hz for sec in line.sections], dtype=float)
@@ -335,7 +339,7 @@ class TrackCircuitBank:
             return cache[key]
         family_key = (k, faults)
         if family_key not in self._families:
-            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio, self.carriers[k])
+            net = self.circuits[k].network(None, faults, self.settings.transformer_ratio, self.carriers[k], self.band_hz)
             self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
         family, node_index = self._families[family_key]
         shunts, heads = config
@@ -537,7 +541,9 @@ class TrackCircuitBank:
             self._wake(k)
         previous = self._active[k]
         self._handover[k] = (1.0, 0.0)
-        if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
+        # (one carrier only: the states of a code of several tones carry over as they are)
+        if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model \
+                and self.band_hz is None:
             self._carry_over.append((k, previous[1], model))
         log_amplitude = self._phasor_table(k)[1]
         shunts, heads = config
