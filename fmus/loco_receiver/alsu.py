@@ -129,15 +129,19 @@ class AlsuReceiverCore:
         self.hold_samples = round(resolve_inertia_s(s.inertia_s) * s.fs_hz)
         self.min_samples = round(MIN_DURATION_S * s.fs_hz)
         self.permissive_samples = round(PERMISSIVE_DURATION_S * s.fs_hz)
-        # classification of every 6-bit tone word: a code number, _NONE or _GARBLED
+        # classification of every 6-bit tone word: a code number, _NONE or _GARBLED (one tone,
+        # three or more, or a reserved pair); and the code number of every pair, reserved or not
         pairs = self.alsu.table.code_of_tones()
         self._class_of_word = np.full(1 << alsu.TONE_COUNT, _GARBLED, dtype=np.int64)
         self._class_of_word[0] = _NONE
+        self._pair_of_word = np.zeros(1 << alsu.TONE_COUNT, dtype=np.int64)
         for a in range(alsu.TONE_COUNT):
             for b in range(a + 1, alsu.TONE_COUNT):
+                word = (1 << a) | (1 << b)
+                self._pair_of_word[word] = int(pairs[a, b])
                 code = self.alsu.command_of_code(int(pairs[a, b]))
                 if code is not None:
-                    self._class_of_word[(1 << a) | (1 << b)] = code
+                    self._class_of_word[word] = code
         self.v_max_kmh = s.v_max_mps * 3.6 if s.v_max_mps > 0 else alsu.CATEGORY_MAX_KMH[s.train_category]
         self._word = 0
         self._class = _NONE
@@ -219,6 +223,17 @@ class AlsuReceiverCore:
         return self.out
 
     # ---- decisions ----------------------------------------------------------------------------
+    @property
+    def pair_code(self) -> int:
+        """Diagnostics: the code number of the two tones present now (reserved codes included),
+        0 when not exactly two tones are present."""
+        return int(self._pair_of_word[self._word])
+
+    @property
+    def tones_present(self) -> np.ndarray:
+        """Diagnostics: which of the six tones are present now."""
+        return self._present.copy()
+
     def _new_word(self, word: int, at: int) -> None:
         self._word = word
         kind = int(self._class_of_word[word])

@@ -82,8 +82,22 @@ class AlsuCoderCore:
             angle = 2.0 * np.pi * self.tones_hz[:, None] * (n / s.fs_hz)[None, :]
             self._sin_table, self._cos_table = np.sin(angle), np.cos(angle)
         self._logic_state = None
+        self._forced: Optional[np.ndarray] = None      # a bench's tones (send), instead of the block's
         self.out = CoderOutputs(np.zeros((sections, frame)), np.zeros(sections, dtype=np.int64),
                                 np.zeros(sections, dtype=np.int64))
+
+    def send(self, tones: Optional[np.ndarray], codes: Optional[np.ndarray] = None) -> None:
+        """A bench's test generator: from the next frame on, section k sends the tones
+        ``tones[k]`` (bool, K × 6: any set, a code's pair or not) and reports ``codes[k]`` as
+        its code_tx, instead of what the block rules give; None: the block rules again. The
+        generators keep running, so a change is phase-continuous as in service."""
+        self._forced = None if tones is None else np.asarray(tones, dtype=bool).reshape(self.count, alsu.TONE_COUNT)
+        self._forced_codes = np.zeros(self.count, dtype=np.int64) if codes is None else np.asarray(codes)
+        self._logic_state = None
+
+    def tones_of(self, code: int) -> np.ndarray:
+        """The six on/off flags of a code number (0: none)."""
+        return self.tone_mask[int(code)].copy()
 
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False,
              wrong_command_main: int = 0, wrong_command_reserve: int = 0) -> CoderOutputs:
@@ -119,6 +133,9 @@ class AlsuCoderCore:
             codes = np.zeros(k, dtype=np.int64)
         self.codes = codes
         on = self.tone_mask[codes]
+        if self._forced is not None:
+            on, self.codes = self._forced, self._forced_codes
+            codes = self.codes
         self._weight_sin = np.where(on, self._cos_phase, 0.0)
         self._weight_cos = np.where(on, self._sin_phase, 0.0)
         out.code_tx[:k] = codes
