@@ -151,6 +151,7 @@ class AlsuReceiverCore:
         self._last_shown: Optional[int] = None
         self._level = 0.0
         self._level_step = float(np.exp(-self.dt / 1.0))
+        self._level_growth = self._level_step ** -np.arange(frame, dtype=float)      # d^−m
         self.out = ReceiverOutputs()
         self._publish()
 
@@ -180,8 +181,9 @@ class AlsuReceiverCore:
                 self._advance(first + index)
                 self._new_word(int(words[index]), first + index)
             self._advance(first + n)
-        peak = float(envelope.max(axis=0).max()) if n else 0.0
-        self._level = max(self._level * self._level_step ** n, peak)
+        # peak-hold with a 1 s release, sample by sample: held = d^(n−1)·max(held·d, max(e[m]·d^−m))
+        d = self._level_step
+        self._level = d ** (n - 1) * max(self._level * d, float((envelope.max(axis=0) * self._level_growth[:n]).max()))
         self._publish()
         return self.out
 
