@@ -22,10 +22,13 @@ tones" → minimum duration → display with a hold (no FMI here; docs/loco_rece
   any code while none is shown (a cold start, after a loss). A channel rings for about 0.35 s
   (to 1 % of its peak) after an impulse, and a code change passes through one or three tones
   for up to 0.4 s as one tone fades and the next rises: both shorter than the minimum.
-* **Hold** (the equipment's inertia): with no tone at all the display holds the code shown for
-  ``inertia`` (DISPLAY_HOLD_S, 1.0 s), which bridges the ≈ 1 m null zone at a joint at any speed
-  above 10 km/h, and then shows no code (white; red after code 1). A loss thus reaches the cab
-  within 1.0 s + the channels' decay, within the 2 s.
+* **Hold** (the equipment's inertia): the display holds the code shown for ``inertia``
+  (DISPLAY_HOLD_S, 1.0 s) after its two tones were last heard, whatever is heard meanwhile —
+  nothing (the ≈ 1 m null zone at a joint, bridged at any speed above 10 km/h), a garbled
+  state or another code not yet shown — and then shows no code (white; red after code 1). A
+  loss thus reaches the cab within 1.0 s + the channels' decay, within the 2 s; and impulses
+  that keep breaking a new, more restrictive code into pieces shorter than its minimum
+  duration cannot keep the old code shown (the noise study found that without this rule).
 * **Readings per category**: the code table's (fmus/signalling/alsu.py): `v_permitted`,
   `v_target`, `free_blocks`, the aspect; `code` is the code shown (0 none).
 
@@ -148,6 +151,7 @@ class AlsuReceiverCore:
         self._since = 0                    # sample index the current classification began at
         self._acted = True                 # the current classification has been acted on (or needs nothing)
         self._shown: Optional[int] = None
+        self._unheard_since: Optional[int] = None   # sample the code shown was last heard until
         self._last_shown: Optional[int] = None
         self._level = 0.0
         self._level_step = float(np.exp(-self.dt / 1.0))
@@ -240,38 +244,55 @@ class AlsuReceiverCore:
         self._word = word
         kind = int(self._class_of_word[word])
         if kind != self._class:
+            if self._shown is not None and self._class == self._shown:
+                self._unheard_since = at        # the code shown stops being heard
             self._class, self._since, self._acted = kind, at, False
             if kind > 0 and kind == self._shown:
                 self._acted = True              # the code shown again: nothing to decide
+                self._unheard_since = None
 
     def _due(self) -> Optional[int]:
-        """Sample index at which the current classification is acted on, None: nothing to do."""
+        """Sample index at which the current classification is acted on, None: nothing to do.
+        A loss of every tone needs nothing here: the hold (_expiry) ends it."""
         if self._acted:
             return None
         kind = self._class
         if kind == _NONE:
-            return self._since + self.hold_samples if self._shown is not None else None
+            return None
         if kind == _GARBLED:
             return self._since + self.min_samples if self._shown is not None else None
         if self._shown is None or self.alsu.rank(kind) > self.alsu.rank(self._shown):
             return self._since + self.permissive_samples
         return self._since + self.min_samples
 
+    def _expiry(self) -> Optional[int]:
+        """Sample index at which the code shown has not been heard for the hold, whatever was
+        heard meanwhile (none, garbled, or other codes too short to be shown: impulses that
+        keep breaking a new code must not keep an old one alive)."""
+        if self._shown is None or self._unheard_since is None:
+            return None
+        return self._unheard_since + self.hold_samples
+
     def _advance(self, until: int) -> None:
-        """Act on the current classification if its duration is reached before sample ``until``."""
-        due = self._due()
-        if due is None or due >= until:
-            return
-        self._acted = True
-        kind = self._class
+        """Act on what falls due before sample ``until``: the current classification's
+        duration reached, or the code shown unheard for the hold."""
         out = self.out
-        if kind > 0:
-            self._shown = self._last_shown = kind
-            out.decoded_codes += 1
-        else:
-            if kind == _GARBLED:
+        while True:
+            due, expiry = self._due(), self._expiry()
+            if expiry is not None and expiry < until and (due is None or expiry <= due):
+                self._shown, self._unheard_since = None, None      # the hold is over: no code
+                continue
+            if due is None or due >= until:
+                return
+            self._acted = True
+            kind = self._class
+            if kind > 0:
+                self._shown = self._last_shown = kind
+                self._unheard_since = None
+                out.decoded_codes += 1
+            else:
                 out.errors += 1
-            self._shown = None
+                self._shown, self._unheard_since = None, None
 
     def _publish(self) -> None:
         out, s = self.out, self.settings
