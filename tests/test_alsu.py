@@ -311,3 +311,34 @@ def test_an_alsu_receiver_with_a_carrier_is_one_error(tmp_path, product_fmus):
     write_ssd(tmp_path / "sys", "bad", components, [], stop_time=0.1)
     code, _, stderr = railcosim("run", tmp_path / "sys", "--output", tmp_path / "out", "--no-build")
     assert code == 2 and "parameter carrier: 50 Hz, but ALSU" in stderr and "Traceback" not in stderr
+
+
+def test_the_ato_brakes_gently_for_a_permanent_restriction_and_harder_towards_a_signal(tmp_path):
+    """Closed loop on the 160 km/h throat line, the code of section 3 scripted: code 10 (140 km/h
+    at its exit signal, a permanent restriction) against code 7 (120 km/h, a route: a signal's
+    braking). Both without an ATP intervention; the restriction's braking at most half the
+    deceleration of the signal's."""
+    from benchmarks.harness.closed_loop import run_closed_loop
+    from fmus.ato_controller.core import AtoSettings
+    from orchestrator.analysis.systems import THROAT_LINE, THROAT_TIMETABLE
+
+    (tmp_path / "line.json").write_text(json.dumps(THROAT_LINE))
+    (tmp_path / "timetable.json").write_text(json.dumps(THROAT_TIMETABLE))
+
+    def cab(code_in_section_3):
+        def shown(t, x):
+            code = code_in_section_3 if 5200.0 <= x < 7600.0 else 9
+            ind = SYSTEM.indication(code, "passenger")
+            return ind.aspect, True, ind.permitted_kmh / 3.6, ind.target_kmh / 3.6, ind.free_blocks, False, code
+        return shown
+    hardest = {}
+    for code in (10, 7):
+        run = run_closed_loop(470.0, settings=AtoSettings(cab_signal="ALSU", decoding_latency_s=alsu.STATED_LATENCY_S),
+                              line_file=tmp_path / "line.json", timetable_file=tmp_path / "timetable.json",
+                              cab_signal=cab(code))
+        x, v = run.column("x"), run.column("v")
+        assert run.ato.atp.interventions == 0
+        assert v[np.searchsorted(x, 7600.0)] <= SYSTEM.indication(code, "passenger").target_kmh / 3.6 + 0.1
+        inside = (x > 5200.0) & (x < 7600.0)
+        hardest[code] = -np.min(np.diff(v[inside])) / 0.5
+    assert hardest[10] <= 0.5 * hardest[7]
