@@ -355,12 +355,15 @@ def read_results_file(path: Path):
 
 def _receiver_band_pass(params: dict):
     """The band-pass the receiver FMU designs from these parameters: its own settings mapping
-    and filter design."""
+    and filter design; None for ALSU (six channels)."""
     from fmus.loco_receiver.filters import receiver_band_pass
     from fmus.loco_receiver.parameters import receiver_settings
     from fmus.signalling import cab_systems
 
-    system = cab_systems.DIGITAL.get(str(params.get("system", "ALSN")))
+    name = str(params.get("system", "ALSN"))
+    if name == cab_systems.ALSU:
+        return None              # six tone channels, no one band-pass: the EMF alone is drawn
+    system = cab_systems.DIGITAL.get(name)
     return receiver_band_pass(receiver_settings(system, params), system)
 
 
