@@ -23,9 +23,11 @@ tones" → minimum duration → display with a hold (no FMI here; docs/loco_rece
   (to 1 % of its peak) after an impulse, and a code change passes through one or three tones
   for up to 0.4 s as one tone fades and the next rises: both shorter than the minimum.
 * **Hold** (the equipment's inertia): the display holds the code shown for ``inertia``
-  (DISPLAY_HOLD_S, 1.0 s) after its two tones were last heard, whatever is heard meanwhile —
-  nothing (the ≈ 1 m null zone at a joint, bridged at any speed above 10 km/h), a garbled
-  state or another code not yet shown — and then shows no code (white; red after code 1). A
+  (DISPLAY_HOLD_S, 1.0 s) after its two tones, or those of a more permissive code (the code
+  sent may have become more permissive: it keeps the code shown alive until it is shown itself,
+  as in ALSN), were last heard, whatever else is heard meanwhile — nothing (the ≈ 1 m null zone
+  at a joint, bridged at any speed above 10 km/h), a garbled state or a more restrictive code
+  not yet shown — and then shows no code (white; red after code 1). A
   loss thus reaches the cab within 1.0 s + the channels' decay, within the 2 s; and impulses
   that keep breaking a new, more restrictive code into pieces shorter than its minimum
   duration cannot keep the old code shown (the noise study found that without this rule).
@@ -240,16 +242,23 @@ class AlsuReceiverCore:
         """Diagnostics: which of the six tones are present now."""
         return self._present.copy()
 
+    def _supports(self, kind: int) -> bool:
+        """Whether hearing ``kind`` keeps the code shown alive: the code itself or a more
+        permissive one (the code sent may have become more permissive; ALSN's rule too)."""
+        return kind > 0 and self._shown is not None and (
+            kind == self._shown or self.alsu.rank(kind) > self.alsu.rank(self._shown))
+
     def _new_word(self, word: int, at: int) -> None:
         self._word = word
         kind = int(self._class_of_word[word])
         if kind != self._class:
-            if self._shown is not None and self._class == self._shown:
-                self._unheard_since = at        # the code shown stops being heard
+            if self._supports(kind):
+                self._unheard_since = None
+            elif self._shown is not None and (self._unheard_since is None or self._supports(self._class)):
+                self._unheard_since = at        # nothing supports the code shown from here on
             self._class, self._since, self._acted = kind, at, False
             if kind > 0 and kind == self._shown:
                 self._acted = True              # the code shown again: nothing to decide
-                self._unheard_since = None
 
     def _due(self) -> Optional[int]:
         """Sample index at which the current classification is acted on, None: nothing to do.
