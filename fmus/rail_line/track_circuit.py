@@ -78,8 +78,8 @@ def skin_effect_ladder(params: CircuitParameters, band_hz: Tuple[float, float]) 
     Z(f) = R₀ − X_int0 + jωL_ext + (1 + j)·X_int0·√(f/f₀) (the internal part ∝ √(jω), a
     fractional order no finite network has); the R‖L with its corner at the band's geometric
     centre and the series R–L are fitted to it by non-negative least squares (passive parts),
-    relative error weighted, over the band widened by 10 % each side: within 0.6 % of the
-    law's whole impedance over 110–400 Hz (tests/test_rail_line.py)."""
+    relative error weighted, over the band widened by 10 % each side: within 0.4 % of the
+    law's whole impedance at the six ALSU tones, 0.8 % over 110–400 Hz (tests/test_alsu.py)."""
     from scipy.optimize import nnls
 
     low, high = band_hz
