@@ -439,7 +439,8 @@ def add_export_command(sub) -> None:
 
 
 def cmd_conform(args) -> int:
-    from orchestrator.conformance.runner import conform, format_json, format_table
+    from orchestrator.conformance.report import format_json, format_table
+    from orchestrator.conformance.runner import conform
 
     report = conform(args.role, args.target, args.vectors)
     print(format_json(report) if args.format == "json" else format_table(report))
