@@ -255,12 +255,12 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
-    from orchestrator.run import check_system
+    from orchestrator.validation import problems_of
 
     # everything a run with these options would refuse before its first step: the SSD and its
     # parameter sets, the FMUs' ports, connections, units, steps, the data files, the scenario,
     # and each component instantiated and initialised with its parameters (as run does)
-    problems = check_system(_system_path(args.target), _run_options(args, _overrides(args)))
+    problems = problems_of(_system_path(args.target), _run_options(args, _overrides(args)))
     for problem in problems:
         print(f"railcosim: error: {problem}", file=sys.stderr)
     if problems:
