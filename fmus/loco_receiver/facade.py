@@ -1,9 +1,9 @@
 """LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
-FIRE_DQPSK). No logic here (see core.py, digital.py)."""
+FIRE_DQPSK). No logic here (see core.py, digital_receiver.py)."""
 from fmus.signalling import cab_systems
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.loco_receiver.parameters import receiver_settings
 
 

@@ -166,7 +166,8 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
     if system == "ALSN":
         return {}, {}, {}, {"cab_signal": "ALSN"}
-    from fmus.signalling import cab_systems, digital
+    from fmus.signalling import cab_systems
+    from fmus.signalling import digital_messages as digital
 
     digital_system = cab_systems.digital_system(system)
     carrier = digital_system.carrier_hz

@@ -19,10 +19,10 @@ import numpy as np
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.signalling import aspects as sig
 from fmus.signalling import alsn, cab_systems
-from fmus.signalling.digital import stated_latency_s
+from fmus.signalling.digital_messages import stated_latency_s
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-from fmus.wayside_coder.digital import DigitalCoderCore
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.rail_line.track_circuit import cascade_shunt_current
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.vectors import DATA_DIR, FORMAT
