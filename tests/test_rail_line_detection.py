@@ -67,12 +67,12 @@ def test_every_train_shunts_its_whole_length():
     holds a shunt; the old single front-most shunt is gone."""
     core = _core()
     bank = core.bank
-    circuit = bank.circuits[3]
+    circuit = core.circuits[3]
     head = circuit.feed_m - 10.0
     configs, _ = bank._configuration([head, OFF])
     shunts, heads = configs[3]
     assert heads == (circuit.segments,)
-    assert shunts == tuple(range(bank.node_at(3, head - 400.0), circuit.segments + 1))
+    assert shunts == tuple(range(bank.geometry.node_at(3, head - 400.0), circuit.segments + 1))
     assert len(shunts) >= 8
 
 
@@ -98,13 +98,13 @@ def test_standing_train_is_detected_anywhere_at_maximum_ballast_and_supply(path)
     line = load_line(path)
     core = _core(line)
     bank, s = core.bank, core.settings
-    for k, circuit in enumerate(bank.circuits):
+    for k, circuit in enumerate(core.circuits):
         positions = np.concatenate([circuit.nodes_m, [circuit.start_m + 1.0, circuit.end_m - 1.0]])
         for head in positions:
             configs, _ = bank._configuration([float(head), OFF])
             for section, (shunts, _) in enumerate(configs):
                 if shunts:
-                    level = bank.relay_level(section, shunts, Faults(bank.ballast_max_ohm_km),
+                    level = bank.relay_level(section, shunts, Faults(bank.calibration.ballast_max_ohm_km),
                                              1.0 + s.supply_tolerance)
                     assert level < s.relay_drop_out, (k, head, section, level)
 
@@ -117,18 +117,18 @@ def test_calibration_modes_per_shipped_line(path):
     line = load_line(path)
     core = _core(line)
     bank, s = core.bank, core.settings
-    for k, circuit in enumerate(bank.circuits):
+    for k, circuit in enumerate(core.circuits):
         minimum = circuit.params.ballast_ohm_km
         assert minimum == line.sections[k].ballast_ohm_km        # the line file's, per section
         assert bank.relay_level(k, (), Faults(minimum), 1.0 - s.supply_tolerance) >= s.relay_pick_up
         for node in range(circuit.segments + 1):
-            level = bank.relay_level(k, (node,), Faults(bank.ballast_max_ohm_km), 1.0 + s.supply_tolerance)
+            level = bank.relay_level(k, (node,), Faults(bank.calibration.ballast_max_ohm_km), 1.0 + s.supply_tolerance)
             assert level * (1.0 + s.shunt_margin) <= s.relay_drop_out, (k, node)
-        for ballast in (minimum, bank.ballast_max_ohm_km):
+        for ballast in (minimum, bank.calibration.ballast_max_ohm_km):
             for broken in np.linspace(circuit.start_m + 5.0, circuit.feed_m - 5.0, 7):
                 level = bank.relay_level(k, (), Faults(ballast, float(broken)), 1.0 + s.supply_tolerance)
                 assert level < s.relay_drop_out, (k, ballast, broken)
-        calibration = bank.calibration[k]
+        calibration = bank.calibration.table[k]
         assert calibration.normal_level == pytest.approx(s.relay_pick_up)
         assert calibration.shunt_margin >= s.shunt_margin
 
@@ -179,7 +179,7 @@ def test_per_section_ballast_and_line_maximum_are_used(tmp_path):
         sections[5]["ballast_ohm_km"] = 2.0
     core = _core(load_line(_line_file(tmp_path, sections=drier, max_ballast_ohm_km=20.0)))
     assert core.circuits[5].params.ballast_ohm_km == 2.0 and core.circuits[4].params.ballast_ohm_km == 1.0
-    assert core.bank.calibration[5].ballast_max_ohm_km == 20.0
+    assert core.bank.calibration.table[5].ballast_max_ohm_km == 20.0
 
 
 # ---- initial state and overlapping trains ----------------------------------------------------
@@ -220,7 +220,7 @@ def test_calibration_table_in_docs_matches_the_model():
         path = SHIPPED_LINES[0 if name == "default_line" else 1 if name.startswith("default_line_ac") else 2]
         core = cores.setdefault(path, _core(load_line(path)))
         first = int(cells[1].strip().split("–")[0]) - 1
-        calibration = core.bank.calibration[first]
+        calibration = core.bank.calibration.table[first]
         assert float(cells[2]) == pytest.approx(calibration.length_m, abs=1)
         assert float(cells[4]) == pytest.approx(calibration.normal_level, abs=5e-4)
         assert float(cells[5].split("(")[0]) == pytest.approx(calibration.shunt_level, abs=5e-4)

@@ -4,7 +4,8 @@ track relays (no FMI here; docs/rail_line.md).
 The core composes three parts, each with one job:
 
 * circuit_bank.py — the track-circuit bank: a network model per section for its trains'
-  wheelset shunts, the network states frame by frame, the track relays (occupancy);
+  wheelset shunts, the network states frame by frame, the track relays (occupancy), composed
+  of geometry.py, calibration.py, network_models.py, parking.py and relays.py;
 * coil_pickup.py — the coil pickup: the code current the coils see → coil EMF per train;
 * traction_interference.py — the traction interference under the coils: the traction return
   current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
@@ -110,7 +111,7 @@ class RailLineCore:
         self.count, self.sections, self.trains, self.frame = len(line.sections), sections, trains, frame
         self.dt = 1.0 / s.fs_hz
         self.bank = TrackCircuitBank(line, s, trains, frame)
-        self.interference = TractionInterference(line, s, trains, frame, self.bank)
+        self.interference = TractionInterference(line, s, trains, frame, self.bank.geometry)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index_f = np.arange(frame, dtype=float)
         self._times = np.empty(frame)
@@ -137,7 +138,7 @@ class RailLineCore:
 
     @property
     def circuits(self):
-        return self.bank.circuits
+        return self.bank.geometry.circuits
 
     @property
     def asymmetry(self) -> np.ndarray:
@@ -169,8 +170,9 @@ class RailLineCore:
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
         self.pickup.sense(first, times, heads[:, :n], currents, out, self.standing_at)
-        if self.bank.relay_up is not self._occupancy_of:      # the bank makes a new array when a relay moves
-            self._occupancy_of = self.bank.relay_up
+        relays = self.bank.relays
+        if relays.up is not self._occupancy_of:      # a new array when a relay moves
+            self._occupancy_of = relays.up
             out.occupied[:self.count] = ~self._occupancy_of
         return out
 
@@ -189,7 +191,7 @@ class RailLineCore:
                         f"{spans[b][1] - spans[b][0]:g} m) overlaps train {a + 1} (head {spans[a][1]:g} m, length "
                         f"{spans[a][1] - spans[a][0]:g} m) at initialisation")
         self.bank.start([float(x) for x in x_head[:self.trains]])
-        self._occupancy_of = self.bank.relay_up
+        self._occupancy_of = self.bank.relays.up
         self.out.occupied[:self.count] = ~self._occupancy_of
         return self.out
 
