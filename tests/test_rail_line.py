@@ -48,7 +48,7 @@ def test_code_current_under_the_first_axle_matches_the_two_port_solution(x_m):
     core = _steady_carrier_core(transformer_ratio=1.0)
     _, _, axle = _run(core, 0.6, lambda t: x_m, 0.0, sections=[3])
     measured = axle[-20:].mean() * np.sqrt(2.0)          # rms over whole periods → amplitude
-    expected = cascade_shunt_current(core.circuits[3], x_m, core.settings.train_length_m[0])
+    expected = cascade_shunt_current(core.circuits[3], x_m, wheelsets_m=core.settings.wheelset_offsets_m[0])
     assert measured == pytest.approx(expected, rel=0.01)
 
 
@@ -162,7 +162,9 @@ def test_joint_crossing_null_and_weak_zones_scale_with_speed(speed_kmh):
     strong = np.median(env[(coil > joint - 10) & (coil < joint - 3)])
     weak = np.median(env[(coil > joint + 4) & (coil < joint + 10)])
     assert strong > 5 * weak                     # feed end of one section vs entry end of the next
-    quiet = (coil > joint - 3) & (coil < joint + 4) & (env < 0.2 * weak)
+    # quiet: well below the weak zone's level (the unshunted entry end: ≈ 0.19 of the shunted
+    # level beyond, the rail current at the joint as the wheelset chain gives it)
+    quiet = (coil > joint - 3) & (coil < joint + 4) & (env < 0.15 * weak)
     null_m = quiet.sum() / FS * v
     # the ≈ 1 m null zone (docs/sources.md#interference-at-insulated-joints), smeared by the coil and by the envelope (one carrier period)
     assert 0.5 <= null_m <= 1.5

@@ -62,6 +62,61 @@ def test_rear_train_in_the_same_circuit_gets_no_permissive_code():
     assert alone[0][-1] == GREEN                         # the rear train's receiver works
 
 
+LIGHT_ENGINE = np.array([0.0, 2.0, 4.0, 8.66, 10.66, 12.66])     # ЧМЭ3: two three-axle bogies
+
+
+def _steady(core, seconds, heads, section=3):
+    """A steady 1 V 50 Hz carrier into one section, the trains standing: i_axle per train (A rms)."""
+    for frame in range(int(round(seconds * FS / N))):
+        t = frame * N / FS
+        u = np.zeros((8, N))
+        u[section] = np.sin(2 * np.pi * 50.0 * (t + np.arange(N) / FS))
+        out = core.step(t, u, np.array(heads), np.zeros(2), np.zeros(2))
+    return out.i_axle.copy()
+
+
+def test_the_code_left_behind_a_light_engine_is_what_its_wheelsets_leave():
+    """A light engine of two bogies (six wheelsets over 12.7 m) at 9000 m, a 388 m train 100 m
+    behind it in the same circuit: the rear train's coils get the current the wheelset chain
+    leaves past the engine's six axles (docs/rail_line.md, wheelsets at their axles), not the
+    far larger one that passed the single shunt the engine made when it was lumped onto one
+    node; the relay-end level is the chain's too."""
+    passenger = RailSettings().train_length_m[0]
+    core = _core(train_length_m=(17.22, passenger),
+                 wheelset_offsets_m=(LIGHT_ENGINE, load_stock_wheelsets()))
+    heads = [9000.0, 9000.0 - 12.66 - 100.0]
+    axle = _steady(core, 0.6, heads) * np.sqrt(2.0)                 # amplitudes per volt of code
+    chain, _, relay = core.bank.wheelset_solution(3, heads)
+    assert axle == pytest.approx([chain[0], chain[1]], rel=2e-3)
+    # the lumped network: the engine one 0.06 Ω shunt at one node
+    assert core.bank.geometry.node_at(3, 9000.0 - 17.22) == core.bank.geometry.node_at(3, 9000.0)
+    lumped = _lumped_current(core, heads)
+    assert chain[1] < 0.5 * lumped                  # what the engine's wheelsets leave: less than half
+    assert core.bank.relays.levels[3] == pytest.approx(relay / core.settings.transformer_ratio
+                                                        / core.bank.calibration.reference[3])
+
+
+def load_stock_wheelsets():
+    from fmus.data.loader import load_rolling_stock
+    return load_rolling_stock(DEFAULT_LINE.parent / "passenger_chs7.json").wheelset_offsets_m
+
+
+def _lumped_current(core, heads):
+    """The rear train's current as the lumped network alone gives it (one shunt per node)."""
+    from fmus.rail_line.network import PhasorFamily
+    configs, rows = core.bank.configuration(heads)
+    shunts, head_nodes = configs[3]
+    circuit = core.circuits[3]
+    net = circuit.network(None, Faults(), core.settings.transformer_ratio, 50.0)
+    family = PhasorFamily(net, 2 * np.pi * 50.0, [1.0])
+    nodes = [net.node_index[f"n{n}"] for n in shunts]
+    volts = family.free - family.impedance[:, nodes] @ np.linalg.solve(
+        np.eye(len(nodes)) * 0.06 + family.impedance[np.ix_(nodes, nodes)], family.free[nodes])
+    node = head_nodes[rows[3][1]]
+    a, b = net.node_index[f"n{node}"], net.node_index[f"n{node + 1}"]
+    return abs((volts[a] - volts[b]) / family.z_branch[node])
+
+
 def test_every_train_shunts_its_whole_length():
     """A 400 m train with its head 10 m before the feed end of section 4: every node it covers
     holds a shunt; the old single front-most shunt is gone."""
@@ -69,7 +124,7 @@ def test_every_train_shunts_its_whole_length():
     bank = core.bank
     circuit = core.circuits[3]
     head = circuit.feed_m - 10.0
-    configs, _ = bank._configuration([head, OFF])
+    configs, _ = bank.configuration([head, OFF])
     shunts, heads = configs[3]
     assert heads == (circuit.segments,)
     assert shunts == tuple(range(bank.geometry.node_at(3, head - 400.0), circuit.segments + 1))
@@ -101,7 +156,7 @@ def test_standing_train_is_detected_anywhere_at_maximum_ballast_and_supply(path)
     for k, circuit in enumerate(core.circuits):
         positions = np.concatenate([circuit.nodes_m, [circuit.start_m + 1.0, circuit.end_m - 1.0]])
         for head in positions:
-            configs, _ = bank._configuration([float(head), OFF])
+            configs, _ = bank.configuration([float(head), OFF])
             for section, (shunts, _) in enumerate(configs):
                 if shunts:
                     level = bank.relay_level(section, shunts, Faults(bank.calibration.ballast_max_ohm_km),

@@ -314,15 +314,15 @@ class FrameSlave(Fmi2Slave):
         for store in self._stores.values():
             store.slot_of_vr = np.full(total_vrs, -1, dtype=np.int64)
         next_slot = {t: 0 for t in _TYPE_CLASSES}
-        self._string_ports: Dict[str, int] = {}
+        self._string_ports: Dict[str, Tuple[int, int]] = {}    # String port → (first slot, elements; 0: scalar)
         self._port_slots: Dict[str, Tuple[str, int]] = {}      # numeric port → (type, its first slot)
         for port in ports:
             store = self._stores[port.type]
             first = next_slot[port.type]
             if port.type == "String":
-                store.values[first] = str(port.start)
-                self._string_ports[port.name] = first
-                self.io[port.name] = store.values[first]
+                store.values[first:first + port.size] = [str(port.start)] * port.size
+                self._string_ports[port.name] = (first, port.size if port.shape else 0)
+                self.io[port.name] = self._string_value(port.name)
             else:
                 self._port_slots[port.name] = (port.type, first)
                 view = store.values[first:first + port.size]
@@ -446,8 +446,14 @@ class FrameSlave(Fmi2Slave):
             return self._refuse_call("fmi2SetString", error)
         for slot, value in zip(slots, values):
             self._stores["String"].values[slot] = str(value)
-        for name, slot in self._string_ports.items():
-            self.io[name] = self._stores["String"].values[slot]
+        for name in self._string_ports:
+            self.io[name] = self._string_value(name)
+
+    def _string_value(self, name: str):
+        """A String port's value: a str, or a tuple of them for an array port."""
+        first, size = self._string_ports[name]
+        strings = self._stores["String"].values
+        return strings[first] if size == 0 else tuple(strings[first:first + size])
 
     def get_string(self, vrs):
         strings = self._stores["String"].values

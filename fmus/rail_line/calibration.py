@@ -7,15 +7,15 @@ wheelset shunts relative to that reference (what the relays read).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, List, Sequence, Tuple
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
 from fmus.data.loader import Line
 from fmus.errors import FmuInputError
 from fmus.rail_line.geometry import LineGeometry
-from fmus.rail_line.network import PhasorFamily
-from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit
+from fmus.rail_line.axle_chain import SectionChain
+from fmus.rail_line.track_circuit import Faults, TrackCircuit
 
 
 @dataclass(frozen=True)
@@ -39,29 +39,24 @@ class RelayCalibration:
         self.settings, self.geometry = settings, geometry
         self.g_shunt = 1.0 / settings.circuit.shunt_r_ohm
         self.ballast_max_ohm_km = float(getattr(line, "max_ballast_ohm_km", 50.0))
-        self._phasor_families: Dict[Tuple[int, Faults], PhasorFamily] = {}
         self.table = self._calibrate(line)
 
-    def _design_levels(self, circuit: TrackCircuit, carrier_hz: float, ballast_min: float, ballast_max: float):
-        """Relay-end voltages per unit feed at the carrier: (free circuit at the minimum ballast;
-        the worst 0.06 Ω shunt over all nodes at the maximum ballast and its node; the worst
-        broken rail over all segments at either ballast)."""
-        omega, g = 2 * np.pi * carrier_hz, self.g_shunt
+    def _design_levels(self, circuit: TrackCircuit, frequency_hz: float, ballast_min: float, ballast_max: float):
+        """Relay-end voltages per unit feed at the track circuit's frequency, from the wheelset
+        chain (axle_chain.py): (free circuit at the minimum ballast; the worst 0.06 Ω shunt over
+        all nodes at the maximum ballast and its node; the worst broken rail over all segments
+        (at each segment's middle) at either ballast)."""
         worst_control = 0.0
+        middles = 0.5 * (circuit.nodes_m[:-1] + circuit.nodes_m[1:])
         for ballast in (ballast_min, ballast_max):
-            net = circuit.network(None, Faults(ballast), 1.0, carrier_hz)
-            family = PhasorFamily(net, omega, [1.0])
-            relay = net.node_index["n0"]
-            nodes = np.array([net.node_index[f"n{i}"] for i in range(circuit.segments + 1)])
-            broken = family.with_branch_opened(np.arange(circuit.segments), OPEN_OHM, relay)
-            worst_control = max(worst_control, float(np.abs(broken).max()))
+            for broken in middles:
+                chain = SectionChain(circuit, Faults(ballast, float(broken)), frequency_hz, 1.0)
+                worst_control = max(worst_control, chain.solve(())[2])
+            chain = SectionChain(circuit, Faults(ballast), frequency_hz, 1.0)
             if ballast == ballast_min:
-                normal = abs(family.free[relay])
+                normal = chain.solve(())[2]
             else:
-                # one shunt at each node in turn: Sherman–Morrison on Z
-                z = family.impedance
-                at_node = family.free[nodes] / (1.0 + g * z[nodes, nodes])
-                shunted = np.abs(family.free[relay] - g * z[relay, nodes] * at_node)
+                shunted = [chain.solve(chain.shunts_at((float(x),)))[2] for x in circuit.nodes_m]
                 worst_node = int(np.argmax(shunted))
                 worst_shunt = float(shunted[worst_node])
         return normal, worst_shunt, worst_node, worst_control
@@ -134,17 +129,11 @@ class RelayCalibration:
             lo, hi = (middle, hi) if ok(middle) else (lo, middle)
         return lo
 
-    def _phasor_family(self, k: int, faults: Faults) -> PhasorFamily:
-        key = (k, faults)
-        if key not in self._phasor_families:
-            frequency = self.geometry.track_frequencies[k]
-            self._phasor_families[key] = PhasorFamily(self.geometry.circuits[k].network(None, faults, 1.0, frequency),
-                                                      2 * np.pi * frequency, [1.0])
-        return self._phasor_families[key]
-
     def relay_level(self, k: int, shunts: Sequence[int], faults: Faults, supply: float = 1.0) -> float:
         """Relay-end voltage of section k with a 0.06 Ω shunt at each node in ``shunts`` under
         ``faults``, at ``supply`` × the nominal feed, relative to the circuit's calibrated
         reference (pick-up and drop-out are levels of this)."""
-        family = self._phasor_family(k, faults)
-        return supply * abs(family.with_shunts(list(shunts), self.g_shunt, 0)) / self.reference[k]
+        circuit = self.geometry.circuits[k]
+        chain = SectionChain(circuit, faults, self.geometry.track_frequencies[k], 1.0)
+        positions = tuple(float(circuit.nodes_m[node]) for node in sorted(shunts))
+        return supply * chain.solve(chain.shunts_at(positions))[2] / self.reference[k]

@@ -1,28 +1,35 @@
 """The track-circuit bank: the line's K coded track circuits under the trains' wheelsets, their
 network states frame by frame, and the track relays (no FMI here; docs/rail_line.md).
 
-Every train is a set of wheelset shunts over its whole length: a 0.06 Ω conductance at every
-network node it covers, its head and tail snapped to the nearest node (nodes are ≤ 50 m apart,
-bogies closer: docs/rail_line.md, trains as shunts). Per section ONE network holds all shunts of
-all trains in it (network_models.py); the branch currents (the states) carry over when a train
-moves. The current a train's coils see is the rail-loop current arriving at its first axle from
-the feed (a branch current: a state), so a train behind another one in the same circuit gets
-only what the front train's axles leave; for the train whose head is the front-most shunt the
-amplitude is interpolated between nodes from the phasor solution, so it varies continuously
-with position. The rail line core takes the configuration every 10 ms of simulated time,
-whatever the frame length, so frames of any length give the same result.
+Two solutions of each section work together:
+
+* the network model (network_models.py): the section's network with a 0.06 Ω shunt at every
+  node a train covers (nodes ≤ 50 m apart), as a state-space model discretised exactly at fs;
+  its states (the rail segments' currents) advance frame by frame and carry over when a train
+  moves to the next node. It gives the waveform of the code current: its carrier, its code
+  edges and the network's transients;
+* the wheelset chain (axle_chain.py): the same track circuit at the carrier with every wheelset
+  at its axle position, solved every 10 ms of simulated time (the configuration tick) for the
+  sections whose trains moved. It gives the amplitudes: the current arriving at each train's
+  first axle, the entry-end current and the relay-end voltage.
+
+The current a train's coils see is the network model's current arriving at its head node from
+the feed (a branch current: a state), scaled so that its amplitude at the carrier is the chain's
+at the tick, and between ticks following the one-shunt amplitude table along the track (the
+head moves less than half a metre in a tick), so it varies continuously with position. A train
+behind another one in the same circuit gets what the front train's wheelsets leave, as the chain
+says. The relays read the chain's relay-end voltage at the track circuit's own frequency. The
+rail line core takes the configuration every 10 ms of simulated time, whatever the frame length,
+so frames of any length give the same result.
 
 The bank composes its parts, one concern each:
 
 * geometry.py — where the sections, their feed points, nodes and joints lie;
 * calibration.py — each relay's reference from the design regimes, the relay-end levels;
 * network_models.py — the network model per configuration, cached and shared by design;
+* axle_chain.py — the wheelset chain of a section at one frequency;
 * parking.py — sections no train or coil needs are not advanced, and caught up when needed;
 * relays.py — the track relays: levels against pick-up / drop-out with delays → occupancy.
-
-What stays here is the configuration (which nodes the trains shunt) and the frame: the states
-advanced by one product per frame, carried over when a model changes, and the currents a coil
-reads.
 """
 from __future__ import annotations
 
@@ -33,6 +40,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from fmus.data.loader import Line
+from fmus.rail_line.axle_chain import SectionChain
 from fmus.rail_line.calibration import RelayCalibration
 from fmus.rail_line.geometry import LineGeometry
 from fmus.rail_line.network_models import NO_TRAIN, Config, NetworkModel, NetworkModels
@@ -45,7 +53,17 @@ try:        # np.interp's own routine, without its per-call checks (the argument
 except ImportError:          # another numpy layout: the public function
     _interp = np.interp
 
-SHUNT_BLEND_S = 0.1      # the front train's amplitude handed over from one node's model to the next
+
+
+def _interp_one(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
+    """np.interp at one point in floats (xp ascending; clipped at the ends as np.interp is)."""
+    if x <= xp[0]:
+        return float(fp[0])
+    i = int(np.searchsorted(xp, x, side="right")) - 1
+    if i >= len(xp) - 1:
+        return float(fp[-1])
+    slope = (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i])
+    return float(slope * (x - xp[i]) + fp[i])
 
 
 class FrameCurrents:
@@ -72,14 +90,14 @@ class FrameCurrents:
         bank = self.bank
         if bank.parking.parked_at[k] is not None:
             bank._wake_in_frame(k)
-        return bank._active[k][1].padded[2] @ self.start[k]
+        return (bank._active[k][1].padded[2] @ self.start[k]) * bank._entry_factor[k]
 
 
 class TrackCircuitBank:
     """The line's track circuits: their geometry, faults, relay calibration, network models and
     states, parking, relays."""
 
-    def __init__(self, line: Line, settings, trains: int, frame: int):
+    def __init__(self, line: Line, settings, trains: int, frame: int, tick_s: float = 0.01):
         s = settings
         self.settings = s
         self.geometry = geometry = LineGeometry(line, s)
@@ -91,9 +109,21 @@ class TrackCircuitBank:
         self.faults = [Faults() for _ in range(self.count)]
         self.broken_rail_m = -1.0
         self._train_lengths = [float(length) for length in s.train_length_m]
+        # per train its wheelsets, ascending from its last one (0) to its first (the head, ``span``)
+        self._wheelsets = [np.asarray(offsets[-1] - offsets[::-1], dtype=float) for offsets in s.wheelset_offsets_m]
+        self._wheelset_lists = [positions.tolist() for positions in self._wheelsets]
+        self._spans = [float(positions[-1]) for positions in self._wheelsets]
         self._zeros = np.zeros(frame)
-        # per section: (position, amplitude table, node amplitude, scale) of a standing front train
-        self._standing_scale: List[Optional[tuple]] = [None] * self.count
+        # the wheelset chain per section, at the carrier and at the track circuit's frequency
+        self._chains: Dict[tuple, SectionChain] = {}
+        # per section: the amplitude factor of each head (factor, log one-shunt amplitude and head
+        # position at the tick), the entry-end current's factor; per train its head at the last tick
+        self._factors: List[Dict[int, tuple]] = [{} for _ in range(self.count)]
+        self._entry_factor = [1.0] * self.count
+        self._log_amplitude: List[Optional[np.ndarray]] = [None] * self.count
+        self._tick_heads: Optional[List[float]] = None
+        self._passing: Dict[int, float] = {}      # sections whose factors pass to a new solution: its tick
+        self._per_tick = 1.0 / tick_s            # the factors pass from one tick's solution to the next over a tick
         size = self._size = self.models.size
         # per section and frame: its states at the frame start (padded to one size) followed by
         # the frame's code input, so one product [Φᴺ | Ψ]·[x; u] advances it and one gives the
@@ -110,7 +140,6 @@ class TrackCircuitBank:
         self._refresh_faults()
         self._lookahead_m = max(geometry.spacing_list) + s.coil_offset_m + s.coil_length_m + 1.0
         self._carry_over: List[Tuple[int, NetworkModel, NetworkModel]] = []
-        self._handover = [(1.0, 0.0)] * self.count
 
     # ---- relay calibration --------------------------------------------------------------------
     def relay_level(self, k: int, shunts: Sequence[int] = (), faults: Optional[Faults] = None,
@@ -144,31 +173,26 @@ class TrackCircuitBank:
         self._configs: List[Optional[Config]] = [None] * self.count    # every section re-activates
         self._rows: List[Dict[int, int]] = [{} for _ in range(self.count)]
         self._node_bounds = [(0.0, 0.0)] * self.trains
+        self._tick_heads = None                     # every section's chain solved again
 
-    # ---- the front train's amplitude ------------------------------------------------------------
+    # ---- the trains' amplitudes ------------------------------------------------------------------
     def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray, standing_at: Optional[float] = None):
-        """Code-current amplitude at the exact wheelset position over the one at the model's node,
-        for the train whose head is the section's front-most shunt (1 for any other train).
-        The shape between nodes is the one-shunt table's; a whole train's shunts make the
-        amplitude at the next node differ from it by a few per cent, and that difference is
-        spread over ``SHUNT_BLEND_S`` after the head moves on to the next node. A train
-        standing at ``standing_at`` over the frame gets the frame before's values again when
-        nothing else changed (the same computation on the same positions)."""
-        _, _, log_amplitude, at_node, front = self._active[k]
-        if j != front:
+        """What the network model's current arriving at train j's head node in section k is
+        multiplied by, at the sample ``times`` with the head at ``head``: the chain's amplitude
+        over the model's, e·A₁(x)/|r|. A₁ is the one-shunt amplitude table along the track (its
+        shape between ticks: the current varies continuously as the train moves), r the model's
+        response at the head, e the chain's amplitude over A₁ at the tick positions, passing
+        linearly over one tick from the last tick's to this one's (so it never steps: one tick,
+        < 0.5 m, late). A train standing where the factor was last solved gets it as a float."""
+        entry = self._factors[k].get(j)
+        if entry is None:
             return 1.0
-        kept = self._standing_scale[k]
-        if standing_at is not None and kept is not None and kept[0] == standing_at and kept[1] is log_amplitude \
-                and kept[2] == at_node and kept[3].size == head.size:
-            value = kept[3]
-        else:
-            value = np.exp(_interp(head, self.geometry.nodes_m[k], log_amplitude) - at_node)
-            self._standing_scale[k] = (standing_at, log_amplitude, at_node, value) if standing_at is not None else None
-        gain, since = self._handover[k]
-        if gain != 1.0 and times[0] - since < SHUNT_BLEND_S:
-            blend = 1.0 - (times - since) / SHUNT_BLEND_S
-            value = value * (1.0 + (gain - 1.0) * np.minimum(np.maximum(blend, 0.0, out=blend), 1.0, out=blend))
-        return value
+        before, now, tick, response, standing_head, standing_value = entry
+        if standing_at is not None and standing_at == standing_head and before == now:
+            return standing_value
+        weight = np.minimum(np.maximum((times - tick) * self._per_tick, 0.0), 1.0)
+        return (before + (now - before) * weight) * np.exp(_interp(head, self.geometry.nodes_m[k],
+                                                                    self._log_amplitude[k])) / response
 
     @property
     def states(self) -> np.ndarray:
@@ -177,18 +201,52 @@ class TrackCircuitBank:
 
     # ---- the trains' shunts -----------------------------------------------------------------
     def follow_shunts(self, heads: List[float], tick_s: float = 0.0) -> None:
-        """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts,
-        activating the models of the sections whose configuration changed."""
+        """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts:
+        the models of the sections whose configuration changed activated, the wheelset chain
+        solved again for the sections whose trains moved."""
+        if self._passing:
+            self._settle(tick_s)
+        if heads == self._tick_heads:      # nothing moved since the last tick
+            return
+        before, self._tick_heads = self._tick_heads, list(heads)
+        changed = set()
         for head, (lo, hi) in zip(heads, self._node_bounds):
             if not lo < head < hi:
+                changed = self._follow_nodes(heads, tick_s)
                 break
+        geometry = self.geometry
+        if before is None:                 # the first tick, or faults changed: every section
+            touched = set(range(self.count))
         else:
-            return                         # every head between the same two nodes as before
-        configs, rows = self._configuration(heads)
+            touched = changed
+            for j, (head, old) in enumerate(zip(heads, before)):
+                if head != old:            # the sections under its wheelsets, before and now
+                    lo, hi = min(head, old) - self._spans[j], max(head, old)
+                    touched.update(range(bisect.bisect_right(geometry.ends_list, lo),
+                                         bisect.bisect_right(geometry.starts_list, hi)))
+        for k in sorted(touched):
+            self._solve_wheelsets(k, heads, tick_s)
+
+    def _settle(self, tick_s: float) -> None:
+        """A tick after its solution a section's factors have passed to it (the weight is 1
+        from then on): they are taken as they are, so a standing train's is a float again."""
+        for k, solved in list(self._passing.items()):
+            if tick_s > solved:
+                del self._passing[k]
+                factors = self._factors[k]
+                for j, (_, now, tick, response, head, standing) in list(factors.items()):
+                    factors[j] = (now, now, tick, response, head, standing)
+
+    def _follow_nodes(self, heads: List[float], tick_s: float) -> set:
+        """The configurations from the heads; the sections whose configuration changed
+        activated (returned)."""
+        configs, rows = self.configuration(heads)
+        changed = set()
         for k, config in enumerate(configs):
             if config != self._configs[k]:
                 self._rows[k] = rows[k]
-                self._activate(k, config, rows[k], tick_s)
+                self._activate(k, config)
+                changed.add(k)
         self._configs = configs
         # advanced every frame: the sections with a wheelset, and those a coil may reach before
         # the next configuration change (the head moves less than a node spacing till then)
@@ -200,8 +258,69 @@ class TrackCircuitBank:
             wanted.update(range(first, last))
         self.parking.wanted = wanted
         self.parking.review = True
+        return changed
 
-    def _configuration(self, heads: List[float]):
+    def _chain(self, k: int, frequency_hz: float, ratio: float) -> SectionChain:
+        faults = self._effective_faults[k]
+        key = (k, faults, frequency_hz, ratio)
+        chain = self._chains.get(key)
+        if chain is None:
+            chain = self._chains[key] = SectionChain(self.geometry.circuits[k], faults, frequency_hz, ratio)
+        return chain
+
+    def _wheelset_runs(self, k: int, chain: SectionChain, heads: List[float]) -> List[tuple]:
+        """Section k's wheelsets as runs for the chain: per train the axles between the joints,
+        split at the feed leads (beyond them they stand on the stub up to the exit joint)."""
+        geometry = self.geometry
+        start, feed, end = geometry.starts_list[k], geometry.feed_list[k], geometry.ends_list[k]
+        runs = []
+        for j, head in enumerate(heads):
+            base = head - self._spans[j]              # where its last wheelset is
+            if head < start or base > end:
+                continue
+            positions = self._wheelset_lists[j]
+            first = bisect.bisect_left(positions, start - base)
+            to_feed = bisect.bisect_right(positions, feed - base) - 1
+            last = bisect.bisect_right(positions, end - base) - 1
+            table = chain.table(j, self._wheelsets[j])
+            for lo, hi in ((first, to_feed), (max(first, to_feed + 1), last)):
+                if lo <= hi:
+                    runs.append((base + positions[lo], base + positions[hi], table, lo, hi))
+        runs.sort(key=lambda run: run[0])
+        return runs
+
+    def _solve_wheelsets(self, k: int, heads: List[float], tick_s: float) -> None:
+        """Section k's wheelset chain at the tick: each head's amplitude factor, the entry-end
+        current's factor (at the carrier) and the relay level (at the track circuit's frequency)."""
+        geometry, s = self.geometry, self.settings
+        carrier, track = float(geometry.carriers[k]), float(geometry.track_frequencies[k])
+        chain = self._chain(k, carrier, s.transformer_ratio)
+        runs = self._wheelset_runs(k, chain, heads)
+        rows = self._rows[k]
+        model = self._active[k][1]
+        trains = sorted(rows)
+        currents, entry, relay = chain.solve(runs, [heads[j] for j in trains])
+        nodes, log_amplitude = geometry.nodes_m[k], self._log_amplitude[k]
+        factors, previous = {}, self._factors[k]
+        for j, current in zip(trains, currents):
+            response = abs(model.head_responses[rows[j]])
+            one_shunt = math.exp(_interp_one(heads[j], nodes, log_amplitude))
+            now = current / one_shunt if response > 0.0 else 0.0
+            before = previous[j][1] if j in previous else now
+            response = response if response > 0.0 else 1.0
+            factors[j] = (before, now, tick_s, response, heads[j], now * one_shunt / response)
+        self._factors[k] = factors
+        self._passing[k] = tick_s
+        response = abs(model.entry_response)
+        self._entry_factor[k] = entry / response if response > 0.0 else 1.0
+        if track != carrier:               # the relay reads the track circuit's own frequency
+            relay_chain = self._chain(k, track, s.transformer_ratio)
+            relay = relay_chain.solve(self._wheelset_runs(k, relay_chain, heads))[2]
+        # per unit feed (the chain's is per unit code input, × the transformer ratio)
+        self.relays.levels[k] = relay / s.transformer_ratio / self.calibration.reference[k]
+        self.relays.settled = False
+
+    def configuration(self, heads: List[float]):
         """Per section: (its shunt nodes, the head nodes of the trains whose head is in it, front
         first) and which row each such train reads; per train the open interval of head
         positions over which its contribution is constant (self._node_bounds)."""
@@ -230,32 +349,20 @@ class TrackCircuitBank:
             rows.append({j: h for h, (_, j) in enumerate(order)})
         return configs, rows
 
-    def _activate(self, k: int, config: Config, rows: Dict[int, int], tick_s: float) -> None:
+    def _activate(self, k: int, config: Config) -> None:
         model = self.models.model(k, config, self._effective_faults[k])
         if self.parking.parked_at[k] is not None:         # caught up under the model it was parked with
             self._wake(k)
         previous = self._active[k]
-        self._handover[k] = (1.0, 0.0)
         if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
             self._carry_over.append((k, previous[1], model))
-        log_amplitude = self.models.one_shunt_table(k, self._effective_faults[k])[1]
-        shunts, heads = config
-        # the train whose head is the front-most shunt gets the continuous amplitude (scale)
-        front = next((j for j, h in rows.items() if h == 0), -1) if heads and heads[0] == shunts[-1] else -1
-        self._active[k] = (config, model, log_amplitude, log_amplitude[heads[0]] if front >= 0 else 0.0, front)
-        if previous is not None and front >= 0 and previous[4] == front and previous[1] is not model:
-            # the front train's steady amplitude just before and just after, at the same place
-            before = abs(previous[1].front_response) * math.exp(-previous[3])
-            after = abs(model.front_response) * math.exp(-self._active[k][3])
-            if before > 0.0 and after > 0.0:     # an opened feed carries no code to hand over
-                self._handover[k] = (before / after, tick_s)
+        self._log_amplitude[k] = self.models.one_shunt_table(k, self._effective_faults[k])[1]
+        self._active[k] = (config, model)
         size = model.phi_n.shape[0]
         if model.padded is None:
             model.padded = self.models.padded(model)
         self._step[k] = model.padded[0]
         self.states[k, size:] = 0.0       # a branch the new network lacks (feed opened) carries nothing
-        self.relays.levels[k] = model.relay_level
-        self.relays.settled = False
 
     # ---- a frame ----------------------------------------------------------------------------
     def start(self, heads: List[float]) -> None:
@@ -329,6 +436,19 @@ class TrackCircuitBank:
         self._carry_over.clear()
 
     # ---- studies ------------------------------------------------------------------------------
+    def wheelset_solution(self, k: int, heads: List[float], frequency_hz: Optional[float] = None):
+        """Section k with every train's wheelsets at their axles (heads at ``heads``, the
+        current faults), solved by the wheelset chain at ``frequency_hz`` (default the
+        section's carrier), per volt of code input: ({train: the current arriving at its first
+        axle, A} for the trains whose head is in the section, the entry-end current, A, and the
+        relay-end voltage, V) — the amplitudes the rail line gives its outputs and relays."""
+        geometry = self.geometry
+        frequency = float(geometry.carriers[k]) if frequency_hz is None else float(frequency_hz)
+        chain = self._chain(k, frequency, self.settings.transformer_ratio)
+        trains = [j for j, head in enumerate(heads) if geometry.starts_list[k] <= head < geometry.ends_list[k]]
+        currents, entry, relay = chain.solve(self._wheelset_runs(k, chain, heads), [heads[j] for j in trains])
+        return dict(zip(trains, currents)), entry, relay
+
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:
         """ALS mode: the smallest code current (A rms) under one normative shunt (the first
         wheelset, the standard's regime) over all positions in section k, for the nominal code

@@ -34,11 +34,11 @@ class NetworkModel:
     ahead_t: np.ndarray     # (H, N, N) inputs of the frame → the same
     entry_o: np.ndarray     # (N, nx) the same for the entry-end current
     entry_t: np.ndarray     # (N, N)
-    relay_level: float      # relay-end voltage relative to the circuit's calibrated reference
     phi: np.ndarray         # (nx, nx) state after one sample (psi[:, -1]: input → state after one sample)
     carrier_response: np.ndarray    # (nx,) complex: the states' phasor per unit input phasor at the
                                     # carrier, sampled (the discrete model's steady state)
-    front_response: complex         # the same for the current arriving at the front head (0: no head)
+    head_responses: np.ndarray      # (H,) complex: the same for the current arriving at each head
+    entry_response: complex         # the same for the entry-end current
     carrier_system: np.ndarray      # (2·nx, 2) the states at a sample and the next → the carrier's
                                     # phasor (re, im), by least squares (TrackCircuitBank._carry_states_over)
     settle_frames: int = 0          # frames for every mode to fall below parking.SETTLED_SHARE (0: not yet known)
@@ -121,7 +121,7 @@ class NetworkModels:
         # outputs of all samples at once: (H, N, nx) and (H, N, N) per head, (N, nx), (N, N) entry
         rotation = np.exp(2j * np.pi * carrier * self.dt)
         response = np.linalg.solve(rotation * np.eye(nx) - phi, gamma[:, 0].astype(complex))
-        ahead_response = rows[:-1] @ response + direct[:-1]
+        row_responses = rows @ response + direct
         rotated = response * rotation
         carrier_system = np.concatenate([np.stack([response.real, -response.imag], 1),
                                          np.stack([rotated.real, -rotated.imag], 1)])
@@ -129,8 +129,7 @@ class NetworkModels:
                              np.ascontiguousarray(out_o[:, :-1].transpose(1, 0, 2)),
                              np.ascontiguousarray(out_t[:, :-1].transpose(1, 0, 2)),
                              np.ascontiguousarray(out_o[:, -1]), np.ascontiguousarray(out_t[:, -1]),
-                             self.calibration.relay_level(k, shunts, faults), phi, response,
-                             complex(ahead_response[0]) if heads else 0j, carrier_system)
+                             phi, response, row_responses[:-1], complex(row_responses[-1]), carrier_system)
         cache[key] = model
         if len(cache) > self._cache_size[k]:
             cache.popitem(last=False)
