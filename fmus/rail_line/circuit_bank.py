@@ -116,8 +116,8 @@ class TrackCircuitBank:
         self._zeros = np.zeros(frame)
         # the wheelset chain per section, at the carrier and at the track circuit's frequency
         self._chains: Dict[tuple, SectionChain] = {}
-        # per section: the amplitude factor of each head (factor, log one-shunt amplitude and head
-        # position at the tick), the entry-end current's factor; per train its head at the last tick
+        # per section: each head's amplitude (scale: e before and now, the tick, |r|, the head at
+        # the tick, the standing value), the entry-end current's factor; the heads at the last tick
         self._factors: List[Dict[int, tuple]] = [{} for _ in range(self.count)]
         self._entry_factor = [1.0] * self.count
         self._log_amplitude: List[Optional[np.ndarray]] = [None] * self.count
