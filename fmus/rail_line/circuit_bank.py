@@ -55,15 +55,15 @@ except ImportError:          # another numpy layout: the public function
 
 
 
-def _interp_one(x: float, xp: np.ndarray, fp: np.ndarray) -> float:
+def _interp_one(x: float, xp: List[float], fp: List[float]) -> float:
     """np.interp at one point in floats (xp ascending; clipped at the ends as np.interp is)."""
-    if x <= xp[0]:
-        return float(fp[0])
-    i = int(np.searchsorted(xp, x, side="right")) - 1
+    i = bisect.bisect_right(xp, x) - 1
+    if i < 0:
+        return fp[0]
     if i >= len(xp) - 1:
-        return float(fp[-1])
+        return fp[-1]
     slope = (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i])
-    return float(slope * (x - xp[i]) + fp[i])
+    return slope * (x - xp[i]) + fp[i]
 
 
 class FrameCurrents:
@@ -114,13 +114,17 @@ class TrackCircuitBank:
         self._wheelset_lists = [positions.tolist() for positions in self._wheelsets]
         self._spans = [float(positions[-1]) for positions in self._wheelsets]
         self._zeros = np.zeros(frame)
-        # the wheelset chain per section, at the carrier and at the track circuit's frequency
-        self._chains: Dict[tuple, SectionChain] = {}
+        # the wheelset chain per section and frequency, under the section's faults
+        self._chains: List[Dict[float, SectionChain]] = [{} for _ in range(self.count)]
+        self._carriers = [float(f) for f in geometry.carriers]
+        self._track_frequencies = [float(f) for f in geometry.track_frequencies]
+        self._nodes_lists = [nodes.tolist() for nodes in geometry.nodes_m]
         # per section: each head's amplitude (scale: e before and now, the tick, |r|, the head at
         # the tick, the standing value), the entry-end current's factor; the heads at the last tick
         self._factors: List[Dict[int, tuple]] = [{} for _ in range(self.count)]
         self._entry_factor = [1.0] * self.count
         self._log_amplitude: List[Optional[np.ndarray]] = [None] * self.count
+        self._log_amplitude_lists: List[Optional[List[float]]] = [None] * self.count
         self._tick_heads: Optional[List[float]] = None
         self._passing: Dict[int, float] = {}      # sections whose factors pass to a new solution: its tick
         self._per_tick = 1.0 / tick_s            # the factors pass from one tick's solution to the next over a tick
@@ -174,6 +178,10 @@ class TrackCircuitBank:
         self._rows: List[Dict[int, int]] = [{} for _ in range(self.count)]
         self._node_bounds = [(0.0, 0.0)] * self.trains
         self._tick_heads = None                     # every section's chain solved again
+        self._chains = [{} for _ in range(self.count)]
+        # taken at once: the network's own transient shows a fault change, not a passing factor
+        self._factors = [{} for _ in range(self.count)]
+        self._passing = {}
 
     # ---- the trains' amplitudes ------------------------------------------------------------------
     def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray, standing_at: Optional[float] = None):
@@ -204,9 +212,9 @@ class TrackCircuitBank:
         """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts:
         the models of the sections whose configuration changed activated, the wheelset chain
         solved again for the sections whose trains moved."""
-        if self._passing:
-            self._settle(tick_s)
         if heads == self._tick_heads:      # nothing moved since the last tick
+            if self._passing:
+                self._settle(tick_s, ())
             return
         before, self._tick_heads = self._tick_heads, list(heads)
         changed = set()
@@ -224,14 +232,17 @@ class TrackCircuitBank:
                     lo, hi = min(head, old) - self._spans[j], max(head, old)
                     touched.update(range(bisect.bisect_right(geometry.ends_list, lo),
                                          bisect.bisect_right(geometry.starts_list, hi)))
+        if self._passing:
+            self._settle(tick_s, touched)
         for k in sorted(touched):
             self._solve_wheelsets(k, heads, tick_s)
 
-    def _settle(self, tick_s: float) -> None:
+    def _settle(self, tick_s: float, solving) -> None:
         """A tick after its solution a section's factors have passed to it (the weight is 1
-        from then on): they are taken as they are, so a standing train's is a float again."""
+        from then on): they are taken as they are, so a standing train's is a float again (the
+        sections ``solving`` now are left to their new solution)."""
         for k, solved in list(self._passing.items()):
-            if tick_s > solved:
+            if tick_s > solved and k not in solving:
                 del self._passing[k]
                 factors = self._factors[k]
                 for j, (_, now, tick, response, head, standing) in list(factors.items()):
@@ -260,12 +271,12 @@ class TrackCircuitBank:
         self.parking.review = True
         return changed
 
-    def _chain(self, k: int, frequency_hz: float, ratio: float) -> SectionChain:
-        faults = self._effective_faults[k]
-        key = (k, faults, frequency_hz, ratio)
-        chain = self._chains.get(key)
+    def _chain(self, k: int, frequency_hz: float) -> SectionChain:
+        """Section k's wheelset chain at a frequency under its faults, per unit code input."""
+        chain = self._chains[k].get(frequency_hz)
         if chain is None:
-            chain = self._chains[key] = SectionChain(self.geometry.circuits[k], faults, frequency_hz, ratio)
+            chain = self._chains[k][frequency_hz] = SectionChain(self.geometry.circuits[k], self._effective_faults[k],
+                                                                 frequency_hz, self.settings.transformer_ratio)
         return chain
 
     def _wheelset_runs(self, k: int, chain: SectionChain, heads: List[float]) -> List[tuple]:
@@ -292,15 +303,14 @@ class TrackCircuitBank:
     def _solve_wheelsets(self, k: int, heads: List[float], tick_s: float) -> None:
         """Section k's wheelset chain at the tick: each head's amplitude factor, the entry-end
         current's factor (at the carrier) and the relay level (at the track circuit's frequency)."""
-        geometry, s = self.geometry, self.settings
-        carrier, track = float(geometry.carriers[k]), float(geometry.track_frequencies[k])
-        chain = self._chain(k, carrier, s.transformer_ratio)
+        carrier, track = self._carriers[k], self._track_frequencies[k]
+        chain = self._chain(k, carrier)
         runs = self._wheelset_runs(k, chain, heads)
         rows = self._rows[k]
         model = self._active[k][1]
         trains = sorted(rows)
         currents, entry, relay = chain.solve(runs, [heads[j] for j in trains])
-        nodes, log_amplitude = geometry.nodes_m[k], self._log_amplitude[k]
+        nodes, log_amplitude = self._nodes_lists[k], self._log_amplitude_lists[k]
         factors, previous = {}, self._factors[k]
         for j, current in zip(trains, currents):
             response = abs(model.head_responses[rows[j]])
@@ -314,11 +324,14 @@ class TrackCircuitBank:
         response = abs(model.entry_response)
         self._entry_factor[k] = entry / response if response > 0.0 else 1.0
         if track != carrier:               # the relay reads the track circuit's own frequency
-            relay_chain = self._chain(k, track, s.transformer_ratio)
+            relay_chain = self._chain(k, track)
             relay = relay_chain.solve(self._wheelset_runs(k, relay_chain, heads))[2]
         # per unit feed (the chain's is per unit code input, × the transformer ratio)
-        self.relays.levels[k] = relay / s.transformer_ratio / self.calibration.reference[k]
-        self.relays.settled = False
+        level = relay / self.settings.transformer_ratio / self.calibration.reference[k]
+        relays = self.relays
+        relays.levels[k] = level
+        if relays.settled and relays.would_move(k, level):
+            relays.settled = False         # a relay starts to pick up or drop out
 
     def configuration(self, heads: List[float]):
         """Per section: (its shunt nodes, the head nodes of the trains whose head is in it, front
@@ -357,6 +370,7 @@ class TrackCircuitBank:
         if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
             self._carry_over.append((k, previous[1], model))
         self._log_amplitude[k] = self.models.one_shunt_table(k, self._effective_faults[k])[1]
+        self._log_amplitude_lists[k] = self._log_amplitude[k].tolist()
         self._active[k] = (config, model)
         size = model.phi_n.shape[0]
         if model.padded is None:
@@ -444,7 +458,7 @@ class TrackCircuitBank:
         relay-end voltage, V) — the amplitudes the rail line gives its outputs and relays."""
         geometry = self.geometry
         frequency = float(geometry.carriers[k]) if frequency_hz is None else float(frequency_hz)
-        chain = self._chain(k, frequency, self.settings.transformer_ratio)
+        chain = self._chain(k, frequency)
         trains = [j for j, head in enumerate(heads) if geometry.starts_list[k] <= head < geometry.ends_list[k]]
         currents, entry, relay = chain.solve(self._wheelset_runs(k, chain, heads), [heads[j] for j in trains])
         return dict(zip(trains, currents)), entry, relay

@@ -28,6 +28,12 @@ class TrackRelays:
         self.timer[:] = 0.0
         self.settled = False
 
+    def would_move(self, k: int, level: float) -> bool:
+        """Would relay k start to pick up or drop out at ``level`` (its state and the levels)?"""
+        s = self.settings
+        up = bool(self.up[k])
+        return (level > s.relay_drop_out) != up if up else (level >= s.relay_pick_up) != up
+
     def update(self, step_s: float) -> None:
         """The relays after ``step_s`` seconds at the current levels."""
         s = self.settings

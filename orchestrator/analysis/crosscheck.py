@@ -43,8 +43,9 @@ BALLASTS_OHM_KM = (1.0, 50.0, 200.0)
 FOLLOWER_GAPS_M = (30.0, 100.0)
 AXLE_SEGMENT_M = 1.0       # the reference's rail pieces
 # below the reference by less than this is not "the unsafe side": the reference's own resolution
-# (its 1 m rail pieces read ≈ 3·10⁻⁷ above the continuous rails; 0.5 m pieces a quarter of it)
-UNSAFE_TOLERANCE = 1e-6
+# (its 1 m π pieces read above the continuous rails by ≈ 3·10⁻⁷ under a 388 m train, 10⁻⁶ under
+# the 944 m one; 0.5 m pieces a quarter of it: the difference is the reference's, not ours)
+UNSAFE_TOLERANCE = 1e-5
 # where ours above the reference is the safe side: more code behind a train, a higher relay level
 # under it (a weaker shunt) than the real wheelsets give
 SAFE_ABOVE = ("behind", "relay voltage")
