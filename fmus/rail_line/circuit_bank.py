@@ -66,6 +66,12 @@ def _interp_one(x: float, xp: List[float], fp: List[float]) -> float:
     return slope * (x - xp[i]) + fp[i]
 
 
+# the wheelsets are solved again once a train has moved this far since its last solution (or
+# comes to rest): in between, its amplitude follows the one-shunt table along the track, which
+# the chain's shape differs from by < 10⁻³ over a metre (docs/rail_line.md, simplifications)
+SOLVE_STEP_M = 1.0
+
+
 class FrameCurrents:
     """A frame's per-sample currents of a section, computed only for the sections a coil sees
     (from each section's states at the frame start followed by the frame's code input)."""
@@ -111,7 +117,7 @@ class TrackCircuitBank:
         self._train_lengths = [float(length) for length in s.train_length_m]
         # per train its wheelsets, ascending from its last one (0) to its first (the head, ``span``)
         self._wheelsets = [np.asarray(offsets[-1] - offsets[::-1], dtype=float) for offsets in s.wheelset_offsets_m]
-        self._wheelset_lists = [positions.tolist() for positions in self._wheelsets]
+        self._offset_lists = [np.asarray(offsets, dtype=float).tolist() for offsets in s.wheelset_offsets_m]
         self._spans = [float(positions[-1]) for positions in self._wheelsets]
         self._zeros = np.zeros(frame)
         # the wheelset chain per section and frequency, under the section's faults
@@ -126,6 +132,8 @@ class TrackCircuitBank:
         self._log_amplitude: List[Optional[np.ndarray]] = [None] * self.count
         self._log_amplitude_lists: List[Optional[List[float]]] = [None] * self.count
         self._tick_heads: Optional[List[float]] = None
+        self._solved_heads: Optional[List[float]] = None    # each train's head at its last solution
+        self._tick_s: Optional[float] = None
         self._passing: Dict[int, float] = {}      # sections whose factors pass to a new solution: its tick
         self._per_tick = 1.0 / tick_s            # the factors pass from one tick's solution to the next over a tick
         size = self._size = self.models.size
@@ -177,7 +185,7 @@ class TrackCircuitBank:
         self._configs: List[Optional[Config]] = [None] * self.count    # every section re-activates
         self._rows: List[Dict[int, int]] = [{} for _ in range(self.count)]
         self._node_bounds = [(0.0, 0.0)] * self.trains
-        self._tick_heads = None                     # every section's chain solved again
+        self._tick_heads = self._solved_heads = None   # every section's chain solved again
         self._chains = [{} for _ in range(self.count)]
         # taken at once: the network's own transient shows a fault change, not a passing factor
         self._factors = [{} for _ in range(self.count)]
@@ -211,27 +219,38 @@ class TrackCircuitBank:
     def follow_shunts(self, heads: List[float], tick_s: float = 0.0) -> None:
         """Every train's wheelsets (heads at the configuration tick ``tick_s``) as shunts:
         the models of the sections whose configuration changed activated, the wheelset chain
-        solved again for the sections whose trains moved."""
-        if heads == self._tick_heads:      # nothing moved since the last tick
+        solved again for the sections a train has moved SOLVE_STEP_M in since its last solution
+        (or come to rest in)."""
+        if tick_s == self._tick_s and heads == self._tick_heads:
+            return                         # this tick's, taken already (frames shorter than a tick)
+        previous, self._tick_heads, self._tick_s = self._tick_heads, list(heads), tick_s
+        moving = heads != previous
+        if not moving and heads == self._solved_heads:       # nothing moved, nothing left to solve
             if self._passing:
                 self._settle(tick_s, ())
             return
-        before, self._tick_heads = self._tick_heads, list(heads)
         changed = set()
-        for head, (lo, hi) in zip(heads, self._node_bounds):
-            if not lo < head < hi:
-                changed = self._follow_nodes(heads, tick_s)
-                break
+        if moving:
+            for head, (lo, hi) in zip(heads, self._node_bounds):
+                if not lo < head < hi:
+                    changed = self._follow_nodes(heads, tick_s)
+                    break
         geometry = self.geometry
-        if before is None:                 # the first tick, or faults changed: every section
+        if self._solved_heads is None:     # the first tick, or faults changed: every section
             touched = set(range(self.count))
+            self._solved_heads = list(heads)
         else:
             touched = changed
-            for j, (head, old) in enumerate(zip(heads, before)):
-                if head != old:            # the sections under its wheelsets, before and now
-                    lo, hi = min(head, old) - self._spans[j], max(head, old)
+            solved = self._solved_heads
+            for j, head in enumerate(heads):
+                last = solved[j]
+                # a metre on since its last solution, or at rest elsewhere: the sections under its
+                # wheelsets then and now
+                if head != last and (abs(head - last) >= SOLVE_STEP_M or head == previous[j]):
+                    lo, hi = min(head, last) - self._spans[j], max(head, last)
                     touched.update(range(bisect.bisect_right(geometry.ends_list, lo),
                                          bisect.bisect_right(geometry.starts_list, hi)))
+                    solved[j] = head
         if self._passing:
             self._settle(tick_s, touched)
         for k in sorted(touched):
@@ -281,22 +300,24 @@ class TrackCircuitBank:
 
     def _wheelset_runs(self, k: int, chain: SectionChain, heads: List[float]) -> List[tuple]:
         """Section k's wheelsets as runs for the chain: per train the axles between the joints,
-        split at the feed leads (beyond them they stand on the stub up to the exit joint)."""
+        split at the feed leads (beyond them they stand on the stub up to the exit joint). The
+        axles are found by their distance behind the head (a head exactly on a joint is on it)."""
         geometry = self.geometry
         start, feed, end = geometry.starts_list[k], geometry.feed_list[k], geometry.ends_list[k]
         runs = []
         for j, head in enumerate(heads):
-            base = head - self._spans[j]              # where its last wheelset is
-            if head < start or base > end:
+            offsets = self._offset_lists[j]             # behind the head, ascending from 0
+            if head < start or head - offsets[-1] > end:
                 continue
-            positions = self._wheelset_lists[j]
-            first = bisect.bisect_left(positions, start - base)
-            to_feed = bisect.bisect_right(positions, feed - base) - 1
-            last = bisect.bisect_right(positions, end - base) - 1
+            last = len(offsets) - 1
+            # offsets within [head − end, head − start]: the stub's (before head − feed), the rails'
+            first = bisect.bisect_left(offsets, head - end)
+            to_feed = bisect.bisect_left(offsets, head - feed)
+            behind = bisect.bisect_right(offsets, head - start) - 1
             table = chain.table(j, self._wheelsets[j])
-            for lo, hi in ((first, to_feed), (max(first, to_feed + 1), last)):
-                if lo <= hi:
-                    runs.append((base + positions[lo], base + positions[hi], table, lo, hi))
+            for near, far in ((to_feed, behind), (first, to_feed - 1)):      # rails, then the stub
+                if near <= far:          # offsets near…far → table indices (ascending positions)
+                    runs.append((head - offsets[far], head - offsets[near], table, last - far, last - near))
         runs.sort(key=lambda run: run[0])
         return runs
 
