@@ -9,14 +9,15 @@ Two solutions of each section work together:
   moves to the next node. It gives the waveform of the code current: its carrier, its code
   edges and the network's transients;
 * the wheelset chain (axle_chain.py): the same track circuit at the carrier with every wheelset
-  at its axle position, solved every 10 ms of simulated time (the configuration tick) for the
-  sections whose trains moved. It gives the amplitudes: the current arriving at each train's
-  first axle, the entry-end current and the relay-end voltage.
+  at its axle position, solved at a configuration tick (every 10 ms of simulated time) for the
+  sections a train has moved a metre in since their last solution (SOLVE_STEP_M), come to rest
+  in, or whose configuration or faults changed. It gives the amplitudes: the current arriving
+  at each train's first axle, the entry-end current and the relay-end voltage.
 
 The current a train's coils see is the network model's current arriving at its head node from
 the feed (a branch current: a state), scaled so that its amplitude at the carrier is the chain's
-at the tick, and between ticks following the one-shunt amplitude table along the track (the
-head moves less than half a metre in a tick), so it varies continuously with position. A train
+at its solution, and in between following the one-shunt amplitude table along the track, so
+it varies continuously with position. A train
 behind another one in the same circuit gets what the front train's wheelsets leave, as the chain
 says. The relays read the chain's relay-end voltage at the track circuit's own frequency. The
 rail line core takes the configuration every 10 ms of simulated time, whatever the frame length,
