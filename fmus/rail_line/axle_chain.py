@@ -136,7 +136,7 @@ class SectionChain:
         (ascending), the first of them at ``start_m`` and the last at ``end_m`` (absolute). A
         probe is taken just on the feed side of a wheelset at the same position (the current
         arriving at that axle); a probe beyond the feed leads is the current into the stub."""
-        line, broken = self.line, self.broken_m
+        broken = self.broken_m
         v, i = 1.0 + 0j, self.relay_admittance           # at the relay end, V = 1 (scaled at the end)
         entry = i
         x = self.start_m

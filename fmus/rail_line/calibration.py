@@ -38,7 +38,7 @@ class RelayCalibration:
     def __init__(self, line: Line, geometry: LineGeometry, settings):
         self.settings, self.geometry = settings, geometry
         self.g_shunt = 1.0 / settings.circuit.shunt_r_ohm
-        self.ballast_max_ohm_km = float(getattr(line, "max_ballast_ohm_km", 50.0))
+        self.ballast_max_ohm_km = float(line.max_ballast_ohm_km)      # the loader gives its default
         self.table = self._calibrate(line)
 
     def _design_levels(self, circuit: TrackCircuit, frequency_hz: float, ballast_min: float, ballast_max: float):

@@ -47,12 +47,9 @@ from fmus.rail_line.geometry import LineGeometry
 from fmus.rail_line.network_models import NO_TRAIN, Config, NetworkModel, NetworkModels
 from fmus.rail_line.parking import Parking, settle_frames
 from fmus.rail_line.relays import TrackRelays
+from fmus.library_shortcuts import interp
 from fmus.rail_line.track_circuit import Faults
 
-try:        # np.interp's own routine, without its per-call checks (the arguments are float arrays)
-    from numpy._core.multiarray import interp as _interp
-except ImportError:          # another numpy layout: the public function
-    _interp = np.interp
 
 
 
@@ -208,7 +205,7 @@ class TrackCircuitBank:
         if standing_at is not None and standing_at == standing_head and before == now:
             return standing_value
         weight = np.minimum(np.maximum((times - tick) * self._per_tick, 0.0), 1.0)
-        return (before + (now - before) * weight) * np.exp(_interp(head, self.geometry.nodes_m[k],
+        return (before + (now - before) * weight) * np.exp(interp(head, self.geometry.nodes_m[k],
                                                                     self._log_amplitude[k])) / response
 
     @property
