@@ -45,7 +45,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 ROOT = Path(__file__).resolve().parent.parent
 ANNOTATION = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<body>.*?)\s*-->\s*$")
 COMMAND_WORDS = ("railcosim", "python", "python3", "pip", "cmp", "cd", "mkdir", "cp", "ls", "for", "do", "done",
-                 "dask", "export", "echo", "PYTHONPATH=")
+                 "dask", "export", "echo", "ngspice", "PYTHONPATH=")
 DATA_KINDS = ("study file", "scenario for", "scenario event for", "line file fragment", "ssd fragment", "ci job",
               "railml sidecar")
 SKIP_KINDS = ("skip", "needs dcp-slave", "needs hardware", "text")
