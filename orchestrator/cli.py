@@ -1,5 +1,5 @@
 """`railcosim` command line: build, run, report, inspect, validate, new, export, list, contract, conform,
-study, dcp-slave, fmu-env.
+study, dcp-slave, fmu-env, netlist, crosscheck.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
 SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
@@ -255,12 +255,12 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
-    from orchestrator.run import check_system
+    from orchestrator.validation import problems_of
 
     # everything a run with these options would refuse before its first step: the SSD and its
     # parameter sets, the FMUs' ports, connections, units, steps, the data files, the scenario,
     # and each component instantiated and initialised with its parameters (as run does)
-    problems = check_system(_system_path(args.target), _run_options(args, _overrides(args)))
+    problems = problems_of(_system_path(args.target), _run_options(args, _overrides(args)))
     for problem in problems:
         print(f"railcosim: error: {problem}", file=sys.stderr)
     if problems:
@@ -439,7 +439,8 @@ def add_export_command(sub) -> None:
 
 
 def cmd_conform(args) -> int:
-    from orchestrator.conformance.runner import conform, format_json, format_table
+    from orchestrator.conformance.report import format_json, format_table
+    from orchestrator.conformance.runner import conform
 
     report = conform(args.role, args.target, args.vectors)
     print(format_json(report) if args.format == "json" else format_table(report))
@@ -525,6 +526,74 @@ def cmd_dcp_slave(args) -> int:
                  dcpx_in=Path(args.dcpx) if args.dcpx else None)
 
 
+def _rail_setup(args):
+    """The rail line of ``args.system`` (or ``--line``) with ``--train``s added: (setup, system)."""
+    from orchestrator.analysis.rail_setup import add_train, line_setup, rail_setup
+    from orchestrator.ssp import open_system
+
+    system = None
+    if args.line:
+        if args.system:
+            raise UserError(f"give a system or --line, not both ({args.system}, --line {args.line})")
+        setup = line_setup(args.line)
+    else:
+        system = open_system(_system_path(args.system))
+        setup = rail_setup(system, args.time, Path(args.results) if args.results else None)
+    for spec in args.train or []:
+        add_train(setup, spec)
+    return setup, system
+
+
+def cmd_netlist(args) -> int:
+    """``railcosim netlist``: a section as a SPICE netlist (docs/rail_line.md#checked-against-ngspice)."""
+    from orchestrator.analysis.rail_setup import section_netlist
+
+    if args.time and not args.results:
+        raise UserError(f"--time {args.time:g}: the trains' positions then come from a run: add --results RUN_DIR")
+    if not args.segment > 0:
+        raise UserError(f"--segment {args.segment:g}: a positive length in metres")
+    setup, system = _rail_setup(args)
+    try:
+        netlist = section_netlist(setup, setup.section(args.section), args.wheelsets, args.segment, args.frequency,
+                                  args.tran, args.time, args.ballast)
+    finally:
+        if system is not None:
+            system.close()
+    if args.output:
+        Path(args.output).write_text(netlist.text())
+        print(f"wrote {args.output} ({len(netlist.cards)} elements); run it with: ngspice -b {args.output}")
+    else:
+        sys.stdout.write(netlist.text())
+    return 0
+
+
+def cmd_crosscheck(args) -> int:
+    """``railcosim crosscheck spice``: the system's track circuits against ngspice; exit 1 when a
+    comparison is outside its bound."""
+    from orchestrator.analysis.crosscheck import crosscheck_system
+
+    if args.tool != "spice":
+        raise UserError(f"crosscheck {args.tool}: the one cross-check is `spice` (ngspice)")
+    setup, system = _rail_setup(args)
+    try:
+        passed = crosscheck_system(setup, args.section, sys.stdout)
+    finally:
+        if system is not None:
+            system.close()
+    return 0 if passed else 1
+
+
+def _add_section_arguments(parser, required: bool = True) -> None:
+    parser.add_argument("--line", metavar="FILE", help="a line file instead of a system")
+    parser.add_argument("--section", type=int, required=required, metavar="K",
+                        help="the block section, 1-based" + ("" if required else " (default: every design)"))
+    parser.add_argument("--train", action="append", metavar="FILE@HEAD",
+                        help="a train: its rolling-stock file and its first wheelset's position, m (repeatable)")
+    parser.add_argument("--time", type=float, default=0.0, metavar="T",
+                        help="the instant: the trains where a run's results put them at T s (with --results)")
+    parser.add_argument("--results", metavar="RUN_DIR", help="a finished run's folder (its results.csv)")
+
+
 def make_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
     # not required: a missing command is said by main, naming the commands, in one line
@@ -590,6 +659,29 @@ def make_parser() -> argparse.ArgumentParser:
                          help="list one kind only (default: all three)")
     listing.add_argument("--format", choices=["text", "json"], default="text")
     listing.set_defaults(func=cmd_list)
+
+    netlist = sub.add_parser("netlist", help="a section of a system (or line file) as a SPICE netlist at an instant")
+    netlist.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name (default free_run)")
+    _add_section_arguments(netlist)
+    netlist.add_argument("--wheelsets", choices=["nodes", "axles"], default="nodes",
+                         help="nodes: one shunt per network node a train covers, as the rail line's network; "
+                              "axles: every wheelset at its axle (default nodes)")
+    netlist.add_argument("--segment", type=float, default=1.0, metavar="M",
+                         help="with --wheelsets axles: the rails' pieces, at most M metres (default 1)")
+    netlist.add_argument("--frequency", type=float, metavar="HZ", help=".ac frequency (default the section's carrier)")
+    netlist.add_argument("--tran", type=float, metavar="SECONDS",
+                         help=".tran of the coder's code for the section over SECONDS instead of .ac")
+    netlist.add_argument("--ballast", type=float, default=0.0, metavar="OHM_KM",
+                         help="the section's ballast resistance (default: the line file's)")
+    netlist.add_argument("--output", "-o", metavar="FILE", help="write the netlist here (default: standard output)")
+    netlist.set_defaults(func=cmd_netlist)
+
+    crosscheck = sub.add_parser("crosscheck", help="check a system's track circuits against a circuit "
+                                                   "simulator (`crosscheck spice`: ngspice)")
+    crosscheck.add_argument("tool", help="spice")
+    crosscheck.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name (default free_run)")
+    _add_section_arguments(crosscheck, required=False)
+    crosscheck.set_defaults(func=cmd_crosscheck)
 
     conform = sub.add_parser("conform", help="run a role's behavioural test vectors against an FMU "
                                              "(pass/fail table; exit 1 when a vector fails)")

@@ -101,7 +101,7 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         node.parameters[var_name] = _parse_value(var, raw, f"--set {key}")
     for node in nodes.values():
         for name, value in node.parameters.items():
-            if name.endswith("_file"):
+            if name.split("[", 1)[0].endswith("_file"):       # rolling_stock_file[2] too
                 node.parameters[name] = resolve_data_file(value, system.folder)
                 _check_data_file(node, name, system.folder)
 

@@ -23,7 +23,7 @@ Directives (each ``name`` or ``name: value``):
 * ``tolerance: 0.5 s, 0.01 m`` — a figure with that unit may differ from the run's by that
   much (figures of other units: as printed);
 * ``study file``, ``scenario for SYSTEM``, ``scenario event for SYSTEM``, ``line file fragment``,
-  ``ssd fragment``, ``ci job`` — an example file read by what reads it (not run);
+  ``ssd fragment``, ``ci job``, ``railml sidecar`` — an example file read by what reads it (not run);
 * ``verdict table: results/SYSTEM`` — above a Markdown table (not a fence): the table of the
   shipped systems' verdicts, compared with each run's summary.json in that folder.
 
@@ -45,8 +45,9 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 ROOT = Path(__file__).resolve().parent.parent
 ANNOTATION = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<body>.*?)\s*-->\s*$")
 COMMAND_WORDS = ("railcosim", "python", "python3", "pip", "cmp", "cd", "mkdir", "cp", "ls", "for", "do", "done",
-                 "dask", "export", "echo", "PYTHONPATH=")
-DATA_KINDS = ("study file", "scenario for", "scenario event for", "line file fragment", "ssd fragment", "ci job")
+                 "dask", "export", "echo", "ngspice", "PYTHONPATH=")
+DATA_KINDS = ("study file", "scenario for", "scenario event for", "line file fragment", "ssd fragment", "ci job",
+              "railml sidecar")
 SKIP_KINDS = ("skip", "needs dcp-slave", "needs hardware", "text")
 DEFAULT_TIMEOUT_S = 600.0
 

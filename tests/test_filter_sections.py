@@ -7,7 +7,7 @@ from scipy import signal
 from fmus.dsp.filter_design import SosFilter, chebyshev_low_pass, sections
 from fmus.loco_receiver import filters
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.signalling import als_en, fire_dqpsk
 
 FS = 4000.0

@@ -20,7 +20,8 @@ from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.dcp import pdu as P
 from orchestrator.errors import UserError
 from orchestrator.dcp.master import parse_swap
-from orchestrator.run import RunOptions, check_system, run_system
+from orchestrator.run import RunOptions, run_system
+from orchestrator.validation import problems_of
 
 DCPX = """<?xml version="1.0" encoding="UTF-8"?>
 <dcpSlaveDescription dcpMajorVersion="1" dcpMinorVersion="0" dcpSlaveName="counter"
@@ -368,11 +369,11 @@ def test_validate_checks_a_declared_dcp_slave_without_contacting_it(tmp_path, te
     dcpx.write_text(DCPX.format(port=port))
     try:
         system = _declared_system(tmp_path, test_fmus, dcpx, port)
-        assert check_system(system, RunOptions()) == []
+        assert problems_of(system, RunOptions()) == []
         with pytest.raises(socket.timeout):
             listener.recvfrom(2048)                   # nothing was sent to the slave
         dcpx.write_text(DCPX.format(port=port).replace('name="u"', 'name="w"'))
-        problems = check_system(system, RunOptions())
+        problems = problems_of(system, RunOptions())
         assert len(problems) == 1 and "u" in problems[0] and "dut" in problems[0], problems
     finally:
         listener.close()

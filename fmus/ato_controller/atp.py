@@ -12,7 +12,7 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   supervised on a gentler curve than a signal's (alsu.BRAKING_SHARE). ``"digital"``:
   ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
   and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
-  (the section after the free ones is occupied; fmus/signalling/digital.py).
+  (the section after the free ones is occupied; fmus/signalling/digital_messages.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -52,7 +52,7 @@ from typing import List, Optional, Tuple
 from fmus.signalling import alsu
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, TemporaryRestriction
-from fmus.signalling.digital import FREE_BLOCKS_OPEN
+from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH

@@ -14,6 +14,8 @@ from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Tuple
 
+import numpy as np
+
 from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling.aspects import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
@@ -386,6 +388,56 @@ class RollingStock:
     # (weight share, a, b, c) with no tractive effort (coasting, braking): a unit's
     # resistance_idle where given, else its resistance
     idle_resistance_terms: Optional[List[Tuple[float, float, float, float]]] = None
+    # every wheelset's distance behind the first one, m, ascending (0 first): the axle layout
+    # the rail line shunts the track circuits with (wheelset_offsets)
+    wheelset_offsets_m: Optional[np.ndarray] = None
+
+
+DEFAULT_WHEELBASE_PER_GAP_M = 2.4      # a bogie's outer axles apart per gap between axles [U]
+DEFAULT_BOGIE_CENTRES_SHARE = 0.7      # bogie pivots apart / body length [U]
+
+
+def wheelset_offsets(document: dict, path) -> np.ndarray:
+    """The train's wheelsets as distances behind its first one (m, ascending, 0 first), from its
+    units' bodies placed nose to tail from the front (docs/interfaces.md#rolling-stock-file): a
+    body of length L on two bogies whose pivots are ``bogie_centres_m`` apart, centred in it, each
+    bogie's axles spread evenly over ``bogie_wheelbase_m``. Bodies without a length share what the
+    train's length_m leaves equally."""
+    units = document["units"]
+    length = float(document["length_m"])
+    given = sum(u["count"] * u.get("bodies", 1) * u["vehicle_length_m"] for u in units if "vehicle_length_m" in u)
+    sharing = sum(u["count"] * u.get("bodies", 1) for u in units if "vehicle_length_m" not in u)
+    if given > length + 1e-6:
+        _fail(path, "units", f"the bodies' vehicle_length_m add up to {given:g} m, more than the train's "
+                             f"length_m {length:g} m")
+    shared = (length - given) / sharing if sharing else 0.0
+    if sharing and shared <= 0.0:
+        _fail(path, "units", f"no length left for the {sharing} bodies without vehicle_length_m "
+                             f"(length_m {length:g} m, the others take {given:g} m)")
+    positions: List[float] = []
+    front = 0.0
+    for k, u in enumerate(units):
+        bodies = u.get("bodies", 1)
+        if u["axles"] % (2 * bodies):
+            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bodies} bodies of two bogies")
+        per_bogie = u["axles"] // (2 * bodies)
+        body = float(u.get("vehicle_length_m", shared))
+        # absent values are defaults that always fit: a bogie at most 0.3 of the body, its pivots
+        # at most 0.9 of the rest apart (the outer axles stay inside the body)
+        wheelbase = float(u.get("bogie_wheelbase_m",
+                                min(DEFAULT_WHEELBASE_PER_GAP_M * (per_bogie - 1), 0.3 * body)))
+        centres = float(u.get("bogie_centres_m", min(DEFAULT_BOGIE_CENTRES_SHARE * body, 0.9 * (body - wheelbase))))
+        if centres + wheelbase > body + 1e-9:
+            _fail(path, f"units[{k}].bogie_centres_m", f"bogies {centres:g} m apart with a {wheelbase:g} m "
+                                                       f"wheelbase do not fit in a {body:g} m body")
+        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
+        for _ in range(u["count"] * bodies):
+            overhang = 0.5 * (body - centres)
+            for pivot in (overhang, overhang + centres):
+                positions += (front + pivot + axles).tolist()
+            front += body
+    offsets = np.array(positions) - positions[0]
+    return offsets
 
 
 def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
@@ -429,7 +481,8 @@ def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
         emergency_decel=float(pb["emergency_decel_mps2"]), brake_delay_s=float(pb["delay_s"]),
         brake_time_constant_s=float(pb["time_constant_s"]), brake_steps=int(pb.get("steps", 7)),
         electrical_system=electrical["system"], power_factor=float(electrical.get("power_factor", 1.0)),
-        starting_resistance=start_res, path=path, idle_resistance_terms=idle_terms)
+        starting_resistance=start_res, path=path, idle_resistance_terms=idle_terms,
+        wheelset_offsets_m=wheelset_offsets(doc, path))
 
 
 # ---- timetable ---------------------------------------------------------------------------------

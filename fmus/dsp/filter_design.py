@@ -14,7 +14,7 @@ needs its denominator's coefficients to 16 digits and more: at 25 Hz and 4 kHz t
 poles sit within 0.04 of z = 1, and the polynomial's rounding moves them — 9 % off the exact
 response at the carrier, 85 % at half of it (tests/test_filter_sections.py). As sections it
 is exact to about 10⁻¹² of a long-double evaluation of the same prototype. The digital
-generator's band-pass (fmus/wayside_coder/digital.py) is a transmitter's, of order four, and
+generator's band-pass (fmus/wayside_coder/digital_generator.py) is a transmitter's, of order four, and
 keeps the transfer-function form.
 """
 from __future__ import annotations

@@ -9,7 +9,7 @@ from typing import Sequence
 from xml.etree.ElementTree import Element, SubElement
 
 from fmus.fmi.ports import Port
-from fmus.fmi.units import unit_definition
+from fmus.fmi.unit_definitions import unit_definition
 
 
 def complete(root: Element, ports: Sequence[Port], variable_step: bool) -> Element:

@@ -77,7 +77,7 @@ class ValueStore:
         for store in self.types.values():
             store.slot_of_vr = np.full(total_vrs, -1, dtype=np.int64)
         self.io: Dict[str, Any] = {}
-        self.string_ports: Dict[str, int] = {}
+        self.string_ports: Dict[str, Tuple[int, int]] = {}    # String port → (first slot, elements; 0: scalar)
         self.port_slots: Dict[str, Tuple[str, int]] = {}       # numeric port → (type, its first slot)
         self._slot_cache: Dict[tuple, Tuple[list, np.ndarray]] = {}
         self._output_plans: Dict[tuple, tuple] = {}            # write_outputs: the ports of each field list
@@ -86,9 +86,9 @@ class ValueStore:
             store = self.types[port.type]
             first = next_slot[port.type]
             if port.type == "String":
-                store.values[first] = str(port.start)
-                self.string_ports[port.name] = first
-                self.io[port.name] = store.values[first]
+                store.values[first:first + port.size] = [str(port.start)] * port.size
+                self.string_ports[port.name] = (first, port.size if port.shape else 0)
+                self.io[port.name] = self.string_value(port.name)
             else:
                 self.port_slots[port.name] = (port.type, first)
                 view = store.values[first:first + port.size]
@@ -142,8 +142,14 @@ class ValueStore:
         strings = self.types["String"].values
         for slot, value in zip(self.slots("String", list(vrs)), values):
             strings[slot] = str(value)
-        for name, slot in self.string_ports.items():
-            self.io[name] = strings[slot]
+        for name in self.string_ports:
+            self.io[name] = self.string_value(name)
+
+    def string_value(self, name: str):
+        """A String port's value: a str, or a tuple of them for an array port."""
+        first, size = self.string_ports[name]
+        strings = self.types["String"].values
+        return strings[first] if size == 0 else tuple(strings[first:first + size])
 
     def view(self, type_name: str, vrs) -> Tuple[np.ndarray, np.ndarray]:
         """(store, slots): the flat store of a numeric type and the slots of ``vrs`` in it."""

@@ -53,7 +53,7 @@ from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import ReceiverOutputs
 from fmus.signalling import alsu
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import check_category
+from fmus.signalling.digital_messages import check_category
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 CHANNEL_ORDER = 4                  # Butterworth prototype order of each channel (a 8th-order band-pass)

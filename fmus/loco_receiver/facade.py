@@ -1,11 +1,11 @@
 """LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN), AlsuReceiverCore (ALSU) or
-DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital.py)."""
+DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital_receiver.py)."""
 from fmus.errors import FmuInputError
 from fmus.signalling import alsu, cab_systems
 from fmus.loco_receiver.alsu import AlsuReceiverCore
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.loco_receiver.parameters import receiver_settings
 
 

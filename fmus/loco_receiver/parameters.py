@@ -9,9 +9,9 @@ from typing import Mapping, Optional, Union
 from fmus.loco_receiver import alsu as alsu_receiver
 from fmus.loco_receiver.alsu import AlsuReceiverSettings
 from fmus.loco_receiver.core import ReceiverSettings, resolve_inertia_s
-from fmus.loco_receiver.digital import DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverSettings
 from fmus.signalling.alsu import AlsuSystem
-from fmus.signalling.digital import DigitalSystem
+from fmus.signalling.digital_messages import DigitalSystem
 
 # port → settings field
 ALSN_PARAMETERS = {

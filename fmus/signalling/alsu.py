@@ -35,7 +35,7 @@ import numpy as np
 from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling import aspects as sig
 from fmus.signalling.block_rules import SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, BlockCodes
-from fmus.signalling.digital import Indication
+from fmus.signalling.digital_messages import Indication
 
 NAME = "ALSU"
 CODES_FILE = Path(__file__).resolve().parent / "alsu_codes.json"

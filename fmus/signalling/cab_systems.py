@@ -1,12 +1,12 @@
 """The cab-signal systems a coder or receiver can be built for, by their `system` parameter:
 the frequency systems ALSN (numeric codes on one carrier) and ALSU (two of six tones,
-alsu.py), and the digital systems (digital.py)."""
+alsu.py), and the digital systems (digital_messages.py)."""
 from __future__ import annotations
 
 from typing import Optional
 
 from fmus.signalling import als_en, fire_dqpsk
-from fmus.signalling.digital import DigitalSystem
+from fmus.signalling.digital_messages import DigitalSystem
 from fmus.errors import FmuInputError
 
 ALSN = "ALSN"

@@ -1,11 +1,11 @@
 """WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN), AlsuCoderCore (ALSU) or
-DigitalCoderCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital.py)."""
+DigitalCoderCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital_generator.py)."""
 from fmus.signalling import alsn, alsu, cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, cab_system_port, sample_rate_port
 from fmus.wayside_coder.alsu import AlsuCoderCore
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore, bind_outputs
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
 
 class WaysideCoder(FrameFacadeSlave):
