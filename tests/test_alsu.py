@@ -4,6 +4,7 @@ impedance at every tone, the receiver's rules, the bench (coder → rail line �
 the ATP's reading, and the FMUs through the orchestrator. The full measurements are
 benchmarks/alsu_acceptance.py."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from tests.helpers import railcosim, read_csv
 
 FS, N = 4000.0, 40
 SYSTEM = alsu.system()
+SSP = Path(__file__).resolve().parents[1] / "ssp"
 
 
 # ---- the code table and the block's codes -------------------------------------------------------
@@ -152,6 +154,39 @@ def test_the_rails_follow_the_square_root_law_at_every_tone_at_once():
         ladder = r + 1j * w * l + r_parallel * 1j * w * l_parallel / (r_parallel + 1j * w * l_parallel)
         law_r, law_l = rail_impedance(params, f)
         assert abs(ladder - (law_r + 1j * w * law_l)) / abs(law_r + 1j * w * law_l) < 0.005
+
+
+def _wheelset_factors(frequency_hz, heads, k=1):
+    """At each head of a passenger train in section k of the alsu line (its own ballast): the
+    wheelset chain's current at the first axle over the network model's (lumped shunts, the
+    tone band's ladder) at ``frequency_hz`` — the factor the rail line scales that model's
+    current by."""
+    from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
+    from fmus.rail_line.core import RailLineCore, RailSettings
+    from fmus.rail_line.track_circuit import Faults
+
+    line = load_line(str(SSP / "alsu" / "resources" / "alsu_line.json"))
+    stock = load_rolling_stock(str(DEFAULT_ROLLING_STOCK))
+    settings = RailSettings(tone_band_hz=(125.0, 375.0), carrier_hz=frequency_hz, train_length_m=(stock.length_m,),
+                            wheelset_offsets_m=(stock.wheelset_offsets_m,))
+    bank = RailLineCore(line, len(line.sections), 1, 40, settings).bank
+    factors = []
+    for head in heads:
+        configs, rows = bank.configuration([head])
+        model = bank.models.model(k, configs[k], Faults())
+        currents, _, _ = bank.wheelset_solution(k, [head], frequency_hz)
+        factors.append(currents[0] / abs(model.head_responses[rows[k][0]]))
+    return np.array(factors)
+
+
+def test_the_wheelset_amplitude_solved_at_the_band_centre_fits_every_tone_within_four_percent():
+    """A code of several tones takes the wheelset chain's amplitude factor at the band's centre
+    for both its tones (docs/rail_line.md, open points): what that costs each tone."""
+    heads = list(np.linspace(2620.0, 5194.0, 25))         # the 2.6 km section 2, every 107 m
+    centre = _wheelset_factors(float(np.sqrt(125.0 * 375.0)), heads)
+    for tone in SYSTEM.table.tones_hz:
+        error = centre / _wheelset_factors(float(tone), heads) - 1.0
+        assert np.abs(error).max() < 0.04, (tone, error)
 
 
 # ---- receiver -------------------------------------------------------------------------------------
