@@ -26,7 +26,7 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from dcp_test_master import TestMaster, start_slave  # noqa: E402
 from orchestrator.dcp import dcpx  # noqa: E402
-from orchestrator.dcp.pdu import PayloadCodec, PduType, State, StcDoStep, StcRun  # noqa: E402
+from orchestrator.dcp.pdu import PayloadCodec, Pdu, PduType, State  # noqa: E402
 from orchestrator.fmu import read_interface  # noqa: E402
 
 FRAME_NS = 10_000_000
@@ -50,9 +50,9 @@ def main() -> None:
         codec_out = PayloadCodec([(v.data_type, v.count) for v in outputs])
         values = [np.asarray(v.start * (v.count // len(v.start))) for v in inputs]
         coil = next(k for k, v in enumerate(inputs) if v.name == "e_coil")
-        master.request(lambda s: StcRun(s, 1, State.CONFIGURED, 0))
+        master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0))
         master.wait_state(State.SYNCHRONIZED)
-        master.request(lambda s: StcRun(s, 1, State.SYNCHRONIZED, 0))
+        master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, start_time=0))
         master.wait_state(State.RUNNING)
         rng = np.random.default_rng(1)
         round_trips = []
@@ -61,7 +61,7 @@ def main() -> None:
             master.data.clear()
             began = time.perf_counter()
             master.send_inputs(k, codec_in.encode(values))
-            master.request(lambda s: StcDoStep(s, 1, State.RUNNING, FRAME_NS))
+            master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=1, state_id=State.RUNNING, steps=FRAME_NS))
             master.wait_state(State.COMPUTED)
             master.stc(PduType.STC_send_outputs, State.COMPUTED, None)
             master.wait_data(1)

@@ -18,9 +18,9 @@ import numpy as np
 from bench_alsn import one_section_line
 from fmus.signalling import cab_systems
 from fmus.data.loader import load_line
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
 FS, N = 4000.0, 40
 

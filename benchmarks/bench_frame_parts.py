@@ -17,7 +17,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
 
 from benchmarks.harness.runs import scratch_run  # noqa: E402
-from fmus.fmi.slave import FrameSlave  # noqa: E402
+from fmus.fmi.slave import FacadeSlave  # noqa: E402
 from fmus.loco_receiver.facade import LocoReceiver  # noqa: E402
 from fmus.rail_line.circuit_bank import TrackCircuitBank  # noqa: E402
 from fmus.rail_line.coil_pickup import CoilPickup  # noqa: E402
@@ -30,8 +30,8 @@ from orchestrator.cli import SSP_ROOT, _build_dir  # noqa: E402
 from orchestrator.graph import TICKS_PER_SECOND  # noqa: E402
 
 PARTS = (   # (class, method, label): indentation shows what is inside what
-    (FrameSlave, "do_step", "every unit's doStep (coder, rail line, receiver; train, ATO)"),
-    (FrameSlave, "_step_refusal", "  the facades' per-step checks"),
+    (FacadeSlave, "do_step", "every unit's doStep (coder, rail line, receiver; train, ATO)"),
+    (FacadeSlave, "_step_refusal", "  the facades' per-step checks"),
     (WaysideCoder, "step_core", "  coder"),
     (RailLine, "step_core", "  rail line"),
     (TrackCircuitBank, "set_faults", "    fault inputs"),

@@ -6,10 +6,12 @@
   (median, p99, max) against the 10 ms frame;
 * ``ato``: the whole free_run with its ATO ``ato`` swapped for ``railcosim dcp-slave
   AtoController.fmu``: the same stops and safety verdict as with the FMU;
+* ``free_run_srt``: the same swap with the emulator in soft real time (its own clock; the run is
+  paced to the wall clock): lost outputs, fail-safe steps and the age of the outputs used;
 * ``counter``: the exchange alone, with the test suite's counter slave (tests/test_hil.py, a
   foreign .dcpx) stepping every 10 ms beside a test FMU.
 
-    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|ato|counter] [SIM_SECONDS]
+    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|free_run_srt|ato|counter] [SIM_SECONDS]
 
 Needs `railcosim build` first. Record the machine's load with the figures: on a shared machine
 the exchange (eight datagrams per step, two processes) waits for the scheduler.
@@ -25,18 +27,37 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path[:0] = [str(REPO / "tests"), str(REPO)]
 
 from helpers import ComponentSpec, ConnectionSpec, cli_environment, write_ssd   # noqa: E402
-from orchestrator.hil import parse_swap                     # noqa: E402
+from orchestrator.dcp.master import parse_swap                     # noqa: E402
 from orchestrator.run import RunOptions, run_system         # noqa: E402
 
 FMUS = REPO / "build" / "fmus"
-_KEYS = ("exchanges", "rtt_median_ms", "rtt_p99_ms", "rtt_max_ms", "overruns", "lost")
+_KEYS = ("exchanges", "rtt_median_ms", "rtt_p99_ms", "rtt_max_ms", "overruns", "lost", "fail_safe_steps")
 
 
-def _emulator(fmu: Path, dcpx: Path) -> tuple:
+def _emulator(fmu: Path, dcpx: Path, *options: str) -> tuple:
     process = subprocess.Popen([sys.executable, "-m", "orchestrator", "dcp-slave", str(fmu), "--port", "0",
-                                "--dcpx-out", str(dcpx), "--quiet"], cwd=REPO, env=cli_environment(),
+                                "--dcpx-out", str(dcpx), "--quiet", *options], cwd=REPO, env=cli_environment(),
                                stdout=subprocess.PIPE, text=True)
     return process, process.stdout.readline().split()[1]
+
+
+def free_run_srt(sim_s: float) -> dict:
+    """The receiver's emulator in soft real time: what the run counts lost, and the outputs' age."""
+    from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
+
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        process, address = _emulator(FMUS / "LocoReceiver.fmu", folder / "rx.dcpx", "--real-time")
+        try:
+            swap = parse_swap(f"rx=dcp://{address}?dcpx={folder / 'rx.dcpx'}")
+            swapped = run_system(REPO / "ssp" / "free_run",
+                                 RunOptions(output_dir=folder / "dcp", swaps={"rx": swap}, stop_time=sim_s,
+                                            fmu_dirs=[FMUS], summaries=railway_verdicts))
+        finally:
+            process.wait(timeout=30)
+    return {"sim_time_s": swapped.summary["sim_time_s"], "load_average": os.getloadavg(),
+            "real_time": swapped.summary["real_time"], "verdict": safety_verdict(swapped.summary)[1],
+            **{k: swapped.summary["hil"]["rx"][k] for k in _KEYS}}
 
 
 def free_run(sim_s: float, component: str = "rx", unit: str = "LocoReceiver") -> dict:
@@ -107,5 +128,6 @@ if __name__ == "__main__":
         kind = sys.argv[1] if len(sys.argv) > 1 else "free_run"
         seconds = float(sys.argv[2]) if len(sys.argv) > 2 else None    # ato: the whole run
         runs = {"free_run": lambda: free_run(seconds or 120.0), "counter": lambda: counter(seconds or 60.0),
+                "free_run_srt": lambda: free_run_srt(seconds or 60.0),
                 "ato": lambda: free_run(seconds, "ato", "AtoController")}
         print(json.dumps(runs[kind](), indent=2))

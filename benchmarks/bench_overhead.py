@@ -19,7 +19,7 @@ from pathlib import Path
 
 from _systems import build_test_fmus, trivial_system
 import orchestrator.run
-from orchestrator.fmu import _make_buffers
+from orchestrator.fmu import make_buffers
 from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
@@ -31,7 +31,7 @@ class NullSlave:
         self.name, self.messages = name, []
 
     def bind(self, inputs, outputs):
-        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
+        self.inputs, self.outputs = make_buffers(inputs), make_buffers(outputs)
 
     def instantiate(self): pass
     def setup_experiment(self, *a): pass

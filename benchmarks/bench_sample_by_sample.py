@@ -22,7 +22,7 @@ from pathlib import Path
 from fmus.sizes import BuildConfig
 from orchestrator.analysis.systems import cab_settings, signal_chain, train_and_ato
 from orchestrator import master
-from orchestrator.build.builder import build_all
+from orchestrator.packaging.builder import build_all
 from orchestrator.sspgen import write_ssd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere

@@ -26,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from orchestrator.build.builder import build_all, default_build_dir  # noqa: E402
+from orchestrator.packaging.builder import build_all, default_build_dir  # noqa: E402
 from orchestrator.study.runner import run_study  # noqa: E402
 from orchestrator.study.spec import check_against_system, load_study  # noqa: E402
 

@@ -5,7 +5,7 @@ docs/performance.md).
 pythonfmu 0.7.0's own binary corrupts the heap at process exit unless its interpreter state is
 released first (an abort in ~9 % of two-FMU orchestrator runs before that; SIGSEGV/SIGABRT in 37
 of 50 FMU Compliance Checker runs). Our FMUs' forwarding binary releases it itself
-(orchestrator/build/forwarder/), so neither host does anything pythonfmu-specific: the C host
+(orchestrator/packaging/forwarder/), so neither host does anything pythonfmu-specific: the C host
 (tests/host/fmi2_host.c) runs with no LD_PRELOAD, PYTHONHOME or PYTHONPATH set, a few steps at
 each FMU's DefaultExperiment step.
 
@@ -47,7 +47,7 @@ def main():
     if args.runs < 1:
         print(f"clean_exit.py: --runs {args.runs}: must be at least 1", file=sys.stderr)
         return 2
-    from orchestrator.build.builder import build_all, default_build_dir
+    from orchestrator.packaging.builder import build_all, default_build_dir
 
     unknown = [name for name in args.fmus.split(",") if name not in PRODUCT]
     if unknown:

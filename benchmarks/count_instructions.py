@@ -78,7 +78,7 @@ def main():
     if args.sample_by_sample:                 # the N = 1 FMUs made (or found up to date) outside valgrind
         from benchmarks.bench_sample_by_sample import REPO
         from fmus.sizes import BuildConfig
-        from orchestrator.build.builder import build_all
+        from orchestrator.packaging.builder import build_all
         build_all(REPO / "build" / "fmus_n1", BuildConfig(frame=1))
     env = dict(os.environ, **{COUNTING: "1"})
     if args.no_bulk:

@@ -52,15 +52,15 @@ def calibration_table() -> None:
         core = RailLineCore(load_line(path), 8, 2, 40, RailSettings())
         bank = core.bank
         groups = {}
-        for k, c in enumerate(bank.calibration):
+        for k, c in enumerate(bank.calibration.table):
             groups.setdefault((round(c.length_m), round(c.shunt_level, 6)), []).append(k)
         for (_, _), ks in groups.items():
-            c = bank.calibration[ks[0]]
-            where = "feed end" if c.shunt_node == bank.circuits[ks[0]].segments else f"node {c.shunt_node}"
+            c = bank.calibration.table[ks[0]]
+            where = "feed end" if c.shunt_node == core.circuits[ks[0]].segments else f"node {c.shunt_node}"
             sections = f"{ks[0] + 1}" if len(ks) == 1 else f"{ks[0] + 1}–{ks[-1] + 1}"
             print(f"| {name} | {sections} | {c.length_m:.0f} | {c.ballast_min_ohm_km:g}–{c.ballast_max_ohm_km:g} | "
                   f"{c.normal_level:.3f} | {c.shunt_level:.3f} ({where}) | {c.control_level:.1e} | "
-                  f"{100 * c.shunt_margin:.1f} % | {bank.longest_calibratable_m(ks[0]):.0f} |")
+                  f"{100 * c.shunt_margin:.1f} % | {bank.calibration.longest_calibratable_m(ks[0]):.0f} |")
 
 
 def joints() -> None:

@@ -48,10 +48,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: 
 from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
 from fmus.data.loader import load_line
-from fmus.signalling.digital import Message, stated_latency_s
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.signalling.digital_messages import Message, stated_latency_s
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
 FS = 4000.0
 AMPLITUDE_V = 0.2

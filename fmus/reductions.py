@@ -10,10 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:        # np.count_nonzero's own routine, without its Python-level argument handling
-    from numpy._core.multiarray import count_nonzero as _count_nonzero
-except ImportError:          # another numpy layout: the public function
-    _count_nonzero = np.count_nonzero
+from fmus.library_shortcuts import count_nonzero as _count_nonzero
 
 
 def all_true(flags: np.ndarray) -> bool:

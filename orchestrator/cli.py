@@ -1,5 +1,5 @@
-"""`railcosim` command line: build, run, report, inspect, validate, new, contract, conform, study,
-dcp-slave, fmu-env.
+"""`railcosim` command line: build, run, report, inspect, validate, new, export, list, contract, conform,
+study, dcp-slave, fmu-env, netlist, crosscheck.
 
 Bad input → one line on stderr, exit code 2, no traceback. An interrupted run (SIGINT,
 SIGTERM, SIGHUP) writes its results so far and exits with 128 + the signal number: 130, 143,
@@ -38,7 +38,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _build_dir() -> Path:
-    from orchestrator.build.builder import default_build_dir
+    from orchestrator.packaging.builder import default_build_dir
 
     return default_build_dir(WORK_ROOT)
 
@@ -76,9 +76,9 @@ def _system_path(name: Optional[str]) -> Path:
 
 
 def cmd_build(args) -> int:
-    from orchestrator.build.builder import build_all
+    from orchestrator.packaging.builder import build_all
     from fmus.sizes import BuildConfig
-    from orchestrator.build.packing import pack_systems
+    from orchestrator.packaging.packing import pack_systems
 
     for label, value, most in (("--sections", args.sections, MAX_SECTIONS), ("--trains", args.trains, MAX_TRAINS),
                                ("--frame", args.frame, MAX_FRAME)):
@@ -150,10 +150,10 @@ def _run_command(args) -> int:
     system = _system_path(args.system)
     overrides = _overrides(args)    # a malformed --set is refused before the build
     if not args.no_build:
-        from orchestrator.build.builder import build_all
+        from orchestrator.packaging.builder import build_all
 
         build_all(_build_dir())
-    from orchestrator.hil import parse_swap
+    from orchestrator.dcp.master import parse_swap
 
     swaps = {}
     for text in args.swap or []:
@@ -219,12 +219,13 @@ def cmd_inspect(args) -> int:
             var = by_base[label.partition("[")[0]][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
+    from orchestrator.dcp.master import component_interface
     from orchestrator.graph import TICKS_PER_SECOND, build_graph
     from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
-        graph = build_graph(system)
+        graph = build_graph(system, interface_of=component_interface)
         print(f"{system.name}: base step {graph.base_ticks / TICKS_PER_SECOND:g} s, "
               f"order {' → '.join(graph.order)}")
         for name, node in graph.nodes.items():
@@ -254,12 +255,12 @@ def cmd_validate(args) -> int:
             raise UserError(f"{path}: " + "; ".join(problems))
         print(f"{path}: valid")
         return 0
-    from orchestrator.run import check_system
+    from orchestrator.validation import problems_of
 
     # everything a run with these options would refuse before its first step: the SSD and its
     # parameter sets, the FMUs' ports, connections, units, steps, the data files, the scenario,
     # and each component instantiated and initialised with its parameters (as run does)
-    problems = check_system(_system_path(args.target), _run_options(args, _overrides(args)))
+    problems = problems_of(_system_path(args.target), _run_options(args, _overrides(args)))
     for problem in problems:
         print(f"railcosim: error: {problem}", file=sys.stderr)
     if problems:
@@ -309,7 +310,7 @@ def cmd_study(args) -> int:
         system = beside if beside.exists() else _system_path(given)
         system = system.resolve()
         if not args.no_build:
-            from orchestrator.build.builder import build_all
+            from orchestrator.packaging.builder import build_all
 
             build_all(_build_dir())
         check_against_system(spec, system, [_build_dir()])
@@ -334,21 +335,59 @@ def cmd_study(args) -> int:
 
 
 def cmd_new(args) -> int:
-    """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md)."""
-    from orchestrator.analysis.new_system import new_system
+    """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md), from a line
+    file or from a railML 3 file (docs/railml.md)."""
+    from orchestrator.analysis.new_system import new_system, new_system_from_railml
 
-    path = new_system(Path(args.name), Path(args.line), args.timetable, args.rolling_stock, args.system,
-                      args.trains, args.traction, _build_dir())
+    if (args.line is None) == (args.railml is None):
+        raise UserError("new: give the line as --line FILE (JSON) or as --railml FILE (railML 3), one of them")
+    if args.line is not None:
+        for option, value in (("--line-id", args.line_id), ("--sidecar", args.sidecar), ("--schema", args.schema)):
+            if value is not None:
+                raise UserError(f"new: {option} goes with --railml, not with --line")
+        if not args.timetable:
+            raise UserError("new: --timetable is required with --line (give one per train)")
+        path = new_system(Path(args.name), Path(args.line), args.timetable, args.rolling_stock, args.system,
+                          args.trains, args.traction, _build_dir())
+    else:
+        path, notes = new_system_from_railml(Path(args.name), Path(args.railml), args.timetable or [], args.line_id,
+                                             args.sidecar, args.schema, args.rolling_stock, args.system, args.trains,
+                                             args.traction, _build_dir())
+        if notes:
+            print(f"railcosim: warning: {args.railml}: what the railML import ignored or assumed "
+                  "(docs/railml.md):", file=sys.stderr)
+            for note in notes:
+                print(f"  - {' '.join(note.split())}", file=sys.stderr)
     print(f"wrote {path.parent} (SystemStructure.ssd, line.ssv, resources/); run it with: railcosim run {args.name}")
+    return 0
+
+
+def cmd_list(args) -> int:
+    """``railcosim list``: the shipped systems, studies and roles, one line each (read-only)."""
+    from orchestrator.analysis.catalogue import catalogue, format_text
+
+    listing = catalogue(_shipped_names(), DEFAULT_SYSTEM)
+    if args.kind != "all":
+        listing = {args.kind: listing[args.kind]}
+    if args.format == "json":
+        print(json.dumps(listing, indent=1, ensure_ascii=False))
+    else:
+        print(format_text(listing))
     return 0
 
 
 def add_new_command(sub) -> None:
     new = sub.add_parser("new", help="write a system folder from your line, timetable(s) and rolling stock")
     new.add_argument("name", help="folder to write (must not exist yet)")
-    new.add_argument("--line", required=True, metavar="FILE", help="line file (JSON, docs/interfaces.md)")
-    new.add_argument("--timetable", required=True, action="append", metavar="FILE",
-                     help="timetable file; give one per train (train j starts at its first station)")
+    new.add_argument("--line", metavar="FILE", help="line file (JSON, docs/interfaces.md)")
+    new.add_argument("--railml", metavar="FILE", help="the line from a railML 3.1 or 3.2 infrastructure file "
+                                                      "instead of --line (docs/railml.md)")
+    new.add_argument("--line-id", metavar="ID", help="with --railml: the railML line to import")
+    new.add_argument("--sidecar", metavar="FILE", help="with --railml: what the railML file has no place for (JSON)")
+    new.add_argument("--schema", metavar="DIR", help="with --railml: validate the file against the railML XSD in DIR")
+    new.add_argument("--timetable", action="append", metavar="FILE",
+                     help="timetable file; give one per train (train j starts at its first station); with "
+                          "--railml optional (one is made)")
     new.add_argument("--rolling-stock", metavar="FILE",
                      help="rolling-stock file for every train (default: the bundled passenger train; "
                           "freight_vl80 for --traction ac)")
@@ -358,8 +397,50 @@ def add_new_command(sub) -> None:
     new.set_defaults(func=cmd_new)
 
 
+def cmd_export(args) -> int:
+    """``railcosim export railml SYSTEM -o FILE``: a system's line as railML (docs/railml.md)."""
+    import json
+
+    from orchestrator.analysis.railml import export_railml, system_line_file, validate_railml
+    from fmus.data.loader import load_line
+    from fmus.errors import FmuInputError
+
+    line_file = system_line_file(_system_path(args.system))
+    try:
+        load_line(line_file)
+    except FmuInputError as error:
+        raise UserError(str(error)) from None
+    output = Path(args.output)
+    if output.is_dir():
+        raise UserError(f"-o {output}: is a folder; give the railML file to write")
+    try:
+        output.write_bytes(export_railml(json.loads(line_file.read_text("utf-8")), args.railml_version))
+    except OSError as error:
+        raise UserError(f"-o {output}: cannot be written ({error.strerror or error})") from None
+    print(f"wrote {output} (railML {args.railml_version}) from {line_file}")
+    if args.schema:
+        valid, errors = validate_railml(output, args.schema)
+        if not valid:
+            more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+            raise UserError(f"{output}: not valid against the railML schema in {args.schema}: {errors[0]}{more}")
+        print(f"{output}: valid against {args.schema}")
+    return 0
+
+
+def add_export_command(sub) -> None:
+    export = sub.add_parser("export", help="write a system's line in another format: railml")
+    formats = export.add_subparsers(dest="format", required=True, parser_class=_Parser)
+    railml = formats.add_parser("railml", help="the system's line as railML 3.2 infrastructure (docs/railml.md)")
+    railml.add_argument("system", metavar="SYSTEM", help="folder, .ssp archive or shipped system name")
+    railml.add_argument("-o", "--output", required=True, metavar="FILE", help="railML file to write")
+    railml.add_argument("--railml-version", choices=["3.2", "3.1"], default="3.2", help="default 3.2")
+    railml.add_argument("--schema", metavar="DIR", help="validate the file written against the railML XSD in DIR")
+    export.set_defaults(func=cmd_export)
+
+
 def cmd_conform(args) -> int:
-    from orchestrator.conformance.runner import conform, format_json, format_table
+    from orchestrator.conformance.report import format_json, format_table
+    from orchestrator.conformance.runner import conform
 
     report = conform(args.role, args.target, args.vectors)
     print(format_json(report) if args.format == "json" else format_table(report))
@@ -370,7 +451,7 @@ def cmd_contract(args) -> int:
     """``railcosim contract snapshot|check``: an FMU's interface manifest, or the FMU against a
     manifest or a role's shipped one (docs/contracts.md); exit 1 when the check fails."""
     from orchestrator import contracts
-    from orchestrator.build.contract import resolve_manifest
+    from orchestrator.conformance.roles import resolve_manifest
 
     if args.action == "snapshot":
         if args.output:
@@ -386,7 +467,7 @@ def cmd_contract(args) -> int:
 
 
 def add_contract_command(sub) -> None:
-    from orchestrator.build.contract import ROLES
+    from orchestrator.conformance.roles import ROLES
 
     contract = sub.add_parser("contract", help="an FMU's interface manifest, or the FMU checked against one")
     actions = contract.add_subparsers(dest="action", required=True, parser_class=_Parser)
@@ -441,7 +522,76 @@ def cmd_dcp_slave(args) -> int:
     if not 0 <= args.port <= 65535:
         raise UserError(f"dcp-slave: --port {args.port}: a UDP port 0..65535 is expected")
     return serve(Path(args.fmu), args.host, args.port, args.real_time,
-                 Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet)
+                 Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet,
+                 dcpx_in=Path(args.dcpx) if args.dcpx else None)
+
+
+def _rail_setup(args):
+    """The rail line of ``args.system`` (or ``--line``) with ``--train``s added: (setup, system)."""
+    from orchestrator.analysis.rail_setup import add_train, line_setup, rail_setup
+    from orchestrator.ssp import open_system
+
+    system = None
+    if args.line:
+        if args.system:
+            raise UserError(f"give a system or --line, not both ({args.system}, --line {args.line})")
+        setup = line_setup(args.line)
+    else:
+        system = open_system(_system_path(args.system))
+        setup = rail_setup(system, args.time, Path(args.results) if args.results else None)
+    for spec in args.train or []:
+        add_train(setup, spec)
+    return setup, system
+
+
+def cmd_netlist(args) -> int:
+    """``railcosim netlist``: a section as a SPICE netlist (docs/rail_line.md#checked-against-ngspice)."""
+    from orchestrator.analysis.rail_setup import section_netlist
+
+    if args.time and not args.results:
+        raise UserError(f"--time {args.time:g}: the trains' positions then come from a run: add --results RUN_DIR")
+    if not args.segment > 0:
+        raise UserError(f"--segment {args.segment:g}: a positive length in metres")
+    setup, system = _rail_setup(args)
+    try:
+        netlist = section_netlist(setup, setup.section(args.section), args.wheelsets, args.segment, args.frequency,
+                                  args.tran, args.time, args.ballast)
+    finally:
+        if system is not None:
+            system.close()
+    if args.output:
+        Path(args.output).write_text(netlist.text())
+        print(f"wrote {args.output} ({len(netlist.cards)} elements); run it with: ngspice -b {args.output}")
+    else:
+        sys.stdout.write(netlist.text())
+    return 0
+
+
+def cmd_crosscheck(args) -> int:
+    """``railcosim crosscheck spice``: the system's track circuits against ngspice; exit 1 when a
+    comparison is outside its bound."""
+    from orchestrator.analysis.crosscheck import crosscheck_system
+
+    if args.tool != "spice":
+        raise UserError(f"crosscheck {args.tool}: the one cross-check is `spice` (ngspice)")
+    setup, system = _rail_setup(args)
+    try:
+        passed = crosscheck_system(setup, args.section, sys.stdout)
+    finally:
+        if system is not None:
+            system.close()
+    return 0 if passed else 1
+
+
+def _add_section_arguments(parser, required: bool = True) -> None:
+    parser.add_argument("--line", metavar="FILE", help="a line file instead of a system")
+    parser.add_argument("--section", type=int, required=required, metavar="K",
+                        help="the block section, 1-based" + ("" if required else " (default: every design)"))
+    parser.add_argument("--train", action="append", metavar="FILE@HEAD",
+                        help="a train: its rolling-stock file and its first wheelset's position, m (repeatable)")
+    parser.add_argument("--time", type=float, default=0.0, metavar="T",
+                        help="the instant: the trains where a run's results put them at T s (with --results)")
+    parser.add_argument("--results", metavar="RUN_DIR", help="a finished run's folder (its results.csv)")
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -501,7 +651,37 @@ def make_parser() -> argparse.ArgumentParser:
     study.set_defaults(func=cmd_study)
 
     add_new_command(sub)
+    add_export_command(sub)
     add_contract_command(sub)
+
+    listing = sub.add_parser("list", help="the shipped systems, studies and roles, one line each")
+    listing.add_argument("kind", nargs="?", default="all", choices=["all", "systems", "studies", "roles"],
+                         help="list one kind only (default: all three)")
+    listing.add_argument("--format", choices=["text", "json"], default="text")
+    listing.set_defaults(func=cmd_list)
+
+    netlist = sub.add_parser("netlist", help="a section of a system (or line file) as a SPICE netlist at an instant")
+    netlist.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name (default free_run)")
+    _add_section_arguments(netlist)
+    netlist.add_argument("--wheelsets", choices=["nodes", "axles"], default="nodes",
+                         help="nodes: one shunt per network node a train covers, as the rail line's network; "
+                              "axles: every wheelset at its axle (default nodes)")
+    netlist.add_argument("--segment", type=float, default=1.0, metavar="M",
+                         help="with --wheelsets axles: the rails' pieces, at most M metres (default 1)")
+    netlist.add_argument("--frequency", type=float, metavar="HZ", help=".ac frequency (default the section's carrier)")
+    netlist.add_argument("--tran", type=float, metavar="SECONDS",
+                         help=".tran of the coder's code for the section over SECONDS instead of .ac")
+    netlist.add_argument("--ballast", type=float, default=0.0, metavar="OHM_KM",
+                         help="the section's ballast resistance (default: the line file's)")
+    netlist.add_argument("--output", "-o", metavar="FILE", help="write the netlist here (default: standard output)")
+    netlist.set_defaults(func=cmd_netlist)
+
+    crosscheck = sub.add_parser("crosscheck", help="check a system's track circuits against a circuit "
+                                                   "simulator (`crosscheck spice`: ngspice)")
+    crosscheck.add_argument("tool", help="spice")
+    crosscheck.add_argument("system", nargs="?", help="folder, .ssp archive or shipped system name (default free_run)")
+    _add_section_arguments(crosscheck, required=False)
+    crosscheck.set_defaults(func=cmd_crosscheck)
 
     conform = sub.add_parser("conform", help="run a role's behavioural test vectors against an FMU "
                                              "(pass/fail table; exit 1 when a vector fails)")
@@ -522,6 +702,9 @@ def make_parser() -> argparse.ArgumentParser:
     dcp.add_argument("--real-time", action="store_true",
                      help="offer soft real-time mode only (the slave's own clock) instead of non-real-time")
     dcp.add_argument("--dcpx-out", metavar="FILE", help="write the slave's DCP description (.dcpx) here")
+    dcp.add_argument("--dcpx", metavar="FILE",
+                     help="serve this description (a bench device's .dcpx: its uuid, modes, time resolutions and "
+                          "variables, matched to the FMU's by name) instead of the FMU's own")
     dcp.add_argument("--drop-data", type=float, default=0.0, metavar="FRACTION",
                      help="test option: leave this fraction of the DAT PDUs it should send unsent")
     dcp.add_argument("--seed", type=int, default=None, help="seed of --drop-data's random choice")

@@ -5,7 +5,7 @@ A manifest is the FMU-level interface (model identifier, default communication s
 step may vary, frame size) plus every port as :func:`orchestrator.ports.manifest_of` reads it
 (causality, variability, type, unit, min, max, start, description; an array collapsed with its
 shape). The five roles' reference manifests are the shipped ``fmus/<role>/contract.json``
-(orchestrator/build/contract.py finds them by role name; this module knows no railway).
+(orchestrator/conformance/roles.py finds them by role name; this module knows no railway).
 
 A difference is *breaking* when a host or a system built against the manifest may stop working or
 silently behave otherwise with the FMU; *compatible* when everything that worked still does.

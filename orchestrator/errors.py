@@ -1,7 +1,8 @@
 """Errors the CLI turns into one line on stderr and exit code 2."""
+import math
 import os
 import sys
-from typing import Dict, FrozenSet, List, Sequence, Tuple
+from typing import Dict, FrozenSet, List, Optional, Sequence, Tuple
 
 #: extraction folder of an .ssp archive → the archive as the user named it (orchestrator/ssp.py
 #: registers each folder it unpacks); see :func:`shown_paths`
@@ -72,3 +73,20 @@ def print_warning(message: str) -> None:
 def where(path, line=None) -> str:
     """'file' or 'file:line' for messages."""
     return f"{path}:{line}" if line else f"{path}"
+
+
+def non_finite_number(document) -> Optional[Tuple[str, float]]:
+    """The field (``gradients[1].permille``) and value of the first number in a parsed JSON or
+    TOML document that is not finite, or None. Python's json reads NaN, Infinity and -Infinity,
+    and a literal beyond the double range (1e400) as infinity; tomllib reads nan and inf. (The
+    same test as ``fmus.errors.non_finite_number``, which the engine may not import.)"""
+    pending = [("", document)]
+    while pending:
+        field, value = pending.pop()
+        if isinstance(value, float) and not math.isfinite(value):
+            return field or "(top level)", value
+        if isinstance(value, dict):
+            pending.extend((f"{field}.{key}" if field else str(key), item) for key, item in reversed(value.items()))
+        elif isinstance(value, list):
+            pending.extend((f"{field}[{index}]", item) for index, item in reversed(list(enumerate(value))))
+    return None

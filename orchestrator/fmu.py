@@ -18,9 +18,9 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from orchestrator.archives import safe_extract
 from orchestrator.errors import SimulationError, UserError
-from orchestrator.protocols import Causality, Slave
-from orchestrator.ssp import UnitDef, safe_extract
+from orchestrator.protocols import Causality, Slave, UnitDef
 
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
 _CTYPES = {"Real": ctypes.c_double, "Integer": ctypes.c_int, "Boolean": ctypes.c_int}
@@ -145,7 +145,7 @@ def _extract_once(fmu_path: Path, workdir: Path) -> Path:
     return folder
 
 
-def _make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
+def make_buffers(table: Dict[str, List[int]]) -> Dict[str, ValueBuffer]:
     return {t: ValueBuffer(t, vrs) for t, vrs in table.items() if vrs}
 
 
@@ -239,7 +239,7 @@ class FmuSlave(_ExtractedComponent):
                        buffer.vr, buffer.count, buffer.raw)
 
     def bind(self, inputs: Dict[str, List[int]], outputs: Dict[str, List[int]]) -> None:
-        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
+        self.inputs, self.outputs = make_buffers(inputs), make_buffers(outputs)
         # last written values (NaN: nothing written yet); strings are always written
         # the hot path calls the library's functions directly with arguments converted once
         # (fmpy's wrappers convert every argument and add two Python calls per call), and
@@ -264,7 +264,7 @@ class FmuSlave(_ExtractedComponent):
                 # a ufunc and a count of the equal values (np.array_equal's Python layer costs
                 # more than the test); NaN never equals, as there
                 unchanged = np.equal(last, buffer.values, out=self._unchanged[id(buffer)])
-                if _count_nonzero(unchanged) == unchanged.size:
+                if np.count_nonzero(unchanged) == unchanged.size:
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)
@@ -330,10 +330,6 @@ class FmuSlave(_ExtractedComponent):
 
 
 _FMI2_WARNING, _FMI2_FATAL = 1, 4
-try:        # np.count_nonzero's own routine, without its Python-level argument handling
-    from numpy._core.multiarray import count_nonzero as _count_nonzero
-except ImportError:          # another numpy layout: the public function
-    _count_nonzero = np.count_nonzero
 
 
 def _call_exception(function: str, status: int) -> Exception:
@@ -434,7 +430,7 @@ class InProcessSlave(_ExtractedComponent):
             getattr(self._slave, f"set_{var.type.lower()}")([var.vr], [_coerce(var.type, value)])
 
     def bind(self, inputs, outputs) -> None:
-        self.inputs, self.outputs = _make_buffers(inputs), _make_buffers(outputs)
+        self.inputs, self.outputs = make_buffers(inputs), make_buffers(outputs)
         slave = self._slave
         # numeric ports move straight between the master's buffers and the facade's value
         # store (slots resolved once); strings keep the facade's setters and getters

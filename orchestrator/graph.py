@@ -12,7 +12,7 @@ import zipfile
 from dataclasses import dataclass, field
 from functools import reduce
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
@@ -20,6 +20,7 @@ from orchestrator.protocols import TRANSITIONS, Transition
 from orchestrator.ssp import Connection, SystemDescription, check_connectors, convert_unit
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
+MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
 
 def seconds_to_ticks(seconds: float, what: str) -> int:
@@ -64,17 +65,14 @@ class SystemGraph:
 
 
 def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
-                extra_parameters=()) -> SystemGraph:
+                extra_parameters=(), interface_of: Callable[[str], Interface] = read_interface) -> SystemGraph:
+    """The graph of ``system``: ``interface_of`` reads a component's ports from its source (an
+    FMU by default; a run passes one that also reads a DCP slave's .dcpx, orchestrator/dcp/)."""
     nodes: Dict[str, Node] = {}
     for comp in system.components.values():
         if comp.fmu_path is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no source FMU")
-        if Path(comp.fmu_path).suffix == ".dcpx":      # a DCP slave (orchestrator/hil.py)
-            from orchestrator.hil import dcpx_interface
-
-            interface = dcpx_interface(comp.fmu_path)
-        else:
-            interface = read_interface(comp.fmu_path)
+        interface = interface_of(comp.fmu_path)
         step = comp.step_size_s if comp.step_size_s is not None else interface.default_step_s
         if step is None:
             raise UserError(f"{comp.origin}: component {comp.name!r} has no step size "
@@ -103,7 +101,7 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         node.parameters[var_name] = _parse_value(var, raw, f"--set {key}")
     for node in nodes.values():
         for name, value in node.parameters.items():
-            if name.endswith("_file"):
+            if name.split("[", 1)[0].endswith("_file"):       # rolling_stock_file[2] too
                 node.parameters[name] = resolve_data_file(value, system.folder)
                 _check_data_file(node, name, system.folder)
 

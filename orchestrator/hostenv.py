@@ -1,6 +1,6 @@
 """This machine's Python as an FMU sees it: the libpython, PYTHONHOME and PYTHONPATH that
 `railcosim build` writes into every FMU's resources (resources/railcosim_python.txt, read by
-the FMU's forwarding binary, orchestrator/build/forwarder/) and that `railcosim fmu-env`
+the FMU's forwarding binary, orchestrator/packaging/forwarder/) and that `railcosim fmu-env`
 prints as overrides. docs/third_party.md explains each item."""
 from __future__ import annotations
 

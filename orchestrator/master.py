@@ -6,13 +6,10 @@ each plug-in provides; docs/architecture.md, "Master algorithm").
 
 Semantics (docs/interfaces.md, "Time and frames"): a component with step h (a whole multiple of
 the base step) steps at every tick T with T % h == 0, from T to T + h. Every component steps
-through one sequence: gather its inputs (and let manipulators adjust them) → write them →
-doStep → read what is needed of its outputs (and let manipulators adjust them) → tell the
-interpolating links of the new source value. Gauss-Seidel (default) runs the whole sequence for
-one due component after the other, in data-flow order, so a consumer in the same macro step
-sees what its producer has just computed (no latency along a chain). Jacobi runs each stage for
-every due component before the next stage: all inputs are gathered before anything steps, so
-each hop adds one step of latency.
+through three stages: gather its inputs (and let manipulators adjust them); write them and
+doStep; read what is needed of its outputs (and let manipulators adjust them) and tell the
+interpolating links of the new source value. In which order the due components go through
+them is the algorithm's (orchestrator/algorithms.py: Gauss-Seidel by default, Jacobi).
 Rate transitions per connection: hold (latest value), linear (extrapolated from the last
 two values of the source to the consumer's step start), mean (average of the source's
 values since the consumer last read).
@@ -20,16 +17,17 @@ values since the consumer last read).
 from __future__ import annotations
 
 import math
-from typing import Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple
+from typing import Dict, FrozenSet, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from orchestrator.algorithms import algorithm as _algorithm
 from orchestrator.fmu import contiguous
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.interrupts import NEVER, InterruptFlag
-from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, StepRecord, Transition
+from orchestrator.protocols import Algorithm, Manipulator, Observer, Slave, StepRecord, Transition
 
-__all__ = ["ALGORITHMS", "Algorithm", "Link", "Master", "shutdown_slaves"]
+__all__ = ["Link", "Master", "shutdown_slaves"]
 
 #: schedules of distinct tick phases kept (a general multi-rate layout past that is planned per tick)
 _MAX_PLANS = 4096
@@ -150,14 +148,13 @@ class Master:
     (orchestrator/interrupts.py): it is tested between components while initialising and once
     per tick, and a set flag stops the run with :class:`~orchestrator.interrupts.Interrupted`."""
 
-    def __init__(self, graph: SystemGraph, slaves: Mapping[str, Slave], algorithm: Algorithm = "gauss-seidel",
+    def __init__(self, graph: SystemGraph, slaves: Mapping[str, Slave],
+                 algorithm: Union[str, Algorithm] = "gauss-seidel",
                  observers: Sequence[Observer] = (), manipulators: Sequence[Manipulator] = (),
                  interrupt: InterruptFlag = NEVER):
-        if algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm must be one of {ALGORITHMS}")
         self.graph = graph
         self.slaves = slaves
-        self.algorithm = algorithm
+        self.algorithm: Algorithm = _algorithm(algorithm)
         self.observers = list(observers)
         self.manipulators = list(manipulators)
         self.steps_taken = {name: 0 for name in graph.nodes}
@@ -165,9 +162,9 @@ class Master:
         self.interrupt = interrupt
         self._components = {name: _Component(name, slaves[name], graph.nodes[name].step_ticks)
                             for name in graph.order}
-        # the plan of each phase of the steps' common period, kept across run_until calls (a
-        # caller stepping in pieces plans each phase once, as one call does): the components,
-        # their steps and the algorithm do not change after construction
+        # the components due at each phase of the steps' common period, kept across run_until
+        # calls (a caller stepping in pieces plans each phase once, as one call does): the
+        # components and their steps do not change after construction
         self._plans: Dict[int, tuple] = {}
 
     # ---- setup ------------------------------------------------------------------------------
@@ -292,7 +289,7 @@ class Master:
             if link.transition == "linear":
                 link.source_updated(start_time_s)
         for component in components:  # initial exchange along the data flow
-            self._gather(component, start_time_s)
+            self.gather(component, start_time_s)
             component.slave.write_inputs()
             component.slave.read_outputs()
         for component in components:
@@ -309,8 +306,8 @@ class Master:
         for observer in self.observers:
             observer.started(self, start)
 
-    # ---- the step sequence: every component goes through these three stages in this order ---
-    def _gather(self, component: _Component, time_s: float) -> None:
+    # ---- the three stages of a step (protocols.Stages); the algorithm orders them --------------
+    def gather(self, component: _Component, time_s: float) -> None:
         """Stage 1: the component's inputs from its links (and the manipulators' adjustments)."""
         for link in component.links_in:
             stale = link.source_stale
@@ -321,13 +318,13 @@ class Master:
         for adjust in component.adjust_inputs:
             adjust(component.name)
 
-    def _step(self, component: _Component, time_s: float) -> None:
+    def step(self, component: _Component, time_s: float) -> None:
         """Stage 2: write the inputs, step from ``time_s`` by the component's own step."""
         component.slave.write_inputs()
         component.slave.do_step(time_s, component.step_s)
         self.steps_taken[component.name] += 1
 
-    def _conclude(self, component: _Component, tick: int) -> None:
+    def conclude(self, component: _Component, tick: int) -> None:
         """Stage 3: read what must be read at once (what linear and mean links track, or all
         that a manipulator adjusts; the rest on demand), then update the tracking links."""
         slave = component.slave
@@ -347,13 +344,10 @@ class Master:
             for link in component.tracked_links:
                 link.source_updated(end_s)
 
-    def _plan(self, tick: int) -> Tuple[Tuple[Tuple[_Component, ...], ...], FrozenSet[str]]:
-        """The components due at ``tick``, grouped: Gauss-Seidel one group per component (each
-        goes through all three stages before the next starts), Jacobi one group of all (each
-        stage for all before the next stage)."""
+    def _plan(self, tick: int) -> Tuple[Tuple[_Component, ...], FrozenSet[str]]:
+        """The components due at ``tick`` in data-flow order, and their names."""
         due = tuple(c for c in (self._components[name] for name in self.graph.order) if tick % c.step_ticks == 0)
-        groups = tuple((c,) for c in due) if self.algorithm == "gauss-seidel" else ((due,) if due else ())
-        return groups, frozenset(c.name for c in due)
+        return due, frozenset(c.name for c in due)
 
     def run_until(self, stop_ticks: int) -> None:
         base = self.graph.base_ticks
@@ -363,7 +357,7 @@ class Master:
         plans = self._plans
         manipulators = self.manipulators
         observers = self.observers
-        gather, step, conclude = self._gather, self._step, self._conclude
+        step_due = self.algorithm.step_due
         tick = self.time_ticks
         interrupt = self.interrupt
         while tick < stop_ticks:
@@ -378,14 +372,9 @@ class Master:
                 plan = self._plan(tick)
                 if len(plans) < _MAX_PLANS:
                     plans[phase] = plan
-            groups, stepped = plan
-            for group in groups:
-                for component in group:
-                    gather(component, time_s)
-                for component in group:
-                    step(component, time_s)
-                for component in group:
-                    conclude(component, tick)
+            due, stepped = plan
+            if due:
+                step_due(due, self, time_s, tick)
             tick += base
             self.time_ticks = tick
             if observers:

@@ -17,6 +17,7 @@ naming the file and the reason (docs/reliability.md, "Full disks and write error
 from __future__ import annotations
 
 import csv
+import math
 import re
 import sys
 import time
@@ -27,7 +28,7 @@ from typing import Dict, List, Sequence, Tuple
 import numpy as np
 
 from orchestrator.errors import UserError
-from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND
 from orchestrator.protocols import MasterView, Observer, StepRecord
 
 _ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
@@ -147,6 +148,10 @@ class CaptureRequest:
             t0, t1 = float(match.group("t0")), float(match.group("t1"))
         except ValueError:
             raise UserError(f"--capture {text}: T0 and T1 must be numbers of seconds") from None
+        # (float() takes nan and inf; the master's clock is int64 nanoseconds)
+        if not all(math.isfinite(t) and abs(t) <= MAX_TIME_S for t in (t0, t1)):
+            raise UserError(f"--capture {text}: T0 and T1 must be finite numbers of seconds "
+                            f"within the master's clock (±{MAX_TIME_S / 3.15576e7:.0f} years)")
         if t1 <= t0:
             raise UserError(f"--capture {text}: T1 must be after T0")
         return cls(match.group("comp"), match.group("port"), t0, t1)

@@ -105,8 +105,9 @@ class Pacer(Manipulator):
         }}
 
     def verdict_line(self) -> Optional[str]:
-        """One line for stderr when the run could not keep pace, else None."""
-        if self.kept_pace:
+        """One line for stderr when the run could not keep pace, else None (also when it never
+        stepped: a run that failed before its first step has no pace to judge)."""
+        if self.kept_pace or self.steps == 0:
             return None
         return (f"--real-time {self.factor:g}: the run could not keep pace: {self.overruns} of {self.steps} "
                 f"steps started late, worst by {self.worst_lateness_s * 1e3:.1f} ms "

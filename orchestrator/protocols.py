@@ -21,17 +21,25 @@ from typing import (TYPE_CHECKING, Any, Collection, FrozenSet, Literal, Mapping,
 if TYPE_CHECKING:
     import numpy as np
 
-    from orchestrator.graph import SystemGraph
-
 #: rate transition of a connection (docs/interfaces.md, "SSP conventions")
 Transition = Literal["hold", "linear", "mean"]
 TRANSITIONS: Tuple[str, ...] = get_args(Transition)
-#: order of the due components within a tick (the CLI's --algorithm)
-Algorithm = Literal["gauss-seidel", "jacobi"]
-ALGORITHMS: Tuple[str, ...] = get_args(Algorithm)
+#: the master algorithms by name (the CLI's --algorithm; orchestrator/algorithms.py)
+AlgorithmName = Literal["gauss-seidel", "jacobi"]
+ALGORITHMS: Tuple[str, ...] = get_args(AlgorithmName)
 #: FMI 2.0 causality of a variable, spelled as in modelDescription.xml
 Causality = Literal["parameter", "calculatedParameter", "input", "output", "local", "independent"]
 FmiType = Literal["Real", "Integer", "Boolean", "String"]
+
+
+@dataclass(frozen=True)
+class UnitDef:
+    """SSP/FMI unit: SI base exponents plus factor/offset to the SI value."""
+
+    name: str
+    exponents: Tuple[int, ...] = (0, 0, 0, 0, 0, 0, 0, 0)  # kg m s A K mol cd rad
+    factor: float = 1.0
+    offset: float = 0.0
 
 
 class Buffer(Protocol):
@@ -88,10 +96,20 @@ class StepRecord:
     stepped: FrozenSet[str]      # components that stepped in the tick just done (none at the start)
 
 
+class GraphView(Protocol):
+    """What plug-ins see of the system graph (orchestrator/graph.py ``SystemGraph``)."""
+
+    name: str
+    nodes: Mapping[str, Any]       # component name → its node: interface, fmu_path, step_ticks, parameters
+    edges: Sequence[Any]           # the connections, each source, source_var, target, target_var, …
+    order: Sequence[str]           # the components in data-flow order
+    base_ticks: int                # the master's base step, integer nanoseconds
+
+
 class MasterView(Protocol):
     """What observers and manipulators may use of the master."""
 
-    graph: "SystemGraph"
+    graph: GraphView
     slaves: Mapping[str, Slave]
 
     def fresh(self, component: str, type_name: Optional[str] = None) -> None:
@@ -99,6 +117,29 @@ class MasterView(Protocol):
         ...
 
     def output_slot(self, component: str, variable: str) -> Tuple[Buffer, int]: ...
+
+
+class Stages(Protocol):
+    """The three stages every component goes through when it steps (the master provides
+    them): gather its inputs, step it, conclude (read its outputs, update the links that
+    track them). ``component`` is the master's record of one component."""
+
+    def gather(self, component: Any, time_s: float) -> None: ...
+
+    def step(self, component: Any, time_s: float) -> None: ...
+
+    def conclude(self, component: Any, tick: int) -> None: ...
+
+
+class Algorithm(Protocol):
+    """How the components due at one tick are stepped: the order in which they go through
+    the :class:`Stages` (libcosim's algorithm interface; Gauss-Seidel and Jacobi in
+    orchestrator/algorithms.py). ``due`` is in data-flow order. Another algorithm (one that
+    steps again after a rejected step, say) is another class with this method."""
+
+    name: str
+
+    def step_due(self, due: Sequence[Any], stages: Stages, time_s: float, tick: int) -> None: ...
 
 
 class Observer(Protocol):

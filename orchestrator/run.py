@@ -14,22 +14,24 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Set, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
-from orchestrator.errors import RefusedComponents, UserError, print_warning, shown_paths
+from orchestrator.errors import UserError, print_warning, shown_paths
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.hil import (DcpSlave, DcpTarget, OfflineDcpSlave, SlaveDescription, declared_targets,
-                             swapped_descriptions)
+from orchestrator.dcp.dcpx import SlaveDescription
+from orchestrator.dcp.pdu import OpMode
+from orchestrator.dcp.master import (DcpTarget, RemoteDcpSlave, component_interface,
+                                     declared_targets, swapped_descriptions)
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,
                                     scalar_outputs)
 from orchestrator.pacing import Pacer, check_factor
-from orchestrator.protocols import ALGORITHMS, Algorithm, Manipulator, Observer, Slave, SummaryObserver
+from orchestrator.protocols import ALGORITHMS, AlgorithmName, Manipulator, Observer, Slave, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
 from orchestrator.ssp import SystemDescription, load_parameter_set, open_system
 
@@ -49,7 +51,7 @@ class RunOptions:
     param_sets: Sequence[str] = ()
     output_interval: Optional[float] = None   # None: 0.1 s, rounded up to a multiple of the base step
     captures: Sequence[str] = ()
-    algorithm: Algorithm = "gauss-seidel"
+    algorithm: AlgorithmName = "gauss-seidel"
     in_process: bool = False
     fmu_dirs: Sequence[Path] = ()
     record: Optional[Sequence[str]] = None    # "comp.var"; None → all scalar outputs
@@ -68,7 +70,7 @@ class RunOptions:
     #: pace the master to the wall clock: simulated seconds per wall-clock second (1: real
     #: time; orchestrator/pacing.py); None runs as fast as it can
     real_time: Optional[float] = None
-    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/hil.py;
+    #: components driven as remote DCP slaves instead of their FMUs (orchestrator/dcp/master.py;
     #: the CLI's --swap NAME=dcp://HOST:PORT)
     swaps: Dict[str, "DcpTarget"] = field(default_factory=dict)
 
@@ -96,7 +98,7 @@ def run_system(system_path, options: RunOptions) -> RunResult:
 
 
 def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunResult:
-    _check_options(options)
+    check_options(options)
     out = OutputFolder(Path(options.output_dir))
     try:
         flag.check("before the run started")
@@ -104,12 +106,12 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     except Interrupted as stop:
         _interrupted_before_start(out, Path(system_path).stem, stop)
     except OSError as error:            # a .ssp extracted into a full temp folder
-        raise _os_error(error) from None
+        raise os_error(error) from None
     try:
         flag.check("before the run started")
-        plan = _plan(system, options)
-        _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-        _warn_rounded_stop(options, plan)
+        plan = plan_run(system, options)
+        warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
+        warn_rounded_stop(options, plan)
         flag.check("before the run started")
     except Interrupted as stop:
         system.close()
@@ -119,7 +121,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
     start_ticks = plan.start_ticks
-    stop_ticks = round(stop_s * TICKS_PER_SECOND)
+    stop_ticks = _stop_ticks(plan)
     interval_ticks, recorded, captures = plan.interval_ticks, plan.recorded, plan.captures
     workdir: Optional[Path] = None
     try:
@@ -157,7 +159,7 @@ Capture = Tuple[CaptureRequest, List[List[str]]]
 
 
 @dataclass
-class _Plan:
+class RunPlan:
     """What a run is made from, decided before any component exists (each part a UserError
     when the system, its data or the options are wrong)."""
 
@@ -173,13 +175,13 @@ class _Plan:
     targets: Dict[str, DcpTarget] = field(default_factory=dict)      # … and their addresses
 
 
-def _plan(system: SystemDescription, options: RunOptions,
-          attempt: Callable[[Callable[[], object]], object] = lambda step: step()) -> _Plan:
+def plan_run(system: SystemDescription, options: RunOptions,
+          attempt: Callable[[Callable[[], object]], object] = lambda step: step()) -> RunPlan:
     """The graph (needed by everything after it), then each further part through ``attempt``:
-    a run lets the first problem raise (the default); :func:`check_system` notes each one and
-    goes on with what it can still check."""
+    a run lets the first problem raise (the default); validation (orchestrator/validation.py)
+    notes each one and goes on with what it can still check."""
     graph = _load_graph(system, options)
-    plan = _Plan(graph, start_ticks=round(system.start_time * TICKS_PER_SECOND))
+    plan = RunPlan(graph, start_ticks=round(system.start_time * TICKS_PER_SECOND))
     attempt(lambda: _refuse_connected_overrides(graph, options.overrides))
     plan.scenario = attempt(lambda: _scenario(system, graph, options))
     plan.stop_s = attempt(lambda: _stop_time(system, options, plan.scenario))
@@ -195,142 +197,7 @@ def _plan(system: SystemDescription, options: RunOptions,
     return plan
 
 
-def check_system(system_path, options: RunOptions) -> List[str]:
-    """Every problem a run of this system with these options would meet before its first step
-    (``railcosim validate``): the options, the system and its parameter sets, the scenario,
-    the data files, and each component instantiated, given its parameters and initialised
-    together as a run does. One line per problem; empty when the run would start."""
-    problems: List[str] = []
-    refused: Set[str] = set()           # components whose problem is said already: not initialised
-
-    def attempt(step):
-        try:
-            return step()
-        except RefusedComponents as error:
-            for text, names in error.problems:
-                _note(problems, UserError(text))
-                refused.update(names)
-            return None
-        except UserError as error:
-            _note(problems, error)
-            return None
-
-    attempt(lambda: _check_options(options))
-    try:
-        system = open_system(Path(system_path), list(options.fmu_dirs))
-    except (UserError, OSError) as error:
-        return _note(problems, _os_error(error) if isinstance(error, OSError) else error)
-    try:
-        try:
-            plan = _plan(system, options, attempt)
-        except UserError as error:          # no graph: nothing further can be checked
-            return _note(problems, error)
-        if plan.stop_s is not None:         # what a run would warn about, said the same way
-            _warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-            _warn_rounded_stop(options, plan)
-        _initialise_only(plan, system, options, problems, refused)
-    finally:
-        system.close()
-    return problems
-
-
-def _note(problems: List[str], error: BaseException) -> List[str]:
-    text = " ".join(str(error).split()) or type(error).__name__
-    if text not in problems:
-        problems.append(text)
-    return problems
-
-
-class _Checked:
-    """A slave as ``railcosim validate`` drives it: a lifecycle call that fails is noted, not
-    raised, and the component's later calls are skipped, so the initialisation goes on and
-    every component's problem is seen (the others get the values a run would give them).
-    A ``refused`` component (its problem found by the checks before) is instantiated, so that
-    it can be bound, and nothing more: the same problem is not met again."""
-
-    def __init__(self, slave: Slave, problems: List[str], refused: bool = False):
-        self._slave, self._problems, self.failed = slave, problems, False
-        self._instantiated, self._refused = False, refused
-
-    def __getattr__(self, name):                  # inputs, outputs and whatever else is read
-        return getattr(self._slave, name)
-
-    def _call(self, method: str, *args) -> None:
-        if self.failed or (self._refused and method != "instantiate"):
-            return
-        try:
-            getattr(self._slave, method)(*args)
-        except Exception as error:
-            self.failed = True
-            _note(self._problems, error)
-
-    def instantiate(self) -> None:                # instantiated once, before the master is made
-        if not self._instantiated:
-            self._instantiated = True
-            self._call("instantiate")
-
-    def bind(self, inputs, outputs) -> None:
-        self._slave.bind(inputs, outputs)
-
-    def setup_experiment(self, start_time, stop_time) -> None:
-        self._call("setup_experiment", start_time, stop_time)
-
-    def set_values(self, values) -> None:
-        self._call("set_values", values)
-
-    def enter_initialization(self) -> None:
-        self._call("enter_initialization")
-
-    def exit_initialization(self) -> None:
-        self._call("exit_initialization")
-
-    def write_inputs(self) -> None:
-        self._call("write_inputs")
-
-    def read_outputs(self, types=None) -> None:
-        self._call("read_outputs", types)
-
-    def do_step(self, time_s, step_s) -> None:
-        raise AssertionError("validate never steps")
-
-    def terminate(self) -> None:
-        self._slave.terminate()
-
-    def free(self) -> None:
-        self._slave.free()
-
-
-def _initialise_only(plan: _Plan, system: SystemDescription, options: RunOptions, problems: List[str],
-                     refused: Set[str]) -> None:
-    """Instantiate every component, then bind and initialise them together as a run does
-    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written.
-    The ``refused`` components (their problem noted by the checks before) are only
-    instantiated and bound."""
-    workdir = new_workdir()
-    slaves: Dict[str, Slave] = {}
-    try:
-        def make(name, node):
-            if name in plan.hil:          # a DCP slave: its description checked, the rig not contacted
-                made = OfflineDcpSlave(name, node.interface, plan.targets[name], plan.hil[name], node.step_ticks)
-            else:
-                made = make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
-            slave = _Checked(made, problems, refused=name in refused)
-            slave.instantiate()
-            return slave
-
-        try:
-            with threadpool_limits(limits=options.blas_threads, user_api="blas"):
-                _start(plan.graph, options, slaves, make, list(plan.judges), plan.scenario, interrupts.NEVER,
-                       system.start_time, plan.stop_s, ready=lambda: not any(s.failed for s in slaves.values()))
-        except Exception as error:
-            _note(problems, error)
-    finally:
-        for problem in shutdown_slaves(plan.graph.order, slaves):
-            _note(problems, UserError(problem))
-        remove_workdir(workdir)
-
-
-def _check_options(options: RunOptions) -> None:
+def check_options(options: RunOptions) -> None:
     if options.algorithm not in ALGORITHMS:
         raise UserError(f"--algorithm {options.algorithm}: choose {' or '.join(ALGORITHMS)}")
     for label, value in (("--stop-time", options.stop_time), ("--output-interval", options.output_interval)):
@@ -346,7 +213,7 @@ def _load_graph(system: SystemDescription, options: RunOptions) -> SystemGraph:
     """The system's graph with the parameter sets and --set overrides applied (relative data
     files resolved by the graph: graph.resolve_data_file)."""
     extra = [v for name in options.param_sets for v in load_parameter_set(system, name)]
-    return build_graph(system, options.overrides, extra)
+    return build_graph(system, options.overrides, extra, interface_of=component_interface)
 
 
 def _refuse_connected_overrides(graph: SystemGraph, overrides: Dict[str, str]) -> None:
@@ -430,7 +297,7 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Capture]:
     return captures
 
 
-def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulator],
+def warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulator],
                       captures: List[Capture], stop_s: float) -> None:
     """One warning line on stderr per capture window and per scenario event the run never
     reaches (they are kept out of the results, not refused: the same file serves shorter runs)."""
@@ -446,12 +313,19 @@ def _warn_beyond_stop(options: RunOptions, scenario: Optional[ScenarioManipulato
                              f"{stop_s:g} s; not applied")
 
 
-def _warn_rounded_stop(options: RunOptions, plan: _Plan) -> None:
+def _stop_ticks(plan: RunPlan) -> int:
+    """The stop time on the master's clock: whole nanoseconds, at least one after the start (a
+    stop time after the start by less than half a nanosecond, 1e-12 s, is not the start)."""
+    return max(round(plan.stop_s * TICKS_PER_SECOND), plan.start_ticks + 1)
+
+
+def warn_rounded_stop(options: RunOptions, plan: RunPlan) -> None:
     """The master steps in whole base steps: a stop time between two of them ends the run at
-    the next one, said in one warning line."""
+    the next one, said in one warning line (also a stop time too close to the start to be a
+    whole nanosecond after it)."""
     base = plan.graph.base_ticks
     start_ticks = plan.start_ticks
-    span = round(plan.stop_s * TICKS_PER_SECOND) - start_ticks
+    span = _stop_ticks(plan) - start_ticks
     if span % base:
         end_s = (start_ticks + -(-span // base) * base) / TICKS_PER_SECOND
         options.warn(f"stop time {plan.stop_s:g} s is not a whole number of base steps "
@@ -589,10 +463,10 @@ class _Outcome:
     steps_taken: Dict[str, int]
     judges: Sequence[SummaryObserver] = ()
     pacer: Optional[Pacer] = None
-    hil: Dict[str, DcpSlave] = field(default_factory=dict)
+    hil: Dict[str, RemoteDcpSlave] = field(default_factory=dict)
 
 
-def _start(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
+def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
            make: Callable[[str, object], Slave], observers: List[Observer],
            scenario: Optional[ScenarioManipulator], flag: InterruptFlag, start_s: float,
            stop_s: Optional[float], ready: Callable[[], bool] = lambda: True,
@@ -627,14 +501,14 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     master: Optional[Master] = None
     # a slave that runs on its own clock (soft real time) needs the master at real time
     factor = options.real_time
-    if factor is None and any(d.op_modes.isdisjoint({"NRT"}) for d in setup.hil.values()):
+    if factor is None and any(OpMode.NRT not in d.op_modes for d in setup.hil.values()):
         factor = 1.0
     pacer = Pacer(factor, flag) if factor is not None else None
-    swapped: Dict[str, DcpSlave] = {}
+    swapped: Dict[str, RemoteDcpSlave] = {}
 
     def make(name: str, node) -> Slave:
         if name in setup.hil:
-            swapped[name] = DcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
+            swapped[name] = RemoteDcpSlave(name, node.interface, setup.targets[name], setup.hil[name], node.step_ticks)
             return swapped[name]
         return make_slave(name, Path(node.fmu_path), node.interface, setup.workdir, options.in_process)
 
@@ -644,7 +518,7 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
         with threadpool_limits(limits=blas_threads, user_api="blas"):
             observers = _observers(setup.out, setup.recorded, setup.interval_ticks, setup.captures,
                                    setup.progress, judges)
-            master = _start(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s,
+            master = start_master(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s,
                             pacer=pacer)
             master.run_until(stop_ticks)
     except BaseException as error:  # a failure or an interruption: results so far are still written
@@ -742,7 +616,7 @@ def _raise_failure(outcome: _Outcome, problems: List[str], out: Path) -> None:
         raise Interrupted(failure.signum, f"{failure.where}; results so far in {out}"
                           + (f"; {also}" if also else ""))
     if isinstance(failure, OSError):    # e.g. the temp folder full while an FMU is extracted
-        failure = _os_error(failure)
+        failure = os_error(failure)
     if failure is not None:
         if also and isinstance(failure, UserError):
             raise type(failure)(f"{failure}; {also}")
@@ -751,7 +625,7 @@ def _raise_failure(outcome: _Outcome, problems: List[str], out: Path) -> None:
         raise UserError(also)
 
 
-def _os_error(error: OSError) -> UserError:
+def os_error(error: OSError) -> UserError:
     return UserError(f"{error.filename or 'a file'}: {error.strerror or error}")
 
 

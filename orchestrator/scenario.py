@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
-from orchestrator.errors import UserError
-from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.errors import UserError, non_finite_number
+from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND, SystemGraph
 from orchestrator.protocols import Manipulator, MasterView
 
 ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
@@ -41,7 +41,6 @@ ACTIONS = {"set": "set", "override": "set", "bias": "bias", "reset": "reset"}
 RESTRICT = "restrict"
 TSR_PORTS = ("tsr_start", "tsr_end", "tsr_speed")
 INT32 = (-2 ** 31, 2 ** 31 - 1)      # an FMI 2.0 Integer is a C int (fmi2Integer)
-MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
 
 
 @dataclass(frozen=True)
@@ -79,6 +78,9 @@ def load_scenario(path) -> Scenario:
     if not path.is_file():
         raise UserError(f"{path}: scenario file not found")
     doc = read_json(path)
+    bad = non_finite_number(doc)
+    if bad is not None:
+        raise UserError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
     if not isinstance(doc, dict) or not isinstance(doc.get("events"), list):
         raise UserError(f"{path}: field events: a list of events is required")
     defaults = doc.get("defaultOpts", {}) if isinstance(doc.get("defaultOpts", {}), dict) else {}

@@ -12,19 +12,17 @@ naming the element; it is never silently ignored.
 from __future__ import annotations
 
 import math
-import os
 import shutil
 import tempfile
-import zipfile
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 from lxml import etree
 
+from orchestrator.archives import safe_extract
 from orchestrator.errors import UserError, forget_archive, register_archive, where
-from orchestrator.protocols import TRANSITIONS
+from orchestrator.protocols import TRANSITIONS, UnitDef
 
 NS = {
     "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
@@ -38,16 +36,6 @@ OSP_ANNOTATION = "com.opensimulationplatform"
 OSP_NS = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 RATE_TRANSITIONS = TRANSITIONS            # hold, linear, mean (orchestrator/protocols.py)
 _SCHEMAS: Dict[str, etree.XMLSchema] = {}
-
-
-@dataclass(frozen=True)
-class UnitDef:
-    """SSP/FMI unit: SI base exponents plus factor/offset to the SI value."""
-
-    name: str
-    exponents: Tuple[int, ...] = (0, 0, 0, 0, 0, 0, 0, 0)  # kg m s A K mol cd rad
-    factor: float = 1.0
-    offset: float = 0.0
 
 
 @dataclass
@@ -105,47 +93,6 @@ class SystemDescription:
             shutil.rmtree(self.temp_dir, ignore_errors=True)
             forget_archive(self.temp_dir)
             self.temp_dir = None
-
-
-# ---- archives ----------------------------------------------------------------------------------
-def safe_extract(archive_path: Path, dest: Path) -> None:
-    """Extract a zip (.ssp or .fmu), refusing members that would land outside ``dest``."""
-    try:
-        archive = zipfile.ZipFile(archive_path)
-    except zipfile.BadZipFile:
-        raise UserError(f"{archive_path}: not a zip archive (or cut short)") from None
-    except OSError as error:
-        raise UserError(f"{archive_path}: cannot open ({error.strerror})") from None
-    root = dest.resolve()
-    with archive:
-        for member in archive.namelist():
-            target = (dest / member).resolve()
-            if os.path.isabs(member) or not (target == root or root in target.parents):
-                raise UserError(f"{archive_path}: member {member!r} would be extracted outside "
-                                "the extraction folder (zip-slip); refusing the archive")
-        for member in archive.infolist():
-            _extract_member(archive, member, dest, archive_path)
-
-
-#: zip compression methods zipfile can read here: stored and deflate always (zlib is imported
-#: above), bzip2 and LZMA where zipfile could import their modules (it holds None otherwise)
-READABLE_ZIP_METHODS = frozenset(
-    [zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED]
-    + [method for method, module in ((zipfile.ZIP_BZIP2, zipfile.bz2), (zipfile.ZIP_LZMA, zipfile.lzma))
-       if module is not None])
-
-
-def _extract_member(archive: zipfile.ZipFile, member: zipfile.ZipInfo, dest: Path, archive_path: Path) -> None:
-    """One member; a member in a compression method that cannot be read here, or that cannot be
-    read (bad CRC, corrupt deflate stream, cut short), is an error naming ``<archive>!<member>``."""
-    if member.compress_type not in READABLE_ZIP_METHODS:
-        raise UserError(f"{archive_path}!{member.filename}: compressed with a method this Python "
-                        f"cannot read (zip method {member.compress_type}); repack it with deflate")
-    try:
-        archive.extract(member, dest)
-    except (zipfile.BadZipFile, zlib.error, EOFError) as error:
-        raise UserError(f"{archive_path}!{member.filename}: cannot be read from the archive "
-                        f"({error or type(error).__name__}); the archive is corrupt") from None
 
 
 def _unpack_archive(path: Path) -> str:

@@ -94,7 +94,7 @@ def write_ssv(path: Path, name: str, values: Dict[str, object], units: Dict[str,
 
 
 # ---- connectors --------------------------------------------------------------------------------
-# An FMU's variables as its contract manifest lists them (orchestrator/build/contract.py): name →
+# An FMU's variables as its contract manifest lists them (orchestrator/conformance/roles.py): name →
 # causality, type, unit and, for an array, shape. ``PortsOf(folder, source)`` gives them for a
 # component's source, or None when they are unknown.
 Ports = Dict[str, dict]

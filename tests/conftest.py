@@ -9,11 +9,11 @@ FIXTURE_PACKAGE = Path(__file__).resolve().parent / "fixture_fmus" / "rcs_testfm
 sys.path.insert(0, str(FIXTURE_PACKAGE.parent))
 sys.path.insert(0, str(REPO))  # benchmarks.harness: the cores coupled without FMI
 
-TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule")
+TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule", "TestSine")
 
 
 def build_test_fmus(frame: int) -> Path:
-    from orchestrator.build.builder import UnitSpec, build_unit
+    from orchestrator.packaging.builder import UnitSpec, build_unit
     from fmus.sizes import BuildConfig
 
     dest = REPO / "build" / "test_fmus" / f"n{frame}"
@@ -37,7 +37,7 @@ def test_fmus_by_frame():
 @pytest.fixture(scope="session")
 def product_fmus():
     """The product FMUs, built (or found up to date) in build/fmus."""
-    from orchestrator.build.builder import build_all, default_build_dir
+    from orchestrator.packaging.builder import build_all, default_build_dir
 
     dest = default_build_dir(REPO)
     build_all(dest)

@@ -10,9 +10,7 @@ import time
 from pathlib import Path
 from typing import List, Optional
 
-from orchestrator.dcp.pdu import (Basic, CfgInput, CfgNetworkInformation, CfgOutput, CfgParameter, CfgSteps,
-                                  CfgTimeRes, DatInputOutput, NtfStateChanged, OpMode, PduType, RspAck, State,
-                                  Stc, StcRegister, decode, next_seq)
+from orchestrator.dcp.pdu import (OpMode, PduType, State, decode, next_seq, Pdu)
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -58,9 +56,9 @@ class TestMaster:
     def _receive(self):
         data, _ = self.sock.recvfrom(65536)
         pdu = decode(data)
-        if isinstance(pdu, NtfStateChanged):
+        if pdu.type_id == PduType.NTF_state_changed:
             self.states.append(pdu.state_id)
-        elif isinstance(pdu, DatInputOutput):
+        elif pdu.type_id == PduType.DAT_input_output:
             self.data.append(pdu)
         return pdu
 
@@ -81,7 +79,7 @@ class TestMaster:
         self.seq = next_seq(seq)
         rsp = self.response(seq)
         if expect_ack:
-            assert isinstance(rsp, RspAck), f"expected RSP_ack, got {rsp}"
+            assert rsp.type_id == PduType.RSP_ack, f"expected RSP_ack, got {rsp}"
         return rsp
 
     def wait_state(self, state: State, timeout_s: float = 10.0) -> None:
@@ -99,12 +97,12 @@ class TestMaster:
 
     # ---- the standard's sequence ------------------------------------------------------------
     def register(self, uuid, op_mode=OpMode.NRT):
-        rsp = self.request(lambda s: StcRegister(s, self.slave_id, State.ALIVE, uuid, op_mode))
+        rsp = self.request(lambda s: Pdu(PduType.STC_register, pdu_seq_id=s, receiver=self.slave_id, state_id=State.ALIVE, slave_uuid=uuid, op_mode=op_mode))
         self.wait_state(State.CONFIGURATION)
         return rsp
 
     def stc(self, type_id, state, then: Optional[State] = None):
-        self.request(lambda s: Stc(type_id, s, self.slave_id, state))
+        self.request(lambda s: Pdu(type_id, pdu_seq_id=s, receiver=self.slave_id, state_id=state))
         if then is not None:
             self.wait_state(then)
 
@@ -112,24 +110,22 @@ class TestMaster:
         """inputs/outputs: lists of (vr, DataType) on data_id 1 (in) and 2 (out); the slave
         receives on its control port and sends to this master."""
         sid = self.slave_id
-        self.request(lambda s: CfgTimeRes(s, sid, *resolution))
+        self.request(lambda s: Pdu(PduType.CFG_time_res, pdu_seq_id=s, receiver=sid, numerator=resolution[0], denominator=resolution[1]))
         for pos, (vr, data_type) in enumerate(inputs):
-            self.request(lambda s: CfgInput(s, sid, 1, pos, vr, data_type))
+            self.request(lambda s: Pdu(PduType.CFG_input, pdu_seq_id=s, receiver=sid, data_id=1, pos=pos, target_vr=vr, source_data_type=data_type))
         for pos, (vr, _) in enumerate(outputs):
-            self.request(lambda s: CfgOutput(s, sid, 2, pos, vr))
-        self.request(lambda s: CfgSteps(s, sid, steps, 2))
+            self.request(lambda s: Pdu(PduType.CFG_output, pdu_seq_id=s, receiver=sid, data_id=2, pos=pos, source_vr=vr))
+        self.request(lambda s: Pdu(PduType.CFG_steps, pdu_seq_id=s, receiver=sid, steps=steps, data_id=2))
         if inputs:
-            self.request(lambda s: CfgNetworkInformation(PduType.CFG_source_network_information, s, sid, 1,
-                                                         self.slave[1], self.slave[0]))
-        self.request(lambda s: CfgNetworkInformation(PduType.CFG_target_network_information, s, sid, 2,
-                                                     self.address[1], self.address[0]))
+            self.request(lambda s: Pdu(PduType.CFG_source_network_information, pdu_seq_id=s, receiver=sid, data_id=1, port=self.slave[1], ip_address=self.slave[0]))
+        self.request(lambda s: Pdu(PduType.CFG_target_network_information, pdu_seq_id=s, receiver=sid, data_id=2, port=self.address[1], ip_address=self.address[0]))
         for vr, data_type, configuration in parameters:
-            self.request(lambda s: CfgParameter(s, sid, vr, data_type, configuration))
+            self.request(lambda s: Pdu(PduType.CFG_parameter, pdu_seq_id=s, receiver=sid, parameter_vr=vr, source_data_type=data_type, configuration=configuration))
         self.stc(PduType.STC_prepare, State.CONFIGURATION, State.PREPARED)
         self.stc(PduType.STC_configure, State.PREPARED, State.CONFIGURED)
 
     def send_inputs(self, seq: int, payload: bytes, data_id: int = 1) -> None:
-        self.send_raw(DatInputOutput(seq, data_id, payload).encode())
+        self.send_raw(Pdu(PduType.DAT_input_output, pdu_seq_id=seq, data_id=data_id, payload=payload).encode())
 
     def inf_state(self) -> State:
-        return self.request(lambda s: Basic(PduType.INF_state, s, self.slave_id), expect_ack=False).state_id
+        return self.request(lambda s: Pdu(PduType.INF_state, pdu_seq_id=s, receiver=self.slave_id), expect_ack=False).state_id

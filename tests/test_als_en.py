@@ -8,7 +8,7 @@ import pytest
 
 from fmus.signalling import als_en, bauer_code, dqpsk
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import Acceptor, Message
+from fmus.signalling.digital_messages import Acceptor, Message
 
 FS = 4000.0
 BAUD = als_en.SYSTEM.baud(als_en.CARRIER_HZ)

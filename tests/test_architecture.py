@@ -63,11 +63,11 @@ def _forbidden_for(module: str):
                 *(f"fmus.{u}.facade" for u in UNITS)), set()
     if parts[0] == "orchestrator":
         if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study"):   # railway knowledge on the engine
-            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.build", "orchestrator.cli"), set()
-        if len(parts) > 1 and parts[1] in ("build", "cli", "__main__"):
+            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
+        if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__"):
             return ("benchmarks",), set()
         # the engine: FMU-agnostic, knows no railway
-        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.build",
+        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.packaging",
                 "orchestrator.cli"), set()
     return (), set()
 
@@ -92,7 +92,7 @@ def test_every_product_module_keeps_its_import_rules():
 
 def test_the_bundled_package_holds_no_build_tooling_or_harness():
     names = {p.stem for p in (REPO / "fmus").rglob("*.py")}
-    assert not names & {"build", "builder", "contract", "loop", "closed_loop", "channel"}
+    assert not names & {"build", "builder", "packaging", "packing", "contract", "loop", "closed_loop", "channel"}
 
 
 def test_cores_data_signalling_and_analysis_import_without_any_fmi_library():
@@ -125,3 +125,66 @@ def test_a_core_runs_its_unit_without_fmi(unit):
     facades = [p for p in (REPO / "fmus" / unit).glob("*.py")
                if any(_within(n, ("pythonfmu", "fmus.fmi")) for n, _ in _imports(p))]
     assert [p.name for p in facades] == ["facade.py"]
+
+
+def _import_graph():
+    """Module → the product modules it imports (every import: at the top, inside functions,
+    under TYPE_CHECKING; ``from package import name`` counts as importing the package and, where
+    ``name`` is a module, that module)."""
+    modules = {_module_name(path): path for path in _product_files()}
+    graph = {}
+    for module, path in modules.items():
+        graph[module] = {name for name, _ in _imports(path) if name in modules and name != module}
+    return graph
+
+
+def _cycles(graph):
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, on_stack, stack, found = {}, {}, set(), [], []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph[node]:
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_no_import_circle_in_the_product():
+    """An import circle makes a module's meaning depend on import order and hides which layer
+    is below which (docs/architecture.md, 'Import rules'); none may come back."""
+    assert _cycles(_import_graph()) == []
+
+
+#: the engine: loading, graph, master, slaves, observers and what they share; it knows neither
+#: the railway, nor DCP, nor studies or conformance
+ENGINE = ("orchestrator.ssp", "orchestrator.graph", "orchestrator.master", "orchestrator.algorithms",
+          "orchestrator.fmu", "orchestrator.observers", "orchestrator.protocols", "orchestrator.archives",
+          "orchestrator.errors", "orchestrator.interrupts", "orchestrator.scenario", "orchestrator.pacing",
+          "orchestrator.ports")
+
+
+def test_the_engine_imports_no_dcp_analysis_study_or_conformance():
+    graph = _import_graph()
+    above = ("orchestrator.dcp", "orchestrator.analysis", "orchestrator.study", "orchestrator.conformance")
+    offending = {module: sorted(name for name in graph[module] if _within(name, above)) for module in ENGINE}
+    assert {m: names for m, names in offending.items() if names} == {}

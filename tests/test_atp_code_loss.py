@@ -153,7 +153,7 @@ def _digital_loop(lost):
     is lost while ``lost(t)``."""
     from benchmarks.harness.closed_loop import run_closed_loop
     from fmus.ato_controller.core import AtoSettings
-    from fmus.signalling.digital import FREE_BLOCKS_OPEN
+    from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 
     clear = 200.0 * MPS_PER_KMH       # the line's own limits bind: the code never does
 

@@ -84,6 +84,17 @@ def test_bad_command_line_argument(tmp_path):
     _expect_error(*railcosim("run", "--algorithm", "newton")[::2], "invalid choice")
 
 
+@pytest.mark.parametrize("window", ["nan:5", "0:inf", "-inf:1", "0:1e300"])
+def test_capture_window_not_finite_or_beyond_the_clock(tmp_path, test_fmus, window):
+    """float() takes nan and inf: the window is refused naming the option (a ValueError and an
+    OverflowError traceback came out of the recorder)."""
+    folder = _pair(tmp_path, test_fmus, [])
+    _expect_error(*railcosim("run", folder, "--no-build", "--output", tmp_path / "out",
+                             "--capture", f"clock.y@{window}")[::2],
+                  f"--capture clock.y@{window}", "finite numbers of seconds")
+    assert not (tmp_path / "out").exists()
+
+
 def test_zip_slip_archive(tmp_path):
     evil = tmp_path / "evil.ssp"
     with zipfile.ZipFile(evil, "w") as archive:
@@ -114,3 +125,14 @@ def test_parameter_outside_its_declared_range_names_the_port(tmp_path, product_f
     code, _, stderr = railcosim("run", "ato_only", "--no-build", "--output", tmp_path / "out",
                                 "--set", "train.mass_scale=0.05")
     _expect_error(code, stderr, "train", "mass_scale = 0.05 is below its minimum 0.1")
+
+
+@pytest.mark.parametrize("system, setting", [("ato_only", "ato.aspect=99"), ("ato_only", "ato.v_target=-3")])
+def test_an_input_outside_its_declared_range_names_the_port(tmp_path, product_fmus, system, setting):
+    """ato_only's ATO runs with cab_signal = off and does not read its aspect or the digital
+    speeds: a --set outside their declared range is refused like any input's (it was applied
+    silently), before the first step."""
+    name, value = setting.split("=")
+    code, _, stderr = railcosim("run", system, "--no-build", "--output", tmp_path / "out", "--set", setting)
+    words = "above its maximum 4" if value == "99" else "below its minimum 0"
+    _expect_error(code, stderr, "ato", f"input {name.split('.')[1]} = {value} is {words}")

@@ -82,7 +82,22 @@ def test_scenario_real_value_not_finite(tmp_path, test_fmus):
     scenario = _scenario(tmp_path, '{"events": [{"time": 0.5, "model": "gain", "variable": "u", '
                                    '"action": "bias", "value": NaN}]}')
     code, _, stderr = _run(_pair(tmp_path / "sys", test_fmus), tmp_path, "--scenario", scenario)
-    _expect_error(code, stderr, "events.json", "events[0].value", "not a Real value")
+    _expect_error(code, stderr, "events.json", "events[0].value", "nan is not a finite number")
+
+
+def test_scenario_setting_an_input_outside_its_declared_range_stops_the_run_keeping_its_results(
+        tmp_path, product_fmus):
+    """An event setting ato_only's ATO aspect to 99 (declared 0..4; with cab_signal = off the ATO
+    does not read it): the step is refused, the run stops in one line naming the input, and the
+    rows up to the event are written."""
+    scenario = _scenario(tmp_path, json.dumps({"events": [
+        {"time": 2.0, "model": "ato", "variable": "aspect", "action": "set", "value": 99}]}))
+    code, _, stderr = _run("ato_only", tmp_path, "--scenario", scenario, "--stop-time", "5")
+    _expect_error(code, stderr, "'ato'", "t = 2 s", "input aspect = 99 is above its maximum 4")
+    rows = (tmp_path / "out" / "results.csv").read_text().splitlines()
+    assert rows[-1].startswith("2.0,") and len(rows) == 1 + 5
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["completed"] is False and summary["sim_time_s"] == 2.0
 
 
 def test_scenario_nested_too_deeply(tmp_path, test_fmus):
@@ -229,7 +244,7 @@ def _line(tmp_path, name="line.json", **change) -> Path:
 
 
 def test_missing_data_file_inside_an_ssp_names_the_archive(tmp_path, product_fmus):
-    from orchestrator.build.packing import pack_system
+    from orchestrator.packaging.packing import pack_system
 
     archive = pack_system(REPO / "ssp" / "ato_only", product_fmus, tmp_path)   # as `railcosim build` packs it
     code, _, stderr = _run(archive, tmp_path, "--set", "train.line_file=missing.json")
@@ -241,6 +256,56 @@ def test_data_file_nested_too_deeply(tmp_path, product_fmus):
     deep.write_text("[" * 100000 + "]" * 100000)
     code, _, stderr = _run("ato_only", tmp_path, "--set", f"train.rolling_stock_file={deep}")
     _expect_error(code, stderr, "deep.json", "nested", "train.rolling_stock_file")
+
+
+SHIPPED = REPO / "fmus" / "data" / "shipped"
+
+
+def _with_literal(source: Path, path: list, literal: str, target: Path) -> Path:
+    """``source`` with the field at ``path`` replaced by a JSON literal as written (``NaN``,
+    ``Infinity``, ``1e400``: Python's json reads each as a float that is not finite)."""
+    document = json.loads(source.read_text())
+    holder = document
+    for key in path[:-1]:
+        holder = holder[key]
+    holder[path[-1]] = "@@LITERAL@@"
+    target.write_text(json.dumps(document).replace('"@@LITERAL@@"', literal))
+    return target
+
+
+@pytest.mark.parametrize("system, parameters, source, path, literal, field", [
+    # the line file of both the train and the ATO (the error named the bundled timetable: "minimum
+    # running time inf s")
+    ("ato_only", ("train.line_file", "ato.line_file"), SHIPPED / "default_line.json",
+     ["gradients", 1, "permille"], "NaN", "gradients[1].permille: nan"),
+    ("ato_only", ("train.line_file", "ato.line_file"), SHIPPED / "default_line.json",
+     ["stations", 1, "stop_m"], "1e400", "stations[1].stop_m: inf"),
+    # a = NaN was accepted: the train never moved and the run ended "completed"
+    ("ato_only", ("train.rolling_stock_file",), SHIPPED / "passenger_chs7.json",
+     ["units", 0, "resistance", "a"], "NaN", "units[0].resistance.a: nan"),
+    ("ato_only", ("ato.timetable_file",), SHIPPED / "default_timetable.json",
+     ["stops", 1, "arrival_s"], "Infinity", "stops[1].arrival_s: inf"),
+    ("free_run", ("coder.codes_file",), REPO / "fmus" / "signalling" / "alsn_codes.json",
+     ["transmitters", "KPT-5", "codes", "Z", 0], "-Infinity", "transmitters.KPT-5.codes.Z[0]: -inf"),
+], ids=["line-nan", "line-1e400", "rolling-stock-nan", "timetable-infinity", "code-table-minus-infinity"])
+def test_data_file_number_not_finite(tmp_path, product_fmus, system, parameters, source, path, literal, field):
+    """Every data file a component reads refuses a number that is not finite before the run, in
+    one line naming the file, the field and the parameter that names the file."""
+    bad = _with_literal(source, path, literal, tmp_path / f"bad_{source.name}")
+    sets = [arg for name in parameters for arg in ("--set", f"{name}={bad}")]
+    code, _, stderr = _run(system, tmp_path, *sets, "--stop-time", "1")
+    line = _expect_error(code, stderr, str(bad), f"field {field} is not a finite number", parameters[0])
+    assert "default_" not in line.replace(bad.name, "")          # never blames a bundled file
+    assert not (tmp_path / "out").exists()
+
+
+def test_validate_refuses_a_scenario_number_not_finite_at_load(tmp_path, test_fmus):
+    """Any number of a scenario, not only the fields checked by meaning: here an Integer event's
+    value, typed only against the FMU's variable before."""
+    folder = _pair(tmp_path / "sys", test_fmus)
+    (folder / "scenario.json").write_text('{"events": [{"time": 0.5, "model": "clock", "variable": "steps", '
+                                          '"action": "set", "value": Infinity}]}')
+    _expect_error(*railcosim("validate", folder)[::2], "scenario.json", "field events[0].value: inf is not a finite number")
 
 
 def test_gap_between_block_sections(tmp_path, product_fmus):

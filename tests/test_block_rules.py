@@ -10,7 +10,7 @@ from fmus.signalling import alsn, cab_systems
 from fmus.signalling import aspects as sig
 from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, block_codes
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 from orchestrator.analysis.systems import SSP_ROOT
 
 N = 40

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from conftest import FIXTURE_PACKAGE, TEST_UNITS
-from orchestrator.build.builder import UnitSpec, build_unit, discover_units, validate_built
-from orchestrator.build.contract import diff, manifest_of, read_manifest
+from orchestrator.packaging.builder import UnitSpec, build_unit, discover_units, validate_built
+from orchestrator.conformance.roles import diff, manifest_of, read_manifest
 from fmus.errors import FmuInputError
 from fmus.sizes import BuildConfig
 

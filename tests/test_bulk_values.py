@@ -9,7 +9,7 @@ import textwrap
 
 import pytest
 
-from orchestrator.build import forwarder as fwd
+from orchestrator.packaging import forwarder as fwd
 
 pytestmark = pytest.mark.skipif(isinstance(fwd.plan(), fwd.NoForwarder), reason="no forwarding binary here")
 

@@ -1,6 +1,7 @@
 """The command line as a user meets it: validate finds what run would refuse, --set on a
-connected input, stop times between base steps, report --at without a capture, the bare
-command, build repacking only what changed, and capture files (exact times, whole 2-D ports)."""
+connected input, stop times between base steps (or closer to the start than 1 ns), report --at
+without a capture, the bare command, build repacking only what changed, and capture files (exact
+times, whole 2-D ports)."""
 import csv
 import shutil
 import zipfile
@@ -43,6 +44,18 @@ def test_validate_reports_every_problem_run_would_meet(tmp_path, product_fmus):
     assert code == 0 and stdout.strip() == "free_run: valid", stderr
 
 
+def test_a_stop_time_less_than_a_nanosecond_after_the_start_runs_one_base_step_and_says_so(tmp_path, product_fmus):
+    """1e-12 s is after the start but rounds to it on the master's nanosecond clock: the run
+    takes one base step, as any stop time between base steps does, with the same warning (it
+    simulated 0 s and said nothing)."""
+    run = tmp_path / "run"
+    code, _, stderr = railcosim("run", "ato_only", "--no-build", "--stop-time", "1e-12", "--output", run)
+    assert code == 0, stderr
+    assert stderr.strip() == ("railcosim: warning: stop time 1e-12 s is not a whole number of base steps "
+                              "(0.5 s) after the start; the run ends at 0.5 s")
+    assert '"sim_time_s": 0.5' in (run / "summary.json").read_text()
+
+
 def test_set_on_an_input_fed_by_a_connection_is_refused(tmp_path, product_fmus):
     for command in (("run", "free_run", "--no-build", "--in-process", "--stop-time", "1",
                      "--output", tmp_path / "out"), ("validate", "free_run")):
@@ -79,7 +92,7 @@ def test_the_bare_command_says_what_to_do_once():
 
 
 def test_packing_again_without_changes_leaves_the_archive_alone(tmp_path, test_fmus):
-    from orchestrator.build.packing import pack_system, pack_systems
+    from orchestrator.packaging.packing import pack_system, pack_systems
 
     folder = tmp_path / "systems" / "pair"
     write_ssd(folder, "pair", [ComponentSpec("a", str(test_fmus / "TestCounter.fmu"), 0.1),

@@ -18,7 +18,7 @@ DATA = REPO / "orchestrator" / "conformance" / "data"
 
 @pytest.fixture(scope="module")
 def broken_fmus(tmp_path_factory):
-    from orchestrator.build.builder import UnitSpec, build_unit
+    from orchestrator.packaging.builder import UnitSpec, build_unit
 
     dest = REPO / "build" / "test_fmus" / "broken"
     return {identifier: build_unit(UnitSpec(identifier.lower(), "rcs_testfmus.broken", identifier), dest,
@@ -158,7 +158,7 @@ def test_the_shipped_vectors_are_what_the_generator_writes(tmp_path):
 def test_a_target_built_with_another_frame_size_is_stepped_with_its_own_frames():
     """The runner steps N/fs with the target's N (here 16, the vectors were written with 40):
     the rail line's frame input and output and its per-frame rms give the same verdicts."""
-    from orchestrator.build.builder import UnitSpec, build_unit
+    from orchestrator.packaging.builder import UnitSpec, build_unit
     from orchestrator.conformance.runner import conform
     from fmus.sizes import BuildConfig
 

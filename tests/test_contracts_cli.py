@@ -15,8 +15,8 @@ from lxml import etree
 
 from helpers import cli_environment, railcosim
 from orchestrator import contracts
-from orchestrator.build.builder import discover_units
-from orchestrator.build.contract import role_manifest_path
+from orchestrator.packaging.builder import discover_units
+from orchestrator.conformance.roles import role_manifest_path
 from orchestrator.cli import main
 
 UNITS = [(spec.unit, spec.model_identifier) for spec in discover_units()]

@@ -7,39 +7,35 @@ import numpy as np
 import pytest
 
 from orchestrator.dcp import dcpx, states
-from orchestrator.dcp.pdu import (Basic, CfgInput, CfgNetworkInformation, CfgOutput, CfgParameter, CfgScope,
-                                  CfgSteps, CfgTimeRes, DataType, DatInputOutput, ErrorCode, NtfStateChanged,
-                                  OpMode, PayloadCodec, PduError, PduType, RspAck, RspErrorAck, RspNack,
-                                  RspStateAck, Scope, State, Stc, StcDoStep, StcRegister, StcRun, decode,
-                                  next_seq)
+from orchestrator.dcp.pdu import (DataType, ErrorCode, OpMode, PayloadCodec, PduError, PduType, Scope, State, decode, next_seq, Pdu)
 from orchestrator.errors import UserError
 
 UID = uuid.UUID("b5279485-720d-4542-9f29-bee4d9a75ef9")
 
 # (pdu, its length in bytes per the standard)
 SAMPLES = [
-    (StcRegister(7, 3, State.ALIVE, UID, OpMode.NRT, 1, 0), 24),
-    (Stc(PduType.STC_prepare, 8, 3, State.CONFIGURATION), 5),
-    (Stc(PduType.STC_deregister, 9, 3, State.STOPPED), 5),
-    (StcRun(10, 3, State.CONFIGURED, 1_700_000_000), 13),
-    (StcDoStep(11, 3, State.RUNNING, 10_000_000), 9),
-    (CfgTimeRes(12, 3, 1, 1_000_000_000), 12),
-    (CfgSteps(13, 3, 10_000_000, 2), 10),
-    (CfgInput(14, 3, 1, 0, 2**40 + 5, DataType.float64), 17),
-    (CfgOutput(15, 3, 2, 4, 99), 16),
-    (Basic(PduType.CFG_clear, 16, 3), 4),
-    (Basic(PduType.INF_state, 17, 3), 4),
-    (Basic(PduType.INF_error, 18, 3), 4),
-    (CfgNetworkInformation(PduType.CFG_source_network_information, 19, 3, 1, 5001, "127.0.0.1"), 13),
-    (CfgNetworkInformation(PduType.CFG_target_network_information, 20, 3, 2, 6001, "192.168.1.20"), 13),
-    (CfgParameter(21, 3, 4, DataType.float64, struct.pack("<d", 2.5)), 21),
-    (CfgScope(22, 3, 1, Scope.Run_NonRealTime), 7),
-    (RspAck(3, 7), 4),
-    (RspNack(3, 7, 8, ErrorCode.INVALID_SEQUENCE_ID), 8),
-    (RspStateAck(3, 17, State.RUNNING), 5),
-    (RspErrorAck(3, 18, ErrorCode.INVALID_LENGTH), 6),
-    (NtfStateChanged(3, State.COMPUTED), 3),
-    (DatInputOutput(5, 1, b"\x01\x02\x03"), 8),
+    (Pdu(PduType.STC_register, pdu_seq_id=7, receiver=3, state_id=State.ALIVE, slave_uuid=UID, op_mode=OpMode.NRT, major_version=1, minor_version=0), 24),
+    (Pdu(PduType.STC_prepare, pdu_seq_id=8, receiver=3, state_id=State.CONFIGURATION), 5),
+    (Pdu(PduType.STC_deregister, pdu_seq_id=9, receiver=3, state_id=State.STOPPED), 5),
+    (Pdu(PduType.STC_run, pdu_seq_id=10, receiver=3, state_id=State.CONFIGURED, start_time=1_700_000_000), 13),
+    (Pdu(PduType.STC_do_step, pdu_seq_id=11, receiver=3, state_id=State.RUNNING, steps=10_000_000), 9),
+    (Pdu(PduType.CFG_time_res, pdu_seq_id=12, receiver=3, numerator=1, denominator=1_000_000_000), 12),
+    (Pdu(PduType.CFG_steps, pdu_seq_id=13, receiver=3, steps=10_000_000, data_id=2), 10),
+    (Pdu(PduType.CFG_input, pdu_seq_id=14, receiver=3, data_id=1, pos=0, target_vr=2**40 + 5, source_data_type=DataType.float64), 17),
+    (Pdu(PduType.CFG_output, pdu_seq_id=15, receiver=3, data_id=2, pos=4, source_vr=99), 16),
+    (Pdu(PduType.CFG_clear, pdu_seq_id=16, receiver=3), 4),
+    (Pdu(PduType.INF_state, pdu_seq_id=17, receiver=3), 4),
+    (Pdu(PduType.INF_error, pdu_seq_id=18, receiver=3), 4),
+    (Pdu(PduType.CFG_source_network_information, pdu_seq_id=19, receiver=3, data_id=1, port=5001, ip_address="127.0.0.1"), 13),
+    (Pdu(PduType.CFG_target_network_information, pdu_seq_id=20, receiver=3, data_id=2, port=6001, ip_address="192.168.1.20"), 13),
+    (Pdu(PduType.CFG_parameter, pdu_seq_id=21, receiver=3, parameter_vr=4, source_data_type=DataType.float64, configuration=struct.pack("<d", 2.5)), 21),
+    (Pdu(PduType.CFG_scope, pdu_seq_id=22, receiver=3, data_id=1, scope=Scope.Run_NonRealTime), 7),
+    (Pdu(PduType.RSP_ack, sender=3, resp_seq_id=7), 4),
+    (Pdu(PduType.RSP_nack, sender=3, resp_seq_id=7, exp_seq_id=8, error_code=ErrorCode.INVALID_SEQUENCE_ID), 8),
+    (Pdu(PduType.RSP_state_ack, sender=3, resp_seq_id=17, state_id=State.RUNNING), 5),
+    (Pdu(PduType.RSP_error_ack, sender=3, resp_seq_id=18, error_code=ErrorCode.INVALID_LENGTH), 6),
+    (Pdu(PduType.NTF_state_changed, sender=3, state_id=State.COMPUTED), 3),
+    (Pdu(PduType.DAT_input_output, pdu_seq_id=5, data_id=1, payload=b"\x01\x02\x03"), 8),
 ]
 
 
@@ -52,27 +48,34 @@ def test_round_trip_and_standard_length(pdu, size):
 
 
 def test_register_layout_is_little_endian_field_by_field():
-    data = StcRegister(0x0102, 3, State.ALIVE, UID, OpMode.SRT, 1, 0).encode()
+    data = Pdu(PduType.STC_register, pdu_seq_id=0x0102, receiver=3, state_id=State.ALIVE, slave_uuid=UID, op_mode=OpMode.SRT, major_version=1, minor_version=0).encode()
     assert data[:5] == bytes([0x01, 0x02, 0x01, 3, 0x00])        # type, seq LE, receiver, state
     assert data[5:21] == UID.bytes                                # uuid in written byte order
     assert data[21:] == bytes([1, 1, 0])                          # op_mode SRT, version 1.0
 
 
 def test_network_information_ip_is_uint32_of_the_address():
-    data = CfgNetworkInformation(PduType.CFG_target_network_information, 1, 2, 3, 0x1389, "127.0.0.1").encode()
+    data = Pdu(PduType.CFG_target_network_information, pdu_seq_id=1, receiver=2, data_id=3, port=0x1389, ip_address="127.0.0.1").encode()
     assert data[6] == 0                                           # UDP_IPv4
     assert data[7:9] == b"\x89\x13"
     assert data[9:13] == bytes([1, 0, 0, 127])                    # 0x7F000001 little-endian
 
 
-def test_nack_and_dat_layouts():
-    assert RspNack(4, 0x0A0B, 0x0A0C, ErrorCode.INVALID_LENGTH).encode() == bytes(
-        [0xB1, 4, 0x0B, 0x0A, 0x0C, 0x0A, 0x01, 0x20])
-    assert DatInputOutput(0x0201, 0x0403, b"xy").encode() == bytes([0xF0, 1, 2, 3, 4]) + b"xy"
+def test_responses_mirror_the_request_header_and_dat_layout():
+    """RSP_: type_id, resp_seq_id (uint16) where the request had its pdu_seq_id, sender where
+    it had its receiver (DCPLib's layout since its 2019 fix of the RSP offsets)."""
+    assert Pdu(PduType.RSP_nack, sender=4, resp_seq_id=0x0A0B, exp_seq_id=0x0A0C,
+               error_code=ErrorCode.INVALID_LENGTH).encode() == bytes([0xB1, 0x0B, 0x0A, 4, 0x0C, 0x0A, 0x01, 0x20])
+    assert Pdu(PduType.RSP_ack, sender=1, resp_seq_id=0).encode() == bytes([0xB0, 0, 0, 1])
+    assert Pdu(PduType.RSP_state_ack, sender=1, resp_seq_id=9, state_id=State.ALIVE).encode() == bytes(
+        [0xB2, 9, 0, 1, 0])
+    assert Pdu(PduType.RSP_error_ack, sender=2, resp_seq_id=0x0102, error_code=ErrorCode.INVALID_STEPS).encode() == \
+        bytes([0xB3, 0x02, 0x01, 2, 0x0E, 0x20])
+    assert Pdu(PduType.DAT_input_output, pdu_seq_id=0x0201, data_id=0x0403, payload=b"xy").encode() == bytes([0xF0, 1, 2, 3, 4]) + b"xy"
 
 
 def test_truncated_oversized_and_unknown_pdus_raise_with_header():
-    good = StcDoStep(300, 5, State.RUNNING, 1).encode()
+    good = Pdu(PduType.STC_do_step, pdu_seq_id=300, receiver=5, state_id=State.RUNNING, steps=1).encode()
     with pytest.raises(PduError) as info:
         decode(good[:-1])
     assert info.value.error_code == ErrorCode.INVALID_LENGTH
@@ -89,7 +92,7 @@ def test_truncated_oversized_and_unknown_pdus_raise_with_header():
         decode(b"\x07\x01")                                       # header cut short
     assert info.value.pdu_seq_id is None
     with pytest.raises(PduError) as info:                         # op_mode 9 is not defined
-        decode(good[:0] + StcRegister(1, 1, State.ALIVE, UID, OpMode.NRT).encode()[:21] + b"\x09\x01\x00")
+        decode(good[:0] + Pdu(PduType.STC_register, pdu_seq_id=1, receiver=1, state_id=State.ALIVE, slave_uuid=UID, op_mode=OpMode.NRT).encode()[:21] + b"\x09\x01\x00")
     assert info.value.error_code == ErrorCode.INVALID_OP_MODE
 
 
@@ -198,7 +201,7 @@ def test_description_from_fmu_groups_arrays(test_fmus, tmp_path):
 def test_slave_engine_survives_mutated_requests(test_fmus):
     """Thousands of mutated PDUs with the right receiver and sequence id (so that they reach
     the checks behind those) at a running slave: every one handled without an exception."""
-    from orchestrator.dcp.slave import DcpSlave
+    from orchestrator.dcp.slave import DcpSlaveServer
     from orchestrator.fmu import make_slave, new_workdir, read_interface, remove_workdir
 
     fmu = test_fmus / "TestFrameStage.fmu"
@@ -216,7 +219,7 @@ def test_slave_engine_survives_mutated_requests(test_fmus):
 
     workdir = new_workdir()
     logged = []
-    slave = DcpSlave(desc, lambda: make_slave("s", fmu, interface, workdir, False), Socket(), log=logged.append)
+    slave = DcpSlaveServer(desc, lambda: make_slave("s", fmu, interface, workdir, False), Socket(), log=logged.append)
     slave.fmu = slave.make_fmu()
     slave.fmu.instantiate()
     slave._bind_fmu()
@@ -228,19 +231,19 @@ def test_slave_engine_survives_mutated_requests(test_fmus):
         seq[0] = slave.expected_seq
 
     u, y = desc.by_name("u"), desc.by_name("y")
-    send(StcRegister(0, 1, State.ALIVE, desc.uuid, OpMode.NRT))
-    for make in (lambda s: CfgTimeRes(s, 1, 1, 10**9), lambda s: CfgInput(s, 1, 1, 0, u.vr, DataType.float64),
-                 lambda s: CfgOutput(s, 1, 2, 0, y.vr), lambda s: CfgSteps(s, 1, 10**6, 2),
-                 lambda s: CfgNetworkInformation(PduType.CFG_source_network_information, s, 1, 1, 1, "127.0.0.1"),
-                 lambda s: CfgNetworkInformation(PduType.CFG_target_network_information, s, 1, 2, 2, "127.0.0.1"),
-                 lambda s: Stc(PduType.STC_prepare, s, 1, State.CONFIGURATION),
-                 lambda s: Stc(PduType.STC_configure, s, 1, State.PREPARED),
-                 lambda s: StcRun(s, 1, State.CONFIGURED, 0), lambda s: StcRun(s, 1, State.SYNCHRONIZED, 0)):
+    send(Pdu(PduType.STC_register, pdu_seq_id=0, receiver=1, state_id=State.ALIVE, slave_uuid=desc.uuid, op_mode=OpMode.NRT))
+    for make in (lambda s: Pdu(PduType.CFG_time_res, pdu_seq_id=s, receiver=1, numerator=1, denominator=10**9), lambda s: Pdu(PduType.CFG_input, pdu_seq_id=s, receiver=1, data_id=1, pos=0, target_vr=u.vr, source_data_type=DataType.float64),
+                 lambda s: Pdu(PduType.CFG_output, pdu_seq_id=s, receiver=1, data_id=2, pos=0, source_vr=y.vr), lambda s: Pdu(PduType.CFG_steps, pdu_seq_id=s, receiver=1, steps=10**6, data_id=2),
+                 lambda s: Pdu(PduType.CFG_source_network_information, pdu_seq_id=s, receiver=1, data_id=1, port=1, ip_address="127.0.0.1"),
+                 lambda s: Pdu(PduType.CFG_target_network_information, pdu_seq_id=s, receiver=1, data_id=2, port=2, ip_address="127.0.0.1"),
+                 lambda s: Pdu(PduType.STC_prepare, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURATION),
+                 lambda s: Pdu(PduType.STC_configure, pdu_seq_id=s, receiver=1, state_id=State.PREPARED),
+                 lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0), lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, start_time=0)):
         send(make(seq[0]))
     assert slave.state == State.RUNNING and slave.counters.nacks == 0
     rng = np.random.default_rng(11)
     templates = [p for p, _ in SAMPLES if p.type_id != PduType.STC_deregister] + [
-        DatInputOutput(0, 1, bytes(32)), StcDoStep(0, 1, State.RUNNING, 10**6)]
+        Pdu(PduType.DAT_input_output, pdu_seq_id=0, data_id=1, payload=bytes(32)), Pdu(PduType.STC_do_step, pdu_seq_id=0, receiver=1, state_id=State.RUNNING, steps=10**6)]
     try:
         for _ in range(4000):
             data = bytearray(rng.choice(templates).encode())

@@ -12,8 +12,7 @@ import pytest
 
 from dcp_test_master import REPO, TestMaster, start_slave
 from orchestrator.dcp import dcpx
-from orchestrator.dcp.pdu import (Basic, CfgInput, CfgTimeRes, DataType, ErrorCode, OpMode, PayloadCodec,
-                                  PduType, RspNack, RspStateAck, State, Stc, StcDoStep, StcRegister, StcRun)
+from orchestrator.dcp.pdu import (DataType, ErrorCode, OpMode, PayloadCodec, PduType, State, Pdu)
 
 STEP_NS = 1_000_000          # the test frame FMUs' step: 4 samples at 4 kHz
 
@@ -70,12 +69,15 @@ def _reference_outputs(fmu_path, alpha, frames):
         remove_workdir(workdir)
 
 
-def test_state_sequence_and_dat_round_trip_match_the_fmu(frame_stage, test_fmus):
+# the 1 ms frame in any resolution that divides it: 1 ns (the recommended one), 1 µs, 1 ms
+@pytest.mark.parametrize("resolution,steps", [((1, 1_000_000_000), STEP_NS), ((1, 1_000_000), 1000),
+                                              ((1, 1000), 1)])
+def test_state_sequence_and_dat_round_trip_match_the_fmu(frame_stage, test_fmus, resolution, steps):
     proc, desc, master = frame_stage
     u, y, alpha = desc.by_name("u"), desc.by_name("y"), desc.by_name("alpha")
     assert u.dims == (4,) and y.dims == (4,) and alpha.causality == "parameter"
     master.register(desc.uuid)
-    master.configure([(u.vr, DataType.float64)], [(y.vr, DataType.float64)], STEP_NS,
+    master.configure([(u.vr, DataType.float64)], [(y.vr, DataType.float64)], steps, resolution=resolution,
                      parameters=[(alpha.vr, DataType.float64, struct.pack("<d", 0.5))])
     codec_in = PayloadCodec([(DataType.float64, 4)])
     codec_out = PayloadCodec([(DataType.float64, 4)])
@@ -85,14 +87,15 @@ def test_state_sequence_and_dat_round_trip_match_the_fmu(frame_stage, test_fmus)
     master.stc(PduType.STC_initialize, State.CONFIGURED, State.INITIALIZED)
     master.stc(PduType.STC_send_outputs, State.INITIALIZED, State.CONFIGURED)
     master.wait_data(1)
-    master.request(lambda s: StcRun(s, 1, State.CONFIGURED, 0))
+    master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0))
     master.wait_state(State.SYNCHRONIZED)
-    master.request(lambda s: StcRun(s, 1, State.SYNCHRONIZED, 0))
+    master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, start_time=0))
     master.wait_state(State.RUNNING)
     got = []
     for k, frame in enumerate(frames):
         master.send_inputs(k + 1, codec_in.encode([frame]))
-        master.request(lambda s: StcDoStep(s, 1, State.RUNNING, STEP_NS))
+        master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=1, state_id=State.RUNNING,
+                                     steps=steps))
         master.wait_state(State.COMPUTED)
         master.stc(PduType.STC_send_outputs, State.COMPUTED, State.RUNNING)
         master.wait_data(k + 2)
@@ -111,37 +114,39 @@ def test_requests_out_of_turn_are_refused_with_the_standards_codes(frame_stage):
     proc, desc, master = frame_stage
     u = desc.by_name("u")
     wrong_uuid = dcpx.slave_uuid("not-this-slave")
-    rsp = master.request(lambda s: StcRegister(s, 1, State.ALIVE, wrong_uuid, OpMode.NRT), expect_ack=False)
-    assert isinstance(rsp, RspNack) and rsp.error_code == ErrorCode.INVALID_UUID
-    rsp = master.request(lambda s: StcRegister(s, 1, State.ALIVE, desc.uuid, OpMode.SRT), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.STC_register, pdu_seq_id=s, receiver=1, state_id=State.ALIVE, slave_uuid=wrong_uuid, op_mode=OpMode.NRT), expect_ack=False)
+    assert rsp.type_id == PduType.RSP_nack and rsp.error_code == ErrorCode.INVALID_UUID
+    rsp = master.request(lambda s: Pdu(PduType.STC_register, pdu_seq_id=s, receiver=1, state_id=State.ALIVE, slave_uuid=desc.uuid, op_mode=OpMode.SRT), expect_ack=False)
     assert rsp.error_code == ErrorCode.INVALID_OP_MODE            # this slave offers NRT only
     master.register(desc.uuid)
     sid = master.slave_id
     # a request of another state, and a state_id that is not the slave's
-    rsp = master.request(lambda s: StcDoStep(s, sid, State.CONFIGURATION, 1), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=sid, state_id=State.CONFIGURATION, steps=1), expect_ack=False)
     assert rsp.error_code == ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE
-    rsp = master.request(lambda s: Stc(PduType.STC_prepare, s, sid, State.RUNNING), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.STC_prepare, pdu_seq_id=s, receiver=sid, state_id=State.RUNNING), expect_ack=False)
     assert rsp.error_code == ErrorCode.INVALID_STATE_ID
-    # configuration the description does not allow
-    rsp = master.request(lambda s: CfgTimeRes(s, sid, 1, 1000), expect_ack=False)
+    # configuration the description does not allow: a resolution of which the 1 ms step is no
+    # whole number (0.3 ms)
+    rsp = master.request(lambda s: Pdu(PduType.CFG_time_res, pdu_seq_id=s, receiver=sid, numerator=3,
+                                       denominator=10000), expect_ack=False)
     assert rsp.error_code == ErrorCode.INVALID_TIME_RESOLUTION
-    rsp = master.request(lambda s: CfgInput(s, sid, 1, 0, 987654, DataType.float64), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.CFG_input, pdu_seq_id=s, receiver=sid, data_id=1, pos=0, target_vr=987654, source_data_type=DataType.float64), expect_ack=False)
     assert rsp.error_code == ErrorCode.INVALID_VALUE_REFERENCE
-    rsp = master.request(lambda s: CfgInput(s, sid, 1, 0, u.vr, DataType.string), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.CFG_input, pdu_seq_id=s, receiver=sid, data_id=1, pos=0, target_vr=u.vr, source_data_type=DataType.string), expect_ack=False)
     assert rsp.error_code == ErrorCode.INVALID_SOURCE_DATA_TYPE
-    rsp = master.request(lambda s: Stc(PduType.STC_prepare, s, sid, State.CONFIGURATION), expect_ack=False)
+    rsp = master.request(lambda s: Pdu(PduType.STC_prepare, pdu_seq_id=s, receiver=sid, state_id=State.CONFIGURATION), expect_ack=False)
     assert rsp.error_code == ErrorCode.INCOMPLETE_CONFIG_TIME_RESOLUTION
     # truncated and oversized requests: RSP_nack INVALID_LENGTH for their sequence id
     seq = master.seq
-    master.send_raw(CfgTimeRes(seq, sid, 1, 1_000_000_000).encode()[:-2])
+    master.send_raw(Pdu(PduType.CFG_time_res, pdu_seq_id=seq, receiver=sid, numerator=1, denominator=1_000_000_000).encode()[:-2])
     assert master.response(seq).error_code == ErrorCode.INVALID_LENGTH
     seq = master.seq = seq + 1
-    master.send_raw(Basic(PduType.INF_state, seq, sid).encode() + b"\x00" * 60000)
+    master.send_raw(Pdu(PduType.INF_state, pdu_seq_id=seq, receiver=sid).encode() + b"\x00" * 60000)
     assert master.response(seq).error_code == ErrorCode.INVALID_LENGTH
     master.seq = seq + 1
     # out of sequence: refused, the expected id named
     seq = master.seq + 5
-    master.send_raw(Basic(PduType.INF_state, seq, sid).encode())
+    master.send_raw(Pdu(PduType.INF_state, pdu_seq_id=seq, receiver=sid).encode())
     rsp = master.response(seq)
     assert rsp.error_code == ErrorCode.INVALID_SEQUENCE_ID and rsp.exp_seq_id == master.seq
     # a PDU of the standard we do not offer (CFG_logging)
@@ -151,7 +156,8 @@ def test_requests_out_of_turn_are_refused_with_the_standards_codes(frame_stage):
     for junk in (b"", b"\x07", b"\x99\x00\x00\x01", bytes(range(256)) * 3,
                  b"\xf0\x00\x00\x07\x00" + b"\x00" * 8, b"\xf0\x00"):
         master.send_raw(junk)
-    assert isinstance(master.request(lambda s: Basic(PduType.INF_state, s, sid), expect_ack=False), RspStateAck)
+    assert master.request(lambda s: Pdu(PduType.INF_state, pdu_seq_id=s, receiver=sid),
+                          expect_ack=False).type_id == PduType.RSP_state_ack
     assert master.inf_state() == State.CONFIGURATION
     assert proc.poll() is None
 
@@ -176,9 +182,9 @@ def test_wrong_length_dat_is_dropped_and_later_data_still_apply(frame_stage):
     master.send_inputs(1, codec.encode([[1.0, 2.0, 3.0, 4.0]]) + b"\x00")  # one byte long
     master.send_inputs(2, codec.encode([[5.0, 6.0, 7.0, 8.0]]))
     master.send_inputs(1, codec.encode([[9.0, 9.0, 9.0, 9.0]]))            # older than seq 2: stale
-    master.request(lambda s: StcRun(s, 1, State.CONFIGURED, 0))
+    master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0))
     master.wait_state(State.SYNCHRONIZED)
-    master.request(lambda s: StcDoStep(s, 1, State.SYNCHRONIZED, STEP_NS))
+    master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, steps=STEP_NS))
     master.wait_state(State.COMPUTED)
     master.stc(PduType.STC_send_outputs, State.COMPUTED, State.SYNCHRONIZED)
     master.wait_data(1)
@@ -194,16 +200,16 @@ def test_soft_real_time_slave_runs_on_its_own_clock(test_fmus):
 
         desc = dcpx.description_from_fmu(read_interface(test_fmus / "TestFrameSource.fmu"))
         y = desc.by_name("y")
-        rsp = master.request(lambda s: StcRegister(s, 1, State.ALIVE, desc.uuid, OpMode.NRT), expect_ack=False)
+        rsp = master.request(lambda s: Pdu(PduType.STC_register, pdu_seq_id=s, receiver=1, state_id=State.ALIVE, slave_uuid=desc.uuid, op_mode=OpMode.NRT), expect_ack=False)
         assert rsp.error_code == ErrorCode.INVALID_OP_MODE           # a real-time-only slave
         master.register(desc.uuid, OpMode.SRT)
         master.configure([], [(y.vr, DataType.float64)], 2 * STEP_NS)    # outputs every 2 ms
-        master.request(lambda s: StcRun(s, 1, State.CONFIGURED, 0))
+        master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0))
         master.wait_state(State.SYNCHRONIZED)
-        rsp = master.request(lambda s: StcDoStep(s, 1, State.SYNCHRONIZED, 1), expect_ack=False)
+        rsp = master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, steps=1), expect_ack=False)
         assert rsp.error_code == ErrorCode.NOT_SUPPORTED_PDU              # no master steps in SRT
         master.wait_data(3)                  # the slave's clock runs from the first STC_run on
-        master.request(lambda s: StcRun(s, 1, State.SYNCHRONIZED, 0))
+        master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, start_time=0))
         master.wait_state(State.RUNNING)
         master.wait_data(len(master.data) + 3)
         codec = PayloadCodec([(DataType.float64, 4)])
@@ -228,10 +234,10 @@ def test_drop_data_leaves_a_fraction_of_outputs_unsent(test_fmus):
         desc = dcpx.description_from_fmu(read_interface(test_fmus / "TestFrameSource.fmu"))
         master.register(desc.uuid)
         master.configure([], [(desc.by_name("y").vr, DataType.float64)], STEP_NS)
-        master.request(lambda s: StcRun(s, 1, State.CONFIGURED, 0))
+        master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=1, state_id=State.CONFIGURED, start_time=0))
         master.wait_state(State.SYNCHRONIZED)
         for _ in range(60):
-            master.request(lambda s: StcDoStep(s, 1, State.SYNCHRONIZED, STEP_NS))
+            master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=1, state_id=State.SYNCHRONIZED, steps=STEP_NS))
             master.wait_state(State.COMPUTED)
             master.stc(PduType.STC_send_outputs, State.COMPUTED, State.SYNCHRONIZED)
         master.inf_state()        # every DAT sent has arrived before this answer on loopback
@@ -282,14 +288,14 @@ def _serve(fmu):
 
 
 def _run_to_running(master):
-    master.request(lambda s: StcRun(s, master.slave_id, State.CONFIGURED, 0))
+    master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=master.slave_id, state_id=State.CONFIGURED, start_time=0))
     master.wait_state(State.SYNCHRONIZED)
-    master.request(lambda s: StcRun(s, master.slave_id, State.SYNCHRONIZED, 0))
+    master.request(lambda s: Pdu(PduType.STC_run, pdu_seq_id=s, receiver=master.slave_id, state_id=State.SYNCHRONIZED, start_time=0))
     master.wait_state(State.RUNNING)
 
 
 def _step(master, steps):
-    master.request(lambda s: StcDoStep(s, master.slave_id, State.RUNNING, steps))
+    master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=master.slave_id, state_id=State.RUNNING, steps=steps))
     master.wait_state(State.COMPUTED)
     master.stc(PduType.STC_send_outputs, State.COMPUTED, State.RUNNING)
 
@@ -338,10 +344,10 @@ def test_a_failing_fmu_puts_the_slave_in_error_and_reset_starts_afresh(test_fmus
         _run_to_running(master)
         _step(master, 10_000_000)
         _step(master, 10_000_000)
-        master.request(lambda s: StcDoStep(s, master.slave_id, State.RUNNING, 10_000_000))
+        master.request(lambda s: Pdu(PduType.STC_do_step, pdu_seq_id=s, receiver=master.slave_id, state_id=State.RUNNING, steps=10_000_000))
         master.wait_state(State.ERROR_HANDLING)
         master.wait_state(State.ERROR_RESOLVED)
-        rsp = master.request(lambda s: Basic(PduType.INF_error, s, master.slave_id), expect_ack=False)
+        rsp = master.request(lambda s: Pdu(PduType.INF_error, pdu_seq_id=s, receiver=master.slave_id), expect_ack=False)
         assert rsp.error_code == ErrorCode.PROTOCOL_ERROR_GENERIC
         master.stc(PduType.STC_reset, State.ERROR_RESOLVED, State.CONFIGURATION)
         master.data.clear()

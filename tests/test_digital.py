@@ -7,12 +7,12 @@ from scipy import signal
 
 from fmus.signalling import cab_systems, aspects as sig
 from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.signalling.digital import Acceptor, Message, stated_latency_s
+from fmus.signalling.digital_messages import Acceptor, Message, stated_latency_s
 from fmus.errors import FmuInputError
-from fmus.loco_receiver import digital as rxd
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver import digital_receiver as rxd
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 from helpers import read_csv, railcosim
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
 

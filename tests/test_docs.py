@@ -5,11 +5,20 @@ docs/_pending_*.md notes for the integrator) must not read as a
 development log or point at files a repository reader cannot open; every relative link to a
 docs page from docs/ or README.md must name an existing file and, with #anchor, an existing
 heading (GitHub's slug rules). Each failure lists file:line for every offence.
+
+History has one place, docs/changelog.md: README.md and the other pages name none of this
+repository's commits (a commit of another repository, cited as a source, is fine), number no
+"item N" of a list of changes, and carry no date (docs/sources.md may: a source's
+publication date is part of its citation).
 """
 
 import re
+import shutil
+import subprocess
 import unicodedata
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -24,6 +33,16 @@ FORBIDDEN = [
     (re.compile(r"\b(?![IVXLC]+\b)[A-Z]{2,}\s*§"), "a '§' of a document that is not a docs/ page"),
     (re.compile(r"\.\./"), "a path out of the repository ('../')"),
 ]
+
+# A word that may be an abbreviated or full commit id: 7 to 40 lower-case hex digits with at
+# least one digit and one letter (not a decimal figure, not a word such as "defaced").
+HEX_WORD = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b")
+# An entry of a numbered list of changes: "item 23", "items 19 to 22".
+ITEM_NUMBER = re.compile(r"\bitems?\s+\d+", re.IGNORECASE)
+# A calendar date, 2026-11-24.
+DATE = re.compile(r"\b\d{4}-[01]\d-[0-3]\d\b")
+# Pages that may carry a date: the changelog is not a user page; sources.md cites publications.
+DATED_PAGES = ("sources.md",)
 
 # A Markdown file named anywhere on a page (name.md, with or without a folder).
 MD_NAME = re.compile(r"(?<![\w/.-])(?P<name>(?:[\w.-]+/)*[\w-]+\.md)\b")
@@ -97,6 +116,86 @@ def test_user_pages_are_not_a_development_history():
     assert not offences, "history or non-repository wording in docs (move it to docs/changelog.md):\n" + "\n".join(
         offences
     )
+
+
+def history_pages():
+    """README.md and every published docs page but the changelog: the pages that describe the
+    current state only."""
+    return user_pages() + [ROOT / "README.md"]
+
+
+def _matches(pages, pattern):
+    """(page, line number, matched text, line) of every match of pattern on the pages."""
+    for page in pages:
+        for number, line in enumerate(page.read_text(encoding="utf-8").splitlines(), 1):
+            for match in pattern.finditer(line):
+                yield page, number, match.group(0), line
+
+
+def _git_history_or_why_not():
+    """None when ROOT is a git checkout with commits, else why the commit check cannot run."""
+    if shutil.which("git") is None:
+        return "git is not installed"
+    probe = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", "--quiet", "HEAD^{commit}"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        return f"{ROOT} is not a git checkout with history (an sdist, an export)"
+    return None
+
+
+def commits_of_this_repository(words):
+    """The words among ``words`` that name a commit of this repository (``git cat-file -e
+    WORD^{commit}`` would succeed; an abbreviation that several objects share counts too)."""
+    words = sorted(set(words))
+    if not words:
+        return set()
+    checked = subprocess.run(["git", "-C", str(ROOT), "cat-file", "--batch-check"],
+                             input="".join(f"{word}^{{commit}}\n" for word in words),
+                             capture_output=True, text=True, check=True)
+    answers = checked.stdout.splitlines()
+    assert len(answers) == len(words), checked.stdout
+    return {word for word, answer in zip(words, answers)
+            if not answer.endswith(" missing")}
+
+
+def test_pages_name_no_commit_of_this_repository():
+    why_not = _git_history_or_why_not()
+    if why_not:
+        pytest.skip(f"commit ids on the pages not checked: {why_not}")
+    found = list(_matches(history_pages(), HEX_WORD))
+    ours = commits_of_this_repository(word for _, _, word, _ in found)
+    offences = [f"{_where(page, number)}: commit {word}: {line.strip()[:100]}"
+                for page, number, word, line in found if word in ours]
+    assert not offences, "commits of this repository named outside docs/changelog.md (say what is, " \
+                         "and put what changed in the changelog):\n" + "\n".join(offences)
+
+
+def test_pages_number_no_items_of_a_list_of_changes():
+    offences = [f"{_where(page, number)}: '{text}': {line.strip()[:100]}"
+                for page, number, text, line in _matches(history_pages(), ITEM_NUMBER)]
+    assert not offences, "'item N' outside docs/changelog.md (name the thing itself, or link its " \
+                         "section):\n" + "\n".join(offences)
+
+
+def test_pages_carry_no_dates():
+    pages = [page for page in history_pages() if page.name not in DATED_PAGES or page.parent != DOCS]
+    offences = [f"{_where(page, number)}: date {text}: {line.strip()[:100]}"
+                for page, number, text, line in _matches(pages, DATE)]
+    assert not offences, "dates outside docs/changelog.md and docs/sources.md (history goes in the " \
+                         "changelog):\n" + "\n".join(offences)
+
+
+def test_a_commit_id_is_told_from_other_hex_words():
+    assert HEX_WORD.findall("before 133eb79, after 9faf085's counts") == ["133eb79", "9faf085"]
+    assert HEX_WORD.findall("1100000 frames, a defaced cafe, 0x01, 8a3") == []
+    why_not = _git_history_or_why_not()
+    if why_not:
+        pytest.skip(f"commit ids not checked: {why_not}")
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
+                          check=True).stdout.strip()
+    # this repository's commit, full or abbreviated, is ours; DCPLib's commit (docs/hil.md) is not
+    assert commits_of_this_repository([head, head[:9], "39e16f034ab0efd51afea5df295f5e83680c6e8c"]) == {
+        head, head[:9]}
 
 
 def test_every_markdown_file_a_page_names_is_in_the_repository():

@@ -6,7 +6,7 @@ import pytest
 
 from fmus.signalling import dqpsk
 from fmus.signalling import fire_dqpsk as fd
-from fmus.signalling.digital import Acceptor
+from fmus.signalling.digital_messages import Acceptor
 
 FS = 4000.0
 FRAME_S = fd.FRAME_SYMBOLS / fd.BAUD

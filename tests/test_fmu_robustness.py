@@ -218,7 +218,7 @@ def test_without_the_table_the_facade_answers_ok_and_refuses_the_next_step(produ
     message, nothing read, the next doStep refused once, then the instance goes on."""
     import zipfile
 
-    from orchestrator.build.forwarder import VALUE_REFERENCES_MEMBER
+    from orchestrator.packaging.forwarder import VALUE_REFERENCES_MEMBER
 
     stripped = tmp_path / "Traction.fmu"
     with zipfile.ZipFile(_fmu(product_fmus, "Traction")) as source, zipfile.ZipFile(stripped, "w") as target:
@@ -352,6 +352,28 @@ def test_ato_answers_an_impossible_measurement_with_the_emergency_brake(port, va
     assert all(math.isfinite(float(io[name])) for name in ("command", "v_ref", "v_ceiling", "v_atp"))
     [message] = [m.msg for m in slave.log_queue]
     assert f"{port} = " in message and "emergency brake" in message
+
+
+def test_ato_refuses_an_input_it_does_not_read_outside_its_declared_range(product_fmus):
+    """The ATP judges the aspect only with a cab signal, the digital speeds only with a digital
+    one (the test above): an input the ATO does not read in its mode is checked as any other.
+    cab_signal = off: aspect 99 (declared 0..4) refuses the step, which then goes on with a good
+    aspect (it was accepted unread); set before initialisation it fails exitInitializationMode;
+    ALSN: v_permitted = -5 m/s (declared ≥ 0) refuses the step."""
+    fmu = _fmu(product_fmus, "AtoController")
+    off = [["set", "cab_signal", "off"]] + START + [["set", "x", 400.0], ["step", 0.0, 0.5],
+                                                    ["set", "aspect", 99], ["step", 0.5, 0.5],
+                                                    ["set", "aspect", 4], ["step", 0.5, 0.5]]
+    at_init = [["set", "cab_signal", "off"], ["set", "aspect", 99]] + START
+    digital_under_alsn = START + [["set", "x", 400.0], ["set", "v_permitted", -5.0], ["step", 0.0, 0.5]]
+    off_session, init_session, alsn_session = _drive(fmu, [off, at_init, digital_under_alsn])
+    assert [op["status"] for op in off_session if op["op"][0] == "step"] == [OK, DISCARD, OK]
+    refused = [op for op in off_session if op["status"] == DISCARD][0]
+    assert "input aspect = 99 is above its maximum 4" in " ".join(refused["log"])
+    assert init_session[-1]["op"] == ["exit"] and init_session[-1]["status"] == FATAL
+    assert "input aspect = 99 is above its maximum 4" in " ".join(init_session[-1]["log"])
+    assert alsn_session[-1]["status"] == DISCARD
+    assert "input v_permitted = -5 is below its minimum 0" in " ".join(alsn_session[-1]["log"])
 
 
 def test_ato_holds_the_emergency_brake_until_standstill_after_a_fault():

@@ -1,4 +1,4 @@
-"""The forwarding binary at build time (orchestrator/build/forwarder/) and the FMUs without it:
+"""The forwarding binary at build time (orchestrator/packaging/forwarder/) and the FMUs without it:
 the fallback without a C compiler, a Python without a shared libpython, foreign (plain
 pythonfmu) FMUs in our orchestrator, an FMU without a binary for this platform."""
 import dataclasses
@@ -10,8 +10,8 @@ from conftest import FIXTURE_PACKAGE
 from fmus.sizes import BuildConfig
 from helpers import ComponentSpec, ConnectionSpec, railcosim, write_ssd
 from orchestrator import hostenv
-from orchestrator.build import forwarder as fwd
-from orchestrator.build.builder import UnitSpec, build_unit, content_hash
+from orchestrator.packaging import forwarder as fwd
+from orchestrator.packaging.builder import UnitSpec, build_unit, content_hash
 from orchestrator.errors import UserError
 
 COUNTER = UnitSpec("testcounter", "rcs_testfmus.facade", "TestCounter")
@@ -129,7 +129,7 @@ def test_the_value_reference_table_rules():
 
 
 def test_the_built_table_is_the_facades_value_reference_table(product_fmus):
-    """What the forwarder reads is what FrameSlave.value_reference_table() gives: every reference
+    """What the forwarder reads is what FacadeSlave.value_reference_table() gives: every reference
     per type; settable exactly the parameters and inputs."""
     from fmus.loco_receiver.facade import LocoReceiver
     from fmus.traction.facade import Traction

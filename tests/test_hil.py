@@ -1,4 +1,4 @@
-"""The orchestrator as DCP master (orchestrator/hil.py): a component swapped for a remote DCP
+"""The orchestrator as DCP master (orchestrator/dcp/master.py): a component swapped for a remote DCP
 slave gives the run it gives with its FMU; losses are counted and put the outputs at their
 fail-safe values; a slave that is not there ends the run in one line, exit 2.
 
@@ -19,8 +19,9 @@ from helpers import REPO, ComponentSpec, ConnectionSpec, cli_environment, railco
 from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.dcp import pdu as P
 from orchestrator.errors import UserError
-from orchestrator.hil import parse_swap
-from orchestrator.run import RunOptions, check_system, run_system
+from orchestrator.dcp.master import parse_swap
+from orchestrator.run import RunOptions, run_system
+from orchestrator.validation import problems_of
 
 DCPX = """<?xml version="1.0" encoding="UTF-8"?>
 <dcpSlaveDescription dcpMajorVersion="1" dcpMinorVersion="0" dcpSlaveName="counter"
@@ -82,7 +83,7 @@ class CounterSlave(threading.Thread):
                 for (_, vr), value in zip(sorted(self.inputs.items()), values):
                     self.values[vr] = float(value[0])
                 continue
-            self.sock.sendto(P.RspAck(1, message.pdu_seq_id).encode(), master)
+            self.sock.sendto(P.Pdu(P.PduType.RSP_ack, resp_seq_id=message.pdu_seq_id, sender=1).encode(), master)
             if kind == P.PduType.CFG_time_res:
                 self.resolution = message.numerator / message.denominator
             elif kind == P.PduType.CFG_input:
@@ -124,7 +125,7 @@ class CounterSlave(threading.Thread):
         for state in states:
             self.state = state
             self.states_seen.append(state)
-            self.sock.sendto(P.NtfStateChanged(1, state).encode(), master)
+            self.sock.sendto(P.Pdu(P.PduType.NTF_state_changed, sender=1, state_id=state).encode(), master)
 
     def _send_outputs(self):
         if self.state == P.State.SENDING_D and self.random.random() < self.drop:
@@ -133,11 +134,11 @@ class CounterSlave(threading.Thread):
         order = [vr for _, vr in sorted(self.outputs.items())]
         payload = P.PayloadCodec([(self.types[vr], 1) for vr in order]).encode([self.values[vr] for vr in order])
         if self.noise and self.seq > 2:
-            stale = P.DatInputOutput(self.seq - 2, 2, payload).encode()    # out of sequence: older
+            stale = P.Pdu(P.PduType.DAT_input_output, pdu_seq_id=self.seq - 2, data_id=2, payload=payload).encode()    # out of sequence: older
             for junk in (b"\xff\x00", stale[:5], bytes([0xF0]) + bytes(60000), stale, b"", bytes([0xB0, 1])):
                 self.sock.sendto(junk, self.target)
         self.seq = P.next_seq(self.seq)
-        self.sock.sendto(P.DatInputOutput(self.seq, 2, payload).encode(), self.target)
+        self.sock.sendto(P.Pdu(P.PduType.DAT_input_output, pdu_seq_id=self.seq, data_id=2, payload=payload).encode(), self.target)
 
 
 @pytest.fixture
@@ -212,6 +213,10 @@ def test_an_unreachable_slave_ends_the_run_in_one_line_with_exit_2(tmp_path, tes
                              "--swap", f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}&timeout_s=0.5")
     assert code == 2
     assert err.count("\n") == 1 and "dut" in err and f"dcp://127.0.0.1:{slave.port}" in err and "answer" in err
+    # paced, the same failure says nothing of a pace it never had to keep
+    code, _, err = railcosim("run", system, "--no-build", "--output", tmp_path / "paced", "--real-time",
+                             "--swap", f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}&timeout_s=0.5")
+    assert code == 2 and err.count("\n") == 1 and "pace" not in err
 
 
 @pytest.mark.parametrize("text, complaint", [
@@ -364,11 +369,95 @@ def test_validate_checks_a_declared_dcp_slave_without_contacting_it(tmp_path, te
     dcpx.write_text(DCPX.format(port=port))
     try:
         system = _declared_system(tmp_path, test_fmus, dcpx, port)
-        assert check_system(system, RunOptions()) == []
+        assert problems_of(system, RunOptions()) == []
         with pytest.raises(socket.timeout):
             listener.recvfrom(2048)                   # nothing was sent to the slave
         dcpx.write_text(DCPX.format(port=port).replace('name="u"', 'name="w"'))
-        problems = check_system(system, RunOptions())
+        problems = problems_of(system, RunOptions())
         assert len(problems) == 1 and "u" in problems[0] and "dut" in problems[0], problems
     finally:
         listener.close()
+
+
+# ---- inputs set on a slave, and soft real time --------------------------------------------------
+def _sine_emulator(tmp_path, test_fmus, *options):
+    """``railcosim dcp-slave TestSine.fmu`` (y = sin(k + a)) in its own process; → (process, --swap text)."""
+    dcpx = tmp_path / f"sine_{len(list(tmp_path.glob('sine_*.dcpx')))}.dcpx"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "orchestrator", "dcp-slave", str(test_fmus / "TestSine.fmu"), "--port", "0",
+         "--dcpx-out", str(dcpx), *options],
+        cwd=REPO, env=cli_environment(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = process.stdout.readline()
+    assert line.startswith("LISTENING"), line
+    return process, f"ex=dcp://{line.split()[1]}?dcpx={dcpx}"
+
+
+def _sine_system(tmp_path, test_fmus):
+    system = tmp_path / "sine"
+    write_ssd(system, "sine", [ComponentSpec("ex", str(test_fmus / "TestSine.fmu"), 0.01)], [])
+    return system
+
+
+def _finish(process):
+    try:
+        process.wait(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    return process.communicate()[1]
+
+
+def test_an_input_set_on_a_dcp_slave_travels_as_data(tmp_path, test_fmus):
+    """`--set ex.a=0.25` on an input no connection feeds: sent in every inputs PDU (DCP's
+    CFG_parameter is for parameters only, and a reference slave refuses it for an input), so
+    the swapped run is the FMU's own run, bit for bit."""
+    system = _sine_system(tmp_path, test_fmus)
+    run_system(system, RunOptions(output_dir=tmp_path / "fmu", stop_time=1.0, overrides={"ex.a": "0.25"}))
+    process, swap = _sine_emulator(tmp_path, test_fmus, "--quiet")
+    result = run_system(system, RunOptions(output_dir=tmp_path / "dcp", stop_time=1.0, overrides={"ex.a": "0.25"},
+                                           swaps={"ex": parse_swap(swap)}))
+    _finish(process)
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    header, data = read_csv(tmp_path / "dcp" / "results.csv")
+    assert data[1, header.index("ex.y")] == np.sin(9 + 0.25)          # the 10th step, a = 0.25
+    assert result.summary["hil"]["ex"]["lost"] == 0
+
+
+def _slave_counts(stderr: str) -> dict:
+    """The counts of the emulator's last line (``… DAT out N (dropped D) …``)."""
+    line = stderr.strip().splitlines()[-1]
+    words = line.replace(",", "").replace("(", "").replace(")", "").split()
+    return {"sent": int(words[words.index("out") + 1]), "dropped": int(words[words.index("dropped") + 1])}
+
+
+def test_soft_real_time_on_loopback_loses_nothing_over_a_minute(tmp_path, test_fmus):
+    """A soft-real-time slave on loopback for 60 s, the master paced to the wall clock: every
+    output arrives in time, so nothing is counted lost and no step falls back to the fail-safe
+    values; the age of the outputs used is never negative."""
+    process, swap = _sine_emulator(tmp_path, test_fmus, "--real-time")
+    result = run_system(_sine_system(tmp_path, test_fmus),
+                        RunOptions(output_dir=tmp_path / "srt", stop_time=60.0, overrides={"ex.a": "0.25"},
+                                   swaps={"ex": parse_swap(swap)}))
+    counts = _slave_counts(_finish(process))
+    hil = result.summary["hil"]["ex"]
+    assert hil["mode"] == "SRT" and hil["exchanges"] == 6000
+    assert hil["lost"] == 0 and hil["fail_safe_steps"] == 0 and hil["late"] == 0
+    assert counts["dropped"] == 0
+    assert 0.0 <= hil["rtt_median_ms"] <= hil["rtt_p99_ms"] <= hil["rtt_max_ms"] < hil["deadline_ms"]
+
+
+def test_soft_real_time_counts_every_output_the_slave_did_not_send(tmp_path, test_fmus):
+    """Outputs the slave leaves unsent (--drop-data) are all counted lost, from the gaps in their
+    sequence ids; a single missing period leaves outputs younger than the deadline, so no step
+    needs the fail-safe values."""
+    process, swap = _sine_emulator(tmp_path, test_fmus, "--real-time", "--drop-data", "0.02", "--seed", "5")
+    result = run_system(_sine_system(tmp_path, test_fmus),
+                        RunOptions(output_dir=tmp_path / "drop", stop_time=10.0, overrides={"ex.a": "0.25"},
+                                   swaps={"ex": parse_swap(swap)}))
+    counts = _slave_counts(_finish(process))
+    hil = result.summary["hil"]["ex"]
+    assert counts["dropped"] >= 5
+    # every drop is seen as a gap, but one in the last period before STC_stop has no later
+    # output to show it
+    assert counts["dropped"] - 1 <= hil["lost"] <= counts["dropped"]
+    assert hil["fail_safe_steps"] == 0

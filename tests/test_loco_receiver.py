@@ -10,14 +10,14 @@ from benchmarks.harness import latency as lat
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
-from fmus.signalling.digital import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.signalling.digital_messages import JOINT_BRIDGE_MIN_S, TIMEOUT_MARGIN_S, TIMEOUT_MESSAGES
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.signalling import aspects as sig
 from fmus.signalling import cab_systems
 from fmus.signalling.alsn import STATED_LATENCY_S
 from fmus.wayside_coder.core import CoderSettings
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
 CYCLE_S = {"KPT-5": 1.60, "KPT-7": 1.86}
 PHASES = (0.0, 0.3, 0.55, 0.8)

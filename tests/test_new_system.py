@@ -32,9 +32,9 @@ def test_new_then_run_lists_the_custom_timetables_stops(tmp_path, product_fmus):
     stops = {s["station"]: s for s in train["stops"]}
     assert list(stops) == ["Halt", "South"]
     assert stops["Halt"]["reached"] and abs(stops["Halt"]["stop_error_m"]) < 1.0
-    assert not stops["South"]["reached"] and stops["South"]["scheduled_arrival_s"] == 420.0
+    assert not stops["South"]["reached"] and stops["South"]["scheduled_arrival_s"] == 460.0
     assert train["signals_passed_at_danger"] == 0
-    assert "South not reached (due 420 s)" in stdout
+    assert "South not reached (due 460 s)" in stdout
 
 
 def test_a_component_on_another_line_is_refused(tmp_path, product_fmus):

@@ -2,9 +2,10 @@
 
 The wheel is built from a copy of the source (setuptools leaves build/lib and *.egg-info
 behind, and a stale build/lib would leak into the next wheel), with pip's usual isolated build.
-It is installed into a fresh virtual environment that sees this interpreter's site-packages
-(numpy, scipy … are not downloaded again) and used from an empty folder, so nothing can be
-imported from the checkout. About 25 s, most of it the five FMU builds.
+It is installed into a fresh virtual environment that sees the site-packages of the environment
+running the tests (numpy, scipy … are not downloaded again), whether that is a virtual
+environment or a system Python, and used from an empty folder, so nothing can be imported from
+the checkout. About 25 s, most of it the five FMU builds.
 """
 import json
 import os
@@ -53,15 +54,37 @@ def test_wheel_holds_the_two_packages_with_all_their_data(wheel):
     assert not missing, f"not in the wheel: {missing}"
     for data in ("fmus/data/schemas/line.schema.json", "fmus/data/shipped/default_line.json",
                  "fmus/signalling/alsn_codes.json", "fmus/traction/contract.json",
-                 "orchestrator/build/builder.py"):
+                 "orchestrator/packaging/builder.py"):
         assert data in names
+
+
+def _running_site_packages():
+    """The folders the running interpreter imports installed packages from: a virtual
+    environment's own site-packages (and its base's, with --system-site-packages), a system
+    Python's, the user's."""
+    return [path for path in dict.fromkeys(sys.path) if Path(path).name in ("site-packages", "dist-packages")
+            and Path(path).is_dir()]
+
+
+def _fresh_venv_seeing_this_environment(venv: Path) -> Path:
+    """A virtual environment whose own site-packages come first, then the running environment's.
+
+    `python -m venv --system-site-packages` from a virtual environment's Python sees the base
+    interpreter's site-packages, not the environment's (lxml and the rest missing): the running
+    environment's folders are named in a .pth file instead. A .pth line only adds its folder to
+    sys.path; the .pth files inside it (an editable install of this checkout) are not run, so
+    the checkout stays out of reach."""
+    _run([sys.executable, "-m", "venv", "--without-pip", venv], cwd=venv.parent)
+    python = venv / "bin" / "python"
+    own = _run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd=venv.parent).strip()
+    (Path(own) / "_running_environment.pth").write_text("".join(f"{path}\n" for path in _running_site_packages()))
+    return python
 
 
 def test_installed_wheel_builds_and_runs_a_shipped_system(wheel, tmp_path):
     venv, work = tmp_path / "venv", tmp_path / "work"
     work.mkdir()
-    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", venv], cwd=tmp_path)
-    python = venv / "bin" / "python"
+    python = _fresh_venv_seeing_this_environment(venv)
     _run([sys.executable, "-m", "pip", "--python", python, "install", "--quiet", "--no-deps", "--no-index",
           wheel], cwd=tmp_path)
     env = {key: value for key, value in os.environ.items() if key not in ("PYTHONPATH", "PYTHONHOME")}

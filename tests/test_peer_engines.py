@@ -25,7 +25,7 @@ OWN_DATA_FILES = ("following", "same_block", "joints_at_speed", "freight_ac", "a
 @pytest.fixture(scope="module")
 def packed(product_fmus, tmp_path_factory):
     """The shipped systems packed as .ssp archives (what `railcosim build` writes to build/)."""
-    from orchestrator.build.packing import pack_systems
+    from orchestrator.packaging.packing import pack_systems
 
     dest = tmp_path_factory.mktemp("ssp")
     pack_systems(SSP_ROOT, product_fmus, dest)
@@ -89,7 +89,7 @@ def test_libcosim_reproduces_railcosim_jacobi(tmp_path, packed, system, stop_s):
 def test_libcosim_loads_and_steps_the_other_shipped_systems(tmp_path, packed, system):
     """Every other shipped system loads and steps in libcosim as written (ato_only and free_run run
     in full above), those with data files of their own too: the packed FMUs carry the system's
-    data files in their resources (orchestrator/build/packing.py)."""
+    data files in their resources (orchestrator/packaging/packing.py)."""
     receiver = "rx1" if "following" in system or system == "same_block" else "rx"
     code, out, err = _peer("libcosim", packed / f"{system}.ssp", 1.0, 0.5, tmp_path / "libcosim.csv",
                            [f"{receiver}.level"])

@@ -45,6 +45,15 @@ def test_trains_apart_are_valid_and_a_wrong_rail_train_length_is_a_warning(tmp_p
     assert "warning: rail.train_length[2] = 400 m, but train 'follower' on that slot is 388 m long" in stderr
 
 
+def test_a_rail_line_given_another_trains_wheelsets_is_a_warning(tmp_path, product_fmus):
+    code, stdout, stderr = railcosim("validate", _two_trains(tmp_path, product_fmus, leader_x0_m=900.0,
+                                                             rail={"rolling_stock_file[1]": str(DATA / "emu_er2.json"),
+                                                                   "train_length[1]": 388.0}))
+    assert code == 0 and "valid" in stdout, stderr
+    assert ("warning: rail.rolling_stock_file[1] is emu_er2.json, but train 'leader' on that slot runs on the "
+            "bundled default passenger_chs7.json") in stderr
+
+
 def test_a_train_whose_tail_is_before_the_line_start_is_refused(tmp_path, product_fmus):
     folder = str(product_fmus)
     components, connections = train_and_ato(train_parameters=FREIGHT, ato_parameters={"cab_signal": "ALSN", **FREIGHT},

@@ -48,7 +48,7 @@ def test_code_current_under_the_first_axle_matches_the_two_port_solution(x_m):
     core = _steady_carrier_core(transformer_ratio=1.0)
     _, _, axle = _run(core, 0.6, lambda t: x_m, 0.0, sections=[3])
     measured = axle[-20:].mean() * np.sqrt(2.0)          # rms over whole periods → amplitude
-    expected = cascade_shunt_current(core.circuits[3], x_m, core.settings.train_length_m[0])
+    expected = cascade_shunt_current(core.circuits[3], x_m, wheelsets_m=core.settings.wheelset_offsets_m[0])
     assert measured == pytest.approx(expected, rel=0.01)
 
 
@@ -130,7 +130,7 @@ def test_als_mode_code_current_per_carrier(line_name, carrier_hz, norm_a):
     from fmus.data.loader import DEFAULT_LINE
     line = load_line(str(DEFAULT_LINE).replace("default_line.json", line_name))
     core = RailLineCore(line, 8, 2, N, RailSettings(carrier_hz=carrier_hz))
-    assert core.bank.carriers[0] == carrier_hz
+    assert core.bank.geometry.carriers[0] == carrier_hz
     for ballast in (1.0, 2.5, 50.0):
         assert min(core.minimum_code_current(k, ballast) for k in range(8)) >= norm_a, ballast
 
@@ -162,7 +162,9 @@ def test_joint_crossing_null_and_weak_zones_scale_with_speed(speed_kmh):
     strong = np.median(env[(coil > joint - 10) & (coil < joint - 3)])
     weak = np.median(env[(coil > joint + 4) & (coil < joint + 10)])
     assert strong > 5 * weak                     # feed end of one section vs entry end of the next
-    quiet = (coil > joint - 3) & (coil < joint + 4) & (env < 0.2 * weak)
+    # quiet: well below the weak zone's level (the unshunted entry end: ≈ 0.19 of the shunted
+    # level beyond, the rail current at the joint as the wheelset chain gives it)
+    quiet = (coil > joint - 3) & (coil < joint + 4) & (env < 0.15 * weak)
     null_m = quiet.sum() / FS * v
     # the ≈ 1 m null zone (docs/sources.md#interference-at-insulated-joints), smeared by the coil and by the envelope (one carrier period)
     assert 0.5 <= null_m <= 1.5
@@ -210,7 +212,7 @@ def _keyed_run(core, seconds, x0_m, v_mps, ballast_at=None):
         emf.append(out.e_coil[0].copy())
         axle.append(out.i_axle[0])
         occupied.append(out.occupied.copy())
-        parked.update(k for k, at in enumerate(core.bank._parked_at) if at is not None)
+        parked.update(k for k, at in enumerate(core.bank.parking.parked_at) if at is not None)
     return np.concatenate(emf), np.array(axle), np.array(occupied), parked
 
 
@@ -221,8 +223,8 @@ def test_sections_without_a_train_parked_and_caught_up_give_the_same_currents(mo
     every frame (docs/rail_line.md, performance)."""
     line = load_line()
     parked_core = RailLineCore(line, 8, 2, N, RailSettings())
-    from fmus.rail_line import circuit_bank
-    monkeypatch.setattr(circuit_bank, "_HISTORY_FLOATS", 0)       # no history: nothing parked
+    from fmus.rail_line import parking
+    monkeypatch.setattr(parking, "HISTORY_FLOATS", 0)       # no history: nothing parked
     live_core = RailLineCore(line, 8, 2, N, RailSettings())
     run = dict(seconds=9.0, x0_m=2300.0, v_mps=40.0, ballast_at=(3.0, 4.5, 5))
     emf, axle, occupied, parked = _keyed_run(parked_core, **run)
@@ -238,18 +240,18 @@ def test_sections_of_one_design_share_their_network_models_with_the_same_results
     """Sections alike relative to their start (the default line's first four) share their
     network models: a train entering section 2 meets the configurations it had at the start of
     section 1 again, and gets the very same numbers as with a model made per section."""
-    from fmus.rail_line import circuit_bank
+    from fmus.rail_line import network_models
 
     made = []
-    discretise = circuit_bank.discretise
-    monkeypatch.setattr(circuit_bank, "discretise", lambda *args: made.append(1) or discretise(*args))
+    discretise = network_models.discretise
+    monkeypatch.setattr(network_models, "discretise", lambda *args: made.append(1) or discretise(*args))
     run = dict(seconds=6.0, x0_m=2450.0, v_mps=50.0)
 
     def models_made(per_section):
         if per_section:
-            fault_key = circuit_bank.TrackCircuitBank._fault_key
-            monkeypatch.setattr(circuit_bank.TrackCircuitBank, "_fault_key",
-                                lambda bank, k, faults: (k, fault_key(bank, k, faults)))
+            fault_key = network_models.NetworkModels.fault_key
+            monkeypatch.setattr(network_models.NetworkModels, "fault_key",
+                                lambda models, k, faults: (k, fault_key(models, k, faults)))
         made.clear()
         core = RailLineCore(load_line(), 8, 2, N, RailSettings())
         core.step(0.0, np.zeros((8, N)), np.array([-1000.0, -1000.0]), np.zeros(2), np.zeros(2))

@@ -62,17 +62,72 @@ def test_rear_train_in_the_same_circuit_gets_no_permissive_code():
     assert alone[0][-1] == GREEN                         # the rear train's receiver works
 
 
+LIGHT_ENGINE = np.array([0.0, 2.0, 4.0, 8.66, 10.66, 12.66])     # ЧМЭ3: two three-axle bogies
+
+
+def _steady(core, seconds, heads, section=3):
+    """A steady 1 V 50 Hz carrier into one section, the trains standing: i_axle per train (A rms)."""
+    for frame in range(int(round(seconds * FS / N))):
+        t = frame * N / FS
+        u = np.zeros((8, N))
+        u[section] = np.sin(2 * np.pi * 50.0 * (t + np.arange(N) / FS))
+        out = core.step(t, u, np.array(heads), np.zeros(2), np.zeros(2))
+    return out.i_axle.copy()
+
+
+def test_the_code_left_behind_a_light_engine_is_what_its_wheelsets_leave():
+    """A light engine of two bogies (six wheelsets over 12.7 m) at 9000 m, a 388 m train 100 m
+    behind it in the same circuit: the rear train's coils get the current the wheelset chain
+    leaves past the engine's six axles (docs/rail_line.md, wheelsets at their axles), not the
+    far larger one that passed the single shunt the engine made when it was lumped onto one
+    node; the relay-end level is the chain's too."""
+    passenger = RailSettings().train_length_m[0]
+    core = _core(train_length_m=(17.22, passenger),
+                 wheelset_offsets_m=(LIGHT_ENGINE, load_stock_wheelsets()))
+    heads = [9000.0, 9000.0 - 12.66 - 100.0]
+    axle = _steady(core, 0.6, heads) * np.sqrt(2.0)                 # amplitudes per volt of code
+    chain, _, relay = core.bank.wheelset_solution(3, heads)
+    assert axle == pytest.approx([chain[0], chain[1]], rel=2e-3)
+    # the lumped network: the engine one 0.06 Ω shunt at one node
+    assert core.bank.geometry.node_at(3, 9000.0 - 17.22) == core.bank.geometry.node_at(3, 9000.0)
+    lumped = _lumped_current(core, heads)
+    assert chain[1] < 0.5 * lumped                  # what the engine's wheelsets leave: less than half
+    assert core.bank.relays.levels[3] == pytest.approx(relay / core.settings.transformer_ratio
+                                                        / core.bank.calibration.reference[3])
+
+
+def load_stock_wheelsets():
+    from fmus.data.loader import load_rolling_stock
+    return load_rolling_stock(DEFAULT_LINE.parent / "passenger_chs7.json").wheelset_offsets_m
+
+
+def _lumped_current(core, heads):
+    """The rear train's current as the lumped network alone gives it (one shunt per node)."""
+    from fmus.rail_line.network import PhasorFamily
+    configs, rows = core.bank.configuration(heads)
+    shunts, head_nodes = configs[3]
+    circuit = core.circuits[3]
+    net = circuit.network(None, Faults(), core.settings.transformer_ratio, 50.0)
+    family = PhasorFamily(net, 2 * np.pi * 50.0, [1.0])
+    nodes = [net.node_index[f"n{n}"] for n in shunts]
+    volts = family.free - family.impedance[:, nodes] @ np.linalg.solve(
+        np.eye(len(nodes)) * 0.06 + family.impedance[np.ix_(nodes, nodes)], family.free[nodes])
+    node = head_nodes[rows[3][1]]
+    a, b = net.node_index[f"n{node}"], net.node_index[f"n{node + 1}"]
+    return abs((volts[a] - volts[b]) / family.z_branch[node])
+
+
 def test_every_train_shunts_its_whole_length():
     """A 400 m train with its head 10 m before the feed end of section 4: every node it covers
     holds a shunt; the old single front-most shunt is gone."""
     core = _core()
     bank = core.bank
-    circuit = bank.circuits[3]
+    circuit = core.circuits[3]
     head = circuit.feed_m - 10.0
-    configs, _ = bank._configuration([head, OFF])
+    configs, _ = bank.configuration([head, OFF])
     shunts, heads = configs[3]
     assert heads == (circuit.segments,)
-    assert shunts == tuple(range(bank.node_at(3, head - 400.0), circuit.segments + 1))
+    assert shunts == tuple(range(bank.geometry.node_at(3, head - 400.0), circuit.segments + 1))
     assert len(shunts) >= 8
 
 
@@ -98,13 +153,13 @@ def test_standing_train_is_detected_anywhere_at_maximum_ballast_and_supply(path)
     line = load_line(path)
     core = _core(line)
     bank, s = core.bank, core.settings
-    for k, circuit in enumerate(bank.circuits):
+    for k, circuit in enumerate(core.circuits):
         positions = np.concatenate([circuit.nodes_m, [circuit.start_m + 1.0, circuit.end_m - 1.0]])
         for head in positions:
-            configs, _ = bank._configuration([float(head), OFF])
+            configs, _ = bank.configuration([float(head), OFF])
             for section, (shunts, _) in enumerate(configs):
                 if shunts:
-                    level = bank.relay_level(section, shunts, Faults(bank.ballast_max_ohm_km),
+                    level = bank.relay_level(section, shunts, Faults(bank.calibration.ballast_max_ohm_km),
                                              1.0 + s.supply_tolerance)
                     assert level < s.relay_drop_out, (k, head, section, level)
 
@@ -117,18 +172,18 @@ def test_calibration_modes_per_shipped_line(path):
     line = load_line(path)
     core = _core(line)
     bank, s = core.bank, core.settings
-    for k, circuit in enumerate(bank.circuits):
+    for k, circuit in enumerate(core.circuits):
         minimum = circuit.params.ballast_ohm_km
         assert minimum == line.sections[k].ballast_ohm_km        # the line file's, per section
         assert bank.relay_level(k, (), Faults(minimum), 1.0 - s.supply_tolerance) >= s.relay_pick_up
         for node in range(circuit.segments + 1):
-            level = bank.relay_level(k, (node,), Faults(bank.ballast_max_ohm_km), 1.0 + s.supply_tolerance)
+            level = bank.relay_level(k, (node,), Faults(bank.calibration.ballast_max_ohm_km), 1.0 + s.supply_tolerance)
             assert level * (1.0 + s.shunt_margin) <= s.relay_drop_out, (k, node)
-        for ballast in (minimum, bank.ballast_max_ohm_km):
+        for ballast in (minimum, bank.calibration.ballast_max_ohm_km):
             for broken in np.linspace(circuit.start_m + 5.0, circuit.feed_m - 5.0, 7):
                 level = bank.relay_level(k, (), Faults(ballast, float(broken)), 1.0 + s.supply_tolerance)
                 assert level < s.relay_drop_out, (k, ballast, broken)
-        calibration = bank.calibration[k]
+        calibration = bank.calibration.table[k]
         assert calibration.normal_level == pytest.approx(s.relay_pick_up)
         assert calibration.shunt_margin >= s.shunt_margin
 
@@ -179,7 +234,7 @@ def test_per_section_ballast_and_line_maximum_are_used(tmp_path):
         sections[5]["ballast_ohm_km"] = 2.0
     core = _core(load_line(_line_file(tmp_path, sections=drier, max_ballast_ohm_km=20.0)))
     assert core.circuits[5].params.ballast_ohm_km == 2.0 and core.circuits[4].params.ballast_ohm_km == 1.0
-    assert core.bank.calibration[5].ballast_max_ohm_km == 20.0
+    assert core.bank.calibration.table[5].ballast_max_ohm_km == 20.0
 
 
 # ---- initial state and overlapping trains ----------------------------------------------------
@@ -220,7 +275,7 @@ def test_calibration_table_in_docs_matches_the_model():
         path = SHIPPED_LINES[0 if name == "default_line" else 1 if name.startswith("default_line_ac") else 2]
         core = cores.setdefault(path, _core(load_line(path)))
         first = int(cells[1].strip().split("–")[0]) - 1
-        calibration = core.bank.calibration[first]
+        calibration = core.bank.calibration.table[first]
         assert float(cells[2]) == pytest.approx(calibration.length_m, abs=1)
         assert float(cells[4]) == pytest.approx(calibration.normal_level, abs=5e-4)
         assert float(cells[5].split("(")[0]) == pytest.approx(calibration.shunt_level, abs=5e-4)

@@ -425,7 +425,7 @@ def test_a_refused_ssp_leaves_no_extraction_folder(tmp_path, private_tmp, kind):
 
 def test_packing_replaces_the_archive_atomically(tmp_path, test_fmus):
     """A reader opening the .ssp while it is packed again and again always finds a whole zip."""
-    from orchestrator.build.packing import pack_system
+    from orchestrator.packaging.packing import pack_system
 
     folder = _pair(tmp_path, test_fmus)
     (folder / "big.bin").write_bytes(os.urandom(3_000_000))   # long enough writes to be caught mid-way

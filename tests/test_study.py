@@ -260,6 +260,10 @@ def test_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
     ('system = "ato_only"\nstop_time = -1\n', "field stop_time: -1 is less than or equal to the minimum of 0"),
     ('system = "ato_only"\n[grid]\n"train.x" = [1.0]\n', "field grid.train.x: train.x is an output"),
     ('system = "ato_only"\n[grid]\n"train.mass_scale" = ["heavy"]\n', "'heavy' is not a valid Real"),
+    # TOML's nan and inf are floats: refused when the file is read, named by their field
+    ('system = "ato_only"\n[grid]\n"train.mass_scale" = [1.0, nan]\n',
+     "field grid.train.mass_scale[1]: nan is not a finite number"),
+    ('system = "ato_only"\nstop_time = inf\n', "field stop_time: inf is not a finite number"),
 ])
 def test_bad_study_files_are_one_line_and_exit_2(product_fmus, tmp_path, capsys, text, message):
     study = _write(tmp_path, "s.toml", text)

@@ -228,7 +228,7 @@ def test_no_shipped_system_places_trains_overlapping_or_off_the_line():
 def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
     import zipfile
 
-    from orchestrator.build.packing import pack_systems
+    from orchestrator.packaging.packing import pack_systems
 
     names = {p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file()}
     assert {"free_run", "ato_only", "following", "faults", "joints_at_speed", "freight_ac", "als_en", "fire_dqpsk",

@@ -3,9 +3,12 @@
 A non-Python host (tests/host/fmi2_host.c, compiled here: what fmusim or an S-function does)
 runs every product FMU with nothing set in its environment (no LD_PRELOAD, PYTHONHOME or
 PYTHONPATH) and exits 0 every time, thanks to the forwarding binary of every built FMU
-(orchestrator/build/forwarder/); fmpy.simulate_fmu runs each FMU three times in one process.
+(orchestrator/packaging/forwarder/); fmpy.simulate_fmu runs each FMU three times in one process.
+fmpy, libcosim and the C host load, free and load again in one process with the first
+extraction removed, and a host calling on after fmi2Fatal gets fmi2Error, not a crash.
 """
 import ctypes
+import json
 import os
 import shutil
 import subprocess
@@ -17,7 +20,7 @@ import fmpy
 import pytest
 from fmpy import read_model_description
 
-from orchestrator.build.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
+from orchestrator.packaging.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
 
 HOST_SOURCE = Path(__file__).resolve().parent / "host" / "fmi2_host.c"
 PRODUCT = ("Traction", "AtoController", "WaysideCoder", "RailLine", "LocoReceiver")
@@ -205,3 +208,132 @@ def test_simulate_fmu_of_two_fmus_in_turn(product_fmus):
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-1500:]
     assert "distinct 2" in proc.stdout
+
+
+# ---- (e) load → free → load in one process, the first extraction removed -------------------------
+RELOAD_RUNNER = Path(__file__).resolve().parent / "host" / "reload_run.py"
+
+
+@pytest.fixture(scope="module")
+def packed(product_fmus, tmp_path_factory):
+    """The shipped systems packed as .ssp archives (what `railcosim build` writes to build/)."""
+    from orchestrator.analysis.systems import SSP_ROOT
+    from orchestrator.packaging.packing import pack_systems
+
+    dest = tmp_path_factory.mktemp("ssp")
+    pack_systems(SSP_ROOT, product_fmus, dest)
+    return dest
+
+
+def component_names(ssp: Path):
+    """The instance names a host gives a packed system's components (their SSD names)."""
+    from lxml import etree
+
+    with zipfile.ZipFile(ssp) as archive:
+        root = etree.fromstring(archive.read("SystemStructure.ssd"))
+    return sorted(c.get("name") for c in root.iter("{*}Component"))
+
+
+def reload_run(host, tasks, cwd):
+    """tests/host/reload_run.py in a process of its own, from an empty folder (fmpy and libcosim
+    extract into temporary folders and remove them)."""
+    proc = subprocess.run([sys.executable, str(RELOAD_RUNNER), host, *tasks], capture_output=True, text=True,
+                          timeout=600, cwd=cwd)
+    assert proc.returncode == 0, (proc.returncode, proc.stdout[-1000:], proc.stderr[-3000:])
+    *reached, claimed = proc.stdout.strip().splitlines()
+    return [float(line.rsplit("reached ", 1)[1].split()[0]) for line in reached], json.loads(claimed)
+
+
+@pytest.mark.parametrize("first, second", [
+    ("ssp,free_run,1,0.01", "ssp,ato_only,3,0.5"),      # two systems sharing the train and the ATO
+    ("ssp,ato_only,3,0.5", "ssp,ato_only,3,0.5"),       # the same one twice
+    ("ssp,ato_only,3,0.5", "ssp,als_en,1,0.01"),        # a signal-chain system second
+    ("drop,AtoController", "ssp,ato_only,3,0.5"),       # loaded and dropped before it ran
+], ids=["free_run-ato_only", "ato_only-twice", "ato_only-als_en", "dropped-ato_only"])
+def test_fmpy_loads_frees_and_loads_again(first, second, packed, product_fmus, tmp_path):
+    """fmpy extracts every FMU into a temporary folder and removes it after freeing the instance:
+    the second system runs to its stop time, and the forwarding binary of each of its instances
+    still claims the direct value route (from the registry of the package imported for it)."""
+    def task(text):
+        kind, name, *rest = text.split(",")
+        path = packed / f"{name}.ssp" if kind == "ssp" else product_fmus / f"{name}.fmu"
+        return ",".join([kind, str(path), *rest])
+
+    reached, claimed = reload_run("fmpy", [task(first), task(second)], tmp_path)
+    assert reached[1] == pytest.approx(float(second.split(",")[2]))
+    assert sorted(claimed[-len(component_names(packed / f"{second.split(',')[1]}.ssp")):]) == \
+        component_names(packed / f"{second.split(',')[1]}.ssp")
+
+
+def test_fmpy_frees_an_fmu_while_another_uses_the_package_it_imported(product_fmus, tmp_path):
+    """The ATO loaded while Traction lives shares the ``fmus`` package imported from Traction's
+    extraction; Traction is freed and its folder removed before the ATO initialises (it then reads
+    the line, rolling-stock and timetable files and their schemas) and runs 3 s."""
+    task = f"overlap,{product_fmus / 'Traction.fmu'},{product_fmus / 'AtoController.fmu'},3"
+    reached, claimed = reload_run("fmpy", [task], tmp_path)
+    assert reached == [pytest.approx(3.0)] and claimed == ["first", "second"]
+
+
+@pytest.mark.parametrize("first, second", [
+    ("drop,free_run", "run,ato_only,3"),
+    ("drop,ato_only", "run,ato_only,3"),
+    ("run,ato_only,3", "run,ato_only,3"),
+    ("run,ato_only,3", "run,free_run,1"),
+], ids=["free_run-ato_only", "ato_only-twice-dropped", "ato_only-twice", "ato_only-free_run"])
+def test_libcosim_loads_frees_and_loads_again(first, second, packed, tmp_path):
+    """libcosim (libcosimpy) unpacks an .ssp into a temporary folder and removes it when the
+    execution is dropped; the next execution, of another system or the same one, runs to its stop
+    time and the process exits 0 (it aborted with "line.schema.json: No such file")."""
+    pytest.importorskip("libcosimpy")
+
+    def task(text):
+        kind, name, *rest = text.split(",")
+        return ",".join([kind, str(packed / f"{name}.ssp"), *rest])
+
+    reached, claimed = reload_run("libcosim", [task(first), task(second)], tmp_path)
+    assert reached[1] == float(second.split(",")[2])
+    names = component_names(packed / f"{second.split(',')[1]}.ssp")
+    assert sorted(claimed[-len(names):]) == names
+
+
+@pytest.mark.parametrize("first, cycles, second", [
+    ("AtoController", "1nd", "AtoController"),    # dropped before it ran, then loaded again
+    ("AtoController", "1d", "AtoController"),     # the same FMU twice
+    ("Traction", "1d", "AtoController"),
+    ("AtoController", "1d", "RailLine"),          # a signal-chain FMU second
+])
+def test_c_host_loads_frees_and_loads_another_fmu(first, cycles, second, product_fmus, host_binary, tmp_path):
+    """The C host runs the first FMU, frees it, closes its library and deletes its extraction
+    ("d"), then runs the second from its own extraction in the same process: both print their
+    outputs, every step of the second is accepted (the host exits 6 otherwise) and it exits 0."""
+    arguments = host_arguments(product_fmus / f"{first}.fmu", tmp_path / "first")
+    arguments[5] = cycles
+    proc = run_host(host_binary, [*arguments, "--", *host_arguments(product_fmus / f"{second}.fmu",
+                                                                      tmp_path / "second")])
+    assert proc.returncode == 0, proc.stderr[-1500:]
+    assert not (tmp_path / "first").exists()
+    outputs = proc.stdout.splitlines()
+    assert len(outputs) == (3 if "n" in cycles else 6) - (first == "Traction") - (second == "Traction")
+    if first == "Traction":
+        assert float(outputs[0].split()[1]) > 900.0          # a minute of full traction
+
+
+def test_c_host_calls_after_fmi2fatal_are_refused_not_crashed(product_fmus, host_binary, tmp_path):
+    """A host that ignores fmi2Fatal (traction v0 = 1e9, above its maximum 150: exitInitializationMode
+    fails) and calls doStep, fmi2GetReal and fmi2Terminate on the instance gets fmi2Error for each
+    with a logged message, frees it, and the process goes on: a second such instance, then a good
+    one that runs a minute of full traction, and exit 0 (doStep after the fatal crashed the host)."""
+    fmu = product_fmus / "Traction.fmu"
+    v0 = {v.name: v.valueReference for v in read_model_description(str(fmu)).modelVariables}["v0"]
+    failing = host_arguments(fmu, tmp_path / "fmu")
+    failing[5] = "2f"
+    failing.insert(6, f"{v0}:=1e9")
+    proc = run_host(host_binary, [*failing, "--", *host_arguments(fmu, tmp_path / "fmu")])
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-1500:])
+    lines = proc.stdout.splitlines()
+    assert lines[:10] == 2 * ["exitInitializationMode: 4", "after doStep: 3", "after fmi2GetReal: 3",
+                              "after fmi2Terminate: 3", "freed"]
+    assert float(lines[10].split()[1]) > 900.0
+    refused = [line for line in proc.stderr.splitlines() if "refused: the instance returned fmi2Fatal" in line]
+    assert len(refused) == 6 and "[host 3] host: fmi2DoStep refused" in refused[0]
+    assert proc.stderr.count("v0 = 1e+09 is above its maximum 150") == 2

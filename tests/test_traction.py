@@ -3,6 +3,7 @@ validation, and the FMU through the orchestrator (step-size robustness)."""
 import dataclasses
 import json
 
+import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
@@ -198,6 +199,42 @@ def _write(tmp_path, name, doc):
 ])
 def test_bad_rolling_stock_names_file_and_field(tmp_path, mutate, field):
     _assert_rejected(tmp_path, DATA / "passenger_chs7.json", mutate, load_rolling_stock, field)
+
+
+@pytest.mark.parametrize("mutate, field", [
+    (lambda d: d["units"][0].__setitem__("vehicle_length_m", 300.0), "units"),
+    (lambda d: d["units"][0].__setitem__("bogie_centres_m", 16.0), "units[0].bogie_centres_m"),
+    (lambda d: d["units"][1].__setitem__("axles", 3), "units[1].axles"),
+])
+def test_wheelset_geometry_that_cannot_be_names_file_and_field(tmp_path, mutate, field):
+    _assert_rejected(tmp_path, DATA / "passenger_chs7.json", mutate, load_rolling_stock, field)
+
+
+def test_wheelsets_follow_the_bodies_and_bogies():
+    """The ЧС7's two 17.02 m bodies on bogies 7.9 m apart with 3.2 m wheelbase, then the
+    coaches sharing what the file's 388 m leaves (docs/sources.md#rolling-stock-wheelsets); a
+    file without wheelset geometry gets defaults that fit its bodies."""
+    offsets = load_rolling_stock(DATA / "passenger_chs7.json").wheelset_offsets_m
+    assert len(offsets) == 8 + 14 * 4 and offsets[0] == 0.0 and np.all(np.diff(offsets) > 0)
+    assert offsets[1:4] == pytest.approx([3.2, 7.9, 11.1])            # the first body's bogies
+    assert offsets[4] == pytest.approx(17.02)                         # the second body's first axle
+    coach = (388.0 - 34.04) / 14
+    assert offsets[-1] - offsets[-5] == pytest.approx(coach)          # coach to coach
+    assert offsets[-1] < 388.0
+    for name, axles in (("freight_vl80.json", 8 + 62 * 4), ("emu_er2.json", 10 * 4)):
+        stock = load_rolling_stock(DATA / name)
+        assert len(stock.wheelset_offsets_m) == axles and stock.wheelset_offsets_m[-1] < stock.length_m
+
+
+def test_a_rolling_stock_file_without_wheelset_geometry_gets_bogies_that_fit(tmp_path):
+    doc = json.loads((DATA / "freight_vl80.json").read_text())
+    for unit in doc["units"]:
+        for key in ("bodies", "vehicle_length_m", "bogie_centres_m", "bogie_wheelbase_m"):
+            unit.pop(key, None)
+    offsets = load_rolling_stock(_write(tmp_path, "plain.json", doc)).wheelset_offsets_m
+    body = 944.0 / 63                                 # 63 bodies share the train's length
+    assert len(offsets) == 256 and offsets[-1] < 944.0
+    assert offsets[7] < body < offsets[8]             # the locomotive's 8 axles on its one body
 
 
 def _assert_rejected(tmp_path, template, mutate, loader, field):

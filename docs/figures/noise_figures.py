@@ -21,7 +21,7 @@ from scipy import signal  # noqa: E402
 from fmus.signalling import cab_systems, dqpsk  # noqa: E402
 from fmus.data.loader import load_line  # noqa: E402
 from fmus.wayside_coder.core import CoderSettings  # noqa: E402
-from fmus.wayside_coder.digital import DigitalCoderCore  # noqa: E402
+from fmus.wayside_coder.digital_generator import DigitalCoderCore  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 SYSTEMS = ("ALSN", "ALS-EN", "FIRE_DQPSK")

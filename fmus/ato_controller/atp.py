@@ -9,7 +9,7 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   current block section: 60 km/h on yellow, a stop on red-yellow). ``"digital"``:
   ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
   and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
-  (the section after the free ones is occupied; fmus/signalling/digital.py).
+  (the section after the free ones is occupied; fmus/signalling/digital_messages.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -48,7 +48,7 @@ from typing import List, Optional, Tuple
 
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, TemporaryRestriction
-from fmus.signalling.digital import FREE_BLOCKS_OPEN
+from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
@@ -60,6 +60,8 @@ NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # red never
 DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
+# below this the train stands (a tachometer's resolution; the ATO's arrival test uses the same)
+STANDSTILL_MPS = 1e-3
 # driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
 # curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
 T_DRIVER_S = 4.0
@@ -364,7 +366,7 @@ class Atp:
             self.interventions += 1
 
     def _intervene(self, v: float, permitted: float) -> int:
-        if self.emergency_latched and v <= 1e-3:
+        if self.emergency_latched and v <= STANDSTILL_MPS:
             self.emergency_latched = False
         if v > permitted + dv_ebi_mps(v):
             self._emergency()

@@ -20,8 +20,8 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
-from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp, AtpResult,
-                                     Constraints)
+from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION,
+                                     STANDSTILL_MPS, Atp, AtpResult, Constraints)
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach
@@ -41,8 +41,38 @@ MAX_DECEL_MPS2 = 5.0
 # a measured speed below −this is impossible, not noise at standstill (docs/ato.md, "Measurement faults")
 NEGATIVE_SPEED_TOLERANCE_MPS = 0.2
 MIN_BRAKE_SHARE = 0.02
-# below this the train stands (a tachometer's resolution; the arrival test uses the same)
-STANDSTILL_MPS = 1e-3
+# the decelerations derived from the stock's service deceleration when no parameter sets them
+# (docs/ato.md): the ATP supervises at 0.7 × it, the ATO plans at 0.6 × it but at most
+# 0.5 m/s², so the ATO's curve stays inside the ATP's
+ATP_DECEL_SHARE = 0.7
+PLAN_DECEL_SHARE = 0.6
+PLAN_DECEL_MAX_MPS2 = 0.5
+# braking for a target begins once it needs this share of the planned deceleration (a little
+# before it needs all of it, so the brake's build-up does not overshoot the curve)
+BRAKE_ONSET_SHARE = 0.97
+# a target is braked for at most this multiple of the planned deceleration (the ATP's curve
+# lies between the two)
+TARGET_DECEL_CAP = 2.0
+# an immediate stop (the ATP's stop_now) is a target this far beyond the planned stopping point
+STOP_NOW_SLACK_M = 0.5
+# the predicted (dead-time compensated) deceleration is used only while the target lies more
+# than this beyond the predicted position; nearer, the measured one
+PREDICTION_MIN_DISTANCE_M = 0.5
+# a target nearer than this is reached: brake fully if still too fast, else release
+AT_TARGET_M = 0.05
+# a speed target counts as reached within this of its speed (then it is held, not braked for)
+TARGET_SPEED_REACHED_MPS = 0.05
+# a target held is the same as a target offered when they are this close in place and speed
+SAME_TARGET_M = 1.0
+SAME_TARGET_MPS = 0.01
+# coasting in a restriction's band starts this close below the set speed
+BAND_TOP_MPS = 0.05
+# speeds that differ by float rounding only compare equal
+SPEED_ROUNDING_MPS = 1e-6
+# the departure time counts as come when the clock is this close to it (float rounding)
+DEPARTURE_ROUNDING_S = 1e-9
+# a cab signal permits going only above this speed (a "stop" code permits 0)
+MIN_PERMITTED_TO_START_MPS = 1.0
 CREEP_SPEED_MPS = 5.0 * MPS_PER_KMH      # to close up to the stop point after stopping short of the window
 # two-stage stop with a slow brake (docs/sources.md#ato-precise-stopping, ATOMIC): the planned deceleration down to this
 # speed, then the brake share whose predicted stopping point is the stop point (stopping.py)
@@ -59,6 +89,15 @@ TSR_SLOTS = 4
 DIGITAL_CODE_LOSS_GRACE_S = 3.0
 
 
+def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
+    """The measurements whose impossible values the ATP answers with the emergency brake
+    (AtoCore.measurement_fault) in a cab-signal mode: position and speed always, the aspect
+    with a cab signal, the digital speeds and free blocks with a digital one. The others the
+    controller does not read in that mode."""
+    return ("x", "v") + {"off": (), "ALSN": ("aspect",),
+                         "digital": ("aspect", "v_permitted", "v_target", "free_blocks")}.get(cab_signal, ())
+
+
 def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
     """The restrictions in force among the FMU's ``tsr_*`` slots: speed > 0 and end > start."""
     return [TemporaryRestriction(float(a), float(b), float(v), name=f"tsr[{k + 1}]")
@@ -68,7 +107,7 @@ def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestrictio
 
 def default_atp_decel_mps2(stock) -> float:
     """The ATP's supervision deceleration when parameter ``atp_decel`` is 0: 0.7 × the stock's service deceleration."""
-    return 0.7 * stock.service_decel
+    return ATP_DECEL_SHARE * stock.service_decel
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,7 +194,7 @@ class AtoCore:
         self.line, self.stock, self.category = line, stock, category
         self.timetable = timetable
         self.train = NominalTrain(stock, line)
-        self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else min(0.5, 0.6 * stock.service_decel)
+        self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else min(PLAN_DECEL_MAX_MPS2, PLAN_DECEL_SHARE * stock.service_decel)
         a_atp = s.atp_decel_mps2 if s.atp_decel_mps2 > 0 else default_atp_decel_mps2(stock)
         if self.a_plan >= a_atp:
             raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
@@ -219,7 +258,7 @@ class AtoCore:
             else:
                 targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0)))
         if atp_result.stop_now:
-            targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + 0.5, 0.0))
+            targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + STOP_NOW_SLACK_M, 0.0))
         targets.extend(self._aspect_driving(x, atp_result)[1])
         return targets
 
@@ -249,10 +288,10 @@ class AtoCore:
 
     def _decel_to(self, x: float, v: float, position: float, speed: float) -> float:
         xp, vp = self._predict(x, v)
-        if vp > speed and position - xp > 0.5:
+        if vp > speed and position - xp > PREDICTION_MIN_DISTANCE_M:
             return (vp * vp - speed * speed) / (2.0 * (position - xp))
         distance = position - x
-        if distance <= 0.05:
+        if distance <= AT_TARGET_M:
             return _INF if v > speed else 0.0
         return max((v * v - speed * speed) / (2.0 * distance), 0.0)
 
@@ -314,7 +353,8 @@ class AtoCore:
 
     def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
                           free_blocks: int) -> Optional[Tuple[str, str]]:
-        """(input, why) when a measurement the ATP relies on cannot be true, else None."""
+        """(input, why) when a measurement the ATP relies on cannot be true, else None. Which
+        measurements it judges: :func:`judged_measurements`."""
         if not math.isfinite(x):
             return "x", f"measured position x = {x:g} m is not finite"
         if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
@@ -387,8 +427,8 @@ class AtoCore:
                 if self.phase == DWELLING or t > departure else 0.0
             # departure hold: the ATO knows only the cab signal and the line, never where the
             # train ahead is, so it starts only on a valid permissive code (atp.permits_departure)
-            may_go = atp.permitted_mps > 1.0 and not atp.stop_now and permissive
-            due = t + 1e-9 >= departure
+            may_go = atp.permitted_mps > MIN_PERMITTED_TO_START_MPS and not atp.stop_now and permissive
+            due = t + DEPARTURE_ROUNDING_S >= departure
             if due and may_go:
                 self._depart(t)
             elif may_go and t + self.release_lead_s >= departure:
@@ -412,7 +452,7 @@ class AtoCore:
         plan = self.plans[self.stage]
         stop = self.timetable[self.stage + 1]
         # arrival: standing at (or just past) the stop point
-        if v <= 1e-3 and x >= stop.stop_m - s.stop_window_m and self.braking_target is not None \
+        if v <= STANDSTILL_MPS and x >= stop.stop_m - s.stop_window_m and self.braking_target is not None \
                 and self.braking_target.is_stop_point:
             self._arrive(t, x)
             return -s.hold_brake, MODE_STANDSTILL
@@ -467,12 +507,12 @@ class AtoCore:
         targets = self._targets(x, v, atp)
         need, candidate = self._required_decel(x, v, targets)
         self._release_braking_target(v, targets)
-        if need >= 0.97 * self.a_plan and candidate is not None:
+        if need >= BRAKE_ONSET_SHARE * self.a_plan and candidate is not None:
             self.braking_target = candidate
         target = self.braking_target
         if target is None:
             return None
-        if target.is_stop_point and v <= 1e-3 and x < stop_m - self.settings.stop_window_m:
+        if target.is_stop_point and v <= STANDSTILL_MPS and x < stop_m - self.settings.stop_window_m:
             self.braking_target = None            # stopped short of the window: creep on
             self.creeping = True
             return None
@@ -480,7 +520,7 @@ class AtoCore:
             # the stop point: the brake share whose predicted stopping point it is
             return -self.stop_approach.share(t, x, v, target.position_m), MODE_BRAKE
         # the brake stays applied until the target is reached (no release/re-apply)
-        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps), 2.0 * self.a_plan)
+        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps), TARGET_DECEL_CAP * self.a_plan)
         return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
 
     def _release_braking_target(self, v: float, targets: List[BrakingTarget]) -> None:
@@ -489,10 +529,10 @@ class AtoCore:
         held = self.braking_target
         if held is None or held.is_stop_point:
             return
-        if v <= held.speed_mps + 0.05:
+        if v <= held.speed_mps + TARGET_SPEED_REACHED_MPS:
             self.braking_target = None          # target speed reached: hold it
-        elif not any(abs(other.position_m - held.position_m) < 1.0 and other.speed_mps <= held.speed_mps + 0.01
-                     for other in targets):
+        elif not any(abs(other.position_m - held.position_m) < SAME_TARGET_M
+                     and other.speed_mps <= held.speed_mps + SAME_TARGET_MPS for other in targets):
             # the target was lifted (a better code, or the ATP's assumption after passing a
             # signal expired once the new section was decoded): release the brake
             self.braking_target = None
@@ -535,10 +575,10 @@ class AtoCore:
                 sig.alsn_band_bottom_mps(self.category, atp.aspect)
             if top is not None and aspect_bottom is not None and top < limit:
                 limit, bottom = top, aspect_bottom
-        if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - 1e-6):
+        if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - SPEED_ROUNDING_MPS):
             self.band_coasting = False
             return None
-        if v >= v_set - 0.05:
+        if v >= v_set - BAND_TOP_MPS:
             self.band_coasting = True
         elif v <= bottom:
             self.band_coasting = False

@@ -3,11 +3,12 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
-from fmus.fmi.slave import FrameSlave, Port, line_file_port
-from fmus.ato_controller.core import MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions
+from fmus.fmi.slave import FacadeSlave, Port, line_file_port
+from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions,
+                                      judged_measurements)
 
 
-class AtoController(FrameSlave):
+class AtoController(FacadeSlave):
     description = "ATP speed supervision from the cab signal + ATO timetable driving, energy-efficient, precise stopping"
 
     @classmethod
@@ -121,6 +122,11 @@ class AtoController(FrameSlave):
             decoding_latency_s=p("decoding_latency"), vigilance_period_s=p("vigilance_period"),
             vigilance_answer_s=p("vigilance_answer"), ato_acknowledges=bool(p("ato_acknowledges")))
         return AtoCore(line, stock, timetable, timetable_path, p("train_category") or stock.category, settings)
+
+    def unit_handled_inputs(self):
+        # the measurements the ATP judges in this cab-signal mode fail safe; the ones it does not
+        # read (the aspect with cab_signal = off) are refused out of their declared range
+        return judged_measurements(self.param("cab_signal"))
 
     def publish_initial_outputs(self):
         self._write(self.core.out)

@@ -14,7 +14,9 @@ from functools import lru_cache
 from pathlib import Path
 from typing import List, Optional, Tuple
 
-from fmus.errors import FmuInputError
+import numpy as np
+
+from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling.aspects import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
 
@@ -24,14 +26,17 @@ DATA = HERE / "shipped"
 DEFAULT_LINE = DATA / "default_line.json"
 DEFAULT_ROLLING_STOCK = DATA / "passenger_chs7.json"
 DEFAULT_TIMETABLE = DATA / "default_timetable.json"
+# read now: inside an FMU this folder is the extraction the interpreter first imported the package
+# from, which a host may remove while an instance of another FMU still uses the package
+# (docs/third_party.md); the shipped defaults are each instance's own (FacadeSlave.resource_path)
+_SCHEMA_TEXTS = {path.name: path.read_text(encoding="utf-8") for path in SCHEMAS.glob("*.json")}
 
 
 @lru_cache(maxsize=None)
 def _validator(name: str):
     import jsonschema
 
-    schema = json.loads((SCHEMAS / name).read_text())
-    return jsonschema.Draft202012Validator(schema)
+    return jsonschema.Draft202012Validator(json.loads(_SCHEMA_TEXTS[name]))
 
 
 def _field(path) -> str:
@@ -49,7 +54,8 @@ MAX_JSON_DEPTH = 64
 
 def read_json_file(path) -> object:
     """A JSON data file's document; every failure an FmuInputError naming the file: missing or
-    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON."""
+    unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON, a number that
+    is not finite (NaN, Infinity, 1e400: Python's json reads them; named by its field)."""
     path = Path(path)
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
@@ -67,11 +73,16 @@ def read_json_file(path) -> object:
         raise FmuInputError(f"{path}: not a data file: arrays and objects nested {depth} deep "
                             f"(at most {MAX_JSON_DEPTH})")
     try:
-        return json.loads(text)
+        document = json.loads(text)
     except json.JSONDecodeError as error:
         raise FmuInputError(f"{path}: not valid JSON (line {error.lineno}: {error.msg})") from None
     except RecursionError:           # (not reached below MAX_JSON_DEPTH; a last guard)
         raise FmuInputError(f"{path}: not a data file: nested too deeply") from None
+    # before the schema, whose minimum and maximum let NaN through (every comparison is false)
+    bad = non_finite_number(document)
+    if bad is not None:
+        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    return document
 
 
 _BRACKETS = re.compile(r'"(?:[^"\\]|\\.)*"|[\[\]{}]')
@@ -363,6 +374,56 @@ class RollingStock:
     # (weight share, a, b, c) with no tractive effort (coasting, braking): a unit's
     # resistance_idle where given, else its resistance
     idle_resistance_terms: Optional[List[Tuple[float, float, float, float]]] = None
+    # every wheelset's distance behind the first one, m, ascending (0 first): the axle layout
+    # the rail line shunts the track circuits with (wheelset_offsets)
+    wheelset_offsets_m: Optional[np.ndarray] = None
+
+
+DEFAULT_WHEELBASE_PER_GAP_M = 2.4      # a bogie's outer axles apart per gap between axles [U]
+DEFAULT_BOGIE_CENTRES_SHARE = 0.7      # bogie pivots apart / body length [U]
+
+
+def wheelset_offsets(document: dict, path) -> np.ndarray:
+    """The train's wheelsets as distances behind its first one (m, ascending, 0 first), from its
+    units' bodies placed nose to tail from the front (docs/interfaces.md#rolling-stock-file): a
+    body of length L on two bogies whose pivots are ``bogie_centres_m`` apart, centred in it, each
+    bogie's axles spread evenly over ``bogie_wheelbase_m``. Bodies without a length share what the
+    train's length_m leaves equally."""
+    units = document["units"]
+    length = float(document["length_m"])
+    given = sum(u["count"] * u.get("bodies", 1) * u["vehicle_length_m"] for u in units if "vehicle_length_m" in u)
+    sharing = sum(u["count"] * u.get("bodies", 1) for u in units if "vehicle_length_m" not in u)
+    if given > length + 1e-6:
+        _fail(path, "units", f"the bodies' vehicle_length_m add up to {given:g} m, more than the train's "
+                             f"length_m {length:g} m")
+    shared = (length - given) / sharing if sharing else 0.0
+    if sharing and shared <= 0.0:
+        _fail(path, "units", f"no length left for the {sharing} bodies without vehicle_length_m "
+                             f"(length_m {length:g} m, the others take {given:g} m)")
+    positions: List[float] = []
+    front = 0.0
+    for k, u in enumerate(units):
+        bodies = u.get("bodies", 1)
+        if u["axles"] % (2 * bodies):
+            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bodies} bodies of two bogies")
+        per_bogie = u["axles"] // (2 * bodies)
+        body = float(u.get("vehicle_length_m", shared))
+        # absent values are defaults that always fit: a bogie at most 0.3 of the body, its pivots
+        # at most 0.9 of the rest apart (the outer axles stay inside the body)
+        wheelbase = float(u.get("bogie_wheelbase_m",
+                                min(DEFAULT_WHEELBASE_PER_GAP_M * (per_bogie - 1), 0.3 * body)))
+        centres = float(u.get("bogie_centres_m", min(DEFAULT_BOGIE_CENTRES_SHARE * body, 0.9 * (body - wheelbase))))
+        if centres + wheelbase > body + 1e-9:
+            _fail(path, f"units[{k}].bogie_centres_m", f"bogies {centres:g} m apart with a {wheelbase:g} m "
+                                                       f"wheelbase do not fit in a {body:g} m body")
+        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
+        for _ in range(u["count"] * bodies):
+            overhang = 0.5 * (body - centres)
+            for pivot in (overhang, overhang + centres):
+                positions += (front + pivot + axles).tolist()
+            front += body
+    offsets = np.array(positions) - positions[0]
+    return offsets
 
 
 def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
@@ -406,7 +467,8 @@ def load_rolling_stock(path=DEFAULT_ROLLING_STOCK) -> RollingStock:
         emergency_decel=float(pb["emergency_decel_mps2"]), brake_delay_s=float(pb["delay_s"]),
         brake_time_constant_s=float(pb["time_constant_s"]), brake_steps=int(pb.get("steps", 7)),
         electrical_system=electrical["system"], power_factor=float(electrical.get("power_factor", 1.0)),
-        starting_resistance=start_res, path=path, idle_resistance_terms=idle_terms)
+        starting_resistance=start_res, path=path, idle_resistance_terms=idle_terms,
+        wheelset_offsets_m=wheelset_offsets(doc, path))
 
 
 # ---- timetable ---------------------------------------------------------------------------------

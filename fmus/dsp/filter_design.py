@@ -11,27 +11,16 @@ from dataclasses import dataclass
 import control
 import numpy as np
 from scipy import signal
-from scipy.signal import lfilter
 
-
-try:      # lfilter's own C routine; lfilter itself spends about 4 µs per call validating
-    from scipy.signal._sigtools import _linear_filter
-except ImportError:                                  # pragma: no cover - another scipy layout
-    _linear_filter = None
+from fmus.library_shortcuts import linear_filter
 
 
 def filter_frame(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray, axis: int = -1):
     """scipy.signal.lfilter(b, a, x, axis, zi=state) for one frame of a core's hot path: the
     same C routine (transposed direct form II) without lfilter's argument checks, which the
-    cores satisfy by construction (float64 arrays, a[0] = 1, state shaped as lfilter wants).
-    Falls back to lfilter when scipy does not offer the routine (tests/test_filter_frame.py
-    checks both give the same samples)."""
-    if _linear_filter is not None and x.dtype == np.float64 and state.dtype == np.float64:
-        try:
-            return _linear_filter(b, a, x, axis, state)
-        except (TypeError, ValueError):               # pragma: no cover - a changed signature
-            pass
-    return lfilter(b, a, x, axis=axis, zi=state)
+    cores satisfy by construction (float64 arrays, a[0] = 1, state shaped as lfilter wants);
+    fmus/library_shortcuts.py."""
+    return linear_filter(b, a, x, axis, state)
 
 
 class SampleFilter:

@@ -244,7 +244,7 @@ class LocoReceiverCore:
 
     def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
         """One frame of coil EMF. ``channel_faults`` is the digital receiver's per-channel fault
-        input (digital.py); the ALSN receiver is one channel without it, so it is ignored."""
+        input (digital_receiver.py); the ALSN receiver is one channel without it, so it is ignored."""
         s = self.settings
         if self._started_s is None:
             self._started_s = t

@@ -1,16 +1,15 @@
 """LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
-FIRE_DQPSK). No logic here (see core.py, digital.py)."""
+FIRE_DQPSK). No logic here (see core.py, digital_receiver.py)."""
 from fmus.signalling import cab_systems
-from fmus.fmi.slave import FrameSlave, Port, cab_system_port, sample_rate_port
+from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.loco_receiver.parameters import receiver_settings
 
 
-class LocoReceiver(FrameSlave):
+class LocoReceiver(FrameFacadeSlave):
     description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
                    "decoder) or ALS-EN / FIRE_DQPSK (correlation demodulator, code check, 2-out-of-3 channels)")
-    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -80,7 +79,7 @@ class LocoReceiver(FrameSlave):
             core = LocoReceiverCore(self.build.frame, settings)
         else:
             core = DigitalReceiverCore(system, self.build.frame, settings)
-        self.required_step_s = self.build.frame / settings.fs_hz
+        self.require_frame_step(settings.fs_hz)
         return core
 
     def publish_initial_outputs(self):

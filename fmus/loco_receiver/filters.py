@@ -10,7 +10,7 @@ pre-warping at the carrier (docs/loco_receiver.md has the Bode plot and group de
   (10 Hz wide) it takes the 50 Hz of AC traction down by about 34 dB.
 * Envelope low-pass after full-wave rectification: 2nd-order Butterworth at min(12 Hz, f0/3),
   same discretisation, pre-warped at its corner.
-* The digital receivers' band-pass (digital.py): the same design, prototype order 2 (a
+* The digital receivers' band-pass (digital_receiver.py): the same design, prototype order 2 (a
   4th-order band-pass), 10/3 of the symbol rate wide.
 
 :func:`receiver_band_pass` is the band-pass a receiver with given settings uses; the cores and

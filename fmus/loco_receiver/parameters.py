@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import Mapping, Optional, Union
 
 from fmus.loco_receiver.core import ReceiverSettings, resolve_inertia_s
-from fmus.loco_receiver.digital import DigitalReceiverSettings
-from fmus.signalling.digital import DigitalSystem
+from fmus.loco_receiver.digital_receiver import DigitalReceiverSettings
+from fmus.signalling.digital_messages import DigitalSystem
 
 # port → settings field
 ALSN_PARAMETERS = {

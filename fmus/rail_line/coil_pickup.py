@@ -33,6 +33,7 @@ class CoilPickup:
                  interference: TractionInterference):
         s = settings
         self.settings, self.trains, self.bank, self.interference = s, trains, bank, interference
+        self.geometry = geometry = bank.geometry
         self.line_length_m = line_length_m
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
         self._emf_gain = s.fs_hz * s.coil_gain_h
@@ -43,8 +44,8 @@ class CoilPickup:
         margin = s.coil_length_m
         reach = interference.reach_m
         bands = sorted([(min(lo, joint - reach) - margin, max(hi, joint + reach) + margin)
-                        for lo, joint, hi in bank.joint_zones] +
-                       [(c.feed_m - margin, c.end_m + margin) for c in bank.circuits])
+                        for lo, joint, hi in geometry.joint_zones] +
+                       [(c.feed_m - margin, c.end_m + margin) for c in geometry.circuits])
         merged: List[List[float]] = []
         for lo, hi in bands:                    # touching or overlapping bands merged: disjoint, sorted
             if merged and lo <= merged[-1][1]:
@@ -60,13 +61,13 @@ class CoilPickup:
         off-line flag for the frame of sample index ``first`` (``times`` its sample times,
         ``heads`` the trains' first-wheelset positions per sample, ``standing_at`` the position
         of each train that stands over the whole frame, else None); written into ``out``."""
-        s, bank, interference = self.settings, self.bank, self.interference
+        s, bank, geometry, interference = self.settings, self.bank, self.geometry, self.interference
         n = times.size
-        ends, feeds = bank.ends_list, bank.feed_list
+        ends, feeds = geometry.ends_list, geometry.feed_list
         for j in range(self.trains):
             head = heads[j]
             head_first, head_last = float(head[0]), float(head[-1])
-            out.coil_section[j] = bank.section_at(head_last + s.coil_offset_m) + 1
+            out.coil_section[j] = geometry.section_at(head_last + s.coil_offset_m) + 1
             if head_last + s.coil_offset_m + s.coil_length_m < 0.0 or head_first > self.line_length_m:
                 out.off_line[j] = True                   # no coil over the line: nothing to sense
                 if self._sensing[j]:
@@ -75,7 +76,7 @@ class CoilPickup:
                     self._sensing[j] = False
                 continue
             out.off_line[j] = head_last < 0 or head_last > self.line_length_m
-            k = bank.section_at(head_first)
+            k = geometry.section_at(head_first)
             first_coil = head_first + s.coil_offset_m + self._coil_spread[0]
             last_coil = head_last + s.coil_offset_m + self._coil_spread[-1]
             if (k >= 0 and head_last < ends[k] and last_coil <= feeds[k]
@@ -125,9 +126,9 @@ class CoilPickup:
         """Sample by sample, the share of the coil's sensitivity window over each stretch of
         rail: its own section up to the feed leads (shunt current), the dead end from the leads to
         the joint (nothing), the next section's entry end (its unshunted current)."""
-        s, bank = self.settings, self.bank
+        s, bank, geometry = self.settings, self.bank, self.geometry
         n = times.size
-        axle_section = bank.section_of(head)
+        axle_section = geometry.section_of(head)
         centre = head + s.coil_offset_m
         lo, hi = centre - 0.5 * s.coil_length_m, centre + 0.5 * s.coil_length_m
         width = max(s.coil_length_m, 1e-9)
@@ -141,9 +142,9 @@ class CoilPickup:
             own = axle_section == k
             shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times)
             i_axle = np.where(own, shunt_current, i_axle)
-            view = share(-np.inf, bank.circuits[k].feed_m) * shunt_current
-            if k + 1 < bank.count:
-                beyond = share(bank.ends[k], np.inf)
+            view = share(-np.inf, geometry.circuits[k].feed_m) * shunt_current
+            if k + 1 < geometry.count:
+                beyond = share(geometry.ends[k], np.inf)
                 if beyond.any():
                     view = view + beyond * currents.entry(k + 1)
             seen = np.where(own, view, seen)

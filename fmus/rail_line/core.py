@@ -4,7 +4,8 @@ track relays (no FMI here; docs/rail_line.md).
 The core composes three parts, each with one job:
 
 * circuit_bank.py — the track-circuit bank: a network model per section for its trains'
-  wheelset shunts, the network states frame by frame, the track relays (occupancy);
+  wheelset shunts, the network states frame by frame, the track relays (occupancy), composed
+  of geometry.py, calibration.py, network_models.py, parking.py and relays.py;
 * coil_pickup.py — the coil pickup: the code current the coils see → coil EMF per train;
 * traction_interference.py — the traction interference under the coils: the traction return
   current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
@@ -22,12 +23,13 @@ length give the same result.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import List, Optional, Tuple
 
 import numpy as np
 
-from fmus.data.loader import Line
+from fmus.data.loader import DEFAULT_ROLLING_STOCK, Line, load_rolling_stock
 from fmus.errors import FmuInputError
 from fmus.rail_line.circuit_bank import TrackCircuitBank
 from fmus.rail_line.coil_pickup import CoilPickup
@@ -50,6 +52,9 @@ class RailSettings:
     coil_gain_h: float = 4.5e-4           # EMF = M·di/dt: 0.28 V at 2 A peak, 50 Hz (the joints paper's weak level, docs/sources.md#interference-at-insulated-joints)
     coil_length_m: float = 0.3            # sensitivity length of the coil core [U]
     train_length_m: Tuple[float, ...] = (400.0, 400.0)
+    # per train its wheelsets' distances behind the first one (m, ascending, 0 first: the
+    # rolling-stock file's wheelset_offsets_m); empty: default_wheelsets of each train's length
+    wheelset_offsets_m: Tuple[np.ndarray, ...] = ()
     asymmetry_range: Tuple[float, float] = (0.01, 0.05)
     coil_mismatch: float = 0.0            # the two coils' sensitivity difference / their mean (0: matched)
     seed: int = 1
@@ -64,6 +69,40 @@ class RailSettings:
     relay_drop_out_delay_s: float = 0.2
     carrier_hz: float = 0.0               # 0: each section's carrier from the line file (ALSN); else this
                                           # one (a digital system's 174.38 / 175 Hz) for the phasors
+
+
+@lru_cache(maxsize=1)
+def _default_train_wheelsets() -> np.ndarray:
+    return load_rolling_stock(DEFAULT_ROLLING_STOCK).wheelset_offsets_m
+
+
+def default_wheelsets(length_m: float) -> np.ndarray:
+    """The wheelsets of a train known only by its length: the bundled passenger train's
+    (passenger_chs7.json), cut at that length or continued with its last coach's bogies every
+    coach length."""
+    offsets = _default_train_wheelsets()
+    if length_m < offsets[-1]:
+        return offsets[offsets <= length_m].copy()
+    coach, period = offsets[-4:], offsets[-4] - offsets[-8]
+    extra = [coach + period * n for n in range(1, int((length_m - offsets[-1]) // period) + 1)]
+    return np.concatenate([offsets, *extra])
+
+
+def _wheelsets_of(s: "RailSettings", trains: int) -> Tuple[np.ndarray, ...]:
+    """Each train's wheelset offsets, checked against its length."""
+    given = list(s.wheelset_offsets_m)
+    if given and len(given) != trains:
+        raise FmuInputError(f"wheelsets of {len(given)} trains given, {trains} expected")
+    offsets = tuple(np.asarray(given[j], dtype=float) if given else default_wheelsets(s.train_length_m[j])
+                    for j in range(trains))
+    for j, (layout, length) in enumerate(zip(offsets, s.train_length_m)):
+        if not (layout.size and layout[0] == 0.0 and np.all(np.diff(layout) >= 0.0)):
+            raise FmuInputError(f"parameter rolling_stock_file[{j + 1}]: wheelsets must start at 0 m behind "
+                                f"the first and go back from there")
+        if layout[-1] > length + 1e-6:
+            raise FmuInputError(f"parameter rolling_stock_file[{j + 1}]: its wheelsets reach {layout[-1]:g} m "
+                                f"behind the first, beyond train_length[{j + 1}] = {length:g} m")
+    return offsets
 
 
 @dataclass
@@ -106,11 +145,12 @@ class RailLineCore:
         lo, hi = s.asymmetry_range
         if not 0 <= lo <= hi < 1:
             raise FmuInputError("parameter asymmetry_min/asymmetry_max: need 0 ≤ min ≤ max < 1")
+        s = replace(s, wheelset_offsets_m=_wheelsets_of(s, trains))
         self.line, self.settings = line, s
         self.count, self.sections, self.trains, self.frame = len(line.sections), sections, trains, frame
         self.dt = 1.0 / s.fs_hz
-        self.bank = TrackCircuitBank(line, s, trains, frame)
-        self.interference = TractionInterference(line, s, trains, frame, self.bank)
+        self.bank = TrackCircuitBank(line, s, trains, frame, CONFIG_TICK_S)
+        self.interference = TractionInterference(line, s, trains, frame, self.bank.geometry)
         self.pickup = CoilPickup(line.length_m, s, trains, self.bank, self.interference)
         self._index_f = np.arange(frame, dtype=float)
         self._times = np.empty(frame)
@@ -137,7 +177,7 @@ class RailLineCore:
 
     @property
     def circuits(self):
-        return self.bank.circuits
+        return self.bank.geometry.circuits
 
     @property
     def asymmetry(self) -> np.ndarray:
@@ -169,8 +209,9 @@ class RailLineCore:
         currents = self.bank.advance(u_tx[:self.count], n)
         out = self.out
         self.pickup.sense(first, times, heads[:, :n], currents, out, self.standing_at)
-        if self.bank.relay_up is not self._occupancy_of:      # the bank makes a new array when a relay moves
-            self._occupancy_of = self.bank.relay_up
+        relays = self.bank.relays
+        if relays.up is not self._occupancy_of:      # a new array when a relay moves
+            self._occupancy_of = relays.up
             out.occupied[:self.count] = ~self._occupancy_of
         return out
 
@@ -189,7 +230,7 @@ class RailLineCore:
                         f"{spans[b][1] - spans[b][0]:g} m) overlaps train {a + 1} (head {spans[a][1]:g} m, length "
                         f"{spans[a][1] - spans[a][0]:g} m) at initialisation")
         self.bank.start([float(x) for x in x_head[:self.trains]])
-        self._occupancy_of = self.bank.relay_up
+        self._occupancy_of = self.bank.relays.up
         self.out.occupied[:self.count] = ~self._occupancy_of
         return self.out
 

@@ -1,15 +1,14 @@
 """RailLine FMU facade: ports ↔ RailLineCore. No physics here (see core.py, track_circuit.py)."""
-from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.fmi.slave import FrameSlave, Port, line_file_port, sample_rate_port
+from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
+from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, sample_rate_port
 from fmus.rail_line.core import RailLineCore, RailOutputs, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters
 
 OFF_LINE_M = -1000.0
 
 
-class RailLine(FrameSlave):
+class RailLine(FrameFacadeSlave):
     description = "Rail line plant: coded track circuits (MNA networks), coil EMF with joints and traction interference, track relays"
-    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -24,6 +23,8 @@ class RailLine(FrameSlave):
             # one start for every train: the settings default of the first
             Port("train_length", "parameter", unit="m", start=s.train_length_m[0], shape=(m,), min=1.0,
                  description="train j occupies x_head[j] − train_length[j] … x_head[j]"),
+            Port("rolling_stock_file", "parameter", "String", start="", shape=(m,),
+                 description="train j's rolling-stock JSON: where its wheelsets are; empty: the bundled default train"),
             Port("coil_offset", "parameter", unit="m", start=s.coil_offset_m, description="coils ahead of the first wheelset"),
             Port("coil_gain", "parameter", unit="H", start=s.coil_gain_h, min=0.0, description="EMF = gain · d(i)/dt"),
             Port("coil_length", "parameter", unit="m", start=s.coil_length_m, min=0.0, description="coil sensitivity length"),
@@ -95,6 +96,8 @@ class RailLine(FrameSlave):
             fs_hz=p("fs"), circuit=circuit, transformer_ratio=p("transformer_ratio"), coil_offset_m=p("coil_offset"),
             coil_gain_h=p("coil_gain"), coil_length_m=p("coil_length"),
             train_length_m=tuple(float(x) for x in io["train_length"]),
+            wheelset_offsets_m=tuple(load_rolling_stock(self.resource_path(name or str(DEFAULT_ROLLING_STOCK))).wheelset_offsets_m
+                                     for name in io["rolling_stock_file"]),
             asymmetry_range=(p("asymmetry_min"), p("asymmetry_max")), seed=p("seed"), coil_mismatch=p("coil_mismatch"),
             traction_time_constant_s=p("traction_time_constant"),
             relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
@@ -104,7 +107,7 @@ class RailLine(FrameSlave):
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
         # the core writes its outputs straight into the output ports
         core.bind_outputs(RailOutputs(io["e_coil"], io["occupied"], io["i_axle"], io["off_line"], io["coil_section"]))
-        self.required_step_s = self.build.frame / settings.fs_hz
+        self.require_frame_step(settings.fs_hz)
         # the trains' initial positions (the traction units publish x0 in initialisation mode):
         # trains on the line occupy their circuits from the first sample
         core.start(io["x_head"])

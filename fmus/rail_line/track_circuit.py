@@ -15,7 +15,8 @@ at the signal end ahead of the train, the track relay sits at the entry end):
   ≈ 1 m null zone);
 * relay end at the entry joint: the track relay (a resistance referred to the rails) and the
   bond winding;
-* wheelsets: a 0.06 Ω conductance at each node a train covers (circuit_bank.py);
+* wheelsets: a 0.06 Ω conductance at each node a train covers (the network model,
+  circuit_bank.py; axle_chain.py puts each at its axle for the amplitudes);
 * faults: broken rail (the segment containing it opens), ballast override, bond disconnected
   or feed failed (no source at the feed end).
 
@@ -24,7 +25,7 @@ Also the uniform-line two-port (ABCD) solution used to validate the network (doc
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -120,13 +121,15 @@ class TrackCircuit:
 
 
 def cascade_shunt_current(circuit: TrackCircuit, x_m: float, train_length_m: float = 0.0,
-                          carrier_hz: float = 50.0) -> float:
+                          carrier_hz: float = 50.0, wheelsets_m: Optional[Sequence[float]] = None) -> float:
     """The code current (amplitude per volt of source) reaching a standing train's first axle,
     by a cascade of two-ports, the sourced worked example's method (docs/rail_line.md#validation):
-    source ‖ bond at the feed, the line to the first axle, the train as shunts at its first axle
-    and at every network node it covers (its tail snapped to the nearest node, as the network
-    lumps it), each behind the line to the previous, down to the relay end (relay ‖ bond).
-    Independent of the nodal network the rail line solves: the reference it is checked against."""
+    source ‖ bond at the feed, the line to the first axle, the train's wheelsets each behind the
+    line to the previous, down to the relay end (relay ‖ bond). The wheelsets: at ``wheelsets_m``
+    (distances behind the first axle, the rolling-stock file's) where given, else the lumped
+    train of the network model: one at the first axle and one at every network node it covers
+    (its tail snapped to the nearest node). Independent of the rail line's solutions: the
+    reference they are checked against."""
     params = circuit.params
     w = 2.0 * np.pi * carrier_hz
     rail_r, rail_l = rail_impedance(params, carrier_hz)
@@ -136,10 +139,13 @@ def cascade_shunt_current(circuit: TrackCircuit, x_m: float, train_length_m: flo
     def through(length_m, z_end):
         abcd = two_port(z, y, length_m / 1000.0)
         return (abcd[0, 0] * z_end + abcd[0, 1]) / (abcd[1, 0] * z_end + abcd[1, 1])
-    spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
-    head_node = round((x_m - circuit.start_m) / spacing)
-    tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
-    axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
+    if wheelsets_m is None:
+        spacing = circuit.nodes_m[1] - circuit.nodes_m[0]
+        head_node = round((x_m - circuit.start_m) / spacing)
+        tail_node = round((max(x_m - train_length_m, circuit.start_m) - circuit.start_m) / spacing)
+        axles = [circuit.nodes_m[i] for i in range(tail_node, head_node)] + [x_m]
+    else:
+        axles = sorted(x_m - float(offset) for offset in wheelsets_m if x_m - float(offset) >= circuit.start_m)
     z_load, previous = 1.0 / (1.0 / params.relay_r_ohm + 1.0 / z_bond), circuit.start_m
     for position in axles:
         z_load = 1.0 / (1.0 / params.shunt_r_ohm + 1.0 / through(position - previous, z_load))

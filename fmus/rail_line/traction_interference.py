@@ -25,6 +25,7 @@ import numpy as np
 
 from fmus.data.loader import Line
 from fmus.dsp.periodic import period_samples
+from fmus.rail_line.geometry import LineGeometry
 
 _RIPPLE_MAX_SAMPLES = 1 << 14    # traction ripple kept as a table when it repeats within this
 
@@ -51,10 +52,10 @@ def joint_couplings(coil_gain_h: float) -> tuple:
 
 
 class TractionInterference:
-    def __init__(self, line: Line, settings, trains: int, frame: int, bank):
+    def __init__(self, line: Line, settings, trains: int, frame: int, geometry: LineGeometry):
         s = settings
-        self.settings, self.trains, self.bank = s, trains, bank
-        count = bank.count
+        self.settings, self.trains, self.geometry = s, trains, geometry
+        count = geometry.count
         self.ac = line.electrification == "AC25000"
         self.dc = line.electrification == "DC3000"
         lo, hi = s.asymmetry_range
@@ -63,11 +64,11 @@ class TractionInterference:
         joint, per_mismatch = joint_couplings(s.coil_gain_h)
         self.joint_peak = joint + per_mismatch * s.coil_mismatch     # peak of the coupling b(x)
         # sorted: the nearest joint is found by binary search whatever order the line file lists them in
-        self.joints = np.sort(np.array([joint for _, joint, _ in bank.joint_zones], dtype=float))
+        self.joints = np.sort(np.array([joint for _, joint, _ in geometry.joint_zones], dtype=float))
         # each bond-lead zone with the sections on either side (−1: off the line); indices, not
         # values, because a study may overwrite the asymmetries after construction
-        self.lead_zones = sorted((lo_m, hi_m, bank.section_at(lo_m - 1e-9), bank.section_at(hi_m))
-                                 for lo_m, _, hi_m in bank.joint_zones)
+        self.lead_zones = sorted((lo_m, hi_m, geometry.section_at(lo_m - 1e-9), geometry.section_at(hi_m))
+                                 for lo_m, _, hi_m in geometry.joint_zones)
         self._lead_starts = [zone[0] for zone in self.lead_zones]
         self._lead_ends = [zone[1] for zone in self.lead_zones]
         self.reach_m = JOINT_RAMP_M + 0.5 * JOINT_TOP_M     # b(x) is zero farther than this from a joint
@@ -154,9 +155,9 @@ class TractionInterference:
         """c(x) at the positions ``coil`` (any shape): the rails' asymmetry, passing linearly from
         one section's to the next between the bond leads, plus the bond leads' and jumper's
         trapezoid around each joint."""
-        bank = self.bank
-        section = bank.section_of(coil)
-        c = np.where(section >= 0, self.asymmetry[np.clip(section, 0, bank.count - 1)], 0.0)
+        geometry = self.geometry
+        section = geometry.section_of(coil)
+        c = np.where(section >= 0, self.asymmetry[np.clip(section, 0, geometry.count - 1)], 0.0)
         first, last = float(coil.min()), float(coil.max())
         for lo, hi, before, beyond in self.lead_zones[bisect.bisect_left(self._lead_ends, first):
                                                       bisect.bisect_right(self._lead_starts, last)]:

@@ -48,7 +48,7 @@ import numpy as np
 
 from fmus.signalling import bauer_code
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import Decoded, DigitalSystem, Framer, Indication, Message
+from fmus.signalling.digital_messages import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 174.38
 CYCLES_PER_SYMBOL = 16

@@ -16,7 +16,7 @@ from typing import Dict, Tuple
 import numpy as np
 
 from fmus.signalling import aspects as sig
-from fmus.errors import FmuInputError
+from fmus.errors import FmuInputError, non_finite_number
 
 CODES_FILE = Path(__file__).resolve().parent / "alsn_codes.json"
 CODE_NAMES = {"Z": sig.GREEN, "Zh": sig.YELLOW, "KZh": sig.RED_YELLOW}
@@ -73,6 +73,9 @@ def load_transmitters(path=CODES_FILE) -> Dict[str, Transmitter]:
         raise FmuInputError(f"{path}: not a code table: nested too deeply") from None
     except (json.JSONDecodeError, KeyError, TypeError):
         raise FmuInputError(f"{path}: field transmitters: missing or not valid JSON") from None
+    bad = non_finite_number(doc)
+    if bad is not None:
+        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
     if not isinstance(table, dict) or not all(isinstance(spec, dict) for spec in table.values()):
         raise FmuInputError(f"{path}: field transmitters: expected an object of transmitter objects")
     result = {}

@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Optional
 
 from fmus.signalling import als_en, fire_dqpsk
-from fmus.signalling.digital import DigitalSystem
+from fmus.signalling.digital_messages import DigitalSystem
 from fmus.errors import FmuInputError
 
 ALSN = "ALSN"

@@ -43,7 +43,7 @@ import numpy as np
 
 from fmus.signalling import dqpsk, fire_code
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import Decoded, DigitalSystem, Framer, Indication, Message
+from fmus.signalling.digital_messages import Decoded, DigitalSystem, Framer, Indication, Message
 
 CARRIER_HZ = 175.0
 BAUD = 15.0

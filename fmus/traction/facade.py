@@ -2,11 +2,11 @@
 from pythonfmu.default_experiment import DefaultExperiment
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
-from fmus.fmi.slave import FrameSlave, Port, line_file_port, keyword_defaults
+from fmus.fmi.slave import FacadeSlave, Port, line_file_port, keyword_defaults
 from fmus.traction.core import MAX_LINE_M, MAX_PANTOGRAPH_V, MAX_SPEED_MPS, TractionCore
 
 
-class Traction(FrameSlave):
+class Traction(FacadeSlave):
     description = "Train longitudinal dynamics, traction/brake characteristics, energy and traction current"
 
     @classmethod

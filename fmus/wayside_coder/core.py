@@ -200,7 +200,7 @@ class WaysideCoderCore:
 
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False,
              wrong_command_main: int = 0, wrong_command_reserve: int = 0) -> CoderOutputs:
-        """One frame. The wrong-command faults are the digital coders' (digital.py): an ALSN
+        """One frame. The wrong-command faults are the digital coders' (digital_generator.py): an ALSN
         coder has no controllers computing commands, so it ignores them."""
         s = self.settings
         k, out = self.count, self.out

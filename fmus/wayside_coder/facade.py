@@ -1,16 +1,15 @@
 """WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN) or DigitalCoderCore (ALS-EN,
-FIRE_DQPSK). No logic here (see core.py, digital.py)."""
+FIRE_DQPSK). No logic here (see core.py, digital_generator.py)."""
 from fmus.signalling import alsn, cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
-from fmus.fmi.slave import FrameSlave, Port, line_file_port, cab_system_port, sample_rate_port
+from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, cab_system_port, sample_rate_port
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore, bind_outputs
-from fmus.wayside_coder.digital import DigitalCoderCore
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
 
-class WaysideCoder(FrameSlave):
+class WaysideCoder(FrameFacadeSlave):
     description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters "
                    "or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
-    variable_step = False          # every step is one frame: frame/fs
 
     @classmethod
     def declare_ports(cls, build):
@@ -76,7 +75,7 @@ class WaysideCoder(FrameSlave):
             core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)
         else:
             core = DigitalCoderCore(system, line, self.build.sections, self.build.frame, settings)
-        self.required_step_s = self.build.frame / settings.fs_hz
+        self.require_frame_step(settings.fs_hz)
         bind_outputs(core, self.io["u_tx"], self.io["code_tx"], self.io["signal"])    # written in place
         return core
 

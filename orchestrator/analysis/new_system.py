@@ -24,6 +24,7 @@ from typing import Optional, Sequence
 
 from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock,
                               load_timetable)
+from fmus.errors import FmuInputError
 from fmus.signalling.cab_systems import DIGITAL
 from orchestrator.analysis.system_checks import check_sections_contiguous, load_data_file
 from orchestrator.analysis.systems import (cab_settings, check_placements, committed_ports, signal_chain,
@@ -151,3 +152,91 @@ def built_ports(fmu_dir: Optional[Path], source: str):
         return fmu_ports(Path(fmu_dir), Path(source).name)
     return committed_ports(Path("."), source)
 
+
+
+#: a generated timetable runs each stage in its minimum running time plus this share, rounded up
+#: to TIMETABLE_ROUND_S, and stops DWELL_S at every station (docs/railml.md#timetable)
+TIMETABLE_MARGIN = 0.15
+TIMETABLE_ROUND_S = 5.0
+DWELL_S = 60.0
+FIRST_DEPARTURE_S = 60.0
+
+
+def timetable_for(line_path: Path, stock_path: Path) -> dict:
+    """A timetable over every station of the line where the train fits: from the first station
+    with room for the train behind its stop point, stopping at each following one, each stage
+    in its minimum running time (the ATO's own planner, its default settings) + 15 %."""
+    import math
+
+    from fmus.ato_controller.core import AtoSettings
+    from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
+    from fmus.ato_controller.train_model import NominalTrain
+
+    line = _load(load_line, Path(line_path), "--railml")
+    stock = _load(load_rolling_stock, Path(stock_path), "--rolling-stock")
+    try:
+        train = NominalTrain(stock, line)
+    except FmuInputError as error:
+        raise UserError(f"--rolling-stock: {stock_path} cannot run on the imported line "
+                        f"(electrification {line.electrification!r}): {error}") from None
+    planner = StagePlanner(train, line, stock.category, min(0.5, 0.6 * stock.service_decel),
+                           AtoSettings().speed_margin_mps)
+    stations = [s for s in line.stations if s.stop_m - stock.length_m >= 0.0]
+    if len(stations) < 2:
+        raise UserError(f"--railml: the line has {len(stations)} station(s) with room for the {stock.length_m:g} m "
+                        f"train behind its stop point ({', '.join(s.name for s in line.stations)}); a timetable "
+                        "needs two: give a shorter train with --rolling-stock, or a --timetable")
+    stops, time = [{"station": stations[0].name, "departure_s": FIRST_DEPARTURE_S}], FIRST_DEPARTURE_S
+    for origin, destination in zip(stations[:-1], stations[1:]):
+        try:
+            minimum = planner.plan(origin.stop_m, destination.stop_m, None).minimum_time_s
+        except InfeasibleStage:
+            raise UserError(f"--railml: the train cannot run from {origin.name} to {destination.name}") from None
+        time += math.ceil(minimum * (1 + TIMETABLE_MARGIN) / TIMETABLE_ROUND_S) * TIMETABLE_ROUND_S
+        stop = {"station": destination.name, "arrival_s": time}
+        if destination is not stations[-1]:
+            time += DWELL_S
+            stop["departure_s"] = time
+        stops.append(stop)
+    return {"train": f"{stock.name} over {line.name}", "stops": stops}
+
+
+def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Sequence[Path], line_id=None,
+                           sidecar=None, schema_dir=None, rolling_stock_file=None, system: str = "ALSN",
+                           trains=None, traction=None, fmu_dir=None):
+    """``railcosim new NAME --railml FILE``: the railML line imported (orchestrator/analysis/
+    railml.py), written as a line file into the system's resources/, and the system made from it
+    as from a line file; without --timetable one timetable is made (:func:`timetable_for`).
+    Returns (SSD path, the import's notes)."""
+    import json
+    import tempfile
+
+    from orchestrator.analysis.railml import import_railml, validate_railml
+
+    folder, railml_file = Path(folder), Path(railml_file)
+    if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
+        raise UserError(f"{folder}: already exists; give a new name (railcosim new never overwrites)")
+    if schema_dir is not None:
+        valid, errors = validate_railml(railml_file, schema_dir)
+        if not valid:
+            more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+            raise UserError(f"{railml_file}: not valid against the railML schema in {schema_dir}: {errors[0]}{more}")
+    imported = import_railml(railml_file, line_id=line_id, sidecar=sidecar)
+    with tempfile.TemporaryDirectory(prefix="railcosim_railml_") as work:
+        line_path = Path(work) / f"{railml_file.stem}.json"
+        line_path.write_text(json.dumps(imported.document, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+        try:
+            load_line(line_path)
+        except FmuInputError as error:
+            raise UserError(f"{railml_file}: the imported line is refused: {str(error).split(': ', 1)[1]}") from None
+        if not timetable_files:
+            stock = Path(rolling_stock_file) if rolling_stock_file else DEFAULT_STOCK[
+                traction or next(k for k, v in TRACTION.items() if v == imported.document["electrification"]["system"])]
+            generated = Path(work) / f"{railml_file.stem}_timetable.json"
+            generated.write_text(json.dumps(timetable_for(line_path, stock), indent=1, ensure_ascii=False) + "\n",
+                                 encoding="utf-8")
+            timetable_files = [generated]
+            imported.notes.append(f"no --timetable: {generated.name} made (every station with room for the train, "
+                                  f"minimum running times + {TIMETABLE_MARGIN:.0%}, {DWELL_S:g} s stops)")
+        ssd = new_system(folder, line_path, timetable_files, rolling_stock_file, system, trains, traction, fmu_dir)
+    return ssd, imported.notes

@@ -25,6 +25,8 @@ import math
 from pathlib import Path
 from typing import Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
 
+import numpy as np
+
 import fmus
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
@@ -147,6 +149,17 @@ def placement_problems(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[
                 warn(f"{rail}.train_length[{slot}] = {float(given):g} m, but train {train!r} on that slot is "
                      f"{length_m:g} m long ({_stock_name(graph.nodes[train])}): the rail line shunts a train of "
                      f"another length; set {rail}.train_length[{slot}] = {length_m:g}")
+            # where the rail line puts the wheelsets: the file it is given for the slot
+            wheelsets = _parameter(node, f"rolling_stock_file[{slot}]", "") or str(DEFAULT_ROLLING_STOCK)
+            try:
+                theirs = load_rolling_stock(wheelsets).wheelset_offsets_m
+            except (FmuInputError, OSError):
+                theirs = None              # the rail line itself refuses it, naming the file
+            ours = stocks[train].wheelset_offsets_m
+            if theirs is not None and (len(theirs) != len(ours) or not np.allclose(theirs, ours, atol=1e-6)):
+                warn(f"{rail}.rolling_stock_file[{slot}] is {Path(wheelsets).name}, but train {train!r} on that "
+                     f"slot runs on {_stock_name(graph.nodes[train])}: the rail line shunts another train's "
+                     f"wheelsets; set {rail}.rolling_stock_file[{slot}] to its file")
         if not slots:
             continue
         line_m = lines[rail].length_m if rail in lines else math.inf

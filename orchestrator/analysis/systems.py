@@ -137,11 +137,14 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     """Coder → rail line → one receiver per train (``rx``, or ``rx1``, ``rx2`` … for several) →
     its ATO, and each train's position back into the rail line (train j on slot j). The rail
     line's ``train_length[j]`` is the length in train j's rolling-stock file (``stocks[j-1]``,
-    default the bundled default stock), so the rail line shunts the train the Traction moves.
+    default the bundled default stock) and its ``rolling_stock_file[j]`` that file, so the rail
+    line shunts the train the Traction moves, at its wheelsets.
     ``parameter_file``: an .ssv the coder and the rail line also bind (e.g. the line file)."""
     step = frame / SIGNAL_FS_HZ                  # a signal FMU steps one frame
     stocks = list(stocks) if stocks is not None else [None] * len(trains)
     lengths = {f"train_length[{j}]": stock_length_m(stock) for j, stock in enumerate(stocks, start=1)}
+    # where each train's wheelsets are (an empty file name: the bundled default stock's)
+    lengths.update({f"rolling_stock_file[{j}]": str(stock) for j, stock in enumerate(stocks, start=1) if stock})
     components = [
         ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", step, dict(coder or {}), parameter_file),
         ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", step, {**lengths, **(rail or {})}, parameter_file),
@@ -166,7 +169,8 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
     if system == "ALSN":
         return {}, {}, {}, {"cab_signal": "ALSN"}
-    from fmus.signalling import cab_systems, digital
+    from fmus.signalling import cab_systems
+    from fmus.signalling import digital_messages as digital
 
     digital_system = cab_systems.digital_system(system)
     carrier = digital_system.carrier_hz

@@ -17,11 +17,12 @@ from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT
                               load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
-from fmus.signalling import alsn, cab_systems, digital
+from fmus.signalling import alsn, cab_systems
+from fmus.signalling import digital_messages as digital
 from fmus.signalling import aspects as sig
 from fmus.signalling.aspects import ASPECT_NAMES
 from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, block_codes
-from fmus.signalling.digital import FREE_BLOCKS_OPEN
+from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 
 from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.errors import print_warning

@@ -19,10 +19,10 @@ import numpy as np
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.signalling import aspects as sig
 from fmus.signalling import alsn, cab_systems
-from fmus.signalling.digital import stated_latency_s
+from fmus.signalling.digital_messages import stated_latency_s
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-from fmus.wayside_coder.digital import DigitalCoderCore
-from fmus.loco_receiver.digital import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.wayside_coder.digital_generator import DigitalCoderCore
+from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.rail_line.track_circuit import cascade_shunt_current
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.vectors import DATA_DIR, FORMAT
@@ -574,8 +574,9 @@ def rail_vectors() -> RoleFile:
     step = {"fs_hz": FS_HZ, "frame_port": "u_tx"}
     params = {"fs": FS_HZ}
     # the two-port cascade of the worked example's method: a steady 1 V 50 Hz carrier into
-    # section 4 (transformer ratio 1), a standing 400 m train at five places; the rms of i_axle
-    # over each place against the cascade's current (amplitude / √2), within 1 % (docs/rail_line.md#validation)
+    # section 4 (transformer ratio 1), a standing 400 m train (the default rolling stock's
+    # wheelsets at their axles) at five places; the rms of i_axle over each place against the
+    # cascade's current (amplitude / √2), within 1 % (docs/rail_line.md#validation)
     from fmus.rail_line.core import RailLineCore, RailSettings
 
     _check_worked_example()
@@ -588,7 +589,7 @@ def rail_vectors() -> RoleFile:
     seconds = place_s * len(places)
     u_tx = np.zeros((8, int(round(seconds * FS_HZ))))
     u_tx[section] = np.sin(2 * np.pi * carrier * np.arange(u_tx.shape[1]) / FS_HZ)
-    expected = [cascade_shunt_current(circuit, x, plant.settings.train_length_m[0], carrier)
+    expected = [cascade_shunt_current(circuit, x, carrier_hz=carrier, wheelsets_m=plant.settings.wheelset_offsets_m[0])
                 / np.sqrt(2.0) for x in places]
     name = "two_port_first_axle"
     role.vectors.append({

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, List, Optional, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import FmuSlave, Interface, new_workdir, read_interface, remove_workdir
@@ -82,7 +82,3 @@ def _has_port(interface: Interface, port: str) -> bool:
     if port in interface.variables:
         return True
     return any((_element(name) or ("",))[0] == port for name in interface.variables)
-
-
-def variable_types(interface: Interface, names: List[str]) -> Dict[str, str]:
-    return {name: interface.variables[name].type for name in names}

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 import uuid as uuidlib
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
@@ -97,6 +98,8 @@ class SlaveDescription:
     can_handle_reset: bool = False
     can_handle_variable_steps: bool = False
     can_monitor_heartbeat: bool = False
+    can_provide_log_on_request: bool = False
+    can_provide_log_on_notification: bool = False
     major_version: int = DCP_MAJOR_VERSION
     minor_version: int = DCP_MINOR_VERSION
     description: Optional[str] = None
@@ -120,21 +123,41 @@ class SlaveDescription:
     def of_causality(self, causality: str) -> List[DcpVariable]:
         return [v for v in self.variables if v.causality == causality]
 
+    def offered_resolutions(self) -> List[Tuple[int, int]]:
+        """(numerator, denominator) of each Resolution, the schema's default 1/1000 s when the
+        description names neither a Resolution nor a ResolutionRange."""
+        if not self.resolutions and not self.resolution_ranges:
+            return [(1, 1000)]
+        return [(num, den) for num, den, _fixed, _rec in self.resolutions]
+
     def supports_time_resolution(self, numerator: int, denominator: int) -> bool:
+        """Does the description offer this resolution? The same ratio as a Resolution (2/200
+        is 1/100), or inside a ResolutionRange (numeratorFrom/denominator … numeratorTo/denominator)."""
         if numerator < 1 or denominator < 1:
             return False
-        if not self.resolutions and not self.resolution_ranges:
-            return (numerator, denominator) == (1, 1000)     # the schema's default Resolution
-        for num, den, _fixed, _rec in self.resolutions:
-            if num * denominator == numerator * den:
-                return True
+        asked = Fraction(numerator, denominator)
+        if any(asked == Fraction(num, den) for num, den in self.offered_resolutions()):
+            return True
+        return any((asked * den).denominator == 1 and lo <= asked * den <= hi for lo, hi, den in self.resolution_ranges)
+
+    def resolution_for(self, step_s: Fraction) -> Tuple[Fraction, int]:
+        """(time resolution, steps) with steps × resolution = ``step_s``, as a master picks them:
+        the first Resolution that divides the step, else the step itself where a range offers
+        it. A ValueError says what is offered when nothing fits."""
+        for num, den in self.offered_resolutions():
+            steps = step_s / Fraction(num, den)
+            if steps.denominator == 1 and steps >= 1:
+                return Fraction(num, den), int(steps)
         for lo, hi, den in self.resolution_ranges:
-            if den == denominator and lo <= numerator <= hi:
-                return True
-        return False
+            if (step_s * den).denominator == 1 and lo <= step_s * den <= hi:
+                return step_s, 1
+        offered = [f"{num}/{den} s" for num, den in self.offered_resolutions()] + \
+                  [f"{lo}/{den}…{hi}/{den} s" for lo, hi, den in self.resolution_ranges]
+        raise ValueError(f"no time resolution divides the step {float(step_s):g} s "
+                         f"(offered: {', '.join(offered) or 'none'})")
 
     def supports_nrt_steps(self, steps: int) -> bool:
-        if steps < 1:
+        if steps < 1 or OpMode.NRT not in self.op_modes:
             return False
         if self.nrt_fixed_steps:
             return steps == self.nrt_default_steps
@@ -144,6 +167,10 @@ class SlaveDescription:
         if not self.dat_ports and not self.dat_port_ranges:
             return True
         return port in self.dat_ports or any(lo <= port <= hi for lo, hi in self.dat_port_ranges)
+
+    def logs(self) -> bool:
+        """Does the description promise logging (which railcosim dcp-slave does not provide)?"""
+        return self.can_provide_log_on_request or self.can_provide_log_on_notification
 
 
 # ---- schema -----------------------------------------------------------------------------------
@@ -246,6 +273,8 @@ def _parse(root) -> SlaveDescription:
     desc.can_handle_reset = _bool(flags.get("canHandleReset"), False)
     desc.can_handle_variable_steps = _bool(flags.get("canHandleVariableSteps"), False)
     desc.can_monitor_heartbeat = _bool(flags.get("canMonitorHeartbeat"), False)
+    desc.can_provide_log_on_request = _bool(flags.get("canProvideLogOnRequest"), False)
+    desc.can_provide_log_on_notification = _bool(flags.get("canProvideLogOnNotification"), False)
     for node in root.find("Variables"):
         kind = next(child for child in node if child.tag in _CAUSALITIES)
         typed = next(child for child in kind if child.tag in _ELEMENT_TYPES)
@@ -331,7 +360,8 @@ def to_xml(desc: SlaveDescription) -> etree._Element:
                      canHandleReset=tf[desc.can_handle_reset],
                      canHandleVariableSteps=tf[desc.can_handle_variable_steps],
                      canMonitorHeartbeat=tf[desc.can_monitor_heartbeat],
-                     canProvideLogOnRequest="false", canProvideLogOnNotification="false")
+                     canProvideLogOnRequest=tf[desc.can_provide_log_on_request],
+                     canProvideLogOnNotification=tf[desc.can_provide_log_on_notification])
     variables = etree.SubElement(root, "Variables")
     for var in desc.variables:
         node = etree.SubElement(variables, "Variable", name=var.name, valueReference=str(var.vr))
@@ -395,27 +425,45 @@ def _start_of(fmi_var, data_type: DataType):
     return float(value) if data_type == DataType.float64 else int(value)
 
 
-def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int] = None,
-                         real_time: bool = True) -> SlaveDescription:
-    """The DCP description of an FMU (orchestrator.fmu.Interface) served by our slave:
-    inputs, outputs and parameters with the FMU's value references, arrays grouped, time
-    resolution 1 ns, non-real-time with any number of steps, soft real-time if asked."""
+def _fmu_arrays(interface) -> Dict[str, list]:
+    """The FMU's inputs, outputs and parameters grouped as DCP variables: base name → its
+    members (index tuple, FMI variable), sorted row-major; a scalar has one member of index ()."""
     groups: Dict[str, list] = {}
-    order: List[str] = []
     for fmi_var in interface.variables.values():
         if fmi_var.causality not in ("input", "output", "parameter") or fmi_var.type not in FMI_TO_DCP:
             continue
         match = _INDEXED.match(fmi_var.name)
         base, index = (match.group("base"), tuple(int(i) for i in match.group("index").split(","))) \
             if match else (fmi_var.name, ())
-        if base not in groups:
-            groups[base] = []
-            order.append(base)
-        groups[base].append((index, fmi_var))
+        groups.setdefault(base, []).append((index, fmi_var))
+    for members in groups.values():
+        members.sort(key=lambda m: m[0])
+    return groups
+
+
+def offered_resolutions(step_s: Fraction) -> List[Tuple[int, int, bool, Optional[bool]]]:
+    """The time resolutions our slave offers for an FMU of step ``step_s``: those in which the
+    step is a whole number of ticks and that a master is likely to ask for: 1 ns (recommended:
+    the orchestrator's own clock), the step itself, and every decimal fraction of a second
+    (1/10 … 1/10⁸ s) that divides the step. All non-fixed, as the schema wants several."""
+    candidates = [Fraction(1, NS_PER_SECOND), step_s] + [Fraction(1, 10 ** k) for k in range(1, 9)]
+    offered: List[Tuple[int, int, bool, Optional[bool]]] = []
+    for resolution in candidates:
+        entry = (resolution.numerator, resolution.denominator)
+        if (step_s / resolution).denominator == 1 and entry not in [o[:2] for o in offered]:
+            offered.append((*entry, False, True if not offered else None))
+    return offered
+
+
+def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int] = None,
+                         real_time: bool = True) -> SlaveDescription:
+    """The DCP description of an FMU (orchestrator.fmu.Interface) served by our slave:
+    inputs, outputs and parameters with the FMU's value references, arrays grouped, the time
+    resolutions in which the FMU's step is a whole number of ticks (:func:`offered_resolutions`),
+    non-real-time with any number of steps, soft real-time if asked."""
     step_ns = round((interface.default_step_s or 0.01) * NS_PER_SECOND)
     variables = []
-    for base in order:
-        members = sorted(groups[base], key=lambda m: m[0])
+    for base, members in _fmu_arrays(interface).items():
         first = members[0][1]
         kinds = {(m[1].causality, m[1].type) for m in members}
         if len(kinds) != 1:
@@ -453,10 +501,44 @@ def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int]
     return SlaveDescription(
         name=interface.model_identifier, uuid=slave_uuid(interface.guid), variables=variables,
         op_modes=modes, nrt_default_steps=step_ns, nrt_fixed_steps=False, nrt_min_steps=1,
-        nrt_max_steps=UINT32_MAX,
-        resolutions=[(1, NS_PER_SECOND, False, True)], resolution_ranges=[(1, UINT32_MAX, NS_PER_SECOND)],
+        nrt_max_steps=UINT32_MAX, resolutions=offered_resolutions(Fraction(step_ns, NS_PER_SECOND)),
         control_host=host, control_port=port, dat_host=host,
         dat_ports=[port] if port is not None else [], dat_port_ranges=[(1024, 65535)],
         can_accept_config_pdus=True, can_handle_reset=True, can_handle_variable_steps=True,
         description=f"FMU {interface.model_identifier} served as a DCP slave by railcosim dcp-slave",
         generation_tool="railcosim")
+
+
+#: which DCP data types may carry each FMI type when a given description is served over an FMU
+_CARRIES = {"Real": {DataType.float64, DataType.float32},
+            "Integer": {DataType.int8, DataType.int16, DataType.int32, DataType.int64, DataType.uint8,
+                        DataType.uint16, DataType.uint32},
+            "Enumeration": {DataType.int8, DataType.int16, DataType.int32, DataType.uint8, DataType.uint16},
+            "Boolean": {DataType.uint8, DataType.int8, DataType.uint16, DataType.int16, DataType.int32},
+            "String": {DataType.string}}
+
+
+def serve_over_fmu(desc: SlaveDescription, interface, where: str) -> SlaveDescription:
+    """A given description (a bench device's .dcpx) served by an FMU: each DCP variable is the
+    FMU variable of its name, or the FMI array of that base name (``e_coil`` → ``e_coil[1]`` …),
+    of the same causality and a type the DCP type can carry. Every mismatch is listed in one
+    UserError naming ``where``."""
+    groups = _fmu_arrays(interface)
+    problems = []
+    for var in desc.variables:
+        members = groups.get(var.name)
+        causality = "parameter" if var.causality == "structuralParameter" else var.causality
+        if members is None:
+            problems.append(f"{var.name!r}: the FMU has no variable of that name")
+            continue
+        fmi = members[0][1]
+        if fmi.causality != causality:
+            problems.append(f"{var.name!r}: {var.causality} in the description, {fmi.causality} in the FMU")
+        elif var.data_type not in _CARRIES.get(fmi.type, ()):
+            problems.append(f"{var.name!r}: {var.data_type.name} cannot carry the FMU's {fmi.type}")
+        elif len(members) != var.count:
+            problems.append(f"{var.name!r}: {var.count} element(s) in the description, {len(members)} in the FMU")
+        var.fmi_names = tuple(m[1].name for m in members)
+    if problems:
+        raise UserError(f"{where}: does not fit {interface.model_identifier}: " + "; ".join(problems))
+    return desc

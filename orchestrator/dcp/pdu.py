@@ -1,10 +1,20 @@
-"""DCP 1.0 protocol data units: type ids, states, error codes, and every PDU we use as bytes.
+"""DCP 1.0 protocol data units: the ids of the standard, and every PDU as one row of a table.
 
-Layouts are those of the DCP 1.0 standard (docs/hil.md#pdus): all fields little-endian, no
+The wire layout of each PDU type is one :class:`Layout` in :data:`LAYOUTS`: its fields after
+``type_id`` in wire order, each a name and a :mod:`struct` code, all little-endian without
 padding, one PDU per UDP datagram (the 4-byte length indicator exists only on stream
-transports). Each PDU class has ``encode() -> bytes``; :func:`decode` parses a datagram and
-raises :class:`PduError` with the standard's error code (``INVALID_LENGTH``,
-``NOT_SUPPORTED_PDU``) and whatever of the header it could read, so a slave can answer with
+transports). The layouts were checked field by field against the DCP reference implementation
+(DCPLib: its PDU classes, its Wireshark dissector where the two agree) and against datagrams
+it sent and received (tests/data/dcp/, docs/hil.md#pdus says which source each row comes from).
+
+A :class:`Pdu` is a type id and its fields by name::
+
+    Pdu(PduType.RSP_ack, resp_seq_id=7, sender=1).encode()     # b'\\xb0\\x07\\x00\\x01'
+    decode(datagram).resp_seq_id
+
+:func:`decode` parses a datagram and raises :class:`PduError` with the standard's error code
+(``INVALID_LENGTH``, ``NOT_SUPPORTED_PDU``, ``INVALID_*`` for an enumeration value the standard
+does not define) and whatever of the header it could read, so a slave can answer with
 RSP_nack instead of failing.
 
 Payloads of DAT_input_output (and the configuration of CFG_parameter) are encoded by
@@ -17,7 +27,7 @@ import struct
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Dict, List, Optional, Sequence, Tuple, Type, Union
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -124,6 +134,7 @@ class ErrorCode(IntEnum):
     NOT_SUPPORTED_LOG_ON_NOTIFICATION = 0x4001
     NOT_SUPPORTED_LOG_ON_REQUEST = 0x4002
     NOT_SUPPORTED_VARIABLE_STEPS = 0x4003
+    NOT_SUPPORTED_TRANSPORT_PROTOCOL = 0x4004
     NOT_SUPPORTED_PDU = 0x4005
     NOT_SUPPORTED_PDU_SIZE = 0x4006
 
@@ -187,328 +198,169 @@ class PduError(ValueError):
         self.receiver = receiver
 
 
-# ---- the PDUs ---------------------------------------------------------------------------------
-# Each class lists its fields after type_id in wire order with a struct format; SIZE is the
-# standard's fixed length (None for a PDU with a variable tail).
+# ---- the layouts ------------------------------------------------------------------------------
 
-class Pdu:
-    TYPES: Tuple[PduType, ...] = ()
-    FORMAT = ""            # struct format of the fields after type_id
-    FIELDS: Tuple[str, ...] = ()
-    TAIL: Optional[str] = None   # name of a variable-length bytes field at the end
-    type_id: PduType
+@dataclass(frozen=True)
+class Layout:
+    """One PDU type on the wire: ``fields`` after type_id in order, each (name, struct code);
+    ``tail`` names a variable-length bytes field at the end (None: the PDU has a fixed length);
+    ``defaults`` are values a constructor may leave out."""
 
-    @classmethod
-    def size(cls) -> int:
-        return 1 + struct.calcsize("<" + cls.FORMAT)
+    fields: Tuple[Tuple[str, str], ...]
+    tail: Optional[str] = None
+    defaults: Mapping[str, object] = field(default_factory=dict)
 
-    def _values(self) -> tuple:
-        return tuple(_wire(getattr(self, name)) for name in self.FIELDS)
+    def __post_init__(self):
+        object.__setattr__(self, "struct", struct.Struct("<B" + "".join(code for _, code in self.fields)))
 
-    def encode(self) -> bytes:
-        head = struct.pack("<B" + self.FORMAT, int(self.type_id), *self._values())
-        return head + bytes(getattr(self, self.TAIL)) if self.TAIL else head
+    @property
+    def names(self) -> Tuple[str, ...]:
+        return tuple(name for name, _ in self.fields) + ((self.tail,) if self.tail else ())
 
-    @classmethod
-    def _decode(cls, data: bytes) -> "Pdu":
-        fixed = cls.size()
-        values = struct.unpack_from("<" + cls.FORMAT, data, 1)
-        kwargs = {name: _unwire(cls, name, value) for name, value in zip(cls.FIELDS, values)}
-        if cls.TAIL:
-            kwargs[cls.TAIL] = bytes(data[fixed:])
-        if len(cls.TYPES) > 1:
-            kwargs["type_id"] = PduType(data[0])
-        return cls(**kwargs)
+    @property
+    def size(self) -> int:
+        """The length of the fixed part, type_id included (the PDU's length without a tail)."""
+        return self.struct.size
 
 
-def _wire(value):
-    if isinstance(value, uuidlib.UUID):
-        return value.bytes            # the uuid's 16 bytes in the order it is written
-    if isinstance(value, IntEnum):
-        return int(value)
-    return value
+P = PduType
+_REQUEST = (("pdu_seq_id", "H"), ("receiver", "B"))                 # STC_, CFG_, INF_
+_STC = _REQUEST + (("state_id", "B"),)
+_RESPONSE = (("resp_seq_id", "H"), ("sender", "B"))                 # RSP_ (mirrors the request)
+_NETWORK = (("transport_protocol", "B"), ("port", "H"), ("ip_address", "I"))   # UDP_IPv4 / TCP_IPv4
+_UDP = {"transport_protocol": TransportProtocol.UDP_IPv4}
+
+#: every PDU of DCP 1.0, fields after type_id in wire order (docs/hil.md#pdus has the same table)
+LAYOUTS: Dict[PduType, Layout] = {
+    P.STC_register: Layout(_STC + (("slave_uuid", "16s"), ("op_mode", "B"), ("major_version", "B"),
+                                   ("minor_version", "B")),
+                           defaults={"major_version": DCP_MAJOR_VERSION, "minor_version": DCP_MINOR_VERSION}),
+    **{t: Layout(_STC) for t in (P.STC_deregister, P.STC_prepare, P.STC_configure, P.STC_initialize,
+                                 P.STC_send_outputs, P.STC_stop, P.STC_reset)},
+    P.STC_run: Layout(_STC + (("start_time", "q"),), defaults={"start_time": 0}),   # Unix seconds, 0: at once
+    P.STC_do_step: Layout(_STC + (("steps", "I"),)),
+    P.CFG_time_res: Layout(_REQUEST + (("numerator", "I"), ("denominator", "I"))),
+    P.CFG_steps: Layout(_REQUEST + (("steps", "I"), ("data_id", "H"))),
+    P.CFG_input: Layout(_REQUEST + (("data_id", "H"), ("pos", "H"), ("target_vr", "Q"), ("source_data_type", "B"))),
+    P.CFG_output: Layout(_REQUEST + (("data_id", "H"), ("pos", "H"), ("source_vr", "Q"))),
+    P.CFG_clear: Layout(_REQUEST),
+    P.CFG_target_network_information: Layout(_REQUEST + (("data_id", "H"),) + _NETWORK, defaults=_UDP),
+    P.CFG_source_network_information: Layout(_REQUEST + (("data_id", "H"),) + _NETWORK, defaults=_UDP),
+    P.CFG_parameter: Layout(_REQUEST + (("parameter_vr", "Q"), ("source_data_type", "B")), tail="configuration"),
+    P.CFG_tunable_parameter: Layout(_REQUEST + (("param_id", "H"), ("pos", "H"), ("parameter_vr", "Q"),
+                                                ("source_data_type", "B"))),
+    P.CFG_param_network_information: Layout(_REQUEST + (("param_id", "H"),) + _NETWORK, defaults=_UDP),
+    P.CFG_logging: Layout(_REQUEST + (("log_category", "B"), ("log_level", "B"), ("log_mode", "B"))),
+    P.CFG_scope: Layout(_REQUEST + (("data_id", "H"), ("scope", "B"))),
+    P.INF_state: Layout(_REQUEST),
+    P.INF_error: Layout(_REQUEST),
+    P.INF_log: Layout(_REQUEST + (("log_category", "B"), ("log_max_num", "B"))),
+    P.RSP_ack: Layout(_RESPONSE),
+    P.RSP_nack: Layout(_RESPONSE + (("exp_seq_id", "H"), ("error_code", "H"))),
+    P.RSP_state_ack: Layout(_RESPONSE + (("state_id", "B"),)),
+    P.RSP_error_ack: Layout(_RESPONSE + (("error_code", "H"),)),
+    P.RSP_log_ack: Layout(_RESPONSE, tail="log_entries"),
+    P.NTF_state_changed: Layout((("sender", "B"), ("state_id", "B"))),
+    P.NTF_log: Layout((("sender", "B"), ("time", "q"), ("template_id", "B")), tail="log_arguments"),
+    P.DAT_input_output: Layout((("pdu_seq_id", "H"), ("data_id", "H")), tail="payload"),
+    P.DAT_parameter: Layout((("pdu_seq_id", "H"), ("param_id", "H")), tail="configuration"),
+}
+del P
+
+#: the request families a master sends: their header is type_id, pdu_seq_id (uint16), receiver
+REQUEST_TYPES = frozenset(t for t in PduType if t < PduType.RSP_ack)
+#: the PDUs a slave answers with RSP_ (all but data)
+ANSWERED_TYPES = REQUEST_TYPES - {PduType.DAT_input_output, PduType.DAT_parameter}
+
+#: enumerated fields: (their enumeration, the error a slave answers for an undefined value;
+#: None: a value outside the table is kept as a plain int, since a response or notification is
+#: never refused)
+_ENUM_FIELDS: Dict[str, Tuple[type, Optional[ErrorCode]]] = {
+    "state_id": (State, ErrorCode.INVALID_STATE_ID),
+    "op_mode": (OpMode, ErrorCode.INVALID_OP_MODE),
+    "source_data_type": (DataType, ErrorCode.INVALID_SOURCE_DATA_TYPE),
+    "transport_protocol": (TransportProtocol, ErrorCode.INVALID_TRANSPORT_PROTOCOL),
+    "scope": (Scope, ErrorCode.INVALID_SCOPE),
+    "error_code": (ErrorCode, None),
+}
 
 
-_ENUM_FIELDS = {"state_id": State, "op_mode": OpMode, "error_code": ErrorCode,
-                "source_data_type": DataType, "transport_protocol": TransportProtocol,
-                "scope": Scope}
+def _to_wire(name: str, value):
+    if name == "slave_uuid":
+        return value.bytes            # the uuid's 16 bytes in the order it is written (RFC 4122)
+    if name == "ip_address":
+        return int(ipaddress.IPv4Address(value))     # the address's number, as a little-endian uint32
+    return int(value) if isinstance(value, IntEnum) else value
 
 
-def _unwire(cls, name, value):
+def _from_wire(name: str, value, responding: bool):
     if name == "slave_uuid":
         return uuidlib.UUID(bytes=value)
     if name == "ip_address":
         return str(ipaddress.IPv4Address(value))
     enum = _ENUM_FIELDS.get(name)
-    if enum is not None:
+    if enum is None:
+        return value
+    kind, refusal = enum
+    try:
+        return kind(value)
+    except ValueError:
+        if refusal is None or responding:
+            return value
+        raise PduError(refusal, f"{name} {value} is not defined by DCP 1.0") from None
+
+
+class Pdu:
+    """One PDU: ``type_id`` and its fields as attributes, named as in :data:`LAYOUTS`.
+    Immutable; equal when type and fields are equal."""
+
+    __slots__ = ("type_id", "_fields")
+
+    def __init__(self, type_id: PduType, **fields):
+        type_id = PduType(type_id)
+        layout = LAYOUTS[type_id]
+        values = {**layout.defaults, **fields}
+        missing = [name for name in layout.names if name not in values]
+        unknown = sorted(set(values) - set(layout.names))
+        if missing or unknown:
+            raise TypeError(f"{type_id.name}: " + "; ".join(
+                part for part in (f"missing {', '.join(missing)}" if missing else "",
+                                  f"no field {', '.join(unknown)}" if unknown else "") if part))
+        object.__setattr__(self, "type_id", type_id)
+        object.__setattr__(self, "_fields", {name: values[name] for name in layout.names})
+
+    def __getattr__(self, name):
         try:
-            return enum(value)
-        except ValueError:
-            # a value outside the standard's table: the slave answers INVALID_* for it
-            raise PduError(_INVALID_ENUM.get(name, ErrorCode.PROTOCOL_ERROR_GENERIC),
-                           f"{name} {value} is not defined by DCP 1.0") from None
-    return value
+            return object.__getattribute__(self, "_fields")[name]
+        except KeyError:
+            raise AttributeError(f"{self.type_id.name} has no field {name!r}") from None
 
+    def __setattr__(self, name, value):
+        raise AttributeError("a PDU is immutable")
 
-_INVALID_ENUM = {"state_id": ErrorCode.INVALID_STATE_ID, "op_mode": ErrorCode.INVALID_OP_MODE,
-                 "source_data_type": ErrorCode.INVALID_SOURCE_DATA_TYPE,
-                 "transport_protocol": ErrorCode.INVALID_TRANSPORT_PROTOCOL,
-                 "scope": ErrorCode.INVALID_SCOPE}
+    def __eq__(self, other):
+        return isinstance(other, Pdu) and self.type_id == other.type_id and self._fields == other._fields
 
+    def __hash__(self):
+        return hash((self.type_id, tuple(self._fields.items())))
 
-@dataclass(frozen=True)
-class StcRegister(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    state_id: State
-    slave_uuid: uuidlib.UUID
-    op_mode: OpMode
-    major_version: int = DCP_MAJOR_VERSION
-    minor_version: int = DCP_MINOR_VERSION
-    type_id: PduType = field(default=PduType.STC_register, init=False)
-    TYPES = (PduType.STC_register,)
-    FORMAT = "HBB16sBBB"
-    FIELDS = ("pdu_seq_id", "receiver", "state_id", "slave_uuid", "op_mode", "major_version", "minor_version")
+    def __repr__(self):
+        fields = ", ".join(f"{k}={v!r}" for k, v in self._fields.items())
+        return f"Pdu({self.type_id.name}, {fields})"
 
+    @property
+    def fields(self) -> Dict[str, object]:
+        return dict(self._fields)
 
-@dataclass(frozen=True)
-class Stc(Pdu):
-    """STC_deregister, _prepare, _configure, _initialize, _send_outputs, _stop, _reset."""
-    type_id: PduType
-    pdu_seq_id: int
-    receiver: int
-    state_id: State
-    TYPES = (PduType.STC_deregister, PduType.STC_prepare, PduType.STC_configure,
-             PduType.STC_initialize, PduType.STC_send_outputs, PduType.STC_stop, PduType.STC_reset)
-    FORMAT = "HBB"
-    FIELDS = ("pdu_seq_id", "receiver", "state_id")
-
-
-@dataclass(frozen=True)
-class StcRun(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    state_id: State
-    start_time: int = 0      # seconds since the epoch (0: at once)
-    type_id: PduType = field(default=PduType.STC_run, init=False)
-    TYPES = (PduType.STC_run,)
-    FORMAT = "HBBq"
-    FIELDS = ("pdu_seq_id", "receiver", "state_id", "start_time")
-
-
-@dataclass(frozen=True)
-class StcDoStep(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    state_id: State
-    steps: int
-    type_id: PduType = field(default=PduType.STC_do_step, init=False)
-    TYPES = (PduType.STC_do_step,)
-    FORMAT = "HBBI"
-    FIELDS = ("pdu_seq_id", "receiver", "state_id", "steps")
-
-
-@dataclass(frozen=True)
-class CfgTimeRes(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    numerator: int
-    denominator: int
-    type_id: PduType = field(default=PduType.CFG_time_res, init=False)
-    TYPES = (PduType.CFG_time_res,)
-    FORMAT = "HBII"
-    FIELDS = ("pdu_seq_id", "receiver", "numerator", "denominator")
-
-
-@dataclass(frozen=True)
-class CfgSteps(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    steps: int
-    data_id: int
-    type_id: PduType = field(default=PduType.CFG_steps, init=False)
-    TYPES = (PduType.CFG_steps,)
-    FORMAT = "HBIH"
-    FIELDS = ("pdu_seq_id", "receiver", "steps", "data_id")
-
-
-@dataclass(frozen=True)
-class CfgInput(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    data_id: int
-    pos: int
-    target_vr: int
-    source_data_type: DataType
-    type_id: PduType = field(default=PduType.CFG_input, init=False)
-    TYPES = (PduType.CFG_input,)
-    FORMAT = "HBHHQB"
-    FIELDS = ("pdu_seq_id", "receiver", "data_id", "pos", "target_vr", "source_data_type")
-
-
-@dataclass(frozen=True)
-class CfgOutput(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    data_id: int
-    pos: int
-    source_vr: int
-    type_id: PduType = field(default=PduType.CFG_output, init=False)
-    TYPES = (PduType.CFG_output,)
-    FORMAT = "HBHHQ"
-    FIELDS = ("pdu_seq_id", "receiver", "data_id", "pos", "source_vr")
-
-
-@dataclass(frozen=True)
-class Basic(Pdu):
-    """A PDU of header only: CFG_clear, INF_state, INF_error."""
-    type_id: PduType
-    pdu_seq_id: int
-    receiver: int
-    TYPES = (PduType.CFG_clear, PduType.INF_state, PduType.INF_error)
-    FORMAT = "HB"
-    FIELDS = ("pdu_seq_id", "receiver")
-
-
-@dataclass(frozen=True)
-class CfgNetworkInformation(Pdu):
-    """CFG_source_/CFG_target_network_information for UDP_IPv4: port, then the IPv4 address
-    as a little-endian uint32 of its numeric value (127.0.0.1 is 0x7F000001)."""
-    type_id: PduType
-    pdu_seq_id: int
-    receiver: int
-    data_id: int
-    port: int
-    ip_address: str
-    transport_protocol: TransportProtocol = TransportProtocol.UDP_IPv4
-    TYPES = (PduType.CFG_source_network_information, PduType.CFG_target_network_information)
-    FORMAT = "HBHBHI"
-    FIELDS = ("pdu_seq_id", "receiver", "data_id", "transport_protocol", "port", "ip_address")
-
-    def _values(self) -> tuple:
-        return (self.pdu_seq_id, self.receiver, self.data_id, int(self.transport_protocol),
-                self.port, int(ipaddress.IPv4Address(self.ip_address)))
-
-
-@dataclass(frozen=True)
-class CfgParameter(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    parameter_vr: int
-    source_data_type: DataType
-    configuration: bytes
-    type_id: PduType = field(default=PduType.CFG_parameter, init=False)
-    TYPES = (PduType.CFG_parameter,)
-    FORMAT = "HBQB"
-    FIELDS = ("pdu_seq_id", "receiver", "parameter_vr", "source_data_type")
-    TAIL = "configuration"
-
-
-@dataclass(frozen=True)
-class CfgScope(Pdu):
-    pdu_seq_id: int
-    receiver: int
-    data_id: int
-    scope: Scope
-    type_id: PduType = field(default=PduType.CFG_scope, init=False)
-    TYPES = (PduType.CFG_scope,)
-    FORMAT = "HBHB"
-    FIELDS = ("pdu_seq_id", "receiver", "data_id", "scope")
-
-
-@dataclass(frozen=True)
-class RspAck(Pdu):
-    sender: int
-    resp_seq_id: int
-    type_id: PduType = field(default=PduType.RSP_ack, init=False)
-    TYPES = (PduType.RSP_ack,)
-    FORMAT = "BH"
-    FIELDS = ("sender", "resp_seq_id")
-
-
-@dataclass(frozen=True)
-class RspNack(Pdu):
-    sender: int
-    resp_seq_id: int
-    exp_seq_id: int
-    error_code: ErrorCode
-    type_id: PduType = field(default=PduType.RSP_nack, init=False)
-    TYPES = (PduType.RSP_nack,)
-    FORMAT = "BHHH"
-    FIELDS = ("sender", "resp_seq_id", "exp_seq_id", "error_code")
-
-
-@dataclass(frozen=True)
-class RspStateAck(Pdu):
-    sender: int
-    resp_seq_id: int
-    state_id: State
-    type_id: PduType = field(default=PduType.RSP_state_ack, init=False)
-    TYPES = (PduType.RSP_state_ack,)
-    FORMAT = "BHB"
-    FIELDS = ("sender", "resp_seq_id", "state_id")
-
-
-@dataclass(frozen=True)
-class RspErrorAck(Pdu):
-    sender: int
-    resp_seq_id: int
-    error_code: ErrorCode
-    type_id: PduType = field(default=PduType.RSP_error_ack, init=False)
-    TYPES = (PduType.RSP_error_ack,)
-    FORMAT = "BHH"
-    FIELDS = ("sender", "resp_seq_id", "error_code")
-
-
-@dataclass(frozen=True)
-class NtfStateChanged(Pdu):
-    sender: int
-    state_id: State
-    type_id: PduType = field(default=PduType.NTF_state_changed, init=False)
-    TYPES = (PduType.NTF_state_changed,)
-    FORMAT = "BB"
-    FIELDS = ("sender", "state_id")
-
-
-@dataclass(frozen=True)
-class DatInputOutput(Pdu):
-    pdu_seq_id: int
-    data_id: int
-    payload: bytes
-    type_id: PduType = field(default=PduType.DAT_input_output, init=False)
-    TYPES = (PduType.DAT_input_output,)
-    FORMAT = "HH"
-    FIELDS = ("pdu_seq_id", "data_id")
-    TAIL = "payload"
-
-
-@dataclass(frozen=True)
-class Unsupported(Pdu):
-    """A PDU the standard defines that we do not implement (logging, tunable parameters,
-    DAT_parameter): only its header is read, so that a slave can refuse it."""
-    type_id: PduType
-    pdu_seq_id: int
-    receiver: int
-    body: bytes = b""
-    TYPES = (PduType.CFG_tunable_parameter, PduType.CFG_param_network_information,
-             PduType.CFG_logging, PduType.INF_log, PduType.RSP_log_ack, PduType.NTF_log,
-             PduType.DAT_parameter)
-    FORMAT = "HB"
-    FIELDS = ("pdu_seq_id", "receiver")
-    TAIL = "body"
-
-
-PDU_CLASSES: Dict[PduType, Type[Pdu]] = {t: cls for cls in (
-    StcRegister, Stc, StcRun, StcDoStep, CfgTimeRes, CfgSteps, CfgInput, CfgOutput, Basic,
-    CfgNetworkInformation, CfgParameter, CfgScope, RspAck, RspNack, RspStateAck, RspErrorAck,
-    NtfStateChanged, DatInputOutput, Unsupported) for t in cls.TYPES}
-
-#: the request families a master sends: their header is type_id, pdu_seq_id (uint16), receiver
-REQUEST_TYPES = frozenset(t for t in PduType if t < 0xB0)
+    def encode(self) -> bytes:
+        layout = LAYOUTS[self.type_id]
+        head = layout.struct.pack(int(self.type_id), *(_to_wire(name, self._fields[name]) for name, _ in layout.fields))
+        return head + bytes(self._fields[layout.tail]) if layout.tail else head
 
 
 def decode(data: bytes) -> Pdu:
-    """The PDU in one datagram; a wrong length or unknown type id raises :class:`PduError`."""
+    """The PDU in one datagram; a wrong length, an unknown type id or an enumeration value the
+    standard does not define raises :class:`PduError`."""
     if not data:
         raise PduError(ErrorCode.INVALID_LENGTH, "empty datagram")
     try:
@@ -517,21 +369,25 @@ def decode(data: bytes) -> Pdu:
         raise PduError(ErrorCode.NOT_SUPPORTED_PDU, f"type_id 0x{data[0]:02X} is not defined by DCP 1.0",
                        type_id=data[0]) from None
     seq = receiver = None
-    if type_id in REQUEST_TYPES and type_id != PduType.DAT_input_output and len(data) >= 4:
+    if type_id in ANSWERED_TYPES and len(data) >= 4:
         seq, receiver = struct.unpack_from("<HB", data, 1)
-    elif type_id == PduType.DAT_input_output and len(data) >= 3:
+    elif type_id in (PduType.DAT_input_output, PduType.DAT_parameter) and len(data) >= 3:
         seq = struct.unpack_from("<H", data, 1)[0]
-    cls = PDU_CLASSES[type_id]
-    fixed = cls.size()
-    if len(data) < fixed or (cls.TAIL is None and len(data) != fixed):
+    layout = LAYOUTS[type_id]
+    if len(data) < layout.size or (layout.tail is None and len(data) != layout.size):
         raise PduError(ErrorCode.INVALID_LENGTH,
                        f"{type_id.name}: {len(data)} bytes, the standard's length is "
-                       f"{fixed}{' or more' if cls.TAIL else ''}", type_id, seq, receiver)
+                       f"{layout.size}{' or more' if layout.tail else ''}", type_id, seq, receiver)
+    responding = type_id not in REQUEST_TYPES
+    values = layout.struct.unpack_from(data)
     try:
-        return cls._decode(data)
+        fields = {name: _from_wire(name, value, responding) for (name, _), value in zip(layout.fields, values[1:])}
     except PduError as error:
         error.type_id, error.pdu_seq_id, error.receiver = type_id, seq, receiver
         raise
+    if layout.tail:
+        fields[layout.tail] = bytes(data[layout.size:])
+    return Pdu(type_id, **fields)
 
 
 # ---- payloads ---------------------------------------------------------------------------------

@@ -1,20 +1,23 @@
 """``railcosim dcp-slave``: any FMI 2.0 co-simulation FMU served as a DCP 1.0 slave over UDP_IPv4.
 
-The slave follows the standard's state machine (orchestrator/dcp/states.py) from STC_register
-to STC_deregister, checks every request as the standard asks (receiver, sequence id, length,
-state, state_id, then the request's own fields) and answers RSP_ack or RSP_nack with the
-standard's error code; each state change is announced with NTF_state_changed. DAT PDUs are
-never answered: a malformed, unknown or out-of-date one is dropped and counted.
+:class:`DcpSlaveServer` follows the standard's state machine (orchestrator/dcp/states.py) from
+STC_register to STC_deregister, checks every request in the order the reference implementation
+does (receiver, sequence id, length, state, state_id, then the request's own fields) and
+answers RSP_ack or RSP_nack with the standard's error code; each state change is announced
+with NTF_state_changed. DAT PDUs are never answered: a malformed, unknown or out-of-date one is
+dropped and counted. docs/hil.md says how each rule was checked against DCPLib.
 
 Operating modes (docs/hil.md#operating-modes):
 
 * NRT — the master steps the slave: STC_do_step(steps) advances the FMU by steps × time
   resolution, STC_send_outputs sends the outputs it computed.
-* SRT (``--real-time``) — the slave follows its own monotonic clock once running: every
-  output period it applies the latest inputs, steps the FMU and sends its outputs, whether or
-  not the master keeps up (late steps are counted, none skipped).
+* SRT — the slave follows its own monotonic clock once running: every output period it
+  applies the latest inputs, steps the FMU and sends its outputs, whether or not the master
+  keeps up (late steps are counted, none skipped).
 
-The FMU itself is driven through orchestrator/fmu.py's FmuSlave, as in a run.
+The slave describes itself with the FMU's own description (:func:`dcpx.description_from_fmu`)
+or with a given one (a bench device's ``.dcpx``, :func:`dcpx.serve_over_fmu`). The FMU itself
+is driven through orchestrator/fmu.py's slaves, as in a run.
 """
 from __future__ import annotations
 
@@ -25,22 +28,20 @@ import socket
 import sys
 import time
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
-from typing import Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from orchestrator.dcp import states
-from orchestrator.dcp.dcpx import SlaveDescription, description_from_fmu, write_dcpx
-from orchestrator.dcp.pdu import (NUMPY_DTYPES, VARIABLE_LENGTH, CfgInput, CfgNetworkInformation,
-                                  CfgOutput, CfgParameter, CfgScope, CfgSteps, CfgTimeRes, DataType,
-                                  DatInputOutput, ErrorCode, NtfStateChanged, OpMode, PayloadCodec, PduError,
-                                  PduType, RspAck, RspErrorAck, RspNack, RspStateAck, Scope, State,
-                                  StcDoStep, StcRegister, StcRun, TransportProtocol, Unsupported, decode,
-                                  next_seq)
+from orchestrator.dcp import dcpx, states
+from orchestrator.dcp.dcpx import SlaveDescription
+from orchestrator.dcp.pdu import (NUMPY_DTYPES, VARIABLE_LENGTH, DataType, ErrorCode, OpMode, PayloadCodec, Pdu,
+                                  PduError, PduType, Scope, State, TransportProtocol, decode, next_seq)
 from orchestrator.errors import SimulationError, UserError
 
 _RECV_BYTES = 65536          # more than the largest UDP payload: a datagram is never cut
+P = PduType
 
 
 def castable(source: DataType, target: DataType) -> bool:
@@ -95,9 +96,9 @@ class Counters:
                 f"overruns {self.overruns} (worst {self.worst_lateness_s * 1e3:.3f} ms late)")
 
 
-class DcpSlave:
-    """The protocol engine of one slave around one FMU (``fmu`` follows orchestrator's Slave
-    protocol; ``make_fmu`` makes a fresh instance after STC_reset)."""
+class DcpSlaveServer:
+    """The protocol engine of one DCP slave around one FMU (``fmu`` follows orchestrator's
+    Slave protocol; ``make_fmu`` makes a fresh instance after STC_reset or a failure)."""
 
     def __init__(self, description: SlaveDescription, make_fmu, sock: socket.socket,
                  drop_data: float = 0.0, seed: Optional[int] = None, log=None):
@@ -114,13 +115,37 @@ class DcpSlave:
         self.error = ErrorCode.NONE
         self.slave_id = 0
         self.master: Optional[Tuple[str, int]] = None
-        self.expected_seq = 0
+        # sequence ids: the next one expected (DCPLib starts from 0, so a refusal before any
+        # registration names 1); STC_register's own id is the base
+        self.expected_seq = 1
+        self.seq_at_register = 0
+        self.continuing_seq: Optional[int] = None
         self.op_mode = OpMode.NRT
         self.deregistered = False
         self.data_sockets: Dict[Tuple[str, int], socket.socket] = {}
         self.fmu = None
         self._fresh_fmu = True
         self.vars_by_vr = {v.vr: v for v in description.variables}
+        # the request's own checks, and what an accepted request does (checks run after the
+        # state and state_id checks; a request without an entry needs none / does nothing)
+        self._checks: Dict[PduType, Callable[[Pdu], ErrorCode]] = {
+            P.CFG_time_res: self._check_time_resolution, P.CFG_steps: self._check_steps,
+            P.CFG_input: self._check_input, P.CFG_output: self._check_output,
+            P.CFG_source_network_information: self._check_network,
+            P.CFG_target_network_information: self._check_network,
+            P.CFG_parameter: self._check_parameter, P.CFG_scope: self._check_scope,
+            P.STC_prepare: self._check_prepare, P.STC_do_step: self._check_do_step,
+            P.STC_run: self._check_run,
+        }
+        self._actions: Dict[PduType, Callable[[Pdu], None]] = {
+            P.CFG_time_res: self._set_time_resolution, P.CFG_steps: self._set_steps,
+            P.CFG_input: self._add_input, P.CFG_output: self._add_output, P.CFG_clear: self._clear,
+            P.CFG_source_network_information: self._set_source, P.CFG_target_network_information: self._set_target,
+            P.CFG_parameter: self._set_parameter, P.CFG_scope: self._set_scope,
+            P.STC_prepare: self._prepare, P.STC_configure: self._configure, P.STC_initialize: self._initialize,
+            P.STC_send_outputs: self._send_outputs_now, P.STC_run: self._run, P.STC_do_step: self._do_step,
+            P.STC_stop: self._stop, P.STC_reset: self._reset, P.STC_deregister: self._deregister,
+        }
         self._clear_configuration()
 
     # ---- configuration -------------------------------------------------------------------
@@ -130,12 +155,18 @@ class DcpSlave:
         self.sources: Dict[int, Tuple[str, int]] = {}    # data_id → where its inputs arrive
         self.scopes: Dict[int, Scope] = {}
         self.steps: Dict[int, int] = {}
-        self.resolution: Optional[Tuple[int, int]] = None
+        self.resolution: Optional[Tuple[int, int]] = self._preset_resolution()
         self.parameters: Dict[int, list] = {}
         self.initialised = False
         self.fmi_initialised = False
         self.units = 0                 # simulation time in resolution units since the start
         self.run_state = State.RUNNING
+
+    def _preset_resolution(self) -> Optional[Tuple[int, int]]:
+        """A description with one fixed resolution needs no CFG_time_res: it is in use from the
+        start (as the reference implementation does)."""
+        fixed = [(num, den) for num, den, is_fixed, _ in self.desc.resolutions if is_fixed]
+        return fixed[0] if fixed else None
 
     def _close_data_sockets(self) -> None:
         for s in self.data_sockets.values():
@@ -143,7 +174,7 @@ class DcpSlave:
         self.data_sockets.clear()
 
     # ---- sending -------------------------------------------------------------------------
-    def _send(self, pdu, address=None) -> None:
+    def _send(self, pdu: Pdu, address=None) -> None:
         target = address or self.master
         if target is None:
             return
@@ -154,11 +185,16 @@ class DcpSlave:
 
     def _set_state(self, state: State) -> None:
         self.state = state
-        self._send(NtfStateChanged(self.slave_id, state))
+        self._send(Pdu(P.NTF_state_changed, sender=self.slave_id, state_id=state))
 
-    def _nack(self, seq: int, code: ErrorCode, sender: Optional[int] = None, address=None) -> None:
+    def _nack(self, seq: int, code: ErrorCode, sender: Optional[int] = None, address=None,
+              expected: Optional[int] = None) -> None:
         self.counters.nacks += 1
-        self._send(RspNack(self.slave_id if sender is None else sender, seq, self.expected_seq, code), address)
+        self._send(Pdu(P.RSP_nack, resp_seq_id=seq, sender=self.slave_id if sender is None else sender,
+                       exp_seq_id=self.expected_seq if expected is None else expected, error_code=code), address)
+
+    def _ack(self, seq: int, address=None) -> None:
+        self._send(Pdu(P.RSP_ack, resp_seq_id=seq, sender=self.slave_id), address)
 
     # ---- receiving -----------------------------------------------------------------------
     def handle(self, data: bytes, address: Tuple[str, int]) -> None:
@@ -176,24 +212,25 @@ class DcpSlave:
         except PduError as error:
             self._malformed(error, address)
             return
-        if pdu.type_id == PduType.DAT_input_output:
+        if pdu.type_id == P.DAT_input_output:
             self._data(pdu)
             return
-        if pdu.type_id == PduType.DAT_parameter or pdu.type_id >= PduType.RSP_ack:
+        if pdu.type_id not in states.REQUESTS:
             return      # tunable parameters are not offered; responses/notifications are not ours
         self._request(pdu, address)
 
     def _malformed(self, error: PduError, address) -> None:
-        if error.type_id == PduType.DAT_input_output:
+        if error.type_id == P.DAT_input_output:
             self.counters.dat_rejected += 1
             return
-        if error.pdu_seq_id is None or error.type_id is None or error.type_id >= PduType.RSP_ack \
+        if error.pdu_seq_id is None or error.type_id not in states.REQUESTS \
                 or error.error_code == ErrorCode.NOT_SUPPORTED_PDU:
             self.counters.malformed += 1          # no header to answer to
             return
         if self.state == State.ALIVE:
-            if error.type_id in (PduType.STC_register, PduType.INF_state):
-                self._nack(error.pdu_seq_id, error.error_code, sender=error.receiver, address=address)
+            if error.type_id in (P.STC_register, P.INF_state):
+                self._nack(error.pdu_seq_id, error.error_code, sender=error.receiver, address=address,
+                           expected=next_seq(error.pdu_seq_id))
             return
         if error.receiver != self.slave_id:
             return
@@ -202,22 +239,26 @@ class DcpSlave:
         self._nack(error.pdu_seq_id, error.error_code, address=address)
 
     def _sequence_ok(self, seq: int, address) -> bool:
-        if seq != self.expected_seq:
+        """The next request must carry the expected id; one that does not is refused and does
+        not use it up. After CFG_clear and STC_reset the reference implementation's slave expects
+        STC_register's id + 1 again; its master rewinds after CFG_clear but continues counting
+        after STC_reset, so after STC_reset the continuing id is accepted too."""
+        if seq != self.expected_seq and seq != self.continuing_seq:
             self._nack(seq, ErrorCode.INVALID_SEQUENCE_ID, address=address)
             return False
-        self.expected_seq = next_seq(seq)
+        self.expected_seq, self.continuing_seq = next_seq(seq), None
         return True
 
-    def _request(self, pdu, address) -> None:
+    def _request(self, pdu: Pdu, address) -> None:
         type_id = pdu.type_id
-        if self.state == State.ALIVE:
-            if type_id == PduType.INF_state:        # a slave not registered answers as asked
-                self._send(RspStateAck(pdu.receiver, pdu.pdu_seq_id, self.state), address)
-            elif type_id == PduType.STC_register:
+        if self.state == State.ALIVE:     # sequence ids are not checked before a registration
+            if type_id == P.INF_state:
+                self._send(Pdu(P.RSP_state_ack, resp_seq_id=pdu.pdu_seq_id, sender=pdu.receiver,
+                               state_id=self.state), address)
+            elif type_id == P.STC_register:
                 self._register(pdu, address)
             else:
-                self._nack(pdu.pdu_seq_id, ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE,
-                           sender=pdu.receiver, address=address)
+                self._nack(pdu.pdu_seq_id, ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE, address=address)
             return
         if pdu.receiver != self.slave_id:
             return                                   # addressed to another slave
@@ -227,16 +268,26 @@ class DcpSlave:
         if code != ErrorCode.NONE:
             self._nack(pdu.pdu_seq_id, code, address=address)
             return
-        if type_id == PduType.INF_state:
-            self._send(RspStateAck(self.slave_id, pdu.pdu_seq_id, self.state), address)
+        if type_id == P.INF_state:
+            self._send(Pdu(P.RSP_state_ack, resp_seq_id=pdu.pdu_seq_id, sender=self.slave_id, state_id=self.state),
+                       address)
             return
-        if type_id == PduType.INF_error:
-            self._send(RspErrorAck(self.slave_id, pdu.pdu_seq_id, self.error), address)
+        if type_id == P.INF_error:
+            self._send(Pdu(P.RSP_error_ack, resp_seq_id=pdu.pdu_seq_id, sender=self.slave_id, error_code=self.error),
+                       address)
             return
-        self._send(RspAck(self.slave_id, pdu.pdu_seq_id), address)
-        self._act(pdu)
+        self._ack(pdu.pdu_seq_id, address)
+        action = self._actions.get(type_id)
+        if action is None:
+            return
+        try:
+            action(pdu)
+        except (SimulationError, UserError) as error:
+            self._fail(str(error))
+        except Exception as error:     # anything else the FMU or fmpy raises
+            self._fail(f"{type(error).__name__}: {error}")
 
-    def _register(self, pdu: StcRegister, address) -> None:
+    def _register(self, pdu: Pdu, address) -> None:
         code = ErrorCode.NONE
         if pdu.state_id != self.state:
             code = ErrorCode.INVALID_STATE_ID
@@ -249,35 +300,51 @@ class DcpSlave:
         elif pdu.minor_version != self.desc.minor_version:
             code = ErrorCode.INVALID_MINOR_VERSION
         if code != ErrorCode.NONE:
-            self.expected_seq = next_seq(pdu.pdu_seq_id)
-            self._nack(pdu.pdu_seq_id, code, sender=pdu.receiver, address=address)
+            self._nack(pdu.pdu_seq_id, code, sender=pdu.receiver, address=address, expected=next_seq(pdu.pdu_seq_id))
             return
         self.slave_id, self.master, self.op_mode = pdu.receiver, address, pdu.op_mode
-        self.expected_seq = next_seq(pdu.pdu_seq_id)
+        self.seq_at_register = pdu.pdu_seq_id
+        self.expected_seq, self.continuing_seq = next_seq(pdu.pdu_seq_id), None
         self.error = ErrorCode.NONE
-        self._send(RspAck(self.slave_id, pdu.pdu_seq_id))
+        self._ack(pdu.pdu_seq_id)
         self.log(f"registered by {address[0]}:{address[1]} as slave {self.slave_id}, {self.op_mode.name}")
         self._set_state(State.CONFIGURATION)
 
+    def _rewind_sequence(self, accept_continuing: bool) -> None:
+        """After CFG_clear and STC_reset: STC_register's id + 1 next (and, after STC_reset, the
+        continuing one; see :meth:`_sequence_ok`)."""
+        self.continuing_seq = self.expected_seq if accept_continuing else None
+        self.expected_seq = next_seq(self.seq_at_register)
+
     # ---- checks (the standard's order: state, state_id, then the request's fields) ---------
-    def _check(self, pdu) -> ErrorCode:
+    def _check(self, pdu: Pdu) -> ErrorCode:
         type_id = pdu.type_id
-        if type_id == PduType.STC_do_step and self.op_mode != OpMode.NRT:
+        if type_id == P.STC_do_step and self.op_mode != OpMode.NRT:
             return ErrorCode.NOT_SUPPORTED_PDU
-        if isinstance(pdu, Unsupported):
+        if type_id in states.NOT_OFFERED:
             return ErrorCode.NOT_SUPPORTED_PDU
         if not states.allowed(self.state, type_id):
             return ErrorCode.PROTOCOL_ERROR_PDU_NOT_ALLOWED_IN_THIS_STATE
-        if hasattr(pdu, "state_id") and pdu.state_id != self.state:
+        if "state_id" in pdu.fields and pdu.state_id != self.state:
             return ErrorCode.INVALID_STATE_ID
-        check = getattr(self, f"_check_{type_id.name}", None)
+        check = self._checks.get(type_id)
         return check(pdu) if check is not None else ErrorCode.NONE
 
-    def _check_CFG_time_res(self, pdu: CfgTimeRes) -> ErrorCode:
-        ok = self.desc.supports_time_resolution(pdu.numerator, pdu.denominator)
-        return ErrorCode.NONE if ok else ErrorCode.INVALID_TIME_RESOLUTION
+    def _check_time_resolution(self, pdu: Pdu) -> ErrorCode:
+        """Offered by the description, and the FMU's step a whole number of its ticks (an FMU
+        stepped in another size than its own would refuse, or be stepped at other instants)."""
+        num, den = pdu.numerator, pdu.denominator
+        if not self.desc.supports_time_resolution(num, den):
+            return ErrorCode.INVALID_TIME_RESOLUTION
+        fixed = self._preset_resolution()
+        if fixed is not None and Fraction(num, den) != Fraction(*fixed):
+            return ErrorCode.INVALID_TIME_RESOLUTION
+        step_s = self._fmu_step_s()
+        if step_s is not None and (step_s / Fraction(num, den)).denominator != 1:
+            return ErrorCode.INVALID_TIME_RESOLUTION
+        return ErrorCode.NONE
 
-    def _check_CFG_steps(self, pdu: CfgSteps) -> ErrorCode:
+    def _check_steps(self, pdu: Pdu) -> ErrorCode:
         if pdu.steps < 1:
             return ErrorCode.INVALID_STEPS
         config = self.outputs.get(pdu.data_id)
@@ -286,13 +353,13 @@ class DcpSlave:
                 return ErrorCode.INVALID_STEPS
         return ErrorCode.NONE
 
-    def _check_CFG_input(self, pdu: CfgInput) -> ErrorCode:
+    def _check_input(self, pdu: Pdu) -> ErrorCode:
         var = self.vars_by_vr.get(pdu.target_vr)
         if var is None or var.causality != "input":
             return ErrorCode.INVALID_VALUE_REFERENCE
         return ErrorCode.NONE if castable(pdu.source_data_type, var.data_type) else ErrorCode.INVALID_SOURCE_DATA_TYPE
 
-    def _check_CFG_output(self, pdu: CfgOutput) -> ErrorCode:
+    def _check_output(self, pdu: Pdu) -> ErrorCode:
         var = self.vars_by_vr.get(pdu.source_vr)
         if var is None or var.causality != "output":
             return ErrorCode.INVALID_VALUE_REFERENCE
@@ -301,21 +368,19 @@ class DcpSlave:
             return ErrorCode.INVALID_STEPS
         return ErrorCode.NONE
 
-    def _check_network(self, pdu: CfgNetworkInformation) -> ErrorCode:
+    def _check_network(self, pdu: Pdu) -> ErrorCode:
         if pdu.transport_protocol != TransportProtocol.UDP_IPv4:
             return ErrorCode.INVALID_TRANSPORT_PROTOCOL
         if not 1 <= pdu.port <= 65535:
             return ErrorCode.INVALID_NETWORK_INFORMATION
-        if pdu.type_id == PduType.CFG_source_network_information and not self.desc.supports_dat_port(pdu.port):
+        if pdu.type_id == P.CFG_source_network_information and not self.desc.supports_dat_port(pdu.port) \
+                and pdu.port != self.port:
             return ErrorCode.INVALID_NETWORK_INFORMATION
         return ErrorCode.NONE
 
-    _check_CFG_source_network_information = _check_network
-    _check_CFG_target_network_information = _check_network
-
-    def _check_CFG_parameter(self, pdu: CfgParameter) -> ErrorCode:
+    def _check_parameter(self, pdu: Pdu) -> ErrorCode:
         var = self.vars_by_vr.get(pdu.parameter_vr)
-        if var is None or var.causality != "parameter":
+        if var is None or var.causality not in ("parameter", "structuralParameter"):
             return ErrorCode.INVALID_VALUE_REFERENCE
         if not castable(pdu.source_data_type, var.data_type):
             return ErrorCode.INVALID_SOURCE_DATA_TYPE
@@ -325,7 +390,10 @@ class DcpSlave:
             return error.error_code
         return ErrorCode.NONE
 
-    def _check_STC_prepare(self, pdu) -> ErrorCode:
+    def _check_scope(self, pdu: Pdu) -> ErrorCode:
+        return ErrorCode.NONE
+
+    def _check_prepare(self, pdu: Pdu) -> ErrorCode:
         for table, gap in ((self.inputs, ErrorCode.INCOMPLETE_CONFIG_GAP_INPUT_POS),
                            (self.outputs, ErrorCode.INCOMPLETE_CONFIG_GAP_OUTPUT_POS)):
             for config in table.values():
@@ -346,26 +414,15 @@ class DcpSlave:
             return ErrorCode.INVALID_NETWORK_INFORMATION
         return ErrorCode.NONE
 
-    def _check_STC_do_step(self, pdu: StcDoStep) -> ErrorCode:
+    def _check_do_step(self, pdu: Pdu) -> ErrorCode:
         return ErrorCode.NONE if self.desc.supports_nrt_steps(pdu.steps) else ErrorCode.INVALID_STEPS
 
-    def _check_STC_run(self, pdu: StcRun) -> ErrorCode:
+    def _check_run(self, pdu: Pdu) -> ErrorCode:
         if self.op_mode != OpMode.NRT and 0 < pdu.start_time < int(time.time()):
             return ErrorCode.INVALID_START_TIME
         return ErrorCode.NONE
 
     # ---- actions -------------------------------------------------------------------------
-    def _act(self, pdu) -> None:
-        type_id = pdu.type_id
-        try:
-            action = getattr(self, f"_do_{type_id.name}", None)
-            if action is not None:
-                action(pdu)
-        except (SimulationError, UserError) as error:
-            self._fail(str(error))
-        except Exception as error:     # anything else the FMU or fmpy raises
-            self._fail(f"{type(error).__name__}: {error}")
-
     def _fail(self, message: str) -> None:
         """The FMU failed: ERROR_HANDLING, clean up, ERROR_RESOLVED (reset or deregister next)."""
         self.log(f"error: {message}")
@@ -374,36 +431,37 @@ class DcpSlave:
         self._free_fmu()
         self._set_state(State.ERROR_RESOLVED)
 
-    def _do_CFG_time_res(self, pdu: CfgTimeRes) -> None:
+    def _set_time_resolution(self, pdu: Pdu) -> None:
         self.resolution = (pdu.numerator, pdu.denominator)
 
-    def _do_CFG_steps(self, pdu: CfgSteps) -> None:
+    def _set_steps(self, pdu: Pdu) -> None:
         self.steps[pdu.data_id] = pdu.steps
 
-    def _do_CFG_input(self, pdu: CfgInput) -> None:
+    def _add_input(self, pdu: Pdu) -> None:
         self.inputs.setdefault(pdu.data_id, _DataId()).positions[pdu.pos] = (pdu.target_vr, pdu.source_data_type)
 
-    def _do_CFG_output(self, pdu: CfgOutput) -> None:
+    def _add_output(self, pdu: Pdu) -> None:
         var = self.vars_by_vr[pdu.source_vr]
         self.outputs.setdefault(pdu.data_id, _DataId()).positions[pdu.pos] = (pdu.source_vr, var.data_type)
 
-    def _do_CFG_clear(self, pdu) -> None:
+    def _clear(self, pdu: Pdu) -> None:
         self._close_data_sockets()
         self._clear_configuration()
+        self._rewind_sequence(accept_continuing=False)
 
-    def _do_CFG_source_network_information(self, pdu: CfgNetworkInformation) -> None:
+    def _set_source(self, pdu: Pdu) -> None:
         ip = pdu.ip_address if pdu.ip_address != "0.0.0.0" else self.host
         self.sources[pdu.data_id] = (ip, pdu.port)
 
-    def _do_CFG_target_network_information(self, pdu: CfgNetworkInformation) -> None:
+    def _set_target(self, pdu: Pdu) -> None:
         self.outputs.setdefault(pdu.data_id, _DataId()).address = (pdu.ip_address, pdu.port)
 
-    def _do_CFG_parameter(self, pdu: CfgParameter) -> None:
+    def _set_parameter(self, pdu: Pdu) -> None:
         var = self.vars_by_vr[pdu.parameter_vr]
         value = PayloadCodec([(pdu.source_data_type, var.count)]).decode(pdu.configuration)[0]
         self.parameters[var.vr] = [value] if isinstance(value, str) else list(np.asarray(value).tolist())
 
-    def _do_CFG_scope(self, pdu: CfgScope) -> None:
+    def _set_scope(self, pdu: Pdu) -> None:
         self.scopes[pdu.data_id] = pdu.scope
 
     def _bind_sources(self) -> None:
@@ -419,7 +477,7 @@ class DcpSlave:
             s.setblocking(False)
             self.data_sockets[address] = s
 
-    def _do_STC_prepare(self, pdu) -> None:
+    def _prepare(self, pdu: Pdu) -> None:
         self._set_state(State.PREPARING)
         for config in list(self.inputs.values()) + list(self.outputs.values()):
             config.order = [config.positions[p][0] for p in sorted(config.positions)]
@@ -430,7 +488,7 @@ class DcpSlave:
             config.scope = self.scopes.get(data_id, Scope.Initialization_Run_NonRealTime)
         self._set_state(State.PREPARED)
 
-    def _do_STC_configure(self, pdu) -> None:
+    def _configure(self, pdu: Pdu) -> None:
         self._set_state(State.CONFIGURING)
         if not self._fresh_fmu or self.fmu is None:
             self._free_fmu()
@@ -444,18 +502,18 @@ class DcpSlave:
             var = self.vars_by_vr[vr]
             names = var.fmi_names or (var.name,)
             for name, value in zip(names, elements if len(elements) == len(names) else elements * len(names)):
-                values[name] = bool(value) if self._fmi_type(name) == "Boolean" else value
+                values[name] = bool(value) if self.fmi_types[name] == "Boolean" else value
         if values:
             self.fmu.set_values(values)
         self.fmu.enter_initialization()
         self._set_state(State.CONFIGURED)
 
-    def _do_STC_initialize(self, pdu) -> None:
+    def _initialize(self, pdu: Pdu) -> None:
         self._set_state(State.INITIALIZING)
         self._initialise_fmu()
         self._set_state(State.INITIALIZED)
 
-    def _do_STC_send_outputs(self, pdu) -> None:
+    def _send_outputs_now(self, pdu: Pdu) -> None:
         if self.state == State.INITIALIZED:
             self._set_state(State.SENDING_I)
             self._send_outputs(initialization=True)
@@ -465,39 +523,42 @@ class DcpSlave:
             self._send_outputs(initialization=False)
             self._set_state(self.run_state)
 
-    def _do_STC_run(self, pdu: StcRun) -> None:
-        """From CONFIGURED: run. In real time the slave's clock starts here (at start_time) and
-        it steps in SYNCHRONIZING, SYNCHRONIZED and RUNNING alike, as the standard's real-time
-        states exchange data with simulation time mapped to absolute time; a second STC_run
-        (SYNCHRONIZED → RUNNING) only changes the state."""
+    def _run(self, pdu: Pdu) -> None:
+        """From CONFIGURED: run. Non-real-time the slave is synchronised at once. In real time
+        it is SYNCHRONIZING until its clock reaches start_time (0: at once); there it takes its
+        first step, sends its outputs and says SYNCHRONIZED, as the reference implementation
+        does, and steps on in SYNCHRONIZED and RUNNING alike (the standard's real-time states
+        all exchange data). A second STC_run (SYNCHRONIZED → RUNNING) only changes the state."""
         if self.state == State.CONFIGURED:
             self._initialise_fmu()
             self._set_state(State.SYNCHRONIZING)
-            if self.op_mode != OpMode.NRT:
+            if self.op_mode == OpMode.NRT:
+                self._set_state(State.SYNCHRONIZED)
+            else:
                 self._start_clock(pdu.start_time)
-            self._set_state(State.SYNCHRONIZED)    # nothing to synchronise: the FMU is initialised
         else:
             self._set_state(State.RUNNING)
 
-    def _do_STC_do_step(self, pdu: StcDoStep) -> None:
+    def _do_step(self, pdu: Pdu) -> None:
         self.run_state = self.state
         self._set_state(State.COMPUTING)
         self._step(pdu.steps)
         self._set_state(State.COMPUTED)
 
-    def _do_STC_stop(self, pdu) -> None:
+    def _stop(self, pdu: Pdu) -> None:
         self._set_state(State.STOPPING)
         self.clock = None
         self._terminate_fmu()
         self._set_state(State.STOPPED)
 
-    def _do_STC_reset(self, pdu) -> None:
+    def _reset(self, pdu: Pdu) -> None:
         self._close_data_sockets()
         self._clear_configuration()
         self.error = ErrorCode.NONE
+        self._rewind_sequence(accept_continuing=True)
         self._set_state(State.CONFIGURATION)
 
-    def _do_STC_deregister(self, pdu) -> None:
+    def _deregister(self, pdu: Pdu) -> None:
         self._close_data_sockets()
         self._clear_configuration()
         self._set_state(State.ALIVE)
@@ -505,9 +566,6 @@ class DcpSlave:
         self.deregistered = True
 
     # ---- the FMU -------------------------------------------------------------------------
-    def _fmi_type(self, name: str) -> str:
-        return self.fmi_types[name]
-
     def _bind_fmu(self) -> None:
         """Bind every input and output of the FMU; remember where each DCP variable lives."""
         interface = self.fmu.interface
@@ -543,14 +601,18 @@ class DcpSlave:
             self.fmi_initialised = True
         self.fmu.read_outputs()
 
+    def _fmu_step_s(self) -> Optional[Fraction]:
+        """The FMU's own step (None: it states none), exact to the nanosecond."""
+        step_s = self.fmu.interface.default_step_s if self.fmu is not None else None
+        return Fraction(round(step_s * dcpx.NS_PER_SECOND), dcpx.NS_PER_SECOND) if step_s else None
+
     def _fmu_step_units(self) -> Optional[int]:
         """The FMU's own step in units of the time resolution (None: not a whole number)."""
-        step_s = self.fmu.interface.default_step_s
-        if not step_s:
+        step_s = self._fmu_step_s()
+        if step_s is None:
             return None
-        num, den = self.resolution
-        units = step_s * den / num
-        return round(units) if round(units) >= 1 and abs(units - round(units)) < 1e-9 * units else None
+        units = step_s / Fraction(*self.resolution)
+        return int(units) if units.denominator == 1 else None
 
     def _step(self, steps: int) -> None:
         """Advance the FMU by ``steps`` resolution units: in steps of its own size when they
@@ -589,9 +651,9 @@ class DcpSlave:
         self._close_data_sockets()
 
     # ---- data ----------------------------------------------------------------------------
-    def _data(self, pdu: DatInputOutput) -> None:
+    def _data(self, pdu: Pdu) -> None:
         config = self.inputs.get(pdu.data_id)
-        if config is None or config.codec is None or not states.allowed(self.state, PduType.DAT_input_output) \
+        if config is None or config.codec is None or not states.allowed(self.state, P.DAT_input_output) \
                 or self.fmu is None:
             self.counters.dat_rejected += 1
             return
@@ -625,7 +687,8 @@ class DcpSlave:
                     values.append(buffer.values[binding.index[0]])
                 else:
                     values.append(buffer.values[binding.index])
-            pdu = DatInputOutput(config.send_seq, data_id, config.codec.encode(values))
+            pdu = Pdu(P.DAT_input_output, pdu_seq_id=config.send_seq, data_id=data_id,
+                      payload=config.codec.encode(values))
             config.send_seq = next_seq(config.send_seq)
             if self.drop_data and self.rng.random() < self.drop_data:
                 self.counters.dat_dropped += 1
@@ -645,8 +708,8 @@ class DcpSlave:
         num, den = self.resolution
         self.rt_period_s = self.rt_steps * num / den
         start = time.time() if start_time <= 0 else float(start_time)
-        # wall-clock start mapped onto the monotonic clock
-        self.clock = time.monotonic() + max(0.0, start - time.time()) + self.rt_period_s
+        # the first step at the start time (wall clock), mapped onto the monotonic clock
+        self.clock = time.monotonic() + max(0.0, start - time.time())
         self.rt_count = 0
 
     def next_deadline(self) -> Optional[float]:
@@ -668,13 +731,16 @@ class DcpSlave:
         due = {d for d, c in self.outputs.items() if self.rt_count % c.steps == 0}
         self._send_outputs(initialization=False, due=due)
         self.clock += self.rt_period_s
+        if self.state == State.SYNCHRONIZING:       # the clock has started: synchronised
+            self._set_state(State.SYNCHRONIZED)
 
 
 # ---- the command ---------------------------------------------------------------------------
 
 def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optional[Path],
-          drop_data: float, seed: Optional[int], quiet: bool = False) -> int:
-    """Run ``railcosim dcp-slave`` until deregistered (exit 0) or a signal (128 + signal)."""
+          drop_data: float, seed: Optional[int], quiet: bool = False, dcpx_in: Optional[Path] = None) -> int:
+    """Run ``railcosim dcp-slave`` until deregistered (exit 0) or a signal (128 + signal).
+    ``dcpx_in``: serve that description (a bench device's) instead of the FMU's own."""
     from orchestrator.fmu import make_slave, new_workdir, read_interface, remove_workdir
     from orchestrator.interrupts import FLAG, deferred
 
@@ -682,6 +748,10 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
     if not 0.0 <= drop_data < 1.0:
         raise UserError(f"dcp-slave: --drop-data {drop_data:g}: a fraction in [0, 1) is expected")
     interface = read_interface(fmu_path)
+    if dcpx_in is not None:
+        description = dcpx.serve_over_fmu(dcpx.read_dcpx(dcpx_in), interface, str(dcpx_in))
+        if real_time and OpMode.SRT not in description.op_modes:
+            raise UserError(f"dcp-slave: --real-time: {dcpx_in} offers no SoftRealTime mode")
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sock.bind((host, port))
@@ -689,11 +759,14 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
         sock.close()
         raise UserError(f"dcp-slave: cannot listen on {host}:{port}: {error}") from None
     host, port = sock.getsockname()
-    description = description_from_fmu(interface, host, port, real_time=False)
-    description.op_modes = (OpMode.SRT,) if real_time else (OpMode.NRT,)
+    if dcpx_in is None:
+        description = dcpx.description_from_fmu(interface, host, port, real_time=False)
+        description.op_modes = (OpMode.SRT,) if real_time else (OpMode.NRT,)
+    else:
+        description.control_host, description.control_port = host, port
     if dcpx_out is not None:
         try:
-            write_dcpx(description, dcpx_out)
+            dcpx.write_dcpx(description, dcpx_out)
         except OSError as error:
             sock.close()
             raise UserError(f"dcp-slave: --dcpx-out {dcpx_out}: {error.strerror}") from None
@@ -703,10 +776,14 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
         if not quiet:
             print(f"railcosim dcp-slave: {message}", file=sys.stderr, flush=True)
 
+    if description.logs():
+        log("the description offers logging, which this slave does not provide: CFG_logging and INF_log "
+            "are answered NOT_SUPPORTED_PDU")
+
     def make_fmu():
         return make_slave(interface.model_identifier, fmu_path, interface, workdir, in_process=False)
 
-    slave = DcpSlave(description, make_fmu, sock, drop_data=drop_data, seed=seed, log=log)
+    slave = DcpSlaveServer(description, make_fmu, sock, drop_data=drop_data, seed=seed, log=log)
     wake_r, wake_w = socket.socketpair()
     wake_r.setblocking(False)
     wake_w.setblocking(False)
@@ -723,8 +800,9 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
             slave.fmu = make_fmu()
             slave.fmu.instantiate()
             slave._bind_fmu()
-            log(f"{interface.model_identifier} serving DCP 1.0 on udp://{host}:{port} "
-                f"({'soft real-time' if real_time else 'non-real-time'})")
+            modes = " and ".join({OpMode.SRT: "soft real-time", OpMode.NRT: "non-real-time",
+                                  OpMode.HRT: "hard real-time"}[m] for m in description.op_modes)
+            log(f"{interface.model_identifier} serving DCP 1.0 on udp://{host}:{port} ({modes})")
             print(f"LISTENING {host}:{port}", flush=True)
             while not slave.deregistered and not FLAG.signum:
                 # data sockets come and go with the configuration
@@ -763,7 +841,7 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
     return status
 
 
-def _drain(sock: socket.socket, slave: DcpSlave) -> None:
+def _drain(sock: socket.socket, slave: DcpSlaveServer) -> None:
     """Handle every datagram waiting on ``sock``."""
     while True:
         try:

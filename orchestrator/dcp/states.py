@@ -44,6 +44,11 @@ ALLOWED: Dict[S, FrozenSet[P]] = {
     S.ERROR_RESOLVED: _ALWAYS | _DATA | {P.INF_error, P.STC_reset, P.STC_deregister},
 }
 
+#: the requests a slave answers (every STC_, CFG_ and INF_ PDU)
+REQUESTS = frozenset(t for t in P if t < P.RSP_ack) - _DATA
+#: requests our slave refuses with NOT_SUPPORTED_PDU: logging and tunable parameters
+NOT_OFFERED = frozenset({P.CFG_tunable_parameter, P.CFG_param_network_information, P.CFG_logging, P.INF_log})
+
 #: the states in which the slave runs (its simulation time can advance)
 RUN_STATES = frozenset({S.SYNCHRONIZING, S.SYNCHRONIZED, S.RUNNING})
 

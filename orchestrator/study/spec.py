@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, non_finite_number
 
 SCHEMA = Path(__file__).with_name("schema.json")
 #: the keys every run reports unless the study names its own (derived from summary.json:
@@ -79,6 +79,14 @@ def set_text(value) -> str:
 
 
 def _read(path: Path) -> dict:
+    data = _parse(path)
+    bad = non_finite_number(data)          # TOML's nan and inf, JSON's NaN and Infinity
+    if bad is not None:
+        raise UserError(f"study {path}: field {bad[0]}: {bad[1]} is not a finite number")
+    return data
+
+
+def _parse(path: Path) -> dict:
     if not path.is_file():
         raise UserError(f"study {path}: no such file")
     try:

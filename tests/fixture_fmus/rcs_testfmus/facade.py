@@ -3,15 +3,17 @@
 They exercise the master (rates, ordering, latency, frame semantics) and the SSP loader
 (bindings, mappings, transformations) without any railway model.
 """
+import math
+
 import numpy as np
 from scipy.signal import lfilter
 
 from pythonfmu.default_experiment import DefaultExperiment
 
-from fmus.fmi.slave import FrameSlave, Port
+from fmus.fmi.slave import FacadeSlave, Port
 
 
-class TestCounter(FrameSlave):
+class TestCounter(FacadeSlave):
     """Counts its own steps; echoes its input; reports the end time of its last step."""
 
     @classmethod
@@ -38,7 +40,7 @@ class TestCounter(FrameSlave):
         self.io["u_seen"][...] = self.io["u"]
 
 
-class TestGain(FrameSlave):
+class TestGain(FacadeSlave):
     """y = k·u + bias, with units on every port (unit conversion tests)."""
 
     @classmethod
@@ -67,7 +69,7 @@ class TestGain(FrameSlave):
         self.io["y"][...] = gain * self.io["u"] + self.param("bias")
 
 
-class _FrameUnit(FrameSlave):
+class _FrameUnit(FacadeSlave):
     @classmethod
     def sample_rate_port(cls):
         return Port("fs", "parameter", unit="Hz", start=4000.0)
@@ -118,7 +120,7 @@ class TestFrameStage(_FrameUnit):
         self.io["y"][:], core["zi"] = lfilter(core["b"], core["a"], self.io["u"], zi=core["zi"])
 
 
-class TestSchedule(FrameSlave):
+class TestSchedule(FacadeSlave):
     """A timed command: ``schedule`` = "t0:value0;t1:value1;…" (seconds), held between entries."""
 
     @classmethod
@@ -143,3 +145,27 @@ class TestSchedule(FrameSlave):
     def step_core(self, t, h):
         # Gauss-Seidel hands this to consumers stepping over [t, t+h): the value in force at t
         self.io["command"][...] = self._value(t)
+
+
+class TestSine(FacadeSlave):
+    """The DCP reference implementation's example slave as an FMU: y = sin(k + a) after step k
+    (k = 0, 1, …, counted before the step, whatever its length), y = sin(a) at initialisation;
+    input a starts at 10. tests/test_dcp_interop.py serves it with that example's description."""
+
+    @classmethod
+    def declare_ports(cls, build):
+        return [Port("y", "output", unit="1"),
+                Port("a", "input", unit="1", start=10.0)]
+
+    def make_default_experiment(self):
+        return DefaultExperiment(step_size=0.01)
+
+    def create_core(self):
+        return {"steps": 0}
+
+    def publish_initial_outputs(self):
+        self.io["y"][...] = math.sin(float(self.io["a"]))
+
+    def step_core(self, t, h):
+        self.io["y"][...] = math.sin(self.core["steps"] + float(self.io["a"]))
+        self.core["steps"] += 1

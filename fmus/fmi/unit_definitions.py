@@ -30,7 +30,7 @@ _BASE_UNITS = {
 def unit_definition(unit: str) -> Element:
     """FMI 2.0 <Unit> element for one of the units railcosim uses at its ports."""
     if unit not in _BASE_UNITS:
-        raise KeyError(f"unit {unit!r} has no SI definition in fmus/fmi/units.py")
+        raise KeyError(f"unit {unit!r} has no SI definition in fmus/fmi/unit_definitions.py")
     node = Element("Unit", name=unit)
     SubElement(node, "BaseUnit", {k: str(v) for k, v in _BASE_UNITS[unit].items()})
     return node

@@ -6,7 +6,7 @@ script whose module name encodes the build sizes, so FMUs of one unit built with
 frame sizes can live in one process. A content hash stored in the FMU lets a rebuild skip
 units whose sources, data, build sizes and forwarding binary did not change.
 
-Every FMU's linux64 binary is our forwarder (orchestrator/build/forwarder/) in front of
+Every FMU's linux64 binary is our forwarder (orchestrator/packaging/forwarder/) in front of
 pythonfmu's, when a C compiler is there (docs/architecture.md, "Forwarding binary").
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Iterable, List, Optional
 
 from fmus.sizes import BuildConfig
-from orchestrator.build import forwarder as fwd
+from orchestrator.packaging import forwarder as fwd
 
 import fmus
 
@@ -85,10 +85,19 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
     The ``fmus`` package is imported once per interpreter, from the resources folder of the
     first instance (pythonfmu puts each instance's resources first on ``sys.path``). A host
     that removes that folder after freeing its instance (``fmpy.simulate_fmu`` does, after
-    every call) would leave later instances, of this FMU or another of ours, with a package
-    whose files and not yet imported modules are gone: the script then drops the ``fmus``
-    modules so that the import below takes this instance's own copy. Data files come from
-    each instance's ``resources`` argument (``FrameSlave.resource_path``).
+    every call; libcosim does when an execution is dropped) would leave later instances, of
+    this FMU or another of ours, with a package whose files and not yet imported modules are
+    gone: the script then drops the ``fmus`` modules so that the import below takes this
+    instance's own copy. Data files come from each instance's ``resources`` argument
+    (``FacadeSlave.resource_path``); the package reads its own files at import
+    (``fmus.data.loader``), so a folder removed while an instance of another FMU still uses
+    the package costs nothing.
+
+    findClass executes the script with the module's dict as globals but a new dict as locals,
+    and then takes the class from the module, not from those locals: the class of the first
+    execution, bound to the first ``fmus`` import. The script's last line publishes what this
+    execution defined into the module (at the import itself globals and locals are one dict),
+    so each instance is made from the class bound to the ``fmus`` modules imported for it.
 
     Each instance the C wrapper creates is registered with ``fmus.fmi.bulk``, from which the
     forwarding binary claims its bulk Real accessors (docs/performance.md).
@@ -106,14 +115,28 @@ def slave_script(spec: UnitSpec, config: BuildConfig) -> str:
         "from fmus.fmi import bulk as _bulk\n\n"
         "_MODULE_DICT = globals()\n\n\n"
         f"class {spec.model_identifier}(_Facade):\n"
-        f"    build_config = {config.as_dict()!r}\n\n"
+        f"    build_config = {config.as_dict()!r}\n"
+        f"    version = {railcosim_version()!r}\n\n"
         "    def __init__(self, **kwargs):\n"
         "        if 'logger' in kwargs:  # instantiated by pythonfmu's C wrapper\n"
         "            _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(_MODULE_DICT))\n"
         "        super().__init__(**kwargs)\n"
         "        if 'logger' in kwargs:  # its forwarding binary may claim bulk access (fmus/fmi/bulk.py)\n"
-        "            _bulk.created(self)\n"
+        "            _bulk.created(self)\n\n\n"
+        "# pythonfmu takes the class from the module after executing this again: the one just defined\n"
+        "globals().update(locals())\n"
     )
+
+
+def railcosim_version() -> str:
+    """The version the FMUs carry in their modelDescription: the installed railcosim's
+    (pyproject.toml is the one place it is written)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("railcosim")
+    except PackageNotFoundError:            # a checkout used without installing it
+        return "0+unknown"
 
 
 @functools.lru_cache(maxsize=None)

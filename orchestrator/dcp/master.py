@@ -1,11 +1,11 @@
 """A DCP slave as a component of a system: the orchestrator as DCP master (hardware in the loop).
 
-:class:`DcpSlave` implements the slave protocol (orchestrator/protocols.py) by driving a remote
-DCP 1.0 slave over UDP_IPv4 with the PDUs of orchestrator/dcp/pdu.py, so the master steps it
-like any FMU. The component keeps the ports its FMU declares in the system; the slave's
-``.dcpx`` must have a variable of the same name for every port the system uses (connected,
-recorded or set). Which slave stands in for a component is said on the command line,
-``--swap NAME=dcp://HOST:PORT[?dcpx=FILE&deadline_ms=D&timeout_s=T]`` (:func:`parse_swap`).
+:class:`RemoteDcpSlave` implements the engine's slave protocol (orchestrator/protocols.py) by
+driving a remote DCP 1.0 slave over UDP_IPv4 with the PDUs of orchestrator/dcp/pdu.py, so the
+master steps it like any FMU. The component keeps the ports its FMU declares in the system; the
+slave's ``.dcpx`` must have a variable of the same name for every port the system uses
+(connected, recorded or set). Which slave stands in for a component is said on the command
+line, ``--swap NAME=dcp://HOST:PORT[?dcpx=FILE&deadline_ms=D&timeout_s=T]`` (:func:`parse_swap`).
 
 Operating modes (docs/hil.md):
 
@@ -18,39 +18,48 @@ Operating modes (docs/hil.md):
 
 Loss: outputs that do not arrive are *lost* — in non-real-time mode, those not received within
 ``deadline_ms`` after the slave announced it sent them (RUNNING after STC_send_outputs); in soft
-real time, when the newest outputs are older than ``deadline_ms``. The component's outputs then
-go to their fail-safe values at once (:data:`FAIL_SAFE`; never a permissive value held past the
-deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are counted as
-*late* and dropped. A slave that does not answer a control request within
+real time, when the newest outputs arrived more than ``deadline_ms`` before the step that needs
+them (arrival times from the kernel's receive timestamps where it gives them). The component's
+outputs then go to their fail-safe values at once (:data:`FAIL_SAFE`; never a permissive value
+held past the deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are
+counted as *late* and dropped. A slave that does not answer a control request within
 ``timeout_s`` ends the run with one line naming it (results so far kept, exit 2).
 """
 from __future__ import annotations
 
 import socket
+import struct
+import sys
 import time
 import urllib.parse
-import uuid as uuidlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.dcp import dcpx, pdu
-from orchestrator.dcp.dcpx import DcpVariable
+from orchestrator.dcp import dcpx
+from orchestrator.dcp.dcpx import DcpVariable, SlaveDescription
+from orchestrator.dcp.pdu import (UDP_MAX_PDU_SIZE, DataType, OpMode, PayloadCodec, Pdu, PduError, PduType, Scope,
+                                  State, decode, next_seq)
 from orchestrator.errors import SimulationError, UserError
-from orchestrator.fmu import Interface, ValueBuffer, _make_buffers
+from orchestrator.fmu import Interface, ValueBuffer, make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
 from orchestrator.protocols import Slave
 
+P = PduType
 _NUMERIC = {"Real", "Integer", "Boolean"}
 #: data ids of the two DAT_input_output streams the master configures
 INPUTS_ID, OUTPUTS_ID = 1, 2
-SLAVE_ID = 1                                   # the one slave each DcpSlave drives
+SLAVE_ID = 1                                   # the one slave each RemoteDcpSlave drives
 #: set-up requests whose state change may take a model's initialisation (SETTLE_S)
-_SLOW = frozenset({pdu.PduType.STC_prepare, pdu.PduType.STC_configure, pdu.PduType.STC_initialize,
-                   pdu.PduType.STC_run, pdu.PduType.STC_stop})
+_SLOW = frozenset({P.STC_prepare, P.STC_configure, P.STC_initialize, P.STC_run, P.STC_stop})
+_RESPONSES = frozenset({P.RSP_ack, P.RSP_nack, P.RSP_state_ack, P.RSP_error_ack, P.RSP_log_ack})
+#: the kernel's receive timestamps (Linux socket(7): SO_TIMESTAMPNS, a struct timespec of
+#: CLOCK_REALTIME per datagram), which Python's socket module does not name
+_SO_TIMESTAMPNS = 35 if sys.platform.startswith("linux") else None
+_TIMESPEC = struct.Struct("@qq")
 DEFAULT_DEADLINE_MS = 50.0
 DEFAULT_TIMEOUT_S = 2.0
 #: [U] the longest a slave may take to reach the state a set-up request leads to once it has
@@ -127,56 +136,23 @@ def parse_swap(text: str) -> DcpTarget:
 
 
 # ---- the slave description ---------------------------------------------------------------------
-@dataclass
-class SlaveDescription:
-    """What the master needs of a .dcpx (the DCP slave description)."""
-
-    path: Path
-    name: str
-    uuid: uuidlib.UUID
-    op_modes: frozenset            # "HRT", "SRT", "NRT"
-    resolutions: List[Tuple[Fraction, bool]]      # (seconds per step, fixed)
-    resolution_ranges: List[Tuple[Fraction, Fraction]]   # (finest, coarsest) seconds per step, any between
-    variables: Dict[str, DcpVariable] = field(default_factory=dict)
-    host: Optional[str] = None
-    port: Optional[int] = None
-    supports_nrt_steps: object = lambda steps: True
-
-    def resolution_for(self, step_s: Fraction) -> Tuple[Fraction, int]:
-        """(time resolution, steps) with steps × resolution = ``step_s``: a resolution the
-        slave offers that divides the step, else the step itself where a range allows it."""
-        for resolution, _ in self.resolutions:
-            steps = step_s / resolution
-            if steps.denominator == 1 and steps >= 1:
-                return resolution, int(steps)
-        for finest, coarsest in self.resolution_ranges:
-            # a range offers every multiple of its finest resolution up to its coarsest one
-            if finest <= step_s <= coarsest and (step_s / finest).denominator == 1:
-                return step_s, 1
-        offered = [f"{float(r):g} s" for r, _ in self.resolutions] + \
-                  [f"{float(a):g}…{float(b):g} s" for a, b in self.resolution_ranges]
-        raise UserError(f"{self.path}: no time resolution divides the component's step {float(step_s):g} s "
-                        f"(offered: {', '.join(offered) or 'none'})")
-
-
-def read_dcpx(path: Path) -> SlaveDescription:
-    """The parts of a .dcpx the master uses, read and validated against the standard's schema
-    by orchestrator/dcp/dcpx.py (whose variables it keeps, by name); a missing or malformed file
-    is one UserError."""
+def read_description(path: Path) -> SlaveDescription:
+    """A slave's .dcpx as the master reads it (validated against the standard's schema by
+    orchestrator/dcp/dcpx.py); a missing or malformed file is one UserError."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"{path}: DCP slave description (.dcpx) not found")
-    read = dcpx.read_dcpx(path)
-    description = SlaveDescription(
-        path, read.name, read.uuid, frozenset(mode.name for mode in read.op_modes),
-        [(Fraction(num, den), bool(fixed)) for num, den, fixed, _ in read.resolutions],
-        [(Fraction(lo, den), Fraction(hi, den)) for lo, hi, den in read.resolution_ranges],
-        host=read.control_host, port=read.control_port)
-    if not read.resolutions and not read.resolution_ranges:
-        description.resolutions.append((Fraction(1, 1000), True))     # the schema's default
-    description.variables.update((variable.name, variable) for variable in read.variables)
-    description.supports_nrt_steps = read.supports_nrt_steps
+    description = dcpx.read_dcpx(path)
+    description.path = path
     return description
+
+
+def resolution_for(description: SlaveDescription, step_s: Fraction) -> Tuple[Fraction, int]:
+    """(time resolution, steps) for a component's step, or one UserError naming the .dcpx."""
+    try:
+        return description.resolution_for(step_s)
+    except ValueError as error:
+        raise UserError(f"{description.path}: {error}") from None
 
 
 def dcpx_for(target: DcpTarget, fmu_path: Path) -> Path:
@@ -215,7 +191,7 @@ class HilStats:
 
 
 # ---- the slave ---------------------------------------------------------------------------------
-class DcpSlave(Slave):
+class RemoteDcpSlave(Slave):
     """One remote DCP slave driven as a component (see the module docstring)."""
 
     in_process = False
@@ -224,33 +200,35 @@ class DcpSlave(Slave):
                  step_ticks: int):
         self.name, self.interface, self.target, self.description = name, interface, target, description
         self.step_s = Fraction(step_ticks, TICKS_PER_SECOND)
-        self.resolution, self.steps = description.resolution_for(self.step_s)
-        if "NRT" in description.op_modes and not description.supports_nrt_steps(self.steps):
-            raise UserError(f"{description.path}: the slave cannot step {self.steps} × {self.resolution} s "
-                            f"at a time (the component's step {float(self.step_s):g} s)")
-        if "NRT" in description.op_modes:
-            self.mode = "NRT"
-        elif "SRT" in description.op_modes:
-            self.mode = "SRT"
+        self.resolution, self.steps = resolution_for(description, self.step_s)
+        if OpMode.NRT in description.op_modes:
+            if not description.supports_nrt_steps(self.steps):
+                raise UserError(f"{description.path}: the slave cannot step {self.steps} × {self.resolution} s "
+                                f"at a time (the component's step {float(self.step_s):g} s)")
+            self.mode = OpMode.NRT
+        elif OpMode.SRT in description.op_modes:
+            self.mode = OpMode.SRT
         else:
             raise UserError(f"{description.path}: the slave offers neither NonRealTime nor SoftRealTime "
                             "(hard real time needs a real-time master)")
-        self.stats = HilStats(target, self.mode)
+        self.stats = HilStats(target, self.mode.name)
         self.inputs: Dict[str, ValueBuffer] = {}
         self.outputs: Dict[str, ValueBuffer] = {}
         self._sock: Optional[socket.socket] = None
+        self._timestamps = False            # the socket gives each datagram's arrival time
         self._address = (target.host, target.port)
         self._seq = 0
         self._dat_seq = 0
-        self._state = pdu.State.ALIVE
-        self._acks: Dict[int, object] = {}
+        self._state = State.ALIVE
+        self._acks: Dict[int, Pdu] = {}
         self._fresh_outputs: Optional[Tuple[int, List]] = None     # (seq, values) of the newest outputs
-        self._newest_at = 0.0
+        self._newest_at = 0.0               # wall-clock arrival (time.time) of the newest outputs
         self._last_out_seq: Optional[int] = None
         self._registered = False
-        self._exchanged = False                 # an initialisation exchange took place
+        self._exchanged = False             # an initialisation exchange took place
         self._in_map: List[tuple] = []      # (buffer, index, payload entry, element, port name)
         self._out_map: List[tuple] = []
+        self._constant_inputs: List[tuple] = []     # (payload entry, element, value): set, not connected
         self._out_values: Optional[List[float]] = None              # the values the outputs show now
         self._fail_safe: List[Optional[float]] = []
         self._in_codec = self._out_codec = None
@@ -259,7 +237,7 @@ class DcpSlave(Slave):
         self._in_arrays: List[np.ndarray] = []
 
     # ---- transport -------------------------------------------------------------------------
-    def _send(self, message) -> None:
+    def _send(self, message: Pdu) -> None:
         try:
             self._sock.sendto(message.encode(), self._address)
         except OSError as error:
@@ -276,43 +254,63 @@ class DcpSlave(Slave):
         if wait <= 0:
             return False
         self._sock.settimeout(wait)
+        return self._take_one()
+
+    def _drain(self) -> None:
+        """Take every datagram that has arrived, without waiting."""
+        self._sock.setblocking(False)
+        while self._take_one():
+            pass
+
+    def _take_one(self) -> bool:
         try:
-            data, _ = self._sock.recvfrom(pdu.UDP_MAX_PDU_SIZE)
-        except socket.timeout:
+            if self._timestamps:
+                data, ancillary, _, _ = self._sock.recvmsg(UDP_MAX_PDU_SIZE, 64)
+            else:
+                data, ancillary = self._sock.recv(UDP_MAX_PDU_SIZE), ()
+        except (socket.timeout, BlockingIOError):
             return False
         except OSError:               # e.g. ICMP port unreachable reported on the socket
             return False
+        arrived = time.time()
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(value) >= _TIMESPEC.size:
+                seconds, nanoseconds = _TIMESPEC.unpack_from(value)
+                arrived = seconds + nanoseconds * 1e-9
         self.stats.received += 1
         try:
-            message = pdu.decode(data)
-        except pdu.PduError:
+            message = decode(data)
+        except PduError:
             return True               # a malformed datagram is dropped (it answers nothing we asked)
         kind = message.type_id
-        if kind in (pdu.PduType.RSP_ack, pdu.PduType.RSP_nack, pdu.PduType.RSP_state_ack,
-                    pdu.PduType.RSP_error_ack):
+        if kind in _RESPONSES:
             self._acks[message.resp_seq_id] = message
-        elif kind == pdu.PduType.NTF_state_changed:
+        elif kind == P.NTF_state_changed:
             self._state = message.state_id
-        elif kind == pdu.PduType.DAT_input_output and message.data_id == OUTPUTS_ID:
-            self._take_outputs(message)
+        elif kind == P.DAT_input_output and message.data_id == OUTPUTS_ID:
+            self._take_outputs(message, arrived)
         return True
 
-    def _take_outputs(self, message) -> None:
+    def _take_outputs(self, message: Pdu, arrived: float) -> None:
         if self._out_codec is None:
             return
         try:
             values = self._out_codec.decode(message.payload)
-        except pdu.PduError:
+        except PduError:
             return
         seq = message.pdu_seq_id
-        if self._last_out_seq is not None and ((seq - self._last_out_seq) & 0xFFFF) >= 0x8000:
-            self.stats.late += 1       # older than what we have: out of sequence, dropped
-            return
+        if self._last_out_seq is not None:
+            gap = (seq - self._last_out_seq) & 0xFFFF
+            if gap == 0 or gap >= 0x8000:
+                self.stats.late += 1       # not newer than what we have: out of sequence, dropped
+                return
+            if self.mode == OpMode.SRT:
+                self.stats.lost += gap - 1     # sent on the slave's clock: a gap is outputs lost
         self._last_out_seq = seq
         self._fresh_outputs = (seq, values)
-        self._newest_at = time.perf_counter()
+        self._newest_at = arrived
 
-    def _request(self, message, reaches=None) -> None:
+    def _request(self, message: Pdu, reaches: Optional[State] = None) -> None:
         """Send a request; wait for its RSP_ack (RSP_nack: an error naming the code) and, with
         ``reaches``, for the slave to announce that state."""
         self._send(message)
@@ -323,34 +321,42 @@ class DcpSlave(Slave):
                 raise self._gone(f"stopped answering (no answer to {message.type_id.name} within "
                                  f"{self.target.timeout_s:g} s)")
         answer = self._acks.pop(seq)
-        if answer.type_id == pdu.PduType.RSP_nack:
-            raise self._gone(f"refused {message.type_id.name}: {answer.error_code.name}")
+        if answer.type_id == P.RSP_nack:
+            code = getattr(answer.error_code, "name", f"error 0x{int(answer.error_code):04X}")
+            raise self._gone(f"refused {message.type_id.name}: {code}")
         if reaches is not None:
             # the work behind a state change (loading, initialising a model) may take longer
             # than an answer: the slave has acknowledged, so it is there
             settle_s = max(self.target.timeout_s, SETTLE_S) if message.type_id in _SLOW else self.target.timeout_s
             self._await_state(reaches, message.type_id.name, time.perf_counter() + settle_s, settle_s)
 
-    def _await_state(self, state, after: str, until: float, within_s: Optional[float] = None) -> None:
+    def _await_state(self, state: State, after: str, until: float, within_s: Optional[float] = None) -> None:
         while self._state != state:
             if not self._receive(until):
                 raise self._gone(f"stopped answering (state {state.name} not reached after {after} within "
                                  f"{within_s or self.target.timeout_s:g} s)")
 
     def _next_seq(self) -> int:
-        self._seq = pdu.next_seq(self._seq)
+        self._seq = next_seq(self._seq)
         return self._seq
 
-    def _stc(self, kind, reaches=None) -> None:
-        self._request(pdu.Stc(kind, self._next_seq(), SLAVE_ID, self._state), reaches)
+    def _stc(self, kind: PduType, reaches: Optional[State] = None) -> None:
+        self._request(Pdu(kind, pdu_seq_id=self._next_seq(), receiver=SLAVE_ID, state_id=self._state), reaches)
 
     # ---- lifecycle -------------------------------------------------------------------------
     def instantiate(self) -> None:
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1" if self.target.host.startswith("127.") else "0.0.0.0", 0))
+        if _SO_TIMESTAMPNS is not None:
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                self._timestamps = True
+            except OSError:
+                self._timestamps = False
         try:
-            self._request(pdu.StcRegister(self._next_seq(), SLAVE_ID, pdu.State.ALIVE, self.description.uuid,
-                                          pdu.OpMode[self.mode]), reaches=pdu.State.CONFIGURATION)
+            self._request(Pdu(P.STC_register, pdu_seq_id=self._next_seq(), receiver=SLAVE_ID, state_id=State.ALIVE,
+                              slave_uuid=self.description.uuid, op_mode=self.mode),
+                          reaches=State.CONFIGURATION)
         except SimulationError as error:
             raise UserError(str(error)) from None     # never started: bad input (address), exit 2
         self._registered = True
@@ -358,10 +364,9 @@ class DcpSlave(Slave):
     def bind(self, inputs: Mapping[str, Sequence[int]], outputs: Mapping[str, Sequence[int]]) -> None:
         """Map every bound port to a slave variable of its name, or to an element of a DCP array
         (``e_coil[3]`` → element 3 of ``e_coil``, row-major); one payload entry per variable."""
-        self.inputs, self.outputs = _make_buffers(dict(inputs)), _make_buffers(dict(outputs))
+        self.inputs, self.outputs = make_buffers(dict(inputs)), make_buffers(dict(outputs))
         by_vr = {var.vr: var for var in self.interface.variables.values()}
         fail_safe = FAIL_SAFE.get(self.interface.model_identifier, {})
-        codec = pdu.PayloadCodec
         for direction, buffers, causality in (("in", self.inputs, "input"), ("out", self.outputs, "output")):
             entries: Dict[str, int] = {}
             remotes: List[DcpVariable] = []
@@ -370,27 +375,25 @@ class DcpSlave(Slave):
                 for index, vr in enumerate(buffer.vr_array):
                     port = by_vr[int(vr)]
                     remote, element = self._remote(port.name, causality)
-                    if (port.type in _NUMERIC) == (remote.data_type == pdu.DataType.string):
+                    if (port.type in _NUMERIC) == (remote.data_type == DataType.string):
                         raise UserError(f"{self.description.path}: {port.name!r} is {remote.data_type.name} on the "
                                         f"slave but {port.type} on component {self.name!r}")
                     if remote.name not in entries:
                         entries[remote.name] = len(remotes)
                         remotes.append(remote)
                     slots.append((buffer, index, entries[remote.name], element, port.name))
-            arrays = [np.zeros(r.count) for r in remotes]
-            entry_codec = codec([(r.data_type, r.count) for r in remotes])
             if direction == "in":
-                self._in_map, self._in_remotes, self._in_arrays, self._in_codec = slots, remotes, arrays, entry_codec
+                self._in_map, self._in_remotes = slots, remotes
             else:
-                self._out_map, self._out_remotes, self._out_codec = slots, remotes, entry_codec
+                self._out_map, self._out_remotes = slots, remotes
+                self._out_codec = PayloadCodec([(r.data_type, r.count) for r in remotes])
         self._fail_safe = [fail_safe.get(name) for *_, name in self._out_map]
 
     def _remote(self, name: str, causality: str) -> Tuple[DcpVariable, int]:
-        variables = self.description.variables
-        remote, element = variables.get(name), 0
+        remote, element = self.description.by_name(name), 0
         if remote is None and name.endswith("]") and "[" in name:
             base, _, index = name[:-1].partition("[")
-            remote = variables.get(base)
+            remote = self.description.by_name(base)
             if remote is not None and remote.dims:
                 try:
                     position = tuple(int(i) - 1 for i in index.split(","))
@@ -406,49 +409,78 @@ class DcpSlave(Slave):
         return None
 
     def set_values(self, values: Mapping[str, object]) -> None:
-        """Parameters (and start values of inputs) as CFG_parameter, in the CONFIGURATION state."""
+        """Parameters as CFG_parameter, in the CONFIGURATION state. An input set this way (one no
+        connection feeds) travels as data on the inputs' data_id, as every input does: DCP
+        configures only parameters with CFG_parameter."""
         for name, value in values.items():
-            remote = self._parameter(name)
+            remote, element = self._settable(name)
+            if remote.causality == "input":
+                self._set_constant_input(name, remote, element, value)
+                continue
             data_type = remote.data_type
-            if data_type == pdu.DataType.string:
+            if data_type == DataType.string:
                 value = str(value)
             elif isinstance(value, str):
                 value = float(value.lower() in ("1", "true")) if value.lower() in ("true", "false") else float(value)
-            payload = pdu.PayloadCodec([(data_type, 1)]).encode([value])
-            self._request(pdu.CfgParameter(self._next_seq(), SLAVE_ID, remote.vr, data_type, payload))
+            payload = PayloadCodec([(data_type, 1)]).encode([value])
+            self._request(Pdu(P.CFG_parameter, pdu_seq_id=self._next_seq(), receiver=SLAVE_ID,
+                              parameter_vr=remote.vr, source_data_type=data_type, configuration=payload))
 
-    def _parameter(self, name: str) -> DcpVariable:
-        remote = self.description.variables.get(name)
-        if remote is None:
-            raise UserError(f"{self.description.path}: the slave has no parameter {name!r}, which the "
-                            f"system sets on component {self.name!r}")
-        return remote
+    def _settable(self, name: str) -> Tuple[DcpVariable, int]:
+        """The slave variable a value set on the component goes to: a parameter, or an input."""
+        remote = self.description.by_name(name)
+        if remote is not None and remote.causality in ("parameter", "structuralParameter"):
+            return remote, 0
+        try:
+            return self._remote(name, "input")
+        except UserError:
+            raise UserError(f"{self.description.path}: the slave has no parameter or input {name!r}, which the "
+                            f"system sets on component {self.name!r}") from None
+
+    def _set_constant_input(self, name: str, remote: DcpVariable, element: int, value) -> None:
+        for buffer, index, _, _, port in self._in_map:
+            if port == name:                 # bound (a scenario may change it): its buffer holds it
+                buffer.values[index] = float(value) if not isinstance(value, str) else value
+                return
+        if remote not in self._in_remotes:
+            self._in_remotes.append(remote)
+        entry = self._in_remotes.index(remote)
+        self._constant_inputs.append((entry, element, float(value) if remote.data_type != DataType.string else value))
 
     def enter_initialization(self) -> None:
         """Configure the exchange (CFG_*), prepare and configure the slave."""
         sock_host, sock_port = self._sock.getsockname()
         own_host = sock_host if sock_host != "0.0.0.0" else _own_address(self.target.host)
+        self._in_codec = PayloadCodec([(r.data_type, r.count) for r in self._in_remotes])
+        self._in_arrays = [np.zeros(r.count) if r.data_type != DataType.string else [""] for r in self._in_remotes]
+        for entry, element, value in self._constant_inputs:
+            self._in_arrays[entry][element] = value
         nxt = self._next_seq
-        requests = [pdu.CfgTimeRes(nxt(), SLAVE_ID, self.resolution.numerator, self.resolution.denominator)]
-        if self._out_map:
-            requests.append(pdu.CfgSteps(nxt(), SLAVE_ID, self.steps, OUTPUTS_ID))
-        for data_id, table in ((INPUTS_ID, self._in_map), (OUTPUTS_ID, self._out_map)):
-            if table:
-                requests.append(pdu.CfgScope(nxt(), SLAVE_ID, data_id, pdu.Scope.Initialization_Run_NonRealTime))
+        requests = [Pdu(P.CFG_time_res, pdu_seq_id=nxt(), receiver=SLAVE_ID,
+                        numerator=self.resolution.numerator, denominator=self.resolution.denominator)]
+        if self._out_remotes:
+            requests.append(Pdu(P.CFG_steps, pdu_seq_id=nxt(), receiver=SLAVE_ID, steps=self.steps,
+                                data_id=OUTPUTS_ID))
+        for data_id, remotes in ((INPUTS_ID, self._in_remotes), (OUTPUTS_ID, self._out_remotes)):
+            if remotes:
+                requests.append(Pdu(P.CFG_scope, pdu_seq_id=nxt(), receiver=SLAVE_ID, data_id=data_id,
+                                    scope=Scope.Initialization_Run_NonRealTime))
         for pos, remote in enumerate(self._in_remotes):
-            requests.append(pdu.CfgInput(nxt(), SLAVE_ID, INPUTS_ID, pos, remote.vr, remote.data_type))
+            requests.append(Pdu(P.CFG_input, pdu_seq_id=nxt(), receiver=SLAVE_ID, data_id=INPUTS_ID, pos=pos,
+                                target_vr=remote.vr, source_data_type=remote.data_type))
         for pos, remote in enumerate(self._out_remotes):
-            requests.append(pdu.CfgOutput(nxt(), SLAVE_ID, OUTPUTS_ID, pos, remote.vr))
-        if self._in_map:
-            requests.append(pdu.CfgNetworkInformation(pdu.PduType.CFG_source_network_information, nxt(), SLAVE_ID,
-                                                      INPUTS_ID, self.target.port, self.target.host))
-        if self._out_map:
-            requests.append(pdu.CfgNetworkInformation(pdu.PduType.CFG_target_network_information, nxt(), SLAVE_ID,
-                                                      OUTPUTS_ID, sock_port, own_host))
+            requests.append(Pdu(P.CFG_output, pdu_seq_id=nxt(), receiver=SLAVE_ID, data_id=OUTPUTS_ID, pos=pos,
+                                source_vr=remote.vr))
+        if self._in_remotes:
+            requests.append(Pdu(P.CFG_source_network_information, pdu_seq_id=nxt(), receiver=SLAVE_ID,
+                                data_id=INPUTS_ID, port=self.target.port, ip_address=self.target.host))
+        if self._out_remotes:
+            requests.append(Pdu(P.CFG_target_network_information, pdu_seq_id=nxt(), receiver=SLAVE_ID,
+                                data_id=OUTPUTS_ID, port=sock_port, ip_address=own_host))
         for request in requests:
             self._request(request)
-        self._stc(pdu.PduType.STC_prepare, reaches=pdu.State.PREPARED)
-        self._stc(pdu.PduType.STC_configure, reaches=pdu.State.CONFIGURED)
+        self._stc(P.STC_prepare, reaches=State.PREPARED)
+        self._stc(P.STC_configure, reaches=State.CONFIGURED)
         # the first initialisation exchange waits for the inputs the master gathers
         # (write_inputs), as an FMU's initial inputs are set before it leaves initialisation
 
@@ -456,30 +488,31 @@ class DcpSlave(Slave):
         """One initialisation exchange: the inputs written, STC_initialize, the outputs sent."""
         self._exchanged = True
         self._send_inputs()
-        self._stc(pdu.PduType.STC_initialize, reaches=pdu.State.INITIALIZED)
+        self._stc(P.STC_initialize, reaches=State.INITIALIZED)
         before = self._fresh_outputs
-        self._stc(pdu.PduType.STC_send_outputs, reaches=pdu.State.CONFIGURED)
+        self._stc(P.STC_send_outputs, reaches=State.CONFIGURED)
         self._collect_outputs(before, time.perf_counter() + self.target.timeout_s, during="initialisation")
 
     def exit_initialization(self) -> None:
         if not self._exchanged:              # never exchanged (no input written): once now
             self._initialise()
-        self._stc_run(pdu.State.SYNCHRONIZED)
-        self._stc_run(pdu.State.RUNNING)          # soft real time: the slave's clock starts here
+        self._stc_run(State.SYNCHRONIZED)
+        self._stc_run(State.RUNNING)          # soft real time: the slave's clock starts here
 
-    def _stc_run(self, reaches) -> None:
-        self._request(pdu.StcRun(self._next_seq(), SLAVE_ID, self._state, 0), reaches)
+    def _stc_run(self, reaches: State) -> None:
+        self._request(Pdu(P.STC_run, pdu_seq_id=self._next_seq(), receiver=SLAVE_ID, state_id=self._state,
+                          start_time=0), reaches)
 
     # ---- the exchange each step ------------------------------------------------------------
     def _send_inputs(self) -> None:
-        if not self._in_map:
+        if not self._in_remotes:
             return
         arrays = self._in_arrays
         for buffer, index, entry, element, _ in self._in_map:
             arrays[entry][element] = buffer.values[index]
-        payload = self._in_codec.encode(arrays)
-        self._dat_seq = pdu.next_seq(self._dat_seq)
-        self._send(pdu.DatInputOutput(self._dat_seq, INPUTS_ID, payload))
+        self._send(Pdu(P.DAT_input_output, pdu_seq_id=self._dat_seq, data_id=INPUTS_ID,
+                       payload=self._in_codec.encode(arrays)))
+        self._dat_seq = next_seq(self._dat_seq)      # a data_id's sequence ids start at 0
 
     def _collect_outputs(self, before, until: float, during: Optional[str] = None) -> bool:
         """Wait for outputs newer than ``before`` (what was newest when they were asked for), at
@@ -500,7 +533,8 @@ class DcpSlave(Slave):
                 for _, _, entry, element, _ in self._out_map]
 
     def _apply_fail_safe(self) -> None:
-        self.stats.lost += 1
+        if self.mode == OpMode.NRT:
+            self.stats.lost += 1           # the outputs this step asked for did not come
         self.stats.fail_safe_steps += 1
         if self._out_values is not None:
             self._out_values = [safe if safe is not None else value
@@ -509,37 +543,37 @@ class DcpSlave(Slave):
     def write_inputs(self) -> None:
         """In initialisation: an initialisation exchange with these inputs; while running the
         inputs go with the step (:meth:`do_step`)."""
-        if self._state == pdu.State.CONFIGURED:
+        if self._state == State.CONFIGURED:
             self._initialise()
 
     def do_step(self, time_s: float, step_s: float) -> None:
         began = time.perf_counter()
         self._send_inputs()
-        if self.mode == "NRT":
+        if self.mode == OpMode.NRT:
             self._stc_do_step()
             before = self._fresh_outputs
             # the slave sends its outputs, then says RUNNING: outputs still missing then were
             # lost on the way (however long the slave took), unless they trail within the deadline
-            self._stc(pdu.PduType.STC_send_outputs, reaches=pdu.State.RUNNING)
+            self._stc(P.STC_send_outputs, reaches=State.RUNNING)
             got = self._collect_outputs(before, time.perf_counter() + self.target.deadline_s)
-        else:       # soft real time: the newest outputs, if they are recent enough
-            while self._receive(time.perf_counter() + 1e-6):
-                pass
-            got = self._fresh_outputs is not None and began - self._newest_at <= self.target.deadline_s
+            age_s = time.perf_counter() - began          # the round trip
+        else:       # soft real time: the newest outputs, if they arrived recently enough
+            now = time.time()
+            self._drain()
+            age_s = now - self._newest_at
+            got = self._fresh_outputs is not None and age_s <= self.target.deadline_s
             if got:
                 self._out_values = self._slot_values(self._fresh_outputs[1])
-        elapsed = time.perf_counter() - began
         if got:
-            # non-real-time: the round trip; soft real time: the age of the outputs used
-            self.stats.rtt_s.append(elapsed if self.mode == "NRT" else began - self._newest_at)
+            self.stats.rtt_s.append(max(age_s, 0.0))
         else:
             self._apply_fail_safe()
-        if elapsed > float(self.step_s):
+        if time.perf_counter() - began > float(self.step_s):
             self.stats.overruns += 1
 
     def _stc_do_step(self) -> None:
-        self._request(pdu.StcDoStep(self._next_seq(), SLAVE_ID, self._state, self.steps),
-                      reaches=pdu.State.COMPUTED)
+        self._request(Pdu(P.STC_do_step, pdu_seq_id=self._next_seq(), receiver=SLAVE_ID, state_id=self._state,
+                          steps=self.steps), reaches=State.COMPUTED)
 
     def read_outputs(self, types=None) -> None:
         values = self._out_values
@@ -554,9 +588,10 @@ class DcpSlave(Slave):
         if self._sock is None or not self._registered or self.stats.error:
             return
         self._registered = False
+        self._sock.setblocking(True)
         try:
-            self._stc(pdu.PduType.STC_stop, reaches=pdu.State.STOPPED)
-            self._stc(pdu.PduType.STC_deregister, reaches=pdu.State.ALIVE)
+            self._stc(P.STC_stop, reaches=State.STOPPED)
+            self._stc(P.STC_deregister, reaches=State.ALIVE)
         except SimulationError as error:
             raise SimulationError(f"{error} (while stopping)") from None
 
@@ -569,19 +604,19 @@ class DcpSlave(Slave):
         return self.stats.section()
 
 
-class OfflineDcpSlave(DcpSlave):
+class OfflineRemoteDcpSlave(RemoteDcpSlave):
     """A DCP component as ``railcosim validate`` checks it: the slave description against the
-    system as :class:`DcpSlave` checks it (time resolution, operating mode, a variable of the
-    right causality and type for every port used, the parameters set), with nothing sent —
-    validating a hardware-in-the-loop system does not register with the rig (our emulator
-    would end after the deregistration). Its outputs read 0 while the others initialise."""
+    system as :class:`RemoteDcpSlave` checks it (time resolution, operating mode, a variable of
+    the right causality and type for every port used, the parameters and inputs set), with
+    nothing sent — validating a hardware-in-the-loop system does not register with the rig (our
+    emulator would end after the deregistration). Its outputs read 0 while the others initialise."""
 
     def instantiate(self) -> None:
         return None
 
     def set_values(self, values: Mapping[str, object]) -> None:
         for name in values:
-            self._parameter(name)
+            self._settable(name)
 
     def enter_initialization(self) -> None:
         return None
@@ -633,20 +668,28 @@ def dcpx_interface(path: Path) -> Interface:
     port per scalar variable, one per element of an array (``e_coil[3]``, ``u[2,1]``)."""
     from orchestrator.fmu import Variable
 
-    description = read_dcpx(path)
+    description = read_description(path)
     variables = {}
-    for variable in description.variables.values():
+    for variable in description.variables:
         names = [variable.name] if not variable.dims else \
             [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
         fmi_type = _FMI_TYPES.get(variable.data_type.name, "Integer")
         for name in names:
             # value references of their own: an array's elements share the slave's one
-            variables[name] = Variable(name, len(variables), fmi_type, variable.causality
-                                       if variable.causality != "structuralParameter" else "parameter",
-                                       "fixed" if "arameter" in variable.causality else "discrete"
-                                       if fmi_type != "Real" else "continuous", None, None)
+            parameter = variable.causality in ("parameter", "structuralParameter")
+            variables[name] = Variable(name, len(variables), fmi_type, "parameter" if parameter else variable.causality,
+                                       "fixed" if parameter else "discrete" if fmi_type != "Real" else "continuous",
+                                       None, None)
     return Interface(description.name or Path(path).stem, variables, {}, None, str(description.uuid),
                      "DCP slave", None)
+
+
+def component_interface(source: str) -> Interface:
+    """A component's ports from its source: a DCP slave's .dcpx (:func:`dcpx_interface`) or an
+    FMU's modelDescription (the graph's ``interface_of`` for systems that may hold DCP slaves)."""
+    from orchestrator.fmu import read_interface
+
+    return dcpx_interface(Path(source)) if Path(source).suffix == ".dcpx" else read_interface(source)
 
 
 def swapped_descriptions(swaps: Mapping[str, DcpTarget], graph) -> Dict[str, SlaveDescription]:
@@ -658,7 +701,7 @@ def swapped_descriptions(swaps: Mapping[str, DcpTarget], graph) -> Dict[str, Sla
         if node is None:
             raise UserError(f"--swap {target.text}: the system has no component {name!r} "
                             f"(components: {', '.join(graph.order)})")
-        description = read_dcpx(dcpx_for(target, Path(node.fmu_path)))
-        description.resolution_for(Fraction(node.step_ticks, TICKS_PER_SECOND))
+        description = read_description(dcpx_for(target, Path(node.fmu_path)))
+        resolution_for(description, Fraction(node.step_ticks, TICKS_PER_SECOND))
         descriptions[name] = description
     return descriptions

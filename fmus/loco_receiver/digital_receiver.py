@@ -46,7 +46,7 @@ import numpy as np
 
 from fmus.signalling import redundancy
 from fmus.signalling import aspects as sig
-from fmus.signalling.digital import Acceptor, DigitalSystem, check_category, check_modem_rate
+from fmus.signalling.digital_messages import Acceptor, DigitalSystem, check_category, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters

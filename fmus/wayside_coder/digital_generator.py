@@ -33,7 +33,7 @@ from fmus.dsp.filter_design import filter_frame
 
 from fmus.signalling import redundancy
 from fmus.data.loader import Line
-from fmus.signalling.digital import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
+from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN, DigitalSystem, Message, check_modem_rate
 from fmus.dsp.filter_design import chebyshev_band_pass
 from fmus.errors import FmuInputError
 from fmus.signalling.block_rules import SIGNAL_DARK, block_codes

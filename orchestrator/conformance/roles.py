@@ -47,10 +47,3 @@ def diff(manifest: Dict[str, dict], built: Dict[str, dict]) -> List[str]:
                     problems.append(f"{name}.{key}: manifest {manifest[name].get(key)!r}, "
                                     f"FMU {built[name].get(key)!r}")
     return problems
-
-
-def write_manifest(fmu_path: Path, manifest_path: Path) -> None:
-    """The FMU's manifest (``railcosim contract snapshot``) into ``manifest_path``."""
-    from orchestrator.contracts import write_snapshot
-
-    write_snapshot(Path(fmu_path), Path(manifest_path))

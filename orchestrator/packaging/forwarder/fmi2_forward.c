@@ -38,6 +38,17 @@
  * environment) or after a resolver failed once (logged as a warning), calls go to pythonfmu as
  * they are (docs/performance.md).
  *
+ * After fmi2Fatal: pythonfmu 0.7.0 answers a Python exception with fmi2Fatal after it released its
+ * references to the slave, the slave's class and its log queue without forgetting them
+ * (PySlaveInstance::handle_py_exception), so any later call on the instance used freed objects
+ * (a host calling doStep after fmi2Fatal crashed) and fmi2FreeInstance released them a second
+ * time. The forwarder holds one reference of its own to each of the three from fmi2Instantiate
+ * on (fmus/fmi/bulk.py `take`); after an fmi2Fatal it answers every call but fmi2FreeInstance
+ * with fmi2Error and a logged message without reaching pythonfmu, and hands its references to
+ * pythonfmu's second release at fmi2FreeInstance, which then frees the instance cleanly. A
+ * fatal fmi2Reset releases the old slave once more: that instance is not freed (a leak, never a
+ * crash). Without the references (a slave not registered there) the same: calls refused, not freed.
+ *
  * Release: at unload (dlclose of this library or process exit) it empties pythonfmu's
  * interpreter state through pythonfmu's finalizePythonInterpreter, before pythonfmu's own
  * exit-time destructors run, and closes pythonfmu's library if no instance is alive. It never
@@ -58,7 +69,7 @@
 #include "fmi2Functions.h"
 
 /* marker checked by tests/test_third_party_host.py */
-FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 3";
+FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 4";
 
 #define SETTINGS_FILE "railcosim_python.txt"
 #define VALUE_REFERENCES_FILE "railcosim_value_references.txt"
@@ -86,7 +97,9 @@ static PyObject *(*pyErr_Occurred)(void);
 static void (*py_IncRef)(PyObject *);
 static void (*py_DecRef)(PyObject *);
 static void (*pyErr_Clear)(void);
+static int python_api;                 /* the functions above are resolved */
 static int bulk_enabled;
+static int fatal_instances;            /* live instances that returned fmi2Fatal (atomic; 0: no look-up per call) */
 #ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
 static void (*pyEval_RestoreThread)(PyThreadState *);
 static int (*py_FinalizeEx)(void);
@@ -233,10 +246,9 @@ static int ensure_python(const char *folder) {
     return 1;
 }
 
-/* the Python functions bulk access needs, from the process's Python (ours is RTLD_GLOBAL) */
+/* the Python functions the instance references and bulk access need, from the process's Python
+ * (ours is RTLD_GLOBAL) */
 static void resolve_bulk(void) {
-    const char *off = getenv("RAILCOSIM_NO_BULK");
-    if (off && *off && strcmp(off, "0") != 0) return;
 #define RESOLVE_BULK(var, name) if (!(*(void **)&var = dlsym(RTLD_DEFAULT, name))) return;
     RESOLVE_BULK(pyGILState_Ensure, "PyGILState_Ensure")
     RESOLVE_BULK(pyGILState_Release, "PyGILState_Release")
@@ -252,7 +264,9 @@ static void resolve_bulk(void) {
     RESOLVE_BULK(py_IncRef, "Py_IncRef")
     RESOLVE_BULK(py_DecRef, "Py_DecRef")
     RESOLVE_BULK(pyErr_Clear, "PyErr_Clear")
-    bulk_enabled = 1;
+    python_api = 1;
+    const char *off = getenv("RAILCOSIM_NO_BULK");
+    bulk_enabled = !(off && *off && strcmp(off, "0") != 0);
 }
 
 static int load(void) {
@@ -329,6 +343,11 @@ typedef struct Instance {
     DirectList lists[BULK_LISTS];
     int list_count;
     int direct;                        /* the resolvers are held */
+    /* what pythonfmu holds of the slave (the slave, its class, its log queue), one reference
+     * each of our own, or NULL (after fmi2Fatal they stand for pythonfmu's, see the top) */
+    PyObject *held[3];
+    int fatal;                         /* the instance returned fmi2Fatal */
+    int leak;                          /* ... from fmi2Reset: pythonfmu's release would be one too many */
 } Instance;
 
 static Instance *instances;            /* a short list, guarded by table_lock */
@@ -370,8 +389,20 @@ static void drop_bulk(Instance *entry) {
     pyGILState_Release(gil);
 }
 
+/* our references to what pythonfmu holds of the slave, released (taking the GIL) */
+static void release_held(Instance *entry) {
+    if (!entry->held[0] && !entry->held[1] && !entry->held[2]) return;
+    PyGILState_STATE gil = pyGILState_Ensure();
+    for (int k = 0; k < 3; k++) {
+        py_DecRef(entry->held[k]);
+        entry->held[k] = NULL;
+    }
+    pyGILState_Release(gil);
+}
+
 static void free_instance_entry(Instance *entry) {
     drop_bulk(entry);
+    release_held(entry);
     for (int t = 0; t < TYPES; t++) { free(entry->valid[t].bits); free(entry->settable[t].bits); }
     free(entry);
 }
@@ -487,22 +518,30 @@ static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[
     return fmi2OK;
 }
 
-/* the slave's store resolvers, claimed right after pythonfmu created it (fmus/fmi/bulk.py) */
-static void claim_bulk(Instance *entry) {
-    if (!bulk_enabled || !entry->checked) return;
+/* right after pythonfmu created the slave (fmus/fmi/bulk.py `take`): our references to what pythonfmu
+ * holds of it, and its store resolvers when the instance may use them */
+static void claim_instance(Instance *entry) {
+    if (!python_api) return;
+    int want_resolvers = bulk_enabled && entry->checked;
     PyGILState_STATE gil = pyGILState_Ensure();
     PyObject *module = pyImport_ImportModule("fmus.fmi.bulk");
-    PyObject *resolvers = module ? pyObject_CallMethod(module, "take", "s", entry->name) : NULL;
-    if (resolvers && pyTuple_Size(resolvers) == DIRECT_TYPES) {
-        for (int t = 0; t < DIRECT_TYPES; t++) {
-            entry->resolvers[t] = pyTuple_GetItem(resolvers, t);
-            py_IncRef(entry->resolvers[t]);
+    PyObject *taken = module ? pyObject_CallMethod(module, "take", "si", entry->name, want_resolvers) : NULL;
+    Py_ssize_t size = taken ? pyTuple_Size(taken) : -1;
+    if (size == 3 || size == 3 + DIRECT_TYPES) {
+        for (int k = 0; k < 3; k++) {
+            entry->held[k] = pyTuple_GetItem(taken, k);
+            py_IncRef(entry->held[k]);
         }
-        entry->direct = 1;
-    } else {
-        pyErr_Clear();  /* not one of ours, or an older build: pythonfmu's path */
+        if (want_resolvers && size == 3 + DIRECT_TYPES) {
+            for (int t = 0; t < DIRECT_TYPES; t++) {
+                entry->resolvers[t] = pyTuple_GetItem(taken, 3 + t);
+                py_IncRef(entry->resolvers[t]);
+            }
+            entry->direct = 1;
+        }
     }
-    py_DecRef(resolvers);
+    pyErr_Clear();  /* not one of ours, or an older build: pythonfmu's path, no references held */
+    py_DecRef(taken);
     py_DecRef(module);
     pyGILState_Release(gil);
 }
@@ -606,6 +645,31 @@ static int direct_values(fmi2Component c, int type, int setting, const fmi2Value
     return 1;
 }
 
+/* an instance that returned fmi2Fatal: the call refused with fmi2Error and a logged message (1), or 0 */
+static int refused_after_fatal(fmi2Component c, const char *call) {
+    if (!__atomic_load_n(&fatal_instances, __ATOMIC_ACQUIRE)) return 0;
+    Instance *entry = find_instance(c);
+    if (!entry || !entry->fatal) return 0;
+    char text[400];
+    snprintf(text, sizeof text, "%s: %s refused: the instance returned fmi2Fatal before (FMI 2.0 allows no "
+             "further call; fmi2FreeInstance still releases it)", entry->name, call);
+    log_error(entry, text);
+    return 1;
+}
+
+/* pythonfmu's answer, noted when fatal (`reset`: the answer of fmi2Reset) */
+static fmi2Status noted(fmi2Component c, fmi2Status status, int reset) {
+    if (status != fmi2Fatal) return status;
+    Instance *entry = find_instance(c);
+    if (entry && !entry->fatal) {
+        entry->fatal = 1;
+        if (reset || !entry->held[0]) entry->leak = 1;
+        else for (int k = 0; k < 3; k++) entry->held[k] = NULL;  /* pythonfmu's second release takes them */
+        __atomic_add_fetch(&fatal_instances, 1, __ATOMIC_RELEASE);
+    }
+    return status;
+}
+
 /* ---- the FMI functions -------------------------------------------------------------------- */
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
@@ -635,7 +699,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
             snprintf(entry->name, sizeof entry->name, "%s", instanceName ? instanceName : "FMU");
             if (functions) entry->callbacks = *functions;
             entry->checked = read_value_references(fmuResourceLocation, entry);
-            claim_bulk(entry);
+            claim_instance(entry);
             pthread_mutex_lock(&table_lock);
             entry->next = instances;
             instances = entry;
@@ -653,15 +717,23 @@ void fmi2FreeInstance(fmi2Component c) {
     Instance *entry = *link;
     if (entry) *link = entry->next;
     pthread_mutex_unlock(&table_lock);
-    if (entry) free_instance_entry(entry);
-    target_fmi2FreeInstance(c);
+    int leak = entry && entry->leak;
+    if (entry && entry->fatal) __atomic_sub_fetch(&fatal_instances, 1, __ATOMIC_RELEASE);
+    if (!leak) target_fmi2FreeInstance(c);  /* (its references are released in there) */
+    if (entry) {
+        if (leak) for (int k = 0; k < 3; k++) entry->held[k] = NULL;  /* kept: the instance is never freed */
+        free_instance_entry(entry);
+    }
     pthread_mutex_lock(&lock);
     live_instances--;
     pthread_mutex_unlock(&lock);
 }
 
 #define FORWARD(name, params, args) \
-    fmi2Status name params { return target_##name ? target_##name args : fmi2Error; }
+    fmi2Status name params { \
+        if (!target_##name || refused_after_fatal(c, #name)) return fmi2Error; \
+        return noted(c, target_##name args, 0); \
+    }
 
 FORWARD(fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[]),
         (c, on, n, categories))
@@ -675,11 +747,14 @@ FORWARD(fmi2Terminate, (fmi2Component c), (c))
 /* pythonfmu's reset makes a new slave object (with new stores): the direct route is dropped
  * before it and claimed again from the new slave after it */
 fmi2Status fmi2Reset(fmi2Component c) {
-    if (!target_fmi2Reset) return fmi2Error;
-    Instance *entry = bulk_enabled ? find_instance(c) : NULL;
+    if (!target_fmi2Reset || refused_after_fatal(c, "fmi2Reset")) return fmi2Error;
+    Instance *entry = find_instance(c);
     if (entry) drop_bulk(entry);
-    fmi2Status status = target_fmi2Reset(c);
-    if (entry && status <= fmi2Warning) claim_bulk(entry);
+    fmi2Status status = noted(c, target_fmi2Reset(c), 1);
+    if (entry && status <= fmi2Warning) {
+        release_held(entry);         /* the old slave's: pythonfmu made a new one */
+        claim_instance(entry);
+    }
     return status;
 }
 /* get and set: every value reference checked first (check_references); the number types
@@ -688,10 +763,10 @@ fmi2Status fmi2Reset(fmi2Component c) {
     fmi2Status name params { \
         Instance *entry; \
         fmi2Status status; \
-        if (!target_##name) return fmi2Error; \
+        if (!target_##name || refused_after_fatal(c, #name)) return fmi2Error; \
         if (type < DIRECT_TYPES && direct_values(c, type, setting, vr, n, (void *)value, &status)) return status; \
         if (check_references(c, vr, n, type, setting, &entry) != fmi2OK) return fmi2Error; \
-        return target_##name(c, vr, n, value); \
+        return noted(c, target_##name(c, vr, n, value), 0); \
     }
 
 CHECKED(fmi2GetReal, REAL, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]))

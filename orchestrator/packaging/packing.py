@@ -19,7 +19,7 @@ from typing import List, Optional
 
 from lxml import etree
 
-from orchestrator.build.builder import stored_hash
+from orchestrator.packaging.builder import stored_hash
 from orchestrator.ssp import NS
 
 

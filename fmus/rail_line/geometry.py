@@ -1,0 +1,79 @@
+"""Where the line's track circuits lie (no FMI here; docs/rail_line.md): each section's track
+circuit (its feed leads, network nodes and segments, its ballast), the insulated joints'
+bond-lead zones, each section's code carrier and track-circuit frequency, and which section and
+which network node a position falls on.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import replace
+from typing import Tuple
+
+import numpy as np
+
+from fmus.data.loader import Line, check_carrier_under_traction
+from fmus.rail_line.track_circuit import TrackCircuit
+
+
+class LineGeometry:
+    """The line's K track circuits along the line, and positions → sections and nodes."""
+
+    def __init__(self, line: Line, settings):
+        s, c = settings, settings.circuit
+        self.count = len(line.sections)
+        leads = [(float(j["position_m"]), float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
+        offsets = {round(position, 6): offset for position, offset in leads}
+        # each circuit's ballast: the line file's per-section minimum unless the `ballast` parameter overrides all
+        self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0),
+                                      replace(c, ballast_ohm_km=c.ballast_ohm_km if c.ballast_ohm_km > 0
+                                              else float(sec.ballast_ohm_km)))
+                         for sec in line.sections]
+        # (bond lead before, joint, bond lead beyond) of every insulated joint
+        self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
+        self.starts = np.array([sec.start_m for sec in line.sections])
+        self.ends = np.array([sec.end_m for sec in line.sections])
+        self._ends_ext = np.append(self.ends, -np.inf)
+        self.starts_list = self.starts.tolist()
+        self.ends_list = self.ends.tolist()
+        self.feed_list = [float(circuit.feed_m) for circuit in self.circuits]
+        if s.carrier_hz:          # the parameter overrides the line file's carriers: the same rule holds
+            check_carrier_under_traction(s.carrier_hz, line.electrification, "parameter carrier")
+        self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
+        # train detection works at the track circuit's own frequency (the line file's): a digital
+        # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
+        self.track_frequencies = np.array([sec.carrier_hz for sec in line.sections], dtype=float)
+        self.spacing_list = [float(circuit.nodes_m[1] - circuit.nodes_m[0]) for circuit in self.circuits]
+        self.nodes_m = [np.ascontiguousarray(circuit.nodes_m, dtype=float) for circuit in self.circuits]
+        self.segments_list = [circuit.segments for circuit in self.circuits]
+        # positions where a train's head or tail changes section or clipping to the feed
+        self.edges = sorted(set(self.starts_list + self.ends_list + self.feed_list))
+
+    def section_of(self, x):
+        """Section index of every position in the array ``x`` (−1: outside the line)."""
+        k = np.searchsorted(self.starts, x, side="right") - 1
+        return np.where(x < self._ends_ext[k], k, -1)      # k = −1 reads −inf: outside
+
+    def section_at(self, x: float) -> int:
+        """Section index of one position (−1: outside the line)."""
+        k = bisect.bisect_right(self.starts_list, x) - 1
+        return k if k >= 0 and x < self.ends_list[k] else -1
+
+    def node_at(self, k: int, x: float) -> int:
+        """Network node of section k nearest to x (clipped to the circuit: beyond the feed leads
+        the rails carry no signal current, so a wheelset there shunts at the feed node)."""
+        return min(max(round((min(x, self.feed_list[k]) - self.starts_list[k]) / self.spacing_list[k]), 0),
+                   self.segments_list[k])
+
+    def interval(self, x: float) -> Tuple[float, float]:
+        """Open interval around a head or tail position x over which its section, its clipping
+        to the feed and its nearest node do not change."""
+        edges = self.edges
+        i = bisect.bisect_right(edges, x)
+        lo, hi = (edges[i - 1] if i > 0 else -math.inf), (edges[i] if i < len(edges) else math.inf)
+        k = self.section_at(x)
+        if 0 <= k and x < self.feed_list[k]:
+            start, spacing = self.starts_list[k], self.spacing_list[k]
+            middle = round((x - start) / spacing)
+            lo, hi = max(lo, start + (middle - 0.5) * spacing), min(hi, start + (middle + 0.5) * spacing)
+        return lo, hi

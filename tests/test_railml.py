@@ -1,0 +1,189 @@
+"""railML 3 lines in and out (docs/railml.md): every shipped line through railML and back
+unchanged, our railML 3.1 and 3.2 fixtures (a double-track stage with a branch) imported to the
+same line, the branch chosen by --line-id or the sidecar, an imported line run as a system with a
+clean verdict, and every bad input refused in one line naming the railML element."""
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from helpers import REPO, railcosim
+from orchestrator.analysis.railml import export_railml, import_railml, validate_railml
+
+DATA = REPO / "tests" / "data" / "railml"
+FIXTURE_31, FIXTURE_32 = DATA / "double_track_3.1.xml", DATA / "double_track_3.2.xml"
+SHIPPED_LINES = [REPO / "fmus" / "data" / "shipped" / "default_line.json",
+                 REPO / "fmus" / "data" / "shipped" / "default_line_ac.json",
+                 *sorted({p.name: p for p in REPO.glob("ssp/*/resources/*line*.json")}.values()),
+                 REPO / "docs" / "examples" / "short_line.json"]
+
+
+@pytest.mark.parametrize("line", SHIPPED_LINES, ids=lambda p: p.name)
+@pytest.mark.parametrize("version", ["3.2", "3.1"])
+def test_every_shipped_line_goes_through_railml_and_back_unchanged(tmp_path, line, version):
+    document = json.loads(line.read_text())
+    railml = tmp_path / "line.xml"
+    railml.write_bytes(export_railml(document, version))
+    back = import_railml(railml)
+    assert back.version == version
+    # the same line file: every field, numbers of the same JSON type (2600 stays 2600, 1.0 stays 1.0)
+    assert json.dumps(back.document, sort_keys=True, ensure_ascii=False) == json.dumps(document, sort_keys=True,
+                                                                                      ensure_ascii=False)
+
+
+def test_our_31_and_32_fixtures_read_as_the_same_double_track_line():
+    line_32, line_31 = import_railml(FIXTURE_32), import_railml(FIXTURE_31)
+    assert line_31.document == line_32.document
+    line = line_32.document
+    # the main track, run in its normal direction, not track 2 (reverse) nor the branch
+    assert line_32.path_ids == ["ne_t1a", "ne_t1b"] and line["length_m"] == 6000
+    assert line["name"] == "North - South"
+    assert [(s["name"], s["start_m"], s["end_m"], s["signal"]) for s in line["block_sections"]] == [
+        ("1П", 0, 1800, "1"), ("2П", 1800, 3000, "Ч"), ("3П", 3000, 4500, "5"), ("4П", 4500, 6000, "Н")]
+    first = line["block_sections"][0]
+    assert (first["transmitter"], first["carrier_hz"], first["ballast_ohm_km"]) == ("KPT-7", 50, 1.2)
+    # defaults where the file says nothing: transmitters alternating, 1 Ω·km
+    assert [s["transmitter"] for s in line["block_sections"]] == ["KPT-7", "KPT-5", "KPT-7", "KPT-5"]
+    assert line["insulated_joints"][0] == {"position_m": 0, "impedance_bond": True, "bond_lead_offset_m": 1.5}
+    assert [j["position_m"] for j in line["insulated_joints"]] == [0, 1800, 3000, 4500, 6000]
+    assert line["stations"] == [{"name": "North", "stop_m": 400, "platform_length_m": 400},
+                                {"name": "South", "stop_m": 5600}]
+    assert line["gradients"] == [{"start_m": 0, "permille": 0}, {"start_m": 1500, "permille": 5},
+                                 {"start_m": 3000, "permille": -3}]
+    assert line["curves"] == [{"start_m": 3500, "end_m": 3900, "radius_m": 800}]
+    assert line["speed_limits"] == [{"start_m": 0, "passenger_kmh": 120, "freight_kmh": 80},
+                                    {"start_m": 2800, "passenger_kmh": 60, "freight_kmh": 60},
+                                    {"start_m": 3200, "passenger_kmh": 120, "freight_kmh": 80}]
+    assert line["temporary_restrictions"] == [{"name": "track works", "start_m": 4000, "end_m": 4400,
+                                               "speed_kmh": 40}]
+    assert line["electrification"] == {"system": "DC3000", "nominal_voltage_v": 3000}
+    notes = "\n".join(line_32.notes)
+    # what was not read is said: the distant signal, the speed board, the reverse-only limit
+    assert "1 distant" in notes and "other running direction" in notes and "off the running path" in notes
+
+
+@pytest.mark.parametrize("fixture", [FIXTURE_31, FIXTURE_32], ids=["3.1", "3.2"])
+def test_the_branch_is_chosen_through_the_switch(tmp_path, fixture):
+    by_line = import_railml(fixture, line_id="line_depot")
+    sidecar = tmp_path / "sidecar.json"
+    sidecar.write_text(json.dumps({"via": ["ne_br"]}))
+    by_via = import_railml(fixture, sidecar=sidecar)
+    for branch in (by_line, by_via):
+        assert branch.path_ids == ["ne_t1a", "ne_br"]
+        line = branch.document
+        assert line["length_m"] == 4500 and [s["name"] for s in line["stations"]] == ["North", "Depot"]
+        # the depot track ends at a buffer stop, which closes its TVD section
+        assert line["block_sections"][-1]["name"] == "Depot track" and line["block_sections"][-1]["end_m"] == 4500
+        assert line["gradients"][-1] == {"start_m": 3000, "permille": 8}
+        assert line["speed_limits"][-1]["passenger_kmh"] == 40
+
+
+def test_the_sidecar_overrides_what_the_file_lacks(tmp_path):
+    sidecar = tmp_path / "sidecar.json"
+    sidecar.write_text(json.dumps({"defaults": {"ballast_ohm_km": 2.0, "transmitter": "KPT-5"},
+                                   "sections": {"tvd_4": {"carrier_hz": 75}}, "max_ballast_ohm_km": 40}))
+    line = import_railml(FIXTURE_32, sidecar=sidecar).document
+    assert [s["ballast_ohm_km"] for s in line["block_sections"]] == [1.2, 2.0, 2.0, 2.0]
+    assert [s["transmitter"] for s in line["block_sections"]] == ["KPT-7", "KPT-5", "KPT-5", "KPT-5"]
+    assert line["block_sections"][3]["carrier_hz"] == 75 and line["max_ballast_ohm_km"] == 40
+
+
+def test_an_imported_line_runs_as_a_system_with_a_clean_verdict(tmp_path, product_fmus):
+    code, stdout, stderr = railcosim("new", "stage", "--railml", FIXTURE_32, cwd=tmp_path)
+    assert code == 0, stderr
+    # one warning block: a header line, then one line per thing ignored or assumed
+    assert stderr.count("railcosim: warning:") == 1 and "1 distant" in stderr
+    resources = tmp_path / "stage" / "resources"
+    assert json.loads((resources / "double_track_3.2.json").read_text()) == import_railml(FIXTURE_32).document
+    timetable = json.loads((resources / "double_track_3.2_timetable.json").read_text())
+    assert [s["station"] for s in timetable["stops"]] == ["North", "South"]
+    code, stdout, stderr = railcosim("run", "stage", "--no-build", "--in-process", "--output", tmp_path / "out",
+                                     cwd=tmp_path)
+    assert code == 0, stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    (train,) = summary["trains"]
+    (south,) = train["stops"]
+    assert south["station"] == "South" and south["reached"] and abs(south["stop_error_m"]) < 1.0
+    assert train["signals_passed_at_danger"] == 0
+    assert "safety: safe (signals passed at danger 0, wrong-side failures 0, unsafe indications 0)" in stdout
+
+
+def test_export_writes_a_systems_line_that_imports_back(tmp_path):
+    code, stdout, stderr = railcosim("export", "railml", "freight_ac", "-o", tmp_path / "ac.xml", cwd=tmp_path)
+    assert code == 0, stderr
+    original = json.loads((REPO / "ssp" / "freight_ac" / "resources" / "default_line_ac.json").read_text())
+    assert import_railml(tmp_path / "ac.xml").document == original
+    assert b"https://www.railml.org/schemas/3.2" in (tmp_path / "ac.xml").read_bytes()
+
+
+def _variant(tmp_path, source: Path, old: str, new: str) -> Path:
+    text = source.read_text()
+    assert old in text
+    path = tmp_path / source.name
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def _refused(tmp_path, railml, *extra):
+    code, stdout, stderr = railcosim("new", "bad", "--railml", railml, *extra, cwd=tmp_path)
+    assert code == 2, stderr
+    assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1, stderr
+    assert not (tmp_path / "bad").exists()
+    return stderr
+
+
+def test_a_file_that_is_not_railml_3_is_refused(tmp_path):
+    railml2 = tmp_path / "old.xml"
+    railml2.write_text('<railml xmlns="http://www.railml.org/schemas/2013" version="2.2"><infrastructure/></railml>')
+    assert "not railML 3" in _refused(tmp_path, railml2) and "railML 2" in _refused(tmp_path, railml2)
+    garbage = tmp_path / "line.json"
+    garbage.write_text("{}")
+    assert "not railML 3: not an XML document" in _refused(tmp_path, garbage)
+
+
+def test_a_path_that_does_not_connect_is_refused(tmp_path):
+    sidecar = tmp_path / "via.json"
+    sidecar.write_text(json.dumps({"via": ["ne_t1b", "ne_br"]}))      # a switch's two branches
+    stderr = _refused(tmp_path, FIXTURE_32, "--sidecar", sidecar)
+    assert "ne_t1b, ne_br" in stderr and "no path through the topology" in stderr
+    dangling = _variant(tmp_path, FIXTURE_32, '<elementB ref="ne_t1b"/>', '<elementB ref="ne_gone"/>')
+    stderr = _refused(tmp_path, dangling)
+    assert "netRelation 'nr_t1a_t1b'" in stderr and "ne_gone" in stderr
+
+
+def test_a_block_without_detection_at_its_end_is_refused(tmp_path):
+    open_block = _variant(tmp_path, FIXTURE_32, '<hasDemarcatingTraindetector ref="ij_6000"/>', "")
+    stderr = _refused(tmp_path, open_block)
+    assert "tvdSection 'tvd_4'" in stderr and "no train detection at its end" in stderr
+
+
+def test_a_length_disagreeing_with_the_positions_is_refused(tmp_path):
+    wrong = _variant(tmp_path, FIXTURE_31, '<netElement id="ne_t1b">', '<netElement id="ne_t1b" length="2900">')
+    stderr = _refused(tmp_path, wrong)
+    assert "netElement 'ne_t1b'" in stderr and "length 2900 m disagrees with its positioning" in stderr
+    assert "3000 m" in stderr
+
+
+def test_bad_options_and_sidecars_are_refused(tmp_path):
+    assert "--line-id nowhere" in _refused(tmp_path, FIXTURE_32, "--line-id", "nowhere")
+    sidecar = tmp_path / "bad.json"
+    sidecar.write_text(json.dumps({"defaults": {"carrier_hz": 60}}))
+    assert "--sidecar" in _refused(tmp_path, FIXTURE_32, "--sidecar", sidecar)
+    code, _, stderr = railcosim("new", "both", "--railml", FIXTURE_32, "--line", "x.json", cwd=tmp_path)
+    assert code == 2 and "one of them" in stderr
+    code, _, stderr = railcosim("export", "railml", "free_run", "-o", tmp_path, cwd=tmp_path)
+    assert code == 2 and "is a folder" in stderr and "Traceback" not in stderr
+
+
+@pytest.mark.skipif(not os.environ.get("RAILCOSIM_RAILML_SCHEMA_31"),
+                    reason="the railML 3.1 XSD is not redistributable: set RAILCOSIM_RAILML_SCHEMA_31 to its folder")
+def test_exports_and_the_31_fixture_validate_against_the_railml_31_schema(tmp_path):
+    schema = Path(os.environ["RAILCOSIM_RAILML_SCHEMA_31"])
+    assert validate_railml(FIXTURE_31, schema) == (True, [])
+    for line in SHIPPED_LINES:
+        (tmp_path / "line.xml").write_bytes(export_railml(json.loads(line.read_text()), "3.1"))
+        assert validate_railml(tmp_path / "line.xml", schema) == (True, []), line
+    invalid = _variant(tmp_path, FIXTURE_31, 'type="insulatedRailJoint"', 'type="glue"')
+    valid, errors = validate_railml(invalid, schema)
+    assert not valid and "glue" in errors[0]
