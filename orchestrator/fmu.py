@@ -7,7 +7,9 @@ slave is the performance reference (docs/performance.md) and a debugging aid.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import importlib
+import os
 import shutil
 import sys
 import tempfile
@@ -137,11 +139,67 @@ def _coerce(type_name: str, value):
     return str(value)
 
 
+#: where keep_extractions() keeps FMUs extracted across runs (None: once per run, in its workdir)
+_KEPT_EXTRACTIONS: Optional[Path] = None
+
+
+def keep_extractions(folder: Optional[Path]) -> None:
+    """From now on, in this process and the processes forked from it, extract each FMU file
+    once into ``folder`` and let every later run use that extraction (a study's worker does
+    this, docs/studies.md); None: back to one extraction per run in the run's work folder.
+    An FMU rebuilt in place (another size or modification time) is extracted anew."""
+    global _KEPT_EXTRACTIONS
+    _KEPT_EXTRACTIONS = Path(folder) if folder is not None else None
+
+
 def _extract_once(fmu_path: Path, workdir: Path) -> Path:
     """One extraction (and so one loaded library) per FMU file, shared by its instances."""
+    if _KEPT_EXTRACTIONS is not None:
+        return _kept_extraction(Path(fmu_path), _KEPT_EXTRACTIONS)
     folder = Path(workdir) / f"{Path(fmu_path).stem}_{abs(hash(str(Path(fmu_path).resolve()))):x}"
     if not folder.is_dir():
         safe_extract(Path(fmu_path), folder)
+    return folder
+
+
+def import_python_module(fmu_path: Path) -> bool:
+    """Import a Python (pythonfmu) FMU's module into this process from its kept extraction, as
+    its instances would at instantiation, so that processes forked from this one find it (and
+    what it imports) already imported: a study's worker does this once per system. Only with
+    keep_extractions on (the module's folder must outlive the runs); False when the FMU has no
+    Python module or extractions are not kept."""
+    if _KEPT_EXTRACTIONS is None:
+        return False
+    resources = _kept_extraction(Path(fmu_path), _KEPT_EXTRACTIONS) / "resources"
+    if not (resources / "slavemodule.txt").is_file():
+        return False
+    if str(resources) not in sys.path:
+        sys.path.insert(0, str(resources))
+    importlib.import_module((resources / "slavemodule.txt").read_text().strip())
+    return True
+
+
+def _kept_extraction(fmu_path: Path, kept: Path) -> Path:
+    """The FMU's extraction in ``kept``, made whole in a staging folder and renamed into place
+    (a run stopped mid-extraction leaves no half folder for the next run to load)."""
+    resolved = fmu_path.resolve()
+    try:
+        stat = resolved.stat()
+    except OSError as error:
+        raise UserError(f"{fmu_path}: cannot read ({error.strerror or error})") from None
+    identity = f"{resolved}|{stat.st_size}|{stat.st_mtime_ns}".encode()
+    folder = kept / f"{resolved.stem}_{hashlib.sha256(identity).hexdigest()[:16]}"
+    if not folder.is_dir():
+        kept.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".extracting_", dir=kept))
+        try:
+            safe_extract(resolved, staging)
+            os.rename(staging, folder)
+        except OSError:
+            if not folder.is_dir():          # not another process's extraction that came first
+                raise
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     return folder
 
 
