@@ -14,6 +14,7 @@ afresh and its record replaces nothing but itself, so nothing is counted twice.
 from __future__ import annotations
 
 import csv
+import gc
 import json
 import math
 import os
@@ -192,6 +193,9 @@ def _child(job: dict, run_dir: Path, write_fd: int) -> None:
 
 def _in_child(job: dict, run_dir: Path, timeout_s: float) -> dict:
     read_fd, write_fd = os.pipe()
+    # what the worker holds goes to the collector's permanent generation: a collection in the
+    # child would otherwise touch every object of the worker's and copy its memory page by page
+    gc.freeze()
     pid = os.fork()
     if pid == 0:                                       # the child
         os.close(read_fd)
