@@ -56,12 +56,29 @@ class Interface:
 
 
 def read_interface(fmu_path: Path) -> Interface:
-    """Read and check a .fmu's modelDescription; any defect is one clear UserError."""
-    from fmpy import read_model_description
-
+    """Read and check a .fmu's modelDescription; any defect is one clear UserError. In a process
+    that keeps extractions (keep_extractions: a study's worker and the runs forked from it) the
+    interface read is kept too, per FMU file as it is (path, size, modification time)."""
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
         raise UserError(f"{fmu_path}: FMU not found (run `railcosim build`?)")
+    if _KEPT_EXTRACTIONS is None:
+        return _read_interface(fmu_path)
+    stat = fmu_path.stat()
+    key = (str(fmu_path.resolve()), stat.st_size, stat.st_mtime_ns)
+    interface = _KEPT_INTERFACES.get(key)
+    if interface is None:
+        interface = _KEPT_INTERFACES[key] = _read_interface(fmu_path)
+    return interface
+
+
+#: interfaces read in a process that keeps extractions, by (resolved path, size, mtime_ns)
+_KEPT_INTERFACES: Dict[tuple, Interface] = {}
+
+
+def _read_interface(fmu_path: Path) -> Interface:
+    from fmpy import read_model_description
+
     try:
         with zipfile.ZipFile(fmu_path) as archive:
             if "modelDescription.xml" not in archive.namelist():

@@ -104,6 +104,15 @@ def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
                     import_python_module(Path(component.fmu_path))
                 except Exception:              # noqa: BLE001 — the run reports it
                     pass
+        try:    # the run's plan as far as it goes without the run's values: the FMUs' interfaces
+            # read and the data files' schema checks done (both kept for the forked runs)
+            from orchestrator.analysis.verdict import railway_verdicts
+            from orchestrator.run import RunOptions, plan_run
+
+            plan_run(description, RunOptions(fmu_dirs=[Path(p) for p in fmu_dirs], summaries=railway_verdicts,
+                                             warn=lambda line: None))
+        except Exception:                      # noqa: BLE001 — the run reports it
+            pass
     finally:
         description.close()
 
