@@ -45,6 +45,7 @@ from benchmarks.bench_sample_by_sample import sample_by_sample_system  # noqa: E
 from fmus.rail_line import circuit_bank, network_models, relays  # noqa: E402
 from fmus.rail_line import parking as parking_module  # noqa: E402
 from fmus.sizes import BuildConfig  # noqa: E402
+from orchestrator import master as master_module  # noqa: E402
 from orchestrator import run as run_module  # noqa: E402
 from orchestrator.analysis.verdict import railway_verdicts  # noqa: E402
 from orchestrator.packaging.builder import build_all  # noqa: E402
@@ -124,7 +125,24 @@ class Events:
             self.gc_ns.append(now - self._gc_began)
             self.gc_collected.append(info.get("collected", 0))
 
+    def _time_steps(self) -> None:
+        """Master.step wrapped: each component's step (write inputs, do_step) per tick."""
+        original = master_module.Master.step
+        clock, spent = self.clock, self.component_ns
+
+        def step(master, component, time_s):
+            began = time.perf_counter_ns()
+            original(master, component, time_s)
+            row = spent.get(component.name)
+            if row is None:
+                row = spent[component.name] = np.zeros(clock.stamps.size, dtype=np.int64)
+            row[clock.index - 1] += time.perf_counter_ns() - began
+        master_module.Master.step = step
+        self._undo.append((master_module.Master, "step", original))
+
     def __enter__(self) -> "Events":
+        self.component_ns: Dict[str, np.ndarray] = {}
+        self._time_steps()
         bank = circuit_bank.TrackCircuitBank
         self._wrap(bank, "_activate", "network of a new shunt configuration")
         self._wrap(bank, "_solve_wheelsets", "wheelset chain solved again")
@@ -187,12 +205,14 @@ def measure(system: Path, fmus: Path, stop_time: float, in_process: bool) -> dic
     worst = np.argsort(durations_us)[-worst_count:]
     every = np.arange(durations_us.size)
     worst_cpu = np.argsort(cpu_us)[-worst_count:]
+    components = {name: row[:durations_us.size] / 1e3 for name, row in events.component_ns.items()}
     return {"durations_us": durations_us, "cpu_us": cpu_us, "worst": worst, "worst_cpu": worst_cpu,
             "worst_causes": events.causes(worst, stamps, waited_us),
             "worst_cpu_causes": events.causes(worst_cpu, stamps, np.zeros_like(waited_us)),
             "all_causes": Counter(c for causes in events.causes(every, stamps, waited_us) for c in causes),
             "gc_count": len(inside), "gc_max_us": max((ns for _, ns, _ in inside), default=0) / 1e3,
             "gc_collected": sum(n for _, _, n in inside), "summary": summary,
+            "components_us": components,
             "cpu_by_cause": _median_by_cause(cpu_us, events.causes(every, stamps, np.zeros_like(waited_us)))}
 
 
@@ -225,6 +245,13 @@ def report(label: str, result: dict, stop_time: float) -> None:
         print(f"  the worst {worst.size} ticks by {what} time (0.1 %, from {times[worst].min():.0f} us): "
               + "; ".join(f"{cause} {n} (of {result['all_causes'][cause]} ticks with it)"
                           for cause, n in counted.most_common()))
+    worst = result["worst_cpu"]
+    parts = {name: row[worst] for name, row in result["components_us"].items()}
+    rest = result["durations_us"][worst] - sum(parts.values())
+    print(f"  in the worst {worst.size} by CPU time, median wall time of each component's step: " + "; ".join(
+        f"{name} {np.median(values):.0f} us (max {values.max():.0f})" for name, values in
+        sorted(parts.items(), key=lambda kv: -np.median(kv[1])))
+        + f"; the master, exchange and observers {np.median(rest):.0f} us")
     print("  median CPU time of the ticks with each: " + "; ".join(
         f"{cause} {value:.0f} us" for cause, value in sorted(result["cpu_by_cause"].items(), key=lambda kv: -kv[1])))
 
