@@ -158,13 +158,16 @@ def _coerce(type_name: str, value):
 
 #: where keep_extractions() keeps FMUs extracted across runs (None: once per run, in its workdir)
 _KEPT_EXTRACTIONS: Optional[Path] = None
+#: each FMU file's content digest, by (resolved path, size, mtime_ns): hashed once per file
+_CONTENT_DIGESTS: Dict[tuple, str] = {}
 
 
 def keep_extractions(folder: Optional[Path]) -> None:
-    """From now on, in this process and the processes forked from it, extract each FMU file
-    once into ``folder`` and let every later run use that extraction (a study's worker does
-    this, docs/studies.md); None: back to one extraction per run in the run's work folder.
-    An FMU rebuilt in place (another size or modification time) is extracted anew."""
+    """From now on, in this process and the processes forked from it, extract each FMU once
+    into ``folder`` and let every later run use that extraction (a study's worker does this,
+    docs/studies.md); None: back to one extraction per run in the run's work folder. An
+    extraction belongs to the FMU's content (sha256): an FMU rebuilt in place is extracted
+    anew, the same FMU unpacked from a .ssp for each run is extracted once."""
     global _KEPT_EXTRACTIONS
     _KEPT_EXTRACTIONS = Path(folder) if folder is not None else None
 
@@ -202,10 +205,13 @@ def _kept_extraction(fmu_path: Path, kept: Path) -> Path:
     resolved = fmu_path.resolve()
     try:
         stat = resolved.stat()
+        key = (str(resolved), stat.st_size, stat.st_mtime_ns)
+        digest = _CONTENT_DIGESTS.get(key)
+        if digest is None:
+            digest = _CONTENT_DIGESTS[key] = hashlib.sha256(resolved.read_bytes()).hexdigest()[:24]
     except OSError as error:
         raise UserError(f"{fmu_path}: cannot read ({error.strerror or error})") from None
-    identity = f"{resolved}|{stat.st_size}|{stat.st_mtime_ns}".encode()
-    folder = kept / f"{resolved.stem}_{hashlib.sha256(identity).hexdigest()[:16]}"
+    folder = kept / f"{resolved.stem}_{digest}"
     if not folder.is_dir():
         kept.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=".extracting_", dir=kept))
