@@ -364,7 +364,7 @@ def cmd_new(args) -> int:
 
 def cmd_list(args) -> int:
     """``railcosim list``: the shipped systems, studies and roles, one line each (read-only)."""
-    from orchestrator.analysis.catalogue import catalogue, format_text
+    from orchestrator.catalogue import catalogue, format_text
 
     listing = catalogue(_shipped_names(), DEFAULT_SYSTEM)
     if args.kind != "all":

@@ -115,6 +115,26 @@ def test_an_unconfirmed_more_restrictive_code_does_not_keep_the_old_code_shown()
     assert alsn.STATED_LATENCY_S > tx.cycle_s + alsn.CODE_TIMEOUT_S + 0.3
 
 
+def test_a_cycle_begun_after_its_first_pulse_never_has_a_valid_period_and_a_short_interval():
+    """The receiver takes a valid cycle with a short interval as whole even right after a joint
+    or a gap (docs/loco_receiver.md, display rule): begun at any later pulse of its pattern (the
+    pulses before it missed), a cycle of any code of either transmitter, at ±5 % drift, is
+    invalid if it still has a short interval; without one (КЖ) it may be valid."""
+    mid_pattern = []
+    for tx in alsn.load_transmitters().values():
+        for code, pulses in tx.pulses.items():
+            gaps = pulses[1:, 0] - pulses[:-1, 1]                  # the intervals between its pulses
+            for first in range(1, len(pulses)):                    # the pulse the cycle begins at
+                shorts = int(np.sum(gaps[first:] < alsn.LONG_INTERVAL_S))
+                for drift in (0.95, 1.0, 1.05):
+                    decoded, _ = alsn.classify_cycle(shorts, (tx.cycle_s - pulses[first, 0]) * drift)
+                    mid_pattern.append((tx.name, code, first, shorts, drift, decoded))
+    with_short = [m for m in mid_pattern if m[3] >= 1]
+    assert with_short and all(m[5] == alsn.NO_CODE for m in with_short), with_short
+    # the reason КЖ-like cycles keep the stricter rule: a З's last pulse and long interval
+    assert any(m[3] == 0 and m[5] == sig.RED_YELLOW and m[1] == sig.GREEN for m in mid_pattern)
+
+
 # ---- noise immunity -----------------------------------------------------------------------------
 def _wrong_side_seconds(rows, latency_s):
     """Time the receiver showed a more permissive aspect than sent, beyond the decoding latency

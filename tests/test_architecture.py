@@ -64,7 +64,7 @@ def _forbidden_for(module: str):
     if parts[0] == "orchestrator":
         if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study"):   # railway knowledge on the engine
             return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
-        if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__"):
+        if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__", "catalogue"):   # the front ends
             return ("benchmarks",), set()
         # the engine: FMU-agnostic, knows no railway
         return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.packaging",

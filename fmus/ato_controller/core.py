@@ -136,7 +136,7 @@ class AtoSettings:
     min_dwell_s: float = 20.0
     stop_window_m: float = 5.0            # standing at most this far short of the stop point is an arrival
     hold_brake: float = 0.3               # brake share held while standing
-    decoding_latency_s: float = alsn.STATED_LATENCY_S   # ALSN: two KPT-7 cycles + 0.5 s (docs/scenarios.md#results-summaryjson)
+    decoding_latency_s: float = alsn.STATED_LATENCY_S   # the ALSN receiver's stated latency, 4.5 s (docs/loco_receiver.md#latency-of-a-change)
     speed_gain: float = 0.2               # 1/s, speed-holding loop
     hysteresis_mps: float = 1.0 * MPS_PER_KMH     # coast → traction again only this far below the set speed
     brake_lead_s: float = -1.0            # < 0: brake delay + half its time constant (nominal stock)

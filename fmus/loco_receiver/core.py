@@ -39,12 +39,16 @@ that can be shown replaces the held one at once (the display rule below).
 
 Display rule (fail-safe, our choice, docs/loco_receiver.md): a code no more permissive than
 the one shown — or, after a loss of code, than the last one shown — is shown after one valid
-*clean* cycle — its pulses, and the pulse just before it, within a factor 2.5 of each other in
-level (a cycle that straddles or follows an insulated joint mixes two track circuits' codes
-and levels, and may start mid-pattern) and not started after a gap
-longer than any code's long interval (pulses were missed, so it may begin mid-pattern and
-under-count) — anything else only after two identical consecutive valid cycles (kpt.h's rule). Only a cold start (no code seen yet) takes any code after one cycle, which keeps the
-acquisition within two cycles + 0.5 s from any cam phase.
+*clean* cycle — its pulses, and the pulse that ends it, within a factor 2.5 of each other in
+level (a cycle that straddles an insulated joint mixes two track circuits' codes and levels);
+a cycle without a short interval (КЖ) also needs the pulse just before it within that factor
+and must not have started after a gap longer than any code's long interval (after a joint or
+lost pulses it may begin mid-pattern: a З's last pulse and long interval read as КЖ). A cycle
+with a short interval and a valid period began at its pattern's first pulse (begun at a later
+one it is shorter than any period window), so a gap or a joint before it does not matter —
+anything else only after two identical consecutive valid cycles (kpt.h's rule). Only a cold
+start (no code seen yet) takes any code after one cycle, which keeps the acquisition within
+two cycles + 0.5 s from any cam phase.
 """
 from __future__ import annotations
 
@@ -403,8 +407,18 @@ class LocoReceiverCore:
         # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
         reference = out.aspect if out.code_valid else self._last_shown
         peaks = self._cycle_peaks
-        levels = peaks + ([self._boundary_peak] if self._boundary_peak is not None else [])
-        clean = bool(peaks) and max(levels) <= LEVEL_SPREAD * max(min(levels), 1e-12) and not self._after_gap
+        # A cycle with a short interval and a valid period began at its pattern's first pulse:
+        # begun at a later one it lacks at least the first pulse and interval (0.47 s) and is
+        # shorter than any period window (KPT-7 З, the longest, 1.36 s, 1.43 s with 5 % drift,
+        # against 1.47 s; tests/test_alsn.py). So it is whole however it began — after a gap, or
+        # after the pulse of another track circuit at a joint — and only its own pulses (and the
+        # one that ends it) must agree in level. Only a cycle without a short interval (КЖ) may
+        # be a mid-pattern remnant (a З's last pulse and long interval): it keeps both rules.
+        # Waiting for a second cycle after every joint would make a restrictive change met at a
+        # joint up to 5.2 s late (docs/loco_receiver.md#latency-of-a-change).
+        whole = short_intervals >= 1
+        levels = peaks + ([self._boundary_peak] if self._boundary_peak is not None and not whole else [])
+        clean = bool(peaks) and max(levels) <= LEVEL_SPREAD * max(min(levels), 1e-12) and (whole or not self._after_gap)
         # two identical cycles confirm each other only from the same track circuit: the same
         # transmitter type and levels within the spread (at 113 km/h a З cut by a joint read as
         # КЖ, and the next section's first, partly missed З read as КЖ too)

@@ -502,7 +502,7 @@ class ReceiverVerdict(_OutputJudge):
         for track in self.tracks.values():
             track.bind(master, self._slots)
         # checked at the first multiple of the receiver's step from CHECK_INTERVAL_S on: an
-        # episode is timed to that, against stated latencies of 1.1 s (FIRE) to 4.2 s (ALSN)
+        # episode is timed to that, against stated latencies of 1.1 s (FIRE) to 4.5 s (ALSN)
         self._check_ticks = {}
         for r in self.receivers:
             step = master.graph.nodes[r.name].step_ticks
