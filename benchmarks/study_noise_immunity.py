@@ -43,7 +43,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.signal import lfilter
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: harness
 
 from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
@@ -202,7 +202,7 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
 def alsn_chain(cycles: int, noise, seed: int) -> dict:
     """ALSN through coder → receiver in 10 ms frames (the coder keys per frame); a message is a
     code cycle."""
-    from benchmarks.harness.channel import CodeChannel
+    from harness.channel import CodeChannel
     rng = np.random.default_rng(seed)
     codes = [sig.RED_YELLOW, sig.YELLOW, sig.GREEN]
     ahead = {sig.RED_YELLOW: [1], sig.YELLOW: [2], sig.GREEN: []}

@@ -10,7 +10,7 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError
-from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
+from harness.channel import CodeChannel, white_noise_and_hum
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.wayside_coder.core import (SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, STATUS_FAILED,

@@ -1,6 +1,6 @@
 """ATP + ATO controller: planner, ATP supervision, driving to the timetable, the FMU.
 
-Most checks run the ATO and traction cores in one closed loop (benchmarks/harness/closed_loop.py);
+Most checks run the ATO and traction cores in one closed loop (harness/closed_loop.py);
 the FMU checks run the shipped system through the orchestrator.
 """
 import copy
@@ -12,7 +12,7 @@ import pytest
 
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
+from harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.signalling import aspects as sig

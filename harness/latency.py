@@ -1,5 +1,5 @@
 """The ALSN receiver's latencies measured on the receiver core fed by the wayside coder core
-(benchmarks.harness.channel): acquisition from a cold start, restrictive and permissive
+(harness.channel): acquisition from a cold start, restrictive and permissive
 changes of the code sent, and a loss of code → the no-code indication, per transmitter type
 over cam phases (docs/loco_receiver.md, "Latencies"); and a change of code at an insulated
 joint, the coder → rail line → receiver cores with a train crossing the joint behind a standing
@@ -13,8 +13,8 @@ from typing import Dict, Iterable, List, Optional, Tuple
 
 import numpy as np
 
-from benchmarks.harness.channel import CodeChannel, Disturbance, white_noise_and_hum
-from benchmarks.harness.display import rank
+from harness.channel import CodeChannel, Disturbance, white_noise_and_hum
+from harness.display import rank
 from fmus.data.loader import load_line
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.rail_line.core import RailLineCore, RailSettings
