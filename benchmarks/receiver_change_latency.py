@@ -43,7 +43,7 @@ CODE_NAMES = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ"}
 
 def _within(point):
     (kpt, change), phase, _, seed = point
-    noise = white_noise_and_hum(lat.NOISE_SNR_DB, 4.0 * lat.COUPLING, {}, seed)
+    noise = white_noise_and_hum(lat.NOISE_SNR_DB, 4.0 * lat.BENCH_COIL_COUPLING, {}, seed)
     return lat.change_s(kpt, *change, phase, disturb=noise)
 
 
