@@ -1,5 +1,5 @@
 """ALSU acceptance measurements on the bench (coder → rail line → receiver cores,
-benchmarks/harness/alsu.py); the figures of docs/loco_receiver.md#alsu.
+harness/alsu.py); the figures of docs/loco_receiver.md#alsu.
 
     python benchmarks/alsu_acceptance.py [--phases 8] [--quick]
 
@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.harness.alsu import AlsuBench, first_time, sendable_codes  # noqa: E402
+from harness.alsu import AlsuBench, first_time, sendable_codes  # noqa: E402
 from fmus.data.loader import DATA, load_line  # noqa: E402
 from fmus.loco_receiver.alsu import DISPLAY_HOLD_S  # noqa: E402
 from fmus.signalling import alsu  # noqa: E402

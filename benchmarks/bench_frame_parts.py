@@ -16,7 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
 
-from benchmarks.harness.runs import scratch_run  # noqa: E402
+from benchmarks._runs import scratch_run  # noqa: E402
 from fmus.fmi.slave import FacadeSlave  # noqa: E402
 from fmus.loco_receiver.facade import LocoReceiver  # noqa: E402
 from fmus.rail_line.circuit_bank import TrackCircuitBank  # noqa: E402

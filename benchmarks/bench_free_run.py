@@ -18,7 +18,7 @@ from pathlib import Path
 from orchestrator.cli import SSP_ROOT, _build_dir
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
-from benchmarks.harness.runs import scratch_run  # noqa: E402
+from benchmarks._runs import scratch_run  # noqa: E402
 
 
 def run_once(stop_time: float, in_process: bool) -> float:

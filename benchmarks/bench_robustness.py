@@ -1,7 +1,7 @@
 """Robustness of the ATO to the train it drives: the plant's mass, main resistance and catenary
 voltage differ from the ATO's nominal model (the ATO book's ±10 %, ±20 %, ±5 %).
 
-The ATO and traction cores run in one closed loop (benchmarks/harness/closed_loop.py) on the
+The ATO and traction cores run in one closed loop (harness/closed_loop.py) on the
 default line with the passenger train and a timetable of the minimum running times + 8 %; the
 cab signal is green and the ATP's cab-signal supervision is off, so only the train differs.
 Cases: the voltage alone at ±5 %, and the four corners (heavy + high resistance + low voltage,
@@ -14,7 +14,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from benchmarks.harness.closed_loop import run_closed_loop, timetable_with_supplement
+from harness.closed_loop import run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.core import AtoSettings
 from fmus.traction.core import RATED_VOLTAGE_V
 

@@ -26,7 +26,7 @@ from orchestrator.packaging.builder import build_all
 from orchestrator.sspgen import write_ssd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
-from benchmarks.harness.runs import scratch_run  # noqa: E402
+from benchmarks._runs import scratch_run  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 

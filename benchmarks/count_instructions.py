@@ -32,7 +32,7 @@ COUNTING = "RAILCOSIM_COUNTING"
 def counted_run(warm_s: float, stop_s: float, in_process: bool, sample_by_sample: bool) -> None:
     """Inside valgrind: step free_run to ``warm_s`` uncounted, then to ``stop_s`` counted."""
     from orchestrator import master
-    from benchmarks.harness.runs import scratch_run
+    from benchmarks._runs import scratch_run
     from orchestrator.cli import SSP_ROOT, _build_dir
     from orchestrator.graph import TICKS_PER_SECOND
     from orchestrator.protocols import Observer

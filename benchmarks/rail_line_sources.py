@@ -18,7 +18,7 @@ from scipy.signal import butter, hilbert, sosfiltfilt  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from benchmarks.harness.joints import FS, JOINT_M, burst_envelope, cross_joint, pulse_lobes  # noqa: E402
+from harness.joints import FS, JOINT_M, burst_envelope, cross_joint, pulse_lobes  # noqa: E402
 from fmus.data.loader import DEFAULT_LINE, load_line  # noqa: E402
 from fmus.rail_line.core import RailLineCore, RailSettings  # noqa: E402
 from fmus.rail_line.track_circuit import CircuitParameters, rail_impedance  # noqa: E402

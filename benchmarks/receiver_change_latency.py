@@ -1,6 +1,6 @@
 """How long the ALSN receiver takes to show a restrictive change (З → Ж, Ж → КЖ), over cam
 phases × noise seeds (docs/loco_receiver.md, "Latency of a change"), on the cores without FMI
-(benchmarks/harness/latency.py):
+(harness/latency.py):
 
 * **within a circuit** — the code of the circuit under the coils turns more restrictive (the
   block ahead becomes occupied), KPT-5 and KPT-7: the coder core into the receiver core at
@@ -31,8 +31,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from benchmarks.harness import latency as lat
-from benchmarks.harness.channel import white_noise_and_hum
+from harness import latency as lat
+from harness.channel import white_noise_and_hum
 from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S
 
@@ -43,7 +43,7 @@ CODE_NAMES = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ"}
 
 def _within(point):
     (kpt, change), phase, _, seed = point
-    noise = white_noise_and_hum(lat.NOISE_SNR_DB, 4.0 * lat.COUPLING, {}, seed)
+    noise = white_noise_and_hum(lat.NOISE_SNR_DB, 4.0 * lat.BENCH_COIL_COUPLING, {}, seed)
     return lat.change_s(kpt, *change, phase, disturb=noise)
 
 

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from benchmarks.harness.latency import table
+from harness.latency import table
 
 
 def main():

@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from fmus.signalling import aspects as sig
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
-from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: harness
+from harness.channel import CodeChannel, white_noise_and_hum
 
 HARMONICS = {100.0: 0.8, 150.0: 0.8, 300.0: 2.0}
 CODES = {"З": (sig.GREEN, ()), "Ж": (sig.YELLOW, (2,)), "КЖ": (sig.RED_YELLOW, (1,))}

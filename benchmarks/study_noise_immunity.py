@@ -48,7 +48,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.signal import lfilter
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks.harness
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: harness
 
 from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
@@ -207,7 +207,7 @@ def run_digital(name: str, count: int, noise, seed: int, track_parity: int = 1, 
 def alsn_chain(cycles: int, noise, seed: int) -> dict:
     """ALSN through coder → receiver in 10 ms frames (the coder keys per frame); a message is a
     code cycle."""
-    from benchmarks.harness.channel import CodeChannel
+    from harness.channel import CodeChannel
     rng = np.random.default_rng(seed)
     codes = [sig.RED_YELLOW, sig.YELLOW, sig.GREEN]
     ahead = {sig.RED_YELLOW: [1], sig.YELLOW: [2], sig.GREEN: []}
@@ -272,10 +272,10 @@ _JOINT_PULSES = {}
 
 def joint_pulse(speed_kmh: float) -> np.ndarray:
     """The coil EMF of a train crossing a joint at ``speed_kmh`` under DC traction, the rail
-    line's own (benchmarks/harness/joints.py): 1000 A, the coil pair 5 % mismatched — the joints
+    line's own (harness/joints.py): 1000 A, the coil pair 5 % mismatched — the joints
     paper's 5 V at 80 km/h — the same asymmetry both sides, no code, no ripple."""
     if speed_kmh not in _JOINT_PULSES:
-        from benchmarks.harness.joints import cross_joint
+        from harness.joints import cross_joint
 
         _, _, emf = cross_joint(speed_kmh, coil_mismatch=0.05, asymmetry=0.03, before_m=3.0, after_m=6.0)
         _JOINT_PULSES[speed_kmh] = emf - emf[0]

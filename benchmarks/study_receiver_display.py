@@ -10,7 +10,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.harness.display import analyse, with_probe
+from harness.display import analyse, with_probe
 from fmus.signalling import aspects as sig
 from orchestrator.cli import SSP_ROOT, _build_dir
 from orchestrator.run import RunOptions, run_system

@@ -7,7 +7,9 @@ slave is the performance reference (docs/performance.md) and a debugging aid.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import importlib
+import os
 import shutil
 import sys
 import tempfile
@@ -54,12 +56,29 @@ class Interface:
 
 
 def read_interface(fmu_path: Path) -> Interface:
-    """Read and check a .fmu's modelDescription; any defect is one clear UserError."""
-    from fmpy import read_model_description
-
+    """Read and check a .fmu's modelDescription; any defect is one clear UserError. In a process
+    that keeps extractions (keep_extractions: a study's worker and the runs forked from it) the
+    interface read is kept too, per FMU file as it is (path, size, modification time)."""
     fmu_path = Path(fmu_path)
     if not fmu_path.is_file():
         raise UserError(f"{fmu_path}: FMU not found (run `railcosim build`?)")
+    if _KEPT_EXTRACTIONS is None:
+        return _read_interface(fmu_path)
+    stat = fmu_path.stat()
+    key = (str(fmu_path.resolve()), stat.st_size, stat.st_mtime_ns)
+    interface = _KEPT_INTERFACES.get(key)
+    if interface is None:
+        interface = _KEPT_INTERFACES[key] = _read_interface(fmu_path)
+    return interface
+
+
+#: interfaces read in a process that keeps extractions, by (resolved path, size, mtime_ns)
+_KEPT_INTERFACES: Dict[tuple, Interface] = {}
+
+
+def _read_interface(fmu_path: Path) -> Interface:
+    from fmpy import read_model_description
+
     try:
         with zipfile.ZipFile(fmu_path) as archive:
             if "modelDescription.xml" not in archive.namelist():
@@ -137,11 +156,73 @@ def _coerce(type_name: str, value):
     return str(value)
 
 
+#: where keep_extractions() keeps FMUs extracted across runs (None: once per run, in its workdir)
+_KEPT_EXTRACTIONS: Optional[Path] = None
+#: each FMU file's content digest, by (resolved path, size, mtime_ns): hashed once per file
+_CONTENT_DIGESTS: Dict[tuple, str] = {}
+
+
+def keep_extractions(folder: Optional[Path]) -> None:
+    """From now on, in this process and the processes forked from it, extract each FMU once
+    into ``folder`` and let every later run use that extraction (a study's worker does this,
+    docs/studies.md); None: back to one extraction per run in the run's work folder. An
+    extraction belongs to the FMU's content (sha256): an FMU rebuilt in place is extracted
+    anew, the same FMU unpacked from a .ssp for each run is extracted once."""
+    global _KEPT_EXTRACTIONS
+    _KEPT_EXTRACTIONS = Path(folder) if folder is not None else None
+
+
 def _extract_once(fmu_path: Path, workdir: Path) -> Path:
     """One extraction (and so one loaded library) per FMU file, shared by its instances."""
+    if _KEPT_EXTRACTIONS is not None:
+        return _kept_extraction(Path(fmu_path), _KEPT_EXTRACTIONS)
     folder = Path(workdir) / f"{Path(fmu_path).stem}_{abs(hash(str(Path(fmu_path).resolve()))):x}"
     if not folder.is_dir():
         safe_extract(Path(fmu_path), folder)
+    return folder
+
+
+def import_python_module(fmu_path: Path) -> bool:
+    """Import a Python (pythonfmu) FMU's module into this process from its kept extraction, as
+    its instances would at instantiation, so that processes forked from this one find it (and
+    what it imports) already imported: a study's worker does this once per system. Only with
+    keep_extractions on (the module's folder must outlive the runs); False when the FMU has no
+    Python module or extractions are not kept."""
+    if _KEPT_EXTRACTIONS is None:
+        return False
+    resources = _kept_extraction(Path(fmu_path), _KEPT_EXTRACTIONS) / "resources"
+    if not (resources / "slavemodule.txt").is_file():
+        return False
+    if str(resources) not in sys.path:
+        sys.path.insert(0, str(resources))
+    importlib.import_module((resources / "slavemodule.txt").read_text().strip())
+    return True
+
+
+def _kept_extraction(fmu_path: Path, kept: Path) -> Path:
+    """The FMU's extraction in ``kept``, made whole in a staging folder and renamed into place
+    (a run stopped mid-extraction leaves no half folder for the next run to load)."""
+    resolved = fmu_path.resolve()
+    try:
+        stat = resolved.stat()
+        key = (str(resolved), stat.st_size, stat.st_mtime_ns)
+        digest = _CONTENT_DIGESTS.get(key)
+        if digest is None:
+            digest = _CONTENT_DIGESTS[key] = hashlib.sha256(resolved.read_bytes()).hexdigest()[:24]
+    except OSError as error:
+        raise UserError(f"{fmu_path}: cannot read ({error.strerror or error})") from None
+    folder = kept / f"{resolved.stem}_{digest}"
+    if not folder.is_dir():
+        kept.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".extracting_", dir=kept))
+        try:
+            safe_extract(resolved, staging)
+            os.rename(staging, folder)
+        except OSError:
+            if not folder.is_dir():          # not another process's extraction that came first
+                raise
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     return folder
 
 

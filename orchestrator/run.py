@@ -7,7 +7,9 @@ The output folder is locked for the run and holds one run only (docs/reliability
 """
 from __future__ import annotations
 
+import contextlib
 import fcntl
+import gc
 import json
 import math
 import os
@@ -488,6 +490,36 @@ def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slav
     return master
 
 
+#: freeze and turn off Python's garbage collector while the master steps (a module constant so
+#: that benchmarks/bench_deadline.py can compare without)
+FREEZE_GC_WHILE_STEPPING = True
+
+
+@contextlib.contextmanager
+def collector_off_while_stepping():
+    """Python's cyclic garbage collector frozen and off for the stepping, as it was after.
+
+    A collection stops the step it falls in: up to a millisecond for the oldest generation
+    over everything initialisation made (measured at one sample per frame,
+    docs/performance.md#one-sample-per-frame-as-a-deadline), four deadlines of a 4 kHz sample.
+    Frozen, what exists before the first step is left out of every collection; off, none runs
+    while stepping. Stepping makes no cyclic garbage (tests/test_run_gc.py), so nothing
+    accumulates meanwhile; reference counting frees everything else as before."""
+    if not FREEZE_GC_WHILE_STEPPING:
+        yield
+        return
+    was_enabled, frozen_before = gc.isenabled(), gc.get_freeze_count()
+    gc.freeze()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_enabled:
+            gc.enable()
+        if not frozen_before:       # what a caller froze (a study's worker) stays frozen
+            gc.unfreeze()
+
+
 def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_threads: int) -> _Outcome:
     """Make the slaves, bind, initialise and step; whatever happens (a failure, a signal, a
     write error), close every observer and shut every slave made down, so the results so far
@@ -520,7 +552,8 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
                                    setup.progress, judges)
             master = start_master(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s,
                             pacer=pacer)
-            master.run_until(stop_ticks)
+            with collector_off_while_stepping():
+                master.run_until(stop_ticks)
     except BaseException as error:  # a failure or an interruption: results so far are still written
         failure = error
     wall = time.perf_counter() - began

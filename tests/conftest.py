@@ -7,7 +7,7 @@ import pytest
 REPO = Path(__file__).resolve().parent.parent
 FIXTURE_PACKAGE = Path(__file__).resolve().parent / "fixture_fmus" / "rcs_testfmus"
 sys.path.insert(0, str(FIXTURE_PACKAGE.parent))
-sys.path.insert(0, str(REPO))  # benchmarks.harness: the cores coupled without FMI
+sys.path.insert(0, str(REPO))  # harness: the cores coupled without FMI
 
 TEST_UNITS = ("TestCounter", "TestGain", "TestFrameSource", "TestFrameStage", "TestSchedule", "TestSine")
 

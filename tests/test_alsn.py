@@ -10,15 +10,14 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError
-from benchmarks.harness.channel import CodeChannel, white_noise_and_hum
+from harness.channel import CodeChannel, white_noise_and_hum
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
-from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
+from fmus.signalling.alsn import BENCH_COIL_COUPLING, EQUIPMENT_INERTIA_S
 from fmus.wayside_coder.core import (SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, STATUS_FAILED,
                                      STATUS_PARTIAL, CoderSettings, WaysideCoderCore)
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
 
 FS, N = 4000.0, 40
-COUPLING = 0.1            # 4 V transmitter → 0.4 V at the coil
 KPT = {0: 1.60, 1: 1.86}  # section 0 carries KPT-5, section 1 KPT-7 on the default line
 
 
@@ -36,7 +35,7 @@ CODE_OCCUPANCY = {  # code sent into section k when ... is occupied
 
 
 def Chain(section=0, timing_scale=1.0, cam_phase=None, frame=N, receiver=None, seed=1):
-    return CodeChannel(section, frame, COUPLING, coder=CoderSettings(timing_scale=timing_scale, seed=seed),
+    return CodeChannel(section, frame, BENCH_COIL_COUPLING, coder=CoderSettings(timing_scale=timing_scale, seed=seed),
                        receiver=receiver, cam_phase=cam_phase)
 
 
@@ -150,7 +149,7 @@ def _wrong_side_seconds(rows, latency_s):
 
 
 def _disturbance(snr_db, harmonics_v, seed):
-    return white_noise_and_hum(snr_db, 4.0 * COUPLING, harmonics_v, seed)
+    return white_noise_and_hum(snr_db, 4.0 * BENCH_COIL_COUPLING, harmonics_v, seed)
 
 
 # traction harmonics on a DC line, relative to the 0.4 V code: 100 Hz (rectifier even harmonic,
@@ -175,7 +174,7 @@ def test_harmonics_alone_at_stated_levels_do_not_disturb_decoding():
 
 def test_ac_traction_50_hz_does_not_disturb_a_25_hz_receiver(tmp_path):
     doc = json.loads((DATA / "default_line_ac.json").read_text())
-    chain = CodeChannel(0, N, COUPLING, line=load_line(DATA / "default_line_ac.json"),
+    chain = CodeChannel(0, N, BENCH_COIL_COUPLING, line=load_line(DATA / "default_line_ac.json"),
                         receiver=ReceiverSettings(carrier_hz=25.0))
     rows = chain.run(20.0, _occupied(), disturb=_disturbance(60.0, {50.0: 0.8, 150.0: 0.8}, seed=4))
     assert doc["block_sections"][0]["carrier_hz"] == 25
@@ -183,7 +182,7 @@ def test_ac_traction_50_hz_does_not_disturb_a_25_hz_receiver(tmp_path):
 
 
 def test_a_25_hz_code_is_not_decoded_by_a_50_hz_receiver():
-    chain = CodeChannel(0, N, COUPLING, coder=CoderSettings(carrier_hz=25.0))
+    chain = CodeChannel(0, N, BENCH_COIL_COUPLING, coder=CoderSettings(carrier_hz=25.0))
     rows = chain.run(10.0, _occupied())
     assert not rows[:, 2].any()
 
@@ -356,7 +355,7 @@ def _coder_receiver_system(folder, fmu_dir, section=1, extra_receiver=None):
         ComponentSpec("coder", str(fmu_dir / "WaysideCoder.fmu"), 0.01),
         ComponentSpec("rx", str(fmu_dir / "LocoReceiver.fmu"), 0.01, dict(extra_receiver or {})),
     ]
-    connections = [ConnectionSpec(f"coder.u_tx[{section + 1},{n}]", f"rx.e_coil[{n}]", factor=COUPLING)
+    connections = [ConnectionSpec(f"coder.u_tx[{section + 1},{n}]", f"rx.e_coil[{n}]", factor=BENCH_COIL_COUPLING)
                    for n in range(1, N + 1)]
     return write_ssd(folder, "alsn_pair", components, connections, stop_time=6.0)
 

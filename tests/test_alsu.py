@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.harness.alsu import AlsuBench, first_time
+from harness.alsu import AlsuBench, first_time
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.alsu import AlsuReceiverCore, AlsuReceiverSettings, channel_design
@@ -353,7 +353,7 @@ def test_the_ato_brakes_gently_for_a_permanent_restriction_and_harder_towards_a_
     at its exit signal, a permanent restriction) against code 7 (120 km/h, a route: a signal's
     braking). Both without an ATP intervention; the restriction's braking at most half the
     deceleration of the signal's."""
-    from benchmarks.harness.closed_loop import run_closed_loop
+    from harness.closed_loop import run_closed_loop
     from fmus.ato_controller.core import AtoSettings
     from orchestrator.analysis.systems import THROAT_LINE, THROAT_TIMETABLE
 

@@ -3,7 +3,7 @@ supervised table apart from the ATO's driving band."""
 import numpy as np
 import pytest
 
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop
+from harness.closed_loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.atp import Atp
 from fmus.data.loader import load_line
 from fmus.signalling import aspects as sig

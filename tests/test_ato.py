@@ -1,6 +1,6 @@
 """ATP + ATO controller: planner, ATP supervision, driving to the timetable, the FMU.
 
-Most checks run the ATO and traction cores in one closed loop (benchmarks/harness/closed_loop.py);
+Most checks run the ATO and traction cores in one closed loop (harness/closed_loop.py);
 the FMU checks run the shipped system through the orchestrator.
 """
 import copy
@@ -12,7 +12,7 @@ import pytest
 
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
+from harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.planner import StagePlanner
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.signalling import aspects as sig
@@ -69,6 +69,40 @@ def test_fitted_programme_meets_the_scheduled_time_and_saves_energy():
     f = plan.family
     assert f.time_s[plan.chosen] == pytest.approx(1.08 * minimum, abs=1.0)
     assert f.energy_j[plan.chosen] < 0.9 * f.energy_j[plan.minimum]
+
+
+def _same_plan(a, b):
+    assert (a.chosen, a.minimum, a.scheduled_time_s) == (b.chosen, b.minimum, b.scheduled_time_s)
+    for name in ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j"):
+        x, y = getattr(a.family, name), getattr(b.family, name)
+        assert x.dtype == y.dtype and x.shape == y.shape and x.tobytes() == y.tobytes(), name
+
+
+def test_a_kept_stage_plan_is_the_computed_one_bit_for_bit(tmp_path, monkeypatch):
+    """RAILCOSIM_PLAN_CACHE (a study's worker sets it): the second plan of a stage comes from
+    the folder, byte for byte the plan computed without it; another schedule or another train
+    is planned afresh; a damaged file is planned afresh too."""
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    minimum = planner.plan(400, 10300, None).minimum_time_s
+    fresh = planner.plan(400, 10300, 1.08 * minimum)                  # no cache
+    cache = tmp_path / "plans"
+    monkeypatch.setenv("RAILCOSIM_PLAN_CACHE", str(cache))
+    _same_plan(planner.plan(400, 10300, 1.08 * minimum), fresh)       # computed, then kept
+    assert len(list(cache.glob("*.npz"))) == 1
+    _same_plan(planner.plan(400, 10300, 1.08 * minimum), fresh)       # read from the folder
+    assert len(list(cache.glob("*.npz"))) == 1
+    later = planner.plan(400, 10300, 1.12 * minimum)                  # another schedule
+    assert len(list(cache.glob("*.npz"))) == 2
+    assert later.family.time_s[later.chosen] > fresh.family.time_s[fresh.chosen] + 10
+    heavier = copy.deepcopy(stock)
+    heavier.mass_kg *= 1.2
+    other = StagePlanner(NominalTrain(heavier, line), line, "passenger", 0.5, 2 * KMH)
+    assert other.plan(400, 10300, 1.08 * minimum).family.time_s[-1] > fresh.family.time_s[-1]
+    assert len(list(cache.glob("*.npz"))) == 3
+    for kept in cache.glob("*.npz"):
+        kept.write_bytes(kept.read_bytes()[:100])                     # cut short
+    _same_plan(planner.plan(400, 10300, 1.08 * minimum), fresh)
 
 
 def test_infeasible_timetable_is_an_initialisation_error_with_the_minimum_time(tmp_path):

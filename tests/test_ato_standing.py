@@ -2,7 +2,7 @@
 moves, then departs: ATO + traction cores in closed loop (no FMI), an hour of standing."""
 import numpy as np
 
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop
+from harness.closed_loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.core import MODE_TRACTION, AtoCore, AtoSettings
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.signalling import aspects as sig

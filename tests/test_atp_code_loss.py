@@ -151,7 +151,7 @@ def test_passing_the_last_block_signal_of_the_line_under_green_needs_no_brake():
 def _digital_loop(lost):
     """free_run's train under a clear digital code (green, line speed, every block free) that
     is lost while ``lost(t)``."""
-    from benchmarks.harness.closed_loop import run_closed_loop
+    from harness.closed_loop import run_closed_loop
     from fmus.ato_controller.core import AtoSettings
     from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 

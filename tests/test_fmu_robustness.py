@@ -459,6 +459,22 @@ def test_loader_names_a_non_utf8_or_deeply_nested_file(tmp_path):
                 assert words in str(error.value)
 
 
+def test_a_data_file_found_valid_is_checked_again_once_it_changes(tmp_path):
+    """The loader checks a document against its schema once per process (a run reads its line
+    and rolling stock several times): a file edited since is checked again."""
+    from fmus.data.loader import DEFAULT_ROLLING_STOCK, load_rolling_stock
+    from fmus.errors import FmuInputError
+
+    path = tmp_path / "stock.json"
+    document = json.loads(Path(DEFAULT_ROLLING_STOCK).read_text())
+    path.write_text(json.dumps(document))
+    assert load_rolling_stock(path).mass_kg == load_rolling_stock(path).mass_kg > 0
+    del document["units"]
+    path.write_text(json.dumps(document))
+    with pytest.raises(FmuInputError, match="field units: missing"):
+        load_rolling_stock(path)
+
+
 def test_the_verdict_skips_a_bad_data_file_like_any_other(tmp_path):
     """orchestrator/analysis/verdict.py catches FmuInputError (the FMU reports the file itself)."""
     from orchestrator.analysis import verdict

@@ -6,7 +6,7 @@ its stated bound over cam phases."""
 import numpy as np
 import pytest
 
-from benchmarks.harness import latency as lat
+from harness import latency as lat
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S

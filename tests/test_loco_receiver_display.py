@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.harness.display import analyse, with_probe
+from harness.display import analyse, with_probe
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S

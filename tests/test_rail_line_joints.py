@@ -4,7 +4,7 @@ the joints). One test per row the paper quantifies, each within ±10 %."""
 import numpy as np
 import pytest
 
-from benchmarks.harness.joints import FS, JOINT_M, N, burst_envelope, cross_joint, pulse_lobes
+from harness.joints import FS, JOINT_M, N, burst_envelope, cross_joint, pulse_lobes
 from fmus.data.loader import load_line
 from fmus.rail_line.core import RailLineCore, RailSettings
 

@@ -9,6 +9,7 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import textwrap
 import time
 from pathlib import Path
@@ -87,6 +88,79 @@ def test_grid_study_gives_the_values_of_the_runs_made_one_by_one(grid_study, pro
     study_json = json.loads((out / "study.json").read_text())
     assert study_json["counts"]["ok"] == 8 and study_json["counts"]["points"] == 4
     assert study_json["hash"] == load_study(study).hash
+
+
+def _without_wall_clock(summary_path: Path) -> dict:
+    summary = json.loads(summary_path.read_text())
+    for key in ("wall_time_s", "realtime_factor"):
+        summary.pop(key)
+    return summary
+
+
+def test_runs_on_a_warm_worker_equal_fresh_runs_bit_for_bit(grid_study, product_fmus, tmp_path):
+    """A worker runs each run forked from itself with the FMUs extracted once and the ATO's stage
+    plans kept (docs/studies.md): every run's results.csv is byte for byte, and its summary
+    key for key, the run made alone in a fresh process state."""
+    study, out, _ = grid_study
+    assert "RAILCOSIM_PLAN_CACHE" not in os.environ        # this process plans afresh
+    for row in _csv(out / "study.csv"):
+        alone = tmp_path / row["id"]
+        run_system(REPO / "ssp" / "ato_only", RunOptions(
+            stop_time=20, output_interval=1.0, fmu_dirs=[product_fmus], output_dir=alone,
+            overrides={"train.v0": row["train.v0"], "train.mass_scale": row["train.mass_scale"]},
+            summaries=railway_verdicts))
+        run = out / "runs" / row["id"]
+        assert (run / "results.csv").read_bytes() == (alone / "results.csv").read_bytes(), row["id"]
+        assert _without_wall_clock(run / "summary.json") == _without_wall_clock(alone / "summary.json")
+
+
+WARM_WORKER = """
+import json, os, sys, zipfile
+from pathlib import Path
+from orchestrator.study.runner import execute_run, jobs_of, prepare_worker
+from orchestrator.study.spec import load_study
+
+study, system, fmus, out = map(Path, sys.argv[1:5])
+jobs = jobs_of(load_study(study), out, system, [fmus])
+folder = prepare_worker()
+statuses = [execute_run(job)["status"] for job in jobs[:2]]
+first = sorted(p.name for p in (folder / "fmus").iterdir())
+with zipfile.ZipFile(fmus / "Traction.fmu", "a") as fmu:   # the FMU rebuilt in place
+    fmu.writestr("documentation/rebuilt.txt", "another build")
+statuses.append(execute_run(jobs[2])["status"])
+print(json.dumps({"folder": str(folder), "statuses": statuses, "first": first,
+                  "then": sorted(p.name for p in (folder / "fmus").iterdir()),
+                  "plans": len(list((folder / "ato_plans").glob("*.npz")))}))
+"""
+
+
+def test_a_worker_extracts_each_fmu_once_and_removes_its_folder_at_exit(product_fmus, tmp_path):
+    import shutil
+
+    fmus = tmp_path / "fmus"
+    fmus.mkdir()
+    for name in ("Traction.fmu", "AtoController.fmu"):
+        shutil.copy2(product_fmus / name, fmus / name)
+    study = _write(tmp_path, "three.toml", """
+        system = "ato_only"
+        stop_time = 2
+        collect = ["final.train.x"]
+        [grid]
+        "train.v0" = [1.0, 2.0, 3.0]
+        """)
+    script = _write(tmp_path, "warm_worker.py", WARM_WORKER)
+    env = {key: value for key, value in os.environ.items() if key != "RAILCOSIM_PLAN_CACHE"}
+    done = subprocess.run([sys.executable, str(script), str(study), str(REPO / "ssp" / "ato_only"),
+                           str(fmus), str(tmp_path / "out")], capture_output=True, text=True,
+                          env={**env, "PYTHONPATH": str(REPO)}, timeout=300)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.splitlines()[-1])
+    assert seen["statuses"] == ["ok", "ok", "ok"]
+    # one extraction per FMU for both runs; the rebuilt one extracted anew for the third
+    assert [name.split("_")[0] for name in seen["first"]] == ["AtoController", "Traction"]
+    assert len(seen["then"]) == 3 and set(seen["first"]) < set(seen["then"])
+    assert seen["plans"] == 2                          # ato_only's two stages, planned once
+    assert not Path(seen["folder"]).exists()           # removed when the worker exited
 
 
 def test_resume_reruns_nothing_of_a_finished_study(grid_study):

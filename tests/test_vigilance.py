@@ -3,7 +3,7 @@ the period plus the answer window; the ATO answers while it drives."""
 import numpy as np
 import pytest
 
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop
+from harness.closed_loop import red_signal_ahead, run_closed_loop
 from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, Atp
 from fmus.ato_controller.core import AtoSettings
 from fmus.data.loader import load_line

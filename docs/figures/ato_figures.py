@@ -17,8 +17,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from fmus.ato_controller.core import AtoSettings  # noqa: E402
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: benchmarks.harness
-from benchmarks.harness.closed_loop import red_signal_ahead, run_closed_loop  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: harness
+from harness.closed_loop import red_signal_ahead, run_closed_loop  # noqa: E402
 from fmus.ato_controller.planner import StagePlanner  # noqa: E402
 from fmus.ato_controller.train_model import NominalTrain  # noqa: E402
 from fmus.data.loader import load_line, load_rolling_stock  # noqa: E402

@@ -22,14 +22,27 @@ The coasting curves run backwards through down-grades too, so the programme coas
 crest and lets the down-grade bring the speed back (the ATO book's Fig. 15, docs/sources.md#ato-energy-efficient-control; MARECO's "accelerating
 slopes"), never below Vf. Simplification (docs/ato.md): above V1 on a down-grade the
 train coasts up to the ceiling instead of MARECO's explicit accelerating-slope search.
+
+The family is the ATO's whole start-up cost (its integration is a Python loop over the grid).
+When the environment names a folder in ``RAILCOSIM_PLAN_CACHE`` (a study's worker does,
+docs/studies.md), each stage's family is kept there under a hash of everything it is computed
+from (the grid, the speed profiles, the path retardation, the train's force tables, the
+scheduled time, this module's code and numpy's version), so the runs of a study that share
+a line, timetable, rolling stock and ATO settings plan once: a kept family is the computed
+one's bytes.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
+from fmus.ato_controller import train_model
 from fmus.data.loader import Line
 from fmus.ato_controller.train_model import NominalTrain
 
@@ -37,6 +50,10 @@ PLAN_STEP_M = 10.0            # distance grid of the programmes
 REGIME_TRACTION, REGIME_COAST, REGIME_BRAKE = 1, 0, -1
 _FAMILY_SIZE = 24
 _REFINE_SIZE = 8
+PLAN_CACHE_ENV = "RAILCOSIM_PLAN_CACHE"
+#: families a cache folder keeps (about 1 MB each for a 10 km stage); the least recently used go
+PLAN_CACHE_ENTRIES = 64
+_FAMILY_FIELDS = ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j")
 
 
 class InfeasibleStage(ValueError):
@@ -157,14 +174,19 @@ class StagePlanner:
             envelope[:, i] = g
         return envelope
 
-    def programmes(self, s, ceiling, cruise_mps: np.ndarray) -> Programmes:
+    def path_on_grid(self, s: np.ndarray) -> np.ndarray:
+        """Path retardation [m/s²] at the middle of each grid step."""
+        return self.train.path_accel(s[:-1] + 0.5 * (s[1] - s[0]))
+
+    def programmes(self, s, ceiling, cruise_mps: np.ndarray, path: Optional[np.ndarray] = None) -> Programmes:
         """One programme per cruise speed V1, integrated forwards from standstill over the
-        grid ``s`` under its envelope (numpy over the candidates)."""
+        grid ``s`` under its envelope (numpy over the candidates); ``path`` is
+        :meth:`path_on_grid` of ``s`` (computed when not given)."""
         tr = self.train
         ds = s[1] - s[0]
         n, c = s.size, cruise_mps.size
-        mid = s[:-1] + 0.5 * ds
-        path = tr.path_accel(mid)
+        if path is None:
+            path = self.path_on_grid(s)
         coast_end = self.coast_end_speed(cruise_mps)
         envelope = self._coast_brake_envelope(ds, ceiling, path, coast_end)
 
@@ -207,16 +229,30 @@ class StagePlanner:
         s = np.linspace(start_m, end_m, n)
         static = self.static_profile(s)
         ceiling = self.ceiling(s, static)
+        path = self.path_on_grid(s)
+        cache = _PlanCache.from_environment()
+        key = self._key(s, static, ceiling, path, scheduled_time_s) if cache is not None else None
+        kept = cache.load(key) if cache is not None else None
+        if kept is None:
+            kept = self._family(s, static, ceiling, path, scheduled_time_s)
+            if cache is not None:
+                cache.store(key, *kept)
+        family, chosen, minimum = kept
+        return StagePlan(start_m, end_m, s, static, ceiling, family, chosen, minimum, scheduled_time_s)
+
+    def _family(self, s, static, ceiling, path, scheduled_time_s: Optional[float]):
+        """(family sorted longest first, chosen index, minimum-time index); InfeasibleStage when
+        the schedule is shorter than the minimum running time."""
         top = float(static.max())
         cruise = np.concatenate([np.linspace(min(8.0, 0.5 * top), top, _FAMILY_SIZE - 1), [np.inf]])
-        family = self.programmes(s, ceiling, cruise)
+        family = self.programmes(s, ceiling, cruise, path)
         if not np.isfinite(family.time_s[-1]):
             raise InfeasibleStage(np.inf)    # the train cannot even start on this stage
         minimum_time = float(family.time_s[-1])
         if scheduled_time_s is not None and scheduled_time_s < minimum_time:
             raise InfeasibleStage(minimum_time)
         if scheduled_time_s is not None:
-            fitted = self._fit(s, ceiling, family, scheduled_time_s)
+            fitted = self._fit(s, ceiling, family, scheduled_time_s, path, top)
             family = _merge(family, fitted)
         order = np.argsort(-family.time_s, kind="stable")
         family = family.take(order)
@@ -226,9 +262,25 @@ class StagePlanner:
             chosen = minimum
         else:
             chosen = int(np.argmin(np.abs(times - scheduled_time_s) + 1e-9 * np.isinf(family.cruise_mps)))
-        return StagePlan(start_m, end_m, s, static, ceiling, family, chosen, minimum, scheduled_time_s)
+        return family, chosen, minimum
 
-    def _fit(self, s, ceiling, family: Programmes, target_s: float) -> Programmes:
+    def _key(self, s, static, ceiling, path, scheduled_time_s: Optional[float]) -> str:
+        """A hash of everything :meth:`_family` reads: the arrays, the train's force tables and
+        constants, the braking deceleration, the schedule, this code and numpy's version."""
+        tr, stock = self.train, self.train.stock
+        digest = hashlib.sha256(_code_fingerprint())
+        for array in (s, static, ceiling, path, tr.speeds, tr.traction_accel, tr.resistance_accel,
+                      tr.coasting_resistance_accel, tr.electric_brake_accel):
+            array = np.ascontiguousarray(array)
+            digest.update(f"{array.dtype.str}{array.shape}".encode())
+            digest.update(array.tobytes())
+        scalars = (tr.m_eff, stock.efficiency, stock.auxiliary_w, stock.ebrake_efficiency,
+                   self.braking_decel, -1.0 if scheduled_time_s is None else scheduled_time_s)
+        digest.update(" ".join(float(x).hex() for x in scalars).encode())
+        digest.update(f" {stock.ebrake_kind} {scheduled_time_s is None}".encode())
+        return digest.hexdigest()
+
+    def _fit(self, s, ceiling, family: Programmes, target_s: float, path: np.ndarray, top: float) -> Programmes:
         """Cruise speed whose programme runs in the scheduled time (time falls as V1 rises)."""
         cruise, times = family.cruise_mps[:-1], family.time_s[:-1]
         best = None
@@ -238,9 +290,9 @@ class StagePlanner:
             if not slower.size:          # even the slowest candidate is early: keep it
                 return family.take([0])
             lo = cruise[slower.max()]
-            hi = cruise[faster.min()] if faster.size else float(self.static_profile(s).max())
+            hi = cruise[faster.min()] if faster.size else top
             trial = np.linspace(lo, hi, _REFINE_SIZE + 2)[1:-1]
-            best = self.programmes(s, ceiling, trial)
+            best = self.programmes(s, ceiling, trial, path)
             cruise = np.concatenate([[lo], trial, [hi]])
             times = np.concatenate([[times[slower.max()]], best.time_s,
                                     [times[faster.min()] if faster.size else -np.inf]])
@@ -249,5 +301,63 @@ class StagePlanner:
 
 
 def _merge(a: Programmes, b: Programmes) -> Programmes:
-    return Programmes(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in
-                        ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j")))
+    return Programmes(*(np.concatenate([getattr(a, f), getattr(b, f)]) for f in _FAMILY_FIELDS))
+
+
+_CODE_FINGERPRINT: Optional[bytes] = None
+
+
+def _code_fingerprint() -> bytes:
+    """The planner's and the nominal train's source and numpy's version: a change to any of
+    them makes every kept family a stranger."""
+    global _CODE_FINGERPRINT
+    if _CODE_FINGERPRINT is None:
+        digest = hashlib.sha256(np.__version__.encode())
+        for source in (__file__, train_model.__file__):
+            digest.update(Path(source).read_bytes())
+        _CODE_FINGERPRINT = digest.digest()
+    return _CODE_FINGERPRINT
+
+
+class _PlanCache:
+    """Stage families in a folder, one ``<key>.npz`` each, written whole (a temporary file
+    renamed into place, so concurrent runs never read half a file). A cache that cannot be
+    read or written is only a cache: the family is computed as without one."""
+
+    def __init__(self, folder: Path):
+        self.folder = folder
+
+    @classmethod
+    def from_environment(cls) -> Optional["_PlanCache"]:
+        folder = os.environ.get(PLAN_CACHE_ENV)
+        return cls(Path(folder)) if folder else None
+
+    def load(self, key: str):
+        path = self.folder / f"{key}.npz"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                family = Programmes(*(data[name] for name in _FAMILY_FIELDS))
+                chosen, minimum = int(data["chosen"]), int(data["minimum"])
+            os.utime(path)                                  # recently used
+        except Exception:        # noqa: BLE001 — missing, cut short or damaged: planned afresh
+            return None
+        return family, chosen, minimum
+
+    def store(self, key: str, family: Programmes, chosen: int, minimum: int) -> None:
+        temporary = None
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            handle, temporary = tempfile.mkstemp(dir=self.folder, suffix=".part")
+            with os.fdopen(handle, "wb") as f:
+                np.savez(f, chosen=chosen, minimum=minimum,
+                         **{name: getattr(family, name) for name in _FAMILY_FIELDS})
+            os.replace(temporary, self.folder / f"{key}.npz")
+            temporary = None
+            kept = sorted(self.folder.glob("*.npz"), key=lambda p: p.stat().st_mtime_ns)
+            for stale in kept[:-PLAN_CACHE_ENTRIES]:
+                stale.unlink(missing_ok=True)
+        except OSError:
+            pass
+        finally:
+            if temporary is not None:
+                Path(temporary).unlink(missing_ok=True)

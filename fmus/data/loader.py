@@ -7,6 +7,7 @@ Everything is converted to SI on loading; the cores never see km/h or kN.
 from __future__ import annotations
 
 import bisect
+import hashlib
 import json
 import re
 from dataclasses import dataclass
@@ -101,10 +102,24 @@ def json_nesting_depth(text: str) -> int:
     return deepest
 
 
+#: (schema, digest of a document) found valid in this process: a run reads its line and rolling
+#: stock once per component and once for the verdicts, and the schema check costs more than
+#: reading (a document is checked once, whatever file it comes from)
+_VALID_DOCUMENTS: set = set()
+_VALID_DOCUMENTS_KEPT = 1024
+
+
 def load_json(path, schema: str) -> dict:
     path = Path(path)
     document = read_json_file(path)
+    known = (schema, hashlib.sha256(json.dumps(document, sort_keys=True).encode()).digest())
+    if known in _VALID_DOCUMENTS:
+        return document
     errors = sorted(_validator(schema).iter_errors(document), key=lambda e: list(e.absolute_path))
+    if not errors:
+        if len(_VALID_DOCUMENTS) >= _VALID_DOCUMENTS_KEPT:
+            _VALID_DOCUMENTS.clear()
+        _VALID_DOCUMENTS.add(known)
     if errors:
         error = errors[0]
         where_ = list(error.absolute_path)

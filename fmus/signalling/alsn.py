@@ -23,6 +23,10 @@ CODE_NAMES = {"Z": sig.GREEN, "Zh": sig.YELLOW, "KZh": sig.RED_YELLOW}
 NO_CODE = 0
 SUPPORTED_CARRIERS_HZ = (25.0, 50.0, 75.0)
 MIN_SAMPLES_PER_CARRIER_PERIOD = 8
+# a transmitter's 4 V reaching the receiver's coil as 0.4 V: the bench coupling where the coder
+# feeds the receiver without a rail line (the conformance vectors, the latency benches and their
+# tests; docs/loco_receiver.md, Latencies) — a code well above pick-up and below overload
+BENCH_COIL_COUPLING = 0.1
 
 # decoder rules, firmware kpt.h (docs/sources.md#alsn-decoder-rules) [S]
 LONG_INTERVAL_S = 0.35

@@ -19,6 +19,7 @@ import numpy as np
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.signalling import aspects as sig
 from fmus.signalling import alsn, cab_systems
+from fmus.signalling.alsn import BENCH_COIL_COUPLING
 from fmus.signalling.digital_messages import stated_latency_s
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
@@ -97,7 +98,6 @@ def not_more_permissive(code: int) -> List[int]:
 
 
 # ---- loco_receiver ------------------------------------------------------------------------------
-COUPLING = 0.1              # 4 V transmitter → 0.4 V at the coil (docs/loco_receiver.md, Latencies)
 SECTION = {"KPT-5": 0, "KPT-7": 1}      # the bundled line's sections 1 and 2
 #: cam cycle per transmitter type, from the code tables (docs/wayside_coder.md)
 CYCLE_S = {kpt: table["cycle_s"] for kpt, table in
@@ -117,7 +117,7 @@ def occupancy(code: int, section: int, sections: int = 8) -> np.ndarray:
 
 
 def coder_emf(section: int, seconds: float, schedule: Callable[[float], np.ndarray], phase: float,
-              level: float = COUPLING) -> np.ndarray:
+              level: float = BENCH_COIL_COUPLING) -> np.ndarray:
     """The coil EMF of one section's transmitter output × ``level``, frame by frame, every cam
     starting at ``phase`` of its cycle."""
     line = load_line(str(DEFAULT_LINE))
@@ -231,7 +231,7 @@ def receiver_vectors() -> RoleFile:
     return role
 
 
-def _alsu_emf(seconds: float, plan: List[tuple], level: float = COUPLING) -> np.ndarray:
+def _alsu_emf(seconds: float, plan: List[tuple], level: float = BENCH_COIL_COUPLING) -> np.ndarray:
     """Section 1 of the ALSU coder core × ``level``: ``plan`` is (from s, code or a set of tone
     numbers 0…5) in time order, sent through the core's test generator (its tones keep running)."""
     from fmus.wayside_coder.alsu import AlsuCoderCore

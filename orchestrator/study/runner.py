@@ -14,9 +14,11 @@ afresh and its record replaces nothing but itself, so nothing is counted twice.
 from __future__ import annotations
 
 import csv
+import gc
 import json
 import math
 import os
+import select
 import signal
 import sys
 import time
@@ -30,13 +32,91 @@ from orchestrator.study.collect import collect
 from orchestrator.study.spec import Run, StudySpec, point_label, set_text
 
 RECORD = "study_run.json"
+#: the ATO's cache of stage plans (fmus/ato_controller/planner.py reads this variable)
+PLAN_CACHE_ENV = "RAILCOSIM_PLAN_CACHE"
 #: after SIGTERM at a timeout, the run has this long to write its files before SIGKILL
 GRACE_S = 10.0
 POLL_S = 0.02
+EXIT_POLL_S = 0.001
 STATUSES = ("ok", "failed", "timeout", "lost")
 
 
 # ---- the worker's side ---------------------------------------------------------------------------
+_WORKER_FOLDER: Optional[Path] = None
+
+
+def prepare_worker() -> Path:
+    """Once per worker process, before its first run is forked: what every run needs and no
+    run changes is made here, so each run starts from it: the imports of a run (numpy,
+    scipy, fmpy, the orchestrator and the railway analysis), a folder of the worker's own
+    where each FMU is extracted once for all its runs (orchestrator/fmu.py keep_extractions)
+    and where the ATO keeps the stage plans of a line, timetable, rolling stock and settings
+    it has planned (unless the environment names a folder for them already). The folder is
+    removed when the worker exits. Returns the folder."""
+    global _WORKER_FOLDER
+    if _WORKER_FOLDER is None:
+        import atexit
+        import shutil
+        import tempfile
+
+        import fmpy.fmi2  # noqa: F401 — imported here once rather than in every run
+        import jsonschema  # noqa: F401 — the data files' schema check
+        import orchestrator.analysis.verdict  # noqa: F401
+        import orchestrator.run  # noqa: F401
+        from orchestrator.fmu import keep_extractions
+
+        from multiprocessing.util import Finalize
+
+        folder = Path(tempfile.mkdtemp(prefix="railcosim_worker_"))
+        # removed at the worker's exit: a plain process runs atexit, a multiprocessing child
+        # (a LocalCluster's or `dask worker`'s) only multiprocessing's finalizers
+        atexit.register(shutil.rmtree, folder, True)
+        Finalize(None, shutil.rmtree, args=(folder, True), exitpriority=0)
+        keep_extractions(folder / "fmus")
+        os.environ.setdefault(PLAN_CACHE_ENV, str(folder / "ato_plans"))
+        _WORKER_FOLDER = folder
+    return _WORKER_FOLDER
+
+
+_PREPARED_SYSTEMS: set = set()
+
+
+def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
+    """Once per system in a worker (after :func:`prepare_worker`): each of its Python FMUs
+    extracted into the worker's folder and its module imported, so that a run forked from the
+    worker instantiates them without compiling and importing their code. Whatever fails here
+    is left for the run to meet and report."""
+    key = (system, tuple(fmu_dirs))
+    if key in _PREPARED_SYSTEMS:
+        return
+    _PREPARED_SYSTEMS.add(key)
+    from orchestrator.fmu import import_python_module
+    from orchestrator.ssp import open_system
+
+    try:
+        description = open_system(Path(system), [Path(p) for p in fmu_dirs])
+    except Exception:                          # noqa: BLE001 — the run reports it
+        return
+    try:
+        for component in description.components.values():
+            if component.fmu_path is not None and Path(component.fmu_path).suffix == ".fmu":
+                try:
+                    import_python_module(Path(component.fmu_path))
+                except Exception:              # noqa: BLE001 — the run reports it
+                    pass
+        try:    # the run's plan as far as it goes without the run's values: the FMUs' interfaces
+            # read and the data files' schema checks done (both kept for the forked runs)
+            from orchestrator.analysis.verdict import railway_verdicts
+            from orchestrator.run import RunOptions, plan_run
+
+            plan_run(description, RunOptions(fmu_dirs=[Path(p) for p in fmu_dirs], summaries=railway_verdicts,
+                                             warn=lambda line: None))
+        except Exception:                      # noqa: BLE001 — the run reports it
+            pass
+    finally:
+        description.close()
+
+
 def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
     from functools import partial
 
@@ -122,6 +202,9 @@ def _child(job: dict, run_dir: Path, write_fd: int) -> None:
 
 def _in_child(job: dict, run_dir: Path, timeout_s: float) -> dict:
     read_fd, write_fd = os.pipe()
+    # what the worker holds goes to the collector's permanent generation: a collection in the
+    # child would otherwise touch every object of the worker's and copy its memory page by page
+    gc.freeze()
     pid = os.fork()
     if pid == 0:                                       # the child
         os.close(read_fd)
@@ -130,11 +213,13 @@ def _in_child(job: dict, run_dir: Path, timeout_s: float) -> dict:
     chunks: List[bytes] = []
     os.set_blocking(read_fd, False)
     deadline, killed, status = time.monotonic() + timeout_s, None, None
+    ended = False                    # the pipe's end seen: the child is exiting
     try:
         while status is None:
             try:
                 while chunk := os.read(read_fd, 65536):
                     chunks.append(chunk)
+                ended = True
             except BlockingIOError:
                 pass
             done, status_code = os.waitpid(pid, os.WNOHANG)
@@ -147,7 +232,10 @@ def _in_child(job: dict, run_dir: Path, timeout_s: float) -> dict:
                 killed = now
             elif killed is not None and now > killed + GRACE_S:
                 os.kill(pid, signal.SIGKILL)
-            time.sleep(POLL_S)
+            if ended:                # only the reaping is left
+                time.sleep(EXIT_POLL_S)
+            else:                    # woken by the outcome (or the end) the moment it comes
+                select.select([read_fd], [], [], POLL_S)
         try:
             while chunk := os.read(read_fd, 65536):
                 chunks.append(chunk)
@@ -180,6 +268,9 @@ def execute_run(job: dict) -> dict:
     run_dir.mkdir(parents=True, exist_ok=True)
     for stale in (RECORD, "summary.json"):   # what an earlier attempt left must not be read as this run's
         (run_dir / stale).unlink(missing_ok=True)
+    if not job.get("function"):
+        prepare_worker()
+        prepare_system(job["system"], job["fmu_dirs"])
     began = time.perf_counter()
     if hasattr(os, "fork"):
         outcome = _in_child(job, run_dir, job["timeout_s"])

@@ -1,5 +1,5 @@
 """The ALSN receiver's latencies measured on the receiver core fed by the wayside coder core
-(benchmarks.harness.channel): acquisition from a cold start, restrictive and permissive
+(harness.channel): acquisition from a cold start, restrictive and permissive
 changes of the code sent, and a loss of code → the no-code indication, per transmitter type
 over cam phases (docs/loco_receiver.md, "Latencies"); and a change of code at an insulated
 joint, the coder → rail line → receiver cores with a train crossing the joint behind a standing
@@ -13,16 +13,16 @@ from typing import Dict, Iterable, List, Optional, Tuple
 
 import numpy as np
 
-from benchmarks.harness.channel import CodeChannel, Disturbance, white_noise_and_hum
-from benchmarks.harness.display import rank
+from harness.channel import CodeChannel, Disturbance, white_noise_and_hum
+from harness.display import rank
 from fmus.data.loader import load_line
+from fmus.signalling.alsn import BENCH_COIL_COUPLING
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.traction_interference import REFERENCE_TRACTION_A
 from fmus.signalling import aspects as sig
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 
-COUPLING = 0.1                         # 4 V transmitter → 0.4 V at the coil
 SECTION = {"KPT-5": 0, "KPT-7": 1}     # the default line's sections 1 and 2
 SETTLE_S = 12.0                        # the code before a change has been shown for a while
 AFTER_S = 10.0
@@ -40,7 +40,7 @@ def occupancy(code: int, section: int) -> np.ndarray:
 
 
 def _channel(kpt: str, phase: float, receiver=None) -> CodeChannel:
-    return CodeChannel(SECTION[kpt], 40, COUPLING, coder=CoderSettings(seed=1), receiver=receiver,
+    return CodeChannel(SECTION[kpt], 40, BENCH_COIL_COUPLING, coder=CoderSettings(seed=1), receiver=receiver,
                        cam_phase=phase)
 
 
