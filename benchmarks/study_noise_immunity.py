@@ -1,4 +1,4 @@
-"""Noise immunity of ALSN, ALS-EN and FIRE_DQPSK side by side. A study, not a speed
+"""Noise immunity of ALSN, ALSU, ALS-EN and FIRE_DQPSK side by side. A study, not a speed
 benchmark: its tables and plots are in docs/noise_immunity.md.
 
 1. **Bit error rate vs Eb/N0** of the two modems (ideal symbol timing, integrate-and-dump,
@@ -23,13 +23,18 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
    100–400 Hz, 2–10 ms decay) at random times, Poisson at a given rate.
    ALSN: a message is one code cycle (КЖ/Ж/З from a KPT-5 section), decoded by the ALSN
    receiver core.
+   ALSU: a message is one minimum duration (0.5 s) of a code (two tones), decoded by the ALSU
+   receiver core; besides white and impulse noise, DC joint pulse pairs (the rail line's own
+   at 40, 80 and 160 km/h with the coil pair 5 % mismatched: the joints paper's 5 V at
+   80 km/h) at 0.5 per second.
 3. **A steady unmodulated tone at the carrier and the adjacent track's signal alone** (the other
    track parity) must never give a command.
 
-    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--systems ALSN,ALS-EN,FIRE_DQPSK]
+    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--systems ALSN,ALSU,ALS-EN,FIRE_DQPSK]
 
-Part 2 is the study orchestrator/study/studies/noise_immunity.toml run on Dask (a local cluster,
-or --scheduler): ``railcosim study noise_immunity`` runs the same conditions on their own.
+Part 2 is the studies orchestrator/study/studies/noise_immunity.toml and noise_immunity_alsu.toml
+run on Dask (a local cluster, or --scheduler): ``railcosim study noise_immunity`` (and
+``noise_immunity_alsu``) run the same conditions on their own.
 """
 from __future__ import annotations
 
@@ -258,25 +263,129 @@ def alsn_chain(cycles: int, noise, seed: int) -> dict:
             "availability": float(np.mean(((shown_rank >= lowest) & (shown_rank <= recent) & (shown_rank >= 0))[settled]))}
 
 
+# ---- 2c. ALSU --------------------------------------------------------------------------------------
+ALSU_TONE_V = 0.35             # each tone at the coil: the weakest place of a 2.6 km section at 1 Ω·km (the bench)
+ALSU_FRAME = 400               # 0.1 s: the receiver's frame here (it is frame-length invariant)
+JOINT_RATE_PER_S = 0.5         # joint pulse pairs per second: one joint every 2 s, far more than a train meets
+_JOINT_PULSES = {}
+
+
+def joint_pulse(speed_kmh: float) -> np.ndarray:
+    """The coil EMF of a train crossing a joint at ``speed_kmh`` under DC traction, the rail
+    line's own (harness/joints.py): 1000 A, the coil pair 5 % mismatched — the joints
+    paper's 5 V at 80 km/h — the same asymmetry both sides, no code, no ripple."""
+    if speed_kmh not in _JOINT_PULSES:
+        from harness.joints import cross_joint
+
+        _, _, emf = cross_joint(speed_kmh, coil_mismatch=0.05, asymmetry=0.03, before_m=3.0, after_m=6.0)
+        _JOINT_PULSES[speed_kmh] = emf - emf[0]
+    return _JOINT_PULSES[speed_kmh]
+
+
+def joints(speed_kmh: float, rng):
+    """DC joint pulse pairs at ``speed_kmh``, Poisson at JOINT_RATE_PER_S."""
+    pulse = joint_pulse(speed_kmh)
+    pending = np.zeros(0)
+
+    def add(first: int, count: int) -> np.ndarray:
+        nonlocal pending
+        e = np.zeros(count + pulse.size)
+        e[:pending.size] += pending
+        for start in np.flatnonzero(rng.random(count) < JOINT_RATE_PER_S / FS):
+            e[start:start + pulse.size] += pulse
+        pending = e[count:].copy()
+        return e[:count]
+    return add
+
+
+def alsu_chain(count: int, noise, seed: int) -> dict:
+    """ALSU through its coder core (every tone ALSU_TONE_V at the coil) into its receiver core;
+    a message is one minimum duration (0.5 s) of a code, each code held for HOLD messages
+    (random codes of those a wayside sends). A message is decoded correctly when the receiver
+    hears exactly the code's two tones at its end; undetected: another pair; wrong-side: a code
+    shown more permissive than every code sent within the stated latency (2 s) before."""
+    from fmus.loco_receiver.alsu import MIN_DURATION_S, AlsuReceiverCore, AlsuReceiverSettings
+    from fmus.signalling import alsu
+    from fmus.wayside_coder.alsu import AlsuCoderCore
+
+    system = alsu.system()
+    rng = np.random.default_rng(seed)
+    codes = np.array(system.codes())
+    schedule = codes[rng.integers(0, codes.size, (count + HOLD - 1) // HOLD)]
+    per_message = int(round(MIN_DURATION_S * FS))
+    frames = per_message // ALSU_FRAME
+    coder = AlsuCoderCore(load_line(), 8, ALSU_FRAME, CoderSettings(fs_hz=FS, amplitude_v=ALSU_TONE_V, block_aspects=4))
+    receiver = AlsuReceiverCore(ALSU_FRAME, AlsuReceiverSettings(fs_hz=FS))
+    levels = sorted({system.rank(int(c)) for c in codes})
+    rank = {int(c): levels.index(system.rank(int(c))) for c in codes}
+    occupied = np.zeros(8, dtype=bool)
+    grid_sent, grid_shown = np.empty(count * frames, dtype=np.int16), np.empty(count * frames, dtype=np.int16)
+    correct = undetected = detected = 0
+    row = 0
+    for m in range(count):
+        code = int(schedule[m // HOLD])
+        if m % HOLD == 0:
+            coder.send(np.tile(coder.tones_of(code), (coder.count, 1)), np.full(coder.count, code))
+        for f in range(frames):
+            first = m * per_message + f * ALSU_FRAME
+            e = coder.step(first / FS, occupied).u_tx[0]
+            if noise is not None:
+                e = e + noise(first, ALSU_FRAME)
+            out = receiver.step(first / FS, e)
+            grid_sent[row] = rank[code]
+            grid_shown[row] = rank[out.code] if out.code_valid else -1
+            row += 1
+        heard = receiver.pair_code
+        if heard == code:
+            correct += 1
+        elif heard:
+            undetected += 1
+        else:
+            detected += 1
+    step_s = ALSU_FRAME / FS
+    window = int(round(alsu.STATED_LATENCY_S / step_s))
+    recent = maximum_filter1d(grid_sent, size=window + 1, origin=window // 2)
+    lowest = -maximum_filter1d(-grid_sent, size=window + 1, origin=window // 2)
+    wrong = grid_shown > recent
+    settled = np.arange(row) * step_s > 4 * MIN_DURATION_S * HOLD
+    available = (grid_shown >= 0) & (grid_shown <= recent) & (grid_shown >= lowest)
+    return {"messages": count, "seconds": count * MIN_DURATION_S, "correct": correct, "mer": 1.0 - correct / count,
+            "undetected": undetected, "detected": detected,
+            "wrong_side_events": int(np.sum(wrong[1:] & ~wrong[:-1]) + wrong[0]),
+            "wrong_side_s": float(wrong.sum() * step_s), "availability": float(available[settled].mean())}
+
+
 # ---- one condition: a run of the study -------------------------------------------------------------
 SNRS_DB = (0.0, -6.0, -10.0, -13.0, -16.0, -20.0)
 IMPULSE_RATES = (0.5, 2.0, 5.0)
+JOINT_SPEEDS_KMH = (40.0, 80.0, 160.0)
 #: the random-number seeds of each (noise, system): (noise generator, messages); ALSN's message
 #: schedule always from seed 5. Replication ``seed`` k adds 1000·k to both (0: the figures below).
 SEEDS = {("white", "FIRE_DQPSK"): (100, 7), ("white", "ALS-EN"): (101, 8), ("white", "ALSN"): (99, 5),
-         ("impulse", "FIRE_DQPSK"): (200, 17), ("impulse", "ALS-EN"): (201, 18), ("impulse", "ALSN"): (199, 5)}
-STUDY = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "studies" / "noise_immunity.toml"
+         ("impulse", "FIRE_DQPSK"): (200, 17), ("impulse", "ALS-EN"): (201, 18), ("impulse", "ALSN"): (199, 5),
+         ("white", "ALSU"): (98, 6), ("impulse", "ALSU"): (198, 16), ("joint", "ALSU"): (298, 26)}
+STUDIES = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "studies"
+STUDY = STUDIES / "noise_immunity.toml"
+ALSU_STUDY = STUDIES / "noise_immunity_alsu.toml"
 
 
 def condition(system: str, noise: str, level: float, seed: int = 0, messages: int = 100000,
               alsn_cycles: int = 2000) -> dict:
-    """One system under one noise condition (white: SNR in dB; impulse: impulses per second):
-    a run of the study orchestrator/study/studies/noise_immunity.toml (``railcosim study``)."""
+    """One system under one noise condition (white: SNR in dB; impulse: impulses per second;
+    joint, ALSU only: DC joint pulse pairs at this speed in km/h): a run of the study
+    orchestrator/study/studies/noise_immunity.toml or noise_immunity_alsu.toml (``railcosim study``)."""
     if (noise, system) not in SEEDS:
-        raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALS-EN or FIRE_DQPSK")
+        raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALSU, ALS-EN "
+                         f"or FIRE_DQPSK; or joint and ALSU")
     noise_seed, message_seed = (s + 1000 * seed for s in SEEDS[(noise, system)])
-    noise_of = white if noise == "white" else impulses
-    source = noise_of(level, np.random.default_rng(noise_seed))
+    noise_of = {"white": white, "impulse": impulses, "joint": joints}[noise]
+    if system == "ALSU" and noise == "white":
+        # SNR of the code's power, both tones (A² against σ²), over the whole band
+        source = white(level - 10 * np.log10(2 * ALSU_TONE_V ** 2 / AMPLITUDE_V ** 2), np.random.default_rng(noise_seed))
+    else:
+        source = noise_of(level, np.random.default_rng(noise_seed))
+    if system == "ALSU":
+        return alsu_chain(messages, source, message_seed)
     if system == "ALSN":
         return alsn_chain(alsn_cycles, source, message_seed)
     return run_digital(system, messages, source, message_seed)
@@ -289,19 +398,22 @@ def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, worke
     from orchestrator.study.runner import run_study
     from orchestrator.study.spec import load_study
 
-    spec = load_study(STUDY)
-    spec.data["arguments"].update(messages=messages, alsn_cycles=alsn_cycles)
-    spec.runs = [r for r in spec.runs if r.values["system"] in systems]
-    result = run_study(spec, output, None, [], workers=workers, scheduler=scheduler, resume=True,
-                       progress=sys.stderr, python_path=[str(Path(__file__).resolve().parents[1])])
-    tables = {"white": {}, "impulse": {}}
-    for record in result.records:
-        if record["status"] != "ok":
-            raise SystemExit(f"{record['id']} {record['values']}: {record['status']}: {record['error']}")
-        summary = json.loads((result.output / "runs" / record["id"] / "summary.json").read_text())
-        summary.pop("wall_time_s", None)
-        values = record["values"]
-        tables[values["noise"]].setdefault(str(float(values["level"])), {})[values["system"]] = summary
+    tables = {"white": {}, "impulse": {}, "joint": {}}
+    for study, folder in ((STUDY, output), (ALSU_STUDY, output.with_name(output.name + "_alsu"))):
+        spec = load_study(study)
+        spec.data["arguments"].update(messages=messages, **({"alsn_cycles": alsn_cycles} if study == STUDY else {}))
+        spec.runs = [r for r in spec.runs if r.values["system"] in systems]
+        if not spec.runs:
+            continue
+        result = run_study(spec, folder, None, [], workers=workers, scheduler=scheduler, resume=True,
+                           progress=sys.stderr, python_path=[str(Path(__file__).resolve().parents[1])])
+        for record in result.records:
+            if record["status"] != "ok":
+                raise SystemExit(f"{record['id']} {record['values']}: {record['status']}: {record['error']}")
+            summary = json.loads((result.output / "runs" / record["id"] / "summary.json").read_text())
+            summary.pop("wall_time_s", None)
+            values = record["values"]
+            tables[values["noise"]].setdefault(str(float(values["level"])), {})[values["system"]] = summary
     return tables
 
 
@@ -310,7 +422,7 @@ def main():
     parser.add_argument("--messages", type=int, default=100000, help="digital messages per condition")
     parser.add_argument("--alsn-cycles", type=int, default=2000, help="ALSN code cycles per condition")
     parser.add_argument("--ber-symbols", type=int, default=200000)
-    parser.add_argument("--systems", default="ALSN,ALS-EN,FIRE_DQPSK",
+    parser.add_argument("--systems", default="ALSN,ALSU,ALS-EN,FIRE_DQPSK",
                         help="which systems to (re)compute; the others are kept from an existing --output")
     parser.add_argument("--output", default=str(DOCS / "figures" / "noise_immunity.json"))
     parser.add_argument("--runs", default="results/noise_immunity",
@@ -322,7 +434,7 @@ def main():
     digital = [name for name in ("FIRE_DQPSK", "ALS-EN") if name in chosen]
     output = Path(args.output)
     results = json.loads(output.read_text()) if output.is_file() else {}
-    for key in ("ber", "white", "impulse", "tone", "adjacent"):
+    for key in ("ber", "white", "impulse", "joint", "tone", "adjacent"):
         results.setdefault(key, {})
     began = time.perf_counter()
     for name in digital:
@@ -330,7 +442,7 @@ def main():
     results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
     print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
     tables = run_conditions(args.messages, args.alsn_cycles, chosen, Path(args.runs), args.workers, args.scheduler)
-    for kind in ("white", "impulse"):
+    for kind in ("white", "impulse", "joint"):
         for level, row in tables[kind].items():
             results[kind].setdefault(level, {}).update(row)
     print(f"white and impulse noise: {time.perf_counter() - began:.0f} s", flush=True)

@@ -11,6 +11,9 @@ needs without checks: contiguous float64 arrays of the right shapes.
 * ``linear_filter(b, a, x, axis, zi)`` — scipy.signal.lfilter's C routine (transposed direct
   form II), without lfilter's validation (about 4 µs a call); returns (y, zf) like lfilter
   with zi.
+* ``sections_filter(sos, x, zi)`` — scipy.signal.sosfilt's routine along the last axis of x
+  ((N,) or (rows, N)) with zi ((S, 2) or (rows, S, 2)), without sosfilt's validation and
+  axis moves; returns (y, zf) like sosfilt with zi, leaving its arguments as they were.
 """
 from __future__ import annotations
 
@@ -61,4 +64,40 @@ def linear_filter(b: np.ndarray, a: np.ndarray, x: np.ndarray, axis: int, zi: np
 def in_use() -> dict:
     """Which shortcuts this machine takes (False: the public function is used)."""
     return {"count_nonzero": count_nonzero is not np.count_nonzero, "interp": interp is not np.interp,
-            "linear_filter": _linear_filter_routine() is not None}
+            "linear_filter": _linear_filter_routine() is not None,
+            "sections_filter": _sections_filter_routine() is not None}
+
+
+def _sections_filter_routine():
+    """scipy's in-place second-order-sections routine, or None (as _linear_filter_routine)."""
+    global _internal_sections_filter
+    if _internal_sections_filter is _UNKNOWN:
+        try:
+            from scipy.signal._sosfilt import _sosfilt as routine
+        except ImportError:
+            routine = None
+        _internal_sections_filter = routine
+    return _internal_sections_filter
+
+
+_internal_sections_filter = _UNKNOWN
+
+
+def sections_filter(sos: np.ndarray, x: np.ndarray, zi: np.ndarray):
+    """sosfilt(sos, x, axis=-1, zi=zi) through its routine where scipy has it (float64 in):
+    the routine filters a C-contiguous (rows, N) copy and a (rows, S, 2) state in place."""
+    routine = _internal_sections_filter if _internal_sections_filter is not _UNKNOWN else _sections_filter_routine()
+    if routine is not None and x.dtype == np.float64 and zi.dtype == np.float64 and sos.dtype == np.float64:
+        y = np.array(x, dtype=np.float64, order="C", ndmin=2)
+        state = np.array(zi, dtype=np.float64, order="C", ndmin=3)
+        try:
+            routine(sos, y, state)
+            return y.reshape(x.shape), state.reshape(zi.shape)
+        except (TypeError, ValueError):               # pragma: no cover - a changed signature
+            pass
+    from scipy.signal import sosfilt
+
+    if x.ndim == 1:
+        return sosfilt(sos, x, zi=zi)
+    y, state = sosfilt(sos, x, axis=-1, zi=np.moveaxis(zi, 1, 0))      # sosfilt's zi: (S, rows, 2)
+    return y, np.ascontiguousarray(np.moveaxis(state, 0, 1))

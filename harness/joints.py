@@ -20,8 +20,9 @@ def cross_joint(speed_kmh, line=None, i_traction=REFERENCE_TRACTION_A, carrier_v
     """A train crossing the joint at ``joint_m`` at constant speed (coil 1.5 m ahead of the head);
     a steady current established before (the traction lag settled). ``asymmetry`` overwrites
     every section's rail asymmetry (None: the seeded ones); ``settings`` go to RailSettings (DC
-    ripple off unless given). Returns (coil position per sample, t, EMF)."""
+    ripple and harmonics off unless given). Returns (coil position per sample, t, EMF)."""
     settings.setdefault("dc_ripple", (0.0, 0.0))
+    settings.setdefault("dc_even_harmonics", (0.0, 0.0))
     core = RailLineCore(line or load_line(), 8, 2, N, RailSettings(**settings))
     if asymmetry is not None:
         core.asymmetry[:] = asymmetry

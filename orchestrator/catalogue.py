@@ -36,6 +36,9 @@ SYSTEM_DESCRIPTIONS: Dict[str, str] = {
                   "held at departure until the circuit clears",
     "als_en": "the free run with ALS-EN digital cab signalling",
     "fire_dqpsk": "the free run with FIRE_DQPSK digital cab signalling",
+    "alsu": "the free run with ALSU (two of six tones) on a 4-aspect block, a diverging route into B "
+            "and a permanent restriction",
+    "alsu_following": "following with ALSU cab signalling",
 }
 
 #: one line per role (the unit an FMU in that role replaces)

@@ -2,7 +2,7 @@
 of the public functions they stand for, on the inputs the cores pass them."""
 import numpy as np
 import pytest
-from scipy.signal import butter, lfilter
+from scipy.signal import butter, lfilter, sosfilt
 
 from fmus import library_shortcuts as shortcuts
 
@@ -10,7 +10,8 @@ from fmus import library_shortcuts as shortcuts
 def test_the_shortcuts_this_numpy_and_scipy_offer_are_taken():
     """Every shortcut is taken on the versions this project installs (a layout change shows
     here, not as a silent slow-down)."""
-    assert shortcuts.in_use() == {"count_nonzero": True, "interp": True, "linear_filter": True}
+    assert shortcuts.in_use() == {"count_nonzero": True, "interp": True, "linear_filter": True,
+                                  "sections_filter": True}
 
 
 @pytest.mark.parametrize("size", [0, 1, 40, 320])
@@ -39,3 +40,19 @@ def test_linear_filter_is_lfilter_with_state(rows):
     y_public, zf_public = lfilter(b, a, x, axis=-1, zi=zi.copy())
     np.testing.assert_array_equal(y, y_public)
     np.testing.assert_array_equal(zf, zf_public)
+
+
+@pytest.mark.parametrize("rows", [0, 3])
+def test_sections_filter_is_sosfilt_with_state_and_leaves_its_arguments(rows):
+    sos = butter(4, [0.01, 0.05], btype="band", output="sos")
+    rng = np.random.default_rng(rows)
+    x = rng.standard_normal((rows, 400) if rows else 400)
+    zi = rng.standard_normal((rows, sos.shape[0], 2) if rows else (sos.shape[0], 2))
+    x_before, zi_before = x.copy(), zi.copy()
+    y, zf = shortcuts.sections_filter(sos, x, zi)
+    public_zi = np.moveaxis(zi, 1, 0) if rows else zi
+    y_public, zf_public = sosfilt(sos, x, axis=-1, zi=public_zi)
+    np.testing.assert_array_equal(y, y_public)
+    np.testing.assert_array_equal(zf, np.moveaxis(zf_public, 0, 1) if rows else zf_public)
+    np.testing.assert_array_equal(x, x_before)
+    np.testing.assert_array_equal(zi, zi_before)

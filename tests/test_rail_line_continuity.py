@@ -42,7 +42,7 @@ def _run(x_of_t, v_of_t, seconds, t0=0.0, i_of_t=None, settings=None):
 
 def _run_traction(seconds, x_of_t, v_of_t, i_of_t):
     """No code: the coil EMF is the traction interference alone (DC, no ripple)."""
-    core = RailLineCore(load_line(), 8, 2, N, RailSettings(dc_ripple=(0.0, 0.0)))
+    core = RailLineCore(load_line(), 8, 2, N, RailSettings(dc_ripple=(0.0, 0.0), dc_even_harmonics=(0.0, 0.0)))
     core.asymmetry[:] = 0.03
     emf = []
     for k in range(int(round(seconds * FS / N))):

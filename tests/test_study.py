@@ -318,6 +318,27 @@ def test_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
     assert len({r["collected"]["correct"] for r in result.records}) > 1
 
 
+def test_alsu_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
+    """The ALSU noise study's runs (white noise, DC joint pulses) against the chain called
+    directly with the study's seeds (reduced: 200 messages)."""
+    import benchmarks.study_noise_immunity as noise
+
+    shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity_alsu.toml")
+    data = {**shipped.data, "arguments": {"messages": 200},
+            "cases": [{"noise": "white", "level": -6.0}, {"noise": "joint", "level": 160.0}]}
+    study = _write(tmp_path, "noise_alsu.json", json.dumps(data))
+    result = run_study(load_study(study), tmp_path / "out", None, [], workers=2, python_path=[str(REPO)])
+    assert result.counts["ok"] == 2
+    offset = 10 * np.log10(2 * noise.ALSU_TONE_V ** 2 / noise.AMPLITUDE_V ** 2)     # the code's power, both tones
+    expected = {"white": noise.alsu_chain(200, noise.white(-6.0 - offset, np.random.default_rng(98)), 6),
+                "joint": noise.alsu_chain(200, noise.joints(160.0, np.random.default_rng(298)), 26)}
+    for record in result.records:
+        want = expected[record["values"]["noise"]]
+        for key in ("messages", "correct", "undetected", "detected", "wrong_side_events"):
+            assert record["collected"][key] == want[key], (record["values"], key)
+        assert record["collected"]["wrong_side_events"] == 0
+
+
 @pytest.mark.parametrize("text, message", [
     ('system = "ato_only"\n[grid]\n"train.mass_scal" = [1.0]\n',
      "field grid.train.mass_scal: component 'train' of ato_only has no variable 'mass_scal'"),

@@ -6,7 +6,7 @@
 1. noise_ber.png — bit error rate of both modems against Eb/N0 and the theory of
    differentially detected 4-phase DPSK; the generator's spectrum beside it.
 2. noise_message_errors.png — message error rate against wideband SNR, and
-   against the rate of impulse noise, for ALSN, ALS-EN and FIRE_DQPSK.
+   against the rate of impulse noise, for ALSN, ALSU, ALS-EN and FIRE_DQPSK.
 """
 import json
 from pathlib import Path
@@ -24,8 +24,8 @@ from fmus.wayside_coder.core import CoderSettings  # noqa: E402
 from fmus.wayside_coder.digital_generator import DigitalCoderCore  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-SYSTEMS = ("ALSN", "ALS-EN", "FIRE_DQPSK")
-STYLE = {"ALSN": "s-", "ALS-EN": "o-", "FIRE_DQPSK": "^-"}
+SYSTEMS = ("ALSN", "ALSU", "ALS-EN", "FIRE_DQPSK")
+STYLE = {"ALSN": "s-", "ALSU": "d-", "ALS-EN": "o-", "FIRE_DQPSK": "^-"}
 
 
 def ber_and_spectrum(results) -> None:
@@ -62,6 +62,8 @@ def message_errors(results) -> None:
     snrs = sorted(results["white"], key=float, reverse=True)
     rates = sorted(results["impulse"], key=float)
     for name in SYSTEMS:
+        if any(name not in results["white"][s] for s in snrs):
+            continue
         mer = [max(results["white"][s][name]["mer"], 1e-5) for s in snrs]
         axes[0].semilogy([float(s) for s in snrs], mer, STYLE[name], label=name)
         mer = [max(results["impulse"][r][name]["mer"], 1e-5) for r in rates]
@@ -81,12 +83,16 @@ def message_errors(results) -> None:
 
 def tables(results) -> str:
     lines = []
-    for kind, label in (("white", "SNR (dB)"), ("impulse", "impulses / s")):
+    for kind, label in (("white", "SNR (dB)"), ("impulse", "impulses / s"), ("joint", "joint pulses at km/h")):
+        if not results.get(kind):
+            continue
         lines.append(f"\n| {label} | system | messages | MER | undetected | wrong-side events (time) | availability |")
         lines.append("|---|---|---|---|---|---|---|")
         for key in sorted(results[kind], key=float, reverse=kind == "white"):
             for name in SYSTEMS:
-                r = results[kind][key][name]
+                r = results[kind][key].get(name)
+                if r is None:
+                    continue
                 lines.append(f"| {key} | {name} | {r['messages']} | {r['mer']:.4f} | {r['undetected']} | "
                              f"{r['wrong_side_events']} ({r['wrong_side_s']:.2f} s) | {r['availability']:.3f} |")
     lines.append("\n| signal alone | system | message durations | messages accepted | other-track messages discarded |")

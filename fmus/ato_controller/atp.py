@@ -6,7 +6,10 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   and each lower limit ahead as a target;
 * the cab signal. ``cab_signal="ALSN"``: the aspect, through the table in
   fmus/signalling/aspects.py (ceiling, and the speed to reach at the exit signal of the
-  current block section: 60 km/h on yellow, a stop on red-yellow). ``"digital"``:
+  current block section: 60 km/h on yellow, a stop on red-yellow). ``"ALSU"``: the code shown
+  (the receiver's ``code``), through the ALSU code table (fmus/signalling/alsu.py): its
+  ceiling, its speed at the exit signal, and its braking — a permanent restriction's target is
+  supervised on a gentler curve than a signal's (alsu.BRAKING_SHARE). ``"digital"``:
   ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
   and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
   (the section after the free ones is occupied; fmus/signalling/digital_messages.py).
@@ -46,6 +49,7 @@ import math
 from dataclasses import dataclass, field
 from typing import List, Optional, Tuple
 
+from fmus.signalling import alsu
 from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
@@ -53,7 +57,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 
-CAB_SIGNAL_MODES = ("ALSN", "digital", "off")
+CAB_SIGNAL_MODES = ("ALSN", "ALSU", "digital", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # aspects a train may start on (docs/ato.md, departure hold): red-yellow too, since it permits
 # moving up to the exit signal, which the ATP supervises as a stop target; white (no code) and
@@ -89,6 +93,7 @@ class Target:
     position_m: float
     speed_mps: float
     signal: bool = False          # a stop target at a signal (the ATO stops short of it)
+    braking_share: float = 1.0    # of the supervision deceleration (ALSU: a permanent restriction's is gentler)
 
 
 @dataclass
@@ -167,6 +172,10 @@ class Atp:
         self.mode = cab_signal
         self.decel = supervision_decel_mps2
         self.latency_s = decoding_latency_s
+        self.alsu = alsu.system() if cab_signal == "ALSU" else None
+        self.last_valid_code = 0                 # ALSU: the code of the last valid indication
+        # the receiver's display hold: how long it may show the previous section's code
+        self.inertia_s = alsu.EQUIPMENT_INERTIA_S if cab_signal == "ALSU" else EQUIPMENT_INERTIA_S
         # "sections" here are blocks, signal to signal (a track circuit without a signal at its
         # exit, e.g. in a station throat, is no signal to pass)
         self.section_starts = [start for start, _ in line.block_bounds]
@@ -233,6 +242,17 @@ class Atp:
                 c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), 0.0, signal=True))
         return c
 
+    def _alsu(self, code: int, k: Optional[int]) -> Constraints:
+        """The constraints of an ALSU code: its ceiling from now on, and its speed at the exit
+        signal of the current section on its braking's curve (a stop there if 0)."""
+        ind = self.alsu.indication(code, self.category)
+        c = Constraints(ind.permitted_kmh * MPS_PER_KMH)
+        if k is not None and ind.target_kmh < ind.permitted_kmh:
+            target = ind.target_kmh * MPS_PER_KMH
+            c.targets.append(Target(self.exit_signal_m(k), target, signal=target == 0.0,
+                                    braking_share=alsu.BRAKING_SHARE[self.alsu.braking(code)]))
+        return c
+
     def permits_departure(self, aspect: int, code_valid: bool, v_permitted_mps: float) -> bool:
         """A standing train may start only on a valid permissive cab code (docs/ato.md,
         departure hold): what the receiver shows now, not a remembered code. ``off`` (no cab
@@ -241,13 +261,14 @@ class Atp:
             return True
         if not code_valid or int(aspect) not in DEPARTURE_ASPECTS:
             return False
-        return self.mode == "ALSN" or v_permitted_mps > 0.0
+        return self.mode in ("ALSN", "ALSU") or v_permitted_mps > 0.0
 
     def _no_code(self) -> Constraints:
         return self._alsn(sig.WHITE, None)
 
     def supervise(self, t: float, x: float, v: float, aspect: int, code_valid: bool,
-                  v_permitted: float, v_target: float, free_blocks: int) -> AtpResult:
+                  v_permitted: float, v_target: float, free_blocks: int, code: int = 0) -> AtpResult:
+        """One step; ``code`` is the ALSU code shown (the receiver's ``code``), read in ALSU mode."""
         result = AtpResult()
         c = self.line_constraints(x, v)
         c.add(self.restriction_constraints(x, v))
@@ -260,12 +281,15 @@ class Atp:
             self.section = k
             if self.mode == "ALSN":
                 shown = self._alsn(aspect, k)
+            elif self.mode == "ALSU":
+                shown = self._alsu(code, k) if code_valid else self._no_code()
             else:
                 shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
             acted_aspect = int(aspect)
             cab = Constraints()
             if code_valid:
                 self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
+                self.last_valid_code = int(code)
             elif self.last_valid is not None:
                 # no code displayed (the receiver's hold is over): the last valid code's
                 # constraints stay where they were, with the no-code ones
@@ -276,14 +300,15 @@ class Atp:
             if t < self.assumed_until and self.assumed is not None:
                 cab.add(self.assumed)        # constraints only: the reported aspect stays the shown one
             c.add(self._ceiling_on_a_curve(cab, x, v))
-            result.stop_now = acted_aspect == sig.RED and self.mode == "ALSN"
+            result.stop_now = acted_aspect == sig.RED and self.mode in ("ALSN", "ALSU")
         result.aspect = acted_aspect
         result.constraints = c
         result.ceiling_mps = c.ceiling_mps
         permitted = c.ceiling_mps
         for target in c.targets:
             if target.position_m >= x:
-                permitted = min(permitted, math.sqrt(target.speed_mps ** 2 + 2.0 * self.decel * (target.position_m - x)))
+                decel = self.decel * target.braking_share
+                permitted = min(permitted, math.sqrt(target.speed_mps ** 2 + 2.0 * decel * (target.position_m - x)))
             else:
                 permitted = min(permitted, target.speed_mps)
         result.permitted_mps = permitted
@@ -342,6 +367,15 @@ class Atp:
                 degraded = sig.RED_YELLOW if active == sig.YELLOW else sig.RED
                 self.assumed_aspect = degraded
                 self.assumed = self._alsn(degraded, entered)
+        elif self.mode == "ALSU":
+            shown = self.last_valid_code if self.last_valid is not None else 0
+            if shown and self.alsu.indication(shown, self.category).target_kmh == 0.0:
+                self.signals_passed_at_danger += 1      # passed the signal its code said to stop at
+                self._emergency()
+            entered = None if previous is None or previous + 1 >= len(self.section_ends) else previous + 1
+            worst = self.alsu.worst_next(shown) if shown else alsu.RED_CODE
+            self.assumed_aspect = self.alsu.indication(worst, self.category).aspect
+            self.assumed = self._alsu(worst, entered)
         else:
             stop_here = self.last_valid is not None and any(
                 tg.signal and abs(tg.position_m - self.section_ends[previous]) < 1e-6
@@ -353,7 +387,7 @@ class Atp:
             self.assumed = self.last_valid
         # the receiver may display the previous section's code until it has decoded the new
         # one, or for its display hold when the new code is lost (at most the ALSN inertia)
-        self.assumed_until = t + max(self.latency_s, EQUIPMENT_INERTIA_S)
+        self.assumed_until = t + max(self.latency_s, self.inertia_s)
 
     def apply_emergency(self) -> None:
         """Emergency brake until standstill, counted once per application (a fault: core.py)."""

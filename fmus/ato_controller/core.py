@@ -94,7 +94,7 @@ def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
     (AtoCore.measurement_fault) in a cab-signal mode: position and speed always, the aspect
     with a cab signal, the digital speeds and free blocks with a digital one. The others the
     controller does not read in that mode."""
-    return ("x", "v") + {"off": (), "ALSN": ("aspect",),
+    return ("x", "v") + {"off": (), "ALSN": ("aspect",), "ALSU": ("aspect", "cab_code"),
                          "digital": ("aspect", "v_permitted", "v_target", "free_blocks")}.get(cab_signal, ())
 
 
@@ -119,6 +119,7 @@ class BrakingTarget:
     position_m: float
     speed_mps: float
     is_stop_point: bool = False     # the timetable's stop point: arrival, precise stopping
+    braking_share: float = 1.0      # of the planned deceleration (ALSU: gentler for a permanent restriction)
 
 
 @dataclass
@@ -256,7 +257,8 @@ class AtoCore:
             if target.signal:
                 targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0))
             else:
-                targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0)))
+                targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0),
+                                             braking_share=target.braking_share))
         if atp_result.stop_now:
             targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + STOP_NOW_SLACK_M, 0.0))
         targets.extend(self._aspect_driving(x, atp_result)[1])
@@ -297,12 +299,14 @@ class AtoCore:
 
     def _required_decel(self, x: float, v: float,
                         targets: List[BrakingTarget]) -> Tuple[float, Optional[BrakingTarget]]:
-        """The highest deceleration the targets ask for now, and which one asks for it."""
+        """The highest deceleration the targets ask for now, each relative to its braking share
+        (a gentle target's need counts as if the planned deceleration were its share of it),
+        and which one asks for it."""
         best, which = 0.0, None
         for target in targets:
             if v <= target.speed_mps:
                 continue
-            need = self._decel_to(x, v, target.position_m, target.speed_mps)
+            need = self._decel_to(x, v, target.position_m, target.speed_mps) / target.braking_share
             if need > best:
                 best, which = need, target
         return best, which
@@ -310,15 +314,15 @@ class AtoCore:
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0,
-             vigilance_ack: bool = False) -> AtoOutputs:
-        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks)
+             vigilance_ack: bool = False, cab_code: int = 0) -> AtoOutputs:
+        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks, cab_code, code_valid)
         if self.fault is not None:
             return self._fail_safe(t)
         self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
-        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks)
+        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code)
         permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
@@ -352,7 +356,7 @@ class AtoCore:
                        aspect=self.atp.last_valid_aspect)
 
     def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
-                          free_blocks: int) -> Optional[Tuple[str, str]]:
+                          free_blocks: int, cab_code: int = 0, code_valid: bool = False) -> Optional[Tuple[str, str]]:
         """(input, why) when a measurement the ATP relies on cannot be true, else None. Which
         measurements it judges: :func:`judged_measurements`."""
         if not math.isfinite(x):
@@ -363,6 +367,8 @@ class AtoCore:
             return None
         if not sig.WHITE <= aspect <= sig.GREEN:
             return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
+        if self.settings.cab_signal == "ALSU" and code_valid and self.atp.alsu.command_of_code(cab_code) is None:
+            return "cab_code", f"cab_code = {cab_code} is not an ALSU code a wayside sends"
         if self.settings.cab_signal == "digital":
             for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
                 if not (math.isfinite(value) and value >= 0.0):
@@ -520,7 +526,8 @@ class AtoCore:
             # the stop point: the brake share whose predicted stopping point it is
             return -self.stop_approach.share(t, x, v, target.position_m), MODE_BRAKE
         # the brake stays applied until the target is reached (no release/re-apply)
-        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps), TARGET_DECEL_CAP * self.a_plan)
+        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps),
+                    TARGET_DECEL_CAP * self.a_plan * target.braking_share)
         return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
 
     def _release_braking_target(self, v: float, targets: List[BrakingTarget]) -> None:

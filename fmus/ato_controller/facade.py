@@ -23,7 +23,8 @@ class AtoController(FacadeSlave):
                  description="passenger | freight | high_speed; empty: the rolling stock's category"),
             Port("strategy", "parameter", "String", start=s.strategy, description="programme | predictive | flat_out"),
             Port("cab_signal", "parameter", "String", start=s.cab_signal,
-                 description="ALSN (aspect) | digital (v_permitted, v_target, free_blocks) | off (line limits only)"),
+                 description="ALSN (aspect) | ALSU (cab_code) | digital (v_permitted, v_target, free_blocks) | "
+                             "off (line limits only)"),
             Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
             Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
@@ -64,6 +65,8 @@ class AtoController(FacadeSlave):
             Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
+            Port("cab_code", "input", "Integer", start=0, min=0, bad_input="unit",
+                 description="ALSU: the code the receiver shows (its code output), 0 none"),
             # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
             # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
             Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
@@ -137,7 +140,7 @@ class AtoController(FacadeSlave):
         core.set_restrictions(event_restrictions(io["tsr_start"], io["tsr_end"], io["tsr_speed"]))
         self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
                               bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
-                              int(io["free_blocks"]), bool(io["vigilance_ack"])))
+                              int(io["free_blocks"]), bool(io["vigilance_ack"]), int(io["cab_code"])))
         fault = core.fault[0] if core.fault else None
         if fault != self._fault_logged:                 # once per fault, not every step
             if core.fault:

@@ -190,6 +190,8 @@ class Line:
         self.max_ballast_ohm_km = float(document.get("max_ballast_ohm_km", DEFAULT_MAX_BALLAST_OHM_KM))
         self._check(document)
         self.restrictions = self._restrictions(document.get("temporary_restrictions", []))
+        # (signal, frog) of every route set onto a diverging track (ALSU codes its approach)
+        self.diverging_routes = self._routes(document.get("diverging_routes", []))
         # blocks: a block ends at a section with a signal at its exit; a section with no signal
         # ("signal": "") is a track circuit inside a block (a station throat) — the line end
         # always closes the last block
@@ -260,6 +262,18 @@ class Line:
             restrictions.append(TemporaryRestriction(start, end, item["speed_kmh"] * MPS_PER_KMH, categories,
                                                      item.get("name", "")))
         return restrictions
+
+    def _routes(self, items) -> List[Tuple[str, str]]:
+        signals = [section.signal for section in self.sections if section.signal]
+        routes = []
+        for k, item in enumerate(items):
+            if item["signal"] not in signals:
+                _fail(self.path, f"diverging_routes[{k}].signal",
+                      f"{item['signal']!r} is not the signal of a block section")
+            if any(item["signal"] == name for name, _ in routes):
+                _fail(self.path, f"diverging_routes[{k}].signal", f"{item['signal']!r} already has a route")
+            routes.append((item["signal"], item["frog"]))
+        return routes
 
     def restrictions_for(self, category: str) -> List[TemporaryRestriction]:
         """The temporary restrictions a train of ``category`` must keep."""

@@ -4,7 +4,7 @@ relay → decoder (no FMI here).
 Signal chain, vectorised over the frame with carried state (so any frame length gives the
 same result, docs/loco_receiver.md#signal-chain-corepy-filterspy):
 
-1. **Band-pass** at the carrier (filters.py), lfilter's routine with carried state.
+1. **Band-pass** at the carrier (filters.py), second-order sections (sosfilt's routine) with carried state.
 2. **Gain control** on the in-band signal (docs/sources.md#interference-at-insulated-joints: the receiver is overloaded up to 10× by
    the code current at the feed end of a section and recovers in 0.6–1.5 s after the joint; an
    out-of-band interferer must not desensitise it, so the level is taken after the band-pass).
@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from fmus.dsp.filter_design import SampleFilter, filter_frame
+from fmus.dsp.filter_design import SampleSosFilter, sos_frame
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
@@ -163,9 +163,9 @@ class LocoReceiverCore:
         self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
-        # a build with one sample per frame filters in floats (the same samples as lfilter)
-        self._sample_filters = (SampleFilter(self.band_pass.b, self.band_pass.a),
-                                SampleFilter(self.envelope_lp.b, self.envelope_lp.a)) if frame == 1 else None
+        # a build with one sample per frame filters in floats (the same samples as sosfilt)
+        self._sample_filters = (SampleSosFilter(self.band_pass.sos),
+                                SampleSosFilter(self.envelope_lp.sos)) if frame == 1 else None
         self._gain_db = 0.0
         self._relay = False
         self._ramp = (np.arange(frame) + 1) * (s.agc_recovery_db_per_s * self.dt)
@@ -253,10 +253,10 @@ class LocoReceiverCore:
             if x.size != 1:
                 raise ValueError(f"LocoReceiverCore built for one sample per frame stepped with {x.size}")
             return self._step_sample(t, x.item(0))
-        band, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
+        band, self._bp_state = sos_frame(self.band_pass.sos, x, self._bp_state)
         scaled, gain, magnitude = self._gain_control(band)
-        envelope, self._env_state = filter_frame(self.envelope_lp.b, self.envelope_lp.a,
-                                                  np.abs(scaled) if magnitude is None else magnitude, self._env_state)
+        envelope, self._env_state = sos_frame(self.envelope_lp.sos, np.abs(scaled) if magnitude is None else magnitude,
+                                              self._env_state)
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
         relay, drive_max = self._relay_states(envelope)

@@ -6,7 +6,7 @@ docs/sources.md#digital-generator-receiver-and-redundancy; no FMI here).
 * **Front end.** Back-to-back zener limiter at ±`limiter` V (docs/sources.md#digital-generator-receiver-and-redundancy: КС133А), the
   6th-order Chebyshev low-pass at 500 Hz (1 dB ripple; the thesis' anti-alias filter, an
   analog design in python-control discretised with Tustin), then a digital band-pass at the
-  carrier (Butterworth, 4th order, 10/3 of the symbol rate wide).
+  carrier (Butterworth, 4th order, 10/3 of the symbol rate wide); both as second-order sections.
 * **Symbol timing and correlation.** The transmitter's symbol clock is unknown. The baseband
   signal x·e^(−jωt) is integrated over one symbol (integrate-and-dump, running sums from a
   carried cumulative sum) at 8 candidate instants per symbol; each candidate keeps a running
@@ -47,7 +47,7 @@ import numpy as np
 from fmus.signalling import redundancy
 from fmus.signalling import aspects as sig
 from fmus.signalling.digital_messages import Acceptor, DigitalSystem, check_category, check_modem_rate
-from fmus.dsp.filter_design import chebyshev_low_pass, filter_frame
+from fmus.dsp.filter_design import chebyshev_low_pass, sos_frame
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
 from fmus.loco_receiver.core import CHANNELS, ReceiverOutputs, resolve_inertia_s
@@ -205,8 +205,8 @@ class DigitalReceiverCore:
         x = np.asarray(e_coil, dtype=float)
         if s.limiter_v > 0:
             x = np.clip(x, -s.limiter_v, s.limiter_v)
-        x, self._aa_state = filter_frame(self.anti_alias.b, self.anti_alias.a, x, self._aa_state)
-        x, self._bp_state = filter_frame(self.band_pass.b, self.band_pass.a, x, self._bp_state)
+        x, self._aa_state = sos_frame(self.anti_alias.sos, x, self._aa_state)
+        x, self._bp_state = sos_frame(self.band_pass.sos, x, self._bp_state)
         symbols, ends, retimed = self.clock.push(x, first)
         if symbols.size:
             amplitude = self.clock.amplitude(symbols)

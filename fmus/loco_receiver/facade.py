@@ -1,6 +1,8 @@
-"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN) or DigitalReceiverCore (ALS-EN,
-FIRE_DQPSK). No logic here (see core.py, digital_receiver.py)."""
-from fmus.signalling import cab_systems
+"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN), AlsuReceiverCore (ALSU) or
+DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital_receiver.py)."""
+from fmus.errors import FmuInputError
+from fmus.signalling import alsu, cab_systems
+from fmus.loco_receiver.alsu import AlsuReceiverCore
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
@@ -9,7 +11,8 @@ from fmus.loco_receiver.parameters import receiver_settings
 
 class LocoReceiver(FrameFacadeSlave):
     description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
-                   "decoder) or ALS-EN / FIRE_DQPSK (correlation demodulator, code check, 2-out-of-3 channels)")
+                   "decoder), ALSU (six tone channels, exactly two tones) or ALS-EN / FIRE_DQPSK (correlation "
+                   "demodulator, code check, 2-out-of-3 channels)")
 
     @classmethod
     def declare_ports(cls, build):
@@ -17,8 +20,11 @@ class LocoReceiver(FrameFacadeSlave):
         s, d = ReceiverSettings(), DigitalReceiverSettings()     # ALSN and digital-only defaults
         return [
             cab_system_port(),
+            Port("codes_file", "parameter", "String", start="",
+                 description="ALSU: the code table (tone pairs, readings); empty: the bundled one"),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
-                 description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz"),
+                 description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz; "
+                             "ALSU: its six tones, 0 only"),
             sample_rate_port(s.fs_hz, n),
             Port("train_category", "parameter", "String", start=s.train_category,
                  description="passenger | freight | high_speed"),
@@ -27,18 +33,18 @@ class LocoReceiver(FrameFacadeSlave):
             Port("filter_order", "parameter", "Integer", start=s.filter_order, min=1, max=8,
                  description="Butterworth prototype order (band-pass order is twice this)"),
             Port("filter_bandwidth", "parameter", unit="Hz", start=s.filter_bandwidth_hz, min=0.0,
-                 description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate"),
+                 description="band-pass width; 0: ALSN 0.4 × carrier, digital 10/3 × the symbol rate, ALSU 10 Hz per tone"),
             Port("agc_limit", "parameter", unit="V", start=s.agc_limit_v, min=0.0,
                  description="input amplitude where gain reduction starts"),
             Port("agc_recovery", "parameter", unit="dB/s", start=s.agc_recovery_db_per_s, min=0.0,
                  description="gain recovery rate"),
             Port("pick_up", "parameter", unit="V", start=s.pick_up_v, min=0.0,
-                 description="relay pick-up (input-referred envelope)"),
+                 description="relay pick-up (input-referred envelope); ALSU: a tone present above it"),
             Port("drop_out", "parameter", unit="V", start=s.drop_out_v, min=0.0,
                  description="relay drop-out (input-referred envelope); below pick_up"),
             Port("inertia", "parameter", unit="s", start=s.inertia_s, min=0.0,
                  description="longest loss of code the display bridges, from the last code supporting it; "
-                             "0: the system's (ALSN 5.5 s, the equipment's inertia; digital: none)"),
+                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; digital: none)"),
             Port("track_parity", "parameter", "Integer", start=d.track_parity, min=0, max=1,
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
@@ -48,7 +54,8 @@ class LocoReceiver(FrameFacadeSlave):
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
             Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
-            Port("code", "output", "Integer", start=0, description="last decoded cycle: 0 none/invalid, 2 КЖ, 3 Ж, 4 З"),
+            Port("code", "output", "Integer", start=0,
+                 description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, 0 none"),
             Port("code_valid", "output", "Boolean", start=False,
                  description="the indication shown is a received code (held ones included); false: the no-code indication"),
             Port("v_permitted", "output", unit="m/s",
@@ -73,6 +80,15 @@ class LocoReceiver(FrameFacadeSlave):
         return self.frame_experiment(ReceiverSettings.fs_hz)
 
     def create_core(self):
+        if cab_systems.is_alsu(self.param("system")):
+            table = alsu.load_codes(self.resource_path(self.param("codes_file") or str(alsu.CODES_FILE)))
+            settings = receiver_settings(alsu.AlsuSystem(table), self.scalar_parameters())
+            if self.param("carrier"):
+                raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but ALSU listens to its own "
+                                    f"six tones (leave carrier 0)")
+            core = AlsuReceiverCore(self.build.frame, settings, table)
+            self.require_frame_step(settings.fs_hz)
+            return core
         system = cab_systems.digital_system(self.param("system"))
         settings = receiver_settings(system, self.scalar_parameters())
         if system is None:

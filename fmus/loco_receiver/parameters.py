@@ -6,8 +6,11 @@ from __future__ import annotations
 
 from typing import Mapping, Optional, Union
 
+from fmus.loco_receiver import alsu as alsu_receiver
+from fmus.loco_receiver.alsu import AlsuReceiverSettings
 from fmus.loco_receiver.core import ReceiverSettings, resolve_inertia_s
 from fmus.loco_receiver.digital_receiver import DigitalReceiverSettings
+from fmus.signalling.alsu import AlsuSystem
 from fmus.signalling.digital_messages import DigitalSystem
 
 # port → settings field
@@ -16,6 +19,10 @@ ALSN_PARAMETERS = {
     "filter_order": "filter_order", "filter_bandwidth": "filter_bandwidth_hz", "agc_limit": "agc_limit_v",
     "agc_recovery": "agc_recovery_db_per_s", "pick_up": "pick_up_v", "drop_out": "drop_out_v", "inertia": "inertia_s",
 }
+ALSU_PARAMETERS = {
+    "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps", "filter_bandwidth": "filter_bandwidth_hz",
+    "pick_up": "pick_up_v", "drop_out": "drop_out_v", "inertia": "inertia_s", "codes_file": "codes_file",
+}
 DIGITAL_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_bandwidth": "filter_bandwidth_hz", "track_parity": "track_parity", "limiter": "limiter_v",
@@ -23,11 +30,13 @@ DIGITAL_PARAMETERS = {
 }
 
 
-def receiver_settings(system: Optional[DigitalSystem], parameters: Mapping[str, object]
-                      ) -> Union[ReceiverSettings, DigitalReceiverSettings]:
-    """Settings of an ALSN receiver (``system`` None) or a digital one from parameter values by
-    port name; a parameter not given keeps its default, one the system does not use is ignored."""
+def receiver_settings(system: Optional[Union[DigitalSystem, AlsuSystem]], parameters: Mapping[str, object]
+                      ) -> Union[ReceiverSettings, AlsuReceiverSettings, DigitalReceiverSettings]:
+    """Settings of an ALSN receiver (``system`` None), an ALSU one or a digital one from
+    parameter values by port name; a parameter not given keeps its default, one the system does
+    not use is ignored."""
     settings_class, fields = ((ReceiverSettings, ALSN_PARAMETERS) if system is None
+                              else (AlsuReceiverSettings, ALSU_PARAMETERS) if isinstance(system, AlsuSystem)
                               else (DigitalReceiverSettings, DIGITAL_PARAMETERS))
     defaults = settings_class()
     values = {field: type(getattr(defaults, field))(parameters[port])
@@ -39,4 +48,7 @@ def display_hold_s(system: Optional[DigitalSystem], parameters: Mapping[str, obj
     """The longest loss of code the receiver's display bridges (its `inertia`, or the system's
     default): how long after the code under the coils disappears it may still show the last
     one (the run verdicts allow it, docs/scenarios.md#results-summaryjson)."""
-    return resolve_inertia_s(receiver_settings(system, parameters).inertia_s, digital=system is not None)
+    settings = receiver_settings(system, parameters)
+    if isinstance(system, AlsuSystem):
+        return alsu_receiver.resolve_inertia_s(settings.inertia_s)
+    return resolve_inertia_s(settings.inertia_s, digital=system is not None)

@@ -386,7 +386,9 @@ class TrackCircuitBank:
         if self.parking.parked_at[k] is not None:         # caught up under the model it was parked with
             self._wake(k)
         previous = self._active[k]
-        if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model:
+        # (one carrier only: the states of a code of several tones carry over as they are)
+        if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model \
+                and self.geometry.band_hz is None:
             self._carry_over.append((k, previous[1], model))
         self._log_amplitude[k] = self.models.one_shunt_table(k, self._effective_faults[k])[1]
         self._log_amplitude_lists[k] = self._log_amplitude[k].tolist()

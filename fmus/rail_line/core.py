@@ -59,7 +59,8 @@ class RailSettings:
     coil_mismatch: float = 0.0            # the two coils' sensitivity difference / their mean (0: matched)
     seed: int = 1
     dc_ripple: Tuple[float, float] = (0.02, 0.01)       # 300 Hz, 600 Hz shares of the DC traction current [U]
-    ac_harmonics: Tuple[float, float] = (0.10, 0.05)    # 150 Hz, 250 Hz shares on AC lines [U]
+    dc_even_harmonics: Tuple[float, float] = (0.005, 0.005)   # 100 Hz, 200 Hz shares (supply unbalance) [U]
+    ac_harmonics: Tuple[float, float, float] = (0.10, 0.05, 0.025)    # 150, 250, 350 Hz shares on AC lines [U]
     traction_time_constant_s: float = 0.1               # traction circuit lag seen in the rails [U]
     relay_pick_up: float = 0.8            # share of the circuit's calibrated reference (docs/rail_line.md): the
     relay_drop_out: float = 0.5           # free circuit at minimum ballast and supply reads exactly relay_pick_up
@@ -69,6 +70,8 @@ class RailSettings:
     relay_drop_out_delay_s: float = 0.2
     carrier_hz: float = 0.0               # 0: each section's carrier from the line file (ALSN); else this
                                           # one (a digital system's 174.38 / 175 Hz) for the phasors
+    tone_band_hz: Tuple[float, float] = (0.0, 0.0)   # a code of several tones (ALSU 125…375 Hz): the rails'
+                                          # impedance follows the √f law across it; (0, 0): R and L at the carrier
 
 
 @lru_cache(maxsize=1)
@@ -136,6 +139,10 @@ class RailLineCore:
             raise FmuInputError(f"parameter shunt_margin: {s.shunt_margin:g} (need ≥ 0)")
         if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz / 4:
             raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz (0: the line file's; else up to fs/4)")
+        low, high = s.tone_band_hz
+        if (low or high) and not 0 < low < high <= s.fs_hz / 4:
+            raise FmuInputError(f"parameter tone_band_max: the tone band {low:g}…{high:g} Hz needs "
+                                f"0 < tone_band_min < tone_band_max ≤ fs/4")
         if not 0 < s.relay_drop_out < s.relay_pick_up <= 1.0:
             raise FmuInputError("parameter relay_drop_out: must be positive and below relay_pick_up (≤ 1)")
         if len(s.train_length_m) != trains or min(s.train_length_m) <= 0:

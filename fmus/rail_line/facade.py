@@ -20,6 +20,11 @@ class RailLine(FrameFacadeSlave):
             sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: each section's carrier from the line file; else this one (digital: 174.38 / 175 Hz)"),
+            Port("tone_band_min", "parameter", unit="Hz", start=s.tone_band_hz[0], min=0.0,
+                 description="a code of several tones (ALSU: 125): lowest tone; 0 with tone_band_max 0: one carrier"),
+            Port("tone_band_max", "parameter", unit="Hz", start=s.tone_band_hz[1], min=0.0,
+                 description="a code of several tones (ALSU: 375): highest tone; the rails follow the √f law "
+                             "across the band"),
             # one start for every train: the settings default of the first
             Port("train_length", "parameter", unit="m", start=s.train_length_m[0], shape=(m,), min=1.0,
                  description="train j occupies x_head[j] − train_length[j] … x_head[j]"),
@@ -102,7 +107,8 @@ class RailLine(FrameFacadeSlave):
             traction_time_constant_s=p("traction_time_constant"),
             relay_pick_up=p("relay_pick_up"), relay_drop_out=p("relay_drop_out"),
             relay_pick_up_delay_s=p("relay_pick_up_delay"), relay_drop_out_delay_s=p("relay_drop_out_delay"),
-            supply_tolerance=p("supply_tolerance"), shunt_margin=p("shunt_margin"), carrier_hz=p("carrier"))
+            supply_tolerance=p("supply_tolerance"), shunt_margin=p("shunt_margin"), carrier_hz=p("carrier"),
+            tone_band_hz=(p("tone_band_min"), p("tone_band_max")))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
         # the core writes its outputs straight into the output ports

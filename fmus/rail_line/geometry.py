@@ -1,7 +1,8 @@
 """Where the line's track circuits lie (no FMI here; docs/rail_line.md): each section's track
 circuit (its feed leads, network nodes and segments, its ballast), the insulated joints'
 bond-lead zones, each section's code carrier and track-circuit frequency, and which section and
-which network node a position falls on.
+which network node a position falls on; for a code of several tones (ALSU) the band the
+rails' impedance follows.
 """
 from __future__ import annotations
 
@@ -39,7 +40,12 @@ class LineGeometry:
         self.feed_list = [float(circuit.feed_m) for circuit in self.circuits]
         if s.carrier_hz:          # the parameter overrides the line file's carriers: the same rule holds
             check_carrier_under_traction(s.carrier_hz, line.electrification, "parameter carrier")
-        self.carriers = np.array([s.carrier_hz or sec.carrier_hz for sec in line.sections], dtype=float)
+        # a code of several tones (ALSU, ``tone_band_hz``): the rails follow the √f law across the
+        # band (TrackCircuit.network), the phasor tables and the wheelset chain stand at its
+        # geometric centre
+        self.band_hz = tuple(s.tone_band_hz) if s.tone_band_hz[1] > 0 else None
+        centre = float(np.sqrt(s.tone_band_hz[0] * s.tone_band_hz[1])) if self.band_hz else 0.0
+        self.carriers = np.array([s.carrier_hz or centre or sec.carrier_hz for sec in line.sections], dtype=float)
         # train detection works at the track circuit's own frequency (the line file's): a digital
         # cab-signal carrier (174.38 / 175 Hz) is superimposed on it and never feeds the relay
         self.track_frequencies = np.array([sec.carrier_hz for sec in line.sections], dtype=float)

@@ -79,7 +79,7 @@ class NetworkModels:
         carrier = self.geometry.carriers[k]
         family_key = (k, faults)
         if family_key not in self._families:
-            net = circuit.network(None, faults, self.settings.transformer_ratio, carrier)
+            net = circuit.network(None, faults, self.settings.transformer_ratio, carrier, self.geometry.band_hz)
             self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
         family, node_index = self._families[family_key]
         shunts, heads = config

@@ -14,8 +14,9 @@ into EMF (no FMI here; docs/rail_line.md, traction interference at the joints).
   joint (∝ v, each 1.31 m / v wide); under AC traction a 50 Hz burst whose amplitude does not
   depend on speed and whose duration is the zone's length over v.
 * i_traction(t): the train's traction current through a first-order lag (the traction
-  circuit's inductance), times the rectifier ripple of a DC line (300/600 Hz) or the 50 Hz
-  wave with odd harmonics of an AC line. A line without electrification has none.
+  circuit's inductance), times the rectifier ripple of a DC line (300/600 Hz, and 100/200 Hz
+  from an unbalanced supply) or the 50 Hz wave with odd harmonics (150/250/350 Hz) of an AC
+  line. A line without electrification has none.
 """
 from __future__ import annotations
 
@@ -83,7 +84,7 @@ class TractionInterference:
         self._index = np.arange(frame)
         self._ripple_first = None                              # the frame's ripple waveform, once computed
         self._ripple = np.zeros(frame)
-        ripple_hz = (300.0, 600.0) if self.dc else (50.0, 150.0, 250.0)
+        ripple_hz = (100.0, 200.0, 300.0, 600.0) if self.dc else (50.0, 150.0, 250.0, 350.0)
         self._ripple_period = period_samples([1.0 / f for f in ripple_hz], s.fs_hz, _RIPPLE_MAX_SAMPLES)
         if self._ripple_period is not None and (self.dc or self.ac):
             # one period and a frame's length of its continuation: a frame is a slice from
@@ -141,15 +142,19 @@ class TractionInterference:
         return self._i_traction.item(j, 0) * ripple
 
     def _ripple_wave(self, times: np.ndarray) -> np.ndarray:
-        """Waveform of a unit traction current: DC with 300/600 Hz rectifier ripple, AC 50 Hz
-        with odd harmonics (rms 1)."""
+        """Waveform of a unit traction current: DC with the 300/600 Hz rectifier ripple and the
+        100/200 Hz even harmonics of an unbalanced supply, AC 50 Hz with its 3rd, 5th and 7th
+        harmonics (rms 1 of the fundamental). The even harmonics on DC and the odd on AC are
+        what ALSU's tones sit between (docs/sources.md#traction-current-interference)."""
         s = self.settings
         if self.dc:
             r300, r600 = s.dc_ripple
-            return 1.0 + r300 * np.sin(2 * np.pi * 300 * times) + r600 * np.sin(2 * np.pi * 600 * times)
-        h3, h5 = s.ac_harmonics
+            r100, r200 = s.dc_even_harmonics
+            return (1.0 + r300 * np.sin(2 * np.pi * 300 * times) + r600 * np.sin(2 * np.pi * 600 * times)
+                    + r100 * np.sin(2 * np.pi * 100 * times) + r200 * np.sin(2 * np.pi * 200 * times))
+        h3, h5, h7 = s.ac_harmonics
         w = 2 * np.pi * 50 * times
-        return np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w))
+        return np.sqrt(2.0) * (np.sin(w) + h3 * np.sin(3 * w) + h5 * np.sin(5 * w) + h7 * np.sin(7 * w))
 
     def coupling(self, coil: np.ndarray) -> np.ndarray:
         """c(x) at the positions ``coil`` (any shape): the rails' asymmetry, passing linearly from

@@ -675,6 +675,11 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
         document["max_ballast_ohm_km"] = _number(line_element.get(RC + "maxBallastOhmKm"))
     if "max_ballast_ohm_km" in extras:
         document["max_ballast_ohm_km"] = extras["max_ballast_ohm_km"]
+    if line_element is not None and line_element.get(RC + "divergingRoutes") is not None:
+        try:                 # the line loader checks the routes themselves (signal, frog)
+            document["diverging_routes"] = json.loads(line_element.get(RC + "divergingRoutes"))
+        except json.JSONDecodeError:
+            raise UserError(f"{path}: line {line_element.get('id')}: rcs:divergingRoutes is not a JSON list") from None
     document["electrification"] = _electrification(doc, fi, locate, extras, notes)
     detectors, joints = _detectors(doc, fi, locate, extras, notes)
     signals = _block_signals(doc, fi, locate, notes)
@@ -1320,6 +1325,8 @@ def export_railml(document: dict, version: str = "3.2") -> bytes:
     stretch(line, "line_loc", 0, length)
     if "max_ballast_ohm_km" in document:
         line.set(RC + "maxBallastOhmKm", _text(document["max_ballast_ohm_km"]))
+    if document.get("diverging_routes"):
+        line.set(RC + "divergingRoutes", json.dumps(document["diverging_routes"], ensure_ascii=False))
     points = el(fi, "operationalPoints")
     for k, station in enumerate(document["stations"], 1):
         op = el(points, "operationalPoint", id=f"op_{k}")

@@ -307,7 +307,7 @@ def _energy(output: Path, results, trains) -> Path:
 
 def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]) -> Optional[Path]:
     import matplotlib.pyplot as plt
-    from scipy.signal import lfilter
+    from scipy.signal import sosfilt
 
     captures = sorted(run_dir.glob("capture_*e_coil*.csv"))
     if not captures:
@@ -319,7 +319,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
     params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
-    filtered = lfilter(band.b, band.a, emf) if band is not None else None
+    filtered = sosfilt(band.sos, emf) if band is not None else None
     centre = at_s if at_s is not None else 0.5 * (t[0] + t[-1])
     window = (t >= centre - 1.0) & (t <= centre + 1.0)
     if not window.any():
@@ -355,12 +355,15 @@ def read_results_file(path: Path):
 
 def _receiver_band_pass(params: dict):
     """The band-pass the receiver FMU designs from these parameters: its own settings mapping
-    and filter design."""
+    and filter design; None for ALSU (six channels)."""
     from fmus.loco_receiver.filters import receiver_band_pass
     from fmus.loco_receiver.parameters import receiver_settings
     from fmus.signalling import cab_systems
 
-    system = cab_systems.DIGITAL.get(str(params.get("system", "ALSN")))
+    name = str(params.get("system", "ALSN"))
+    if name == cab_systems.ALSU:
+        return None              # six tone channels, no one band-pass: the EMF alone is drawn
+    system = cab_systems.DIGITAL.get(name)
     return receiver_band_pass(receiver_settings(system, params), system)
 
 

@@ -22,6 +22,9 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
   leader has cleared the circuit and a permissive code arrives.
 * ``als_en``, ``fire_dqpsk``, ``als_en_following``, ``fire_dqpsk_following`` — ``free_run``
   and ``following`` with the digital systems.
+* ``alsu`` — ``free_run`` with ALSU on a 4-aspect block: the route into station B set onto a
+  diverging track (frog 1/18, 80 km/h, code 5) and the permanent restriction to 140 km/h at
+  12.8 km announced by code 10; ``alsu_following`` — ``following`` with ALSU, 4-aspect.
 
 Every train's initial placement is checked here (:func:`check_placements`): on the line, tail
 included, and no two trains overlapping (checked again before every run:
@@ -152,6 +155,7 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     connections = [ConnectionSpec(f"coder.u_tx[{k},{n}]", f"rail.u_tx[{k},{n}]")
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
     connections += [ConnectionSpec(f"rail.occupied[{k}]", f"coder.occupied[{k}]") for k in range(1, sections + 1)]
+    alsu_chain = (receiver or {}).get("system") == "ALSU"
     for j, (train, ato) in enumerate(trains, start=1):
         rx = "rx" if len(trains) == 1 else f"rx{j}"
         components.append(ComponentSpec(rx, f"{fmu_folder}/LocoReceiver.fmu", step, dict(receiver or {})))
@@ -161,6 +165,8 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
         connections += [ConnectionSpec(f"{train}.{a}", f"rail.{b}[{j}]", transition="linear")
                         for a, b in (("x", "x_head"), ("v", "v"), ("i_traction", "i_traction"))]
         connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in CHAIN_PORTS]
+        if alsu_chain:                     # the ATP reads the ALSU code shown
+            connections.append(ConnectionSpec(f"{rx}.code", f"{ato}.cab_code"))
     return components, connections
 
 
@@ -169,6 +175,13 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
     if system == "ALSN":
         return {}, {}, {}, {"cab_signal": "ALSN"}
+    if system == "ALSU":
+        from fmus.signalling import alsu
+
+        tones = alsu.system().table.tones_hz
+        return ({"system": system, "block_aspects": ALSU_BLOCK_ASPECTS},
+                {"tone_band_min": min(tones), "tone_band_max": max(tones)}, {"system": system},
+                {"cab_signal": "ALSU", "decoding_latency": alsu.STATED_LATENCY_S})
     from fmus.signalling import cab_systems
     from fmus.signalling import digital_messages as digital
 
@@ -177,6 +190,41 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     allowance = digital.atp_allowance_s(digital_system.message_s(carrier))
     return ({"system": system}, {"carrier": carrier}, {"system": system},
             {"cab_signal": "digital", "decoding_latency": round(allowance, 3)})
+
+
+# ALSU: 4-aspect block (code 4 before a yellow), the route into B onto a diverging track
+ALSU_BLOCK_ASPECTS = 4
+ALSU_ROUTE = {"signal": "5", "frog": "1/18"}          # signal 5 (7.8 km): B's entry, 80 km/h
+ALSU_TURNOUT_LIMIT = (7800.0, 8400.0, 80.0)           # the turnouts of the diverging route (passenger km/h)
+
+
+def alsu_line(line: dict) -> dict:
+    """A copy of a line for ALSU: the route into B set onto a diverging track (its signal sends
+    code 5 into the approach, code 6 into the section before) and 80 km/h over its turnouts."""
+    copy = json.loads(json.dumps(line))
+    copy["description"] = (f"{line.get('description', line['name'])}; ALSU: the route at signal {ALSU_ROUTE['signal']} "
+                           f"set onto a diverging track (frog {ALSU_ROUTE['frog']}), 80 km/h over its turnouts")
+    copy["diverging_routes"] = [dict(ALSU_ROUTE)]
+    start, end, speed = ALSU_TURNOUT_LIMIT
+    limits = sorted(copy["speed_limits"], key=lambda item: item["start_m"])
+    before = next(item for item in reversed(limits) if item["start_m"] <= start)     # in force at the turnouts
+    after = next(dict(item) for item in reversed(limits) if item["start_m"] <= end)  # what holds beyond them
+    kept = [item for item in limits if not start <= item["start_m"] <= end]
+    kept += [{"start_m": int(start), "passenger_kmh": min(speed, before["passenger_kmh"]),
+              "freight_kmh": min(speed, before["freight_kmh"])}, {**after, "start_m": int(end)}]
+    copy["speed_limits"] = sorted(kept, key=lambda item: item["start_m"])
+    return copy
+
+
+def write_alsu(root: Path = SSP_ROOT, name: str = "alsu") -> Path:
+    files = {"line_file": "alsu_line.json"}
+    coder, rail, receiver, ato = cab_settings("ALSU")
+    components, connections = train_and_ato(train_parameters=files, ato_parameters={**ato, **files})
+    chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
+    folder = root / name
+    path = write_ssd(folder, name, chain + components, connections + links, stop_time=1100.0)
+    _write_json(folder / "resources" / "alsu_line.json", alsu_line(_shipped_json("default_line.json")))
+    return path
 
 
 def write_ato_only(root: Path = SSP_ROOT) -> Path:
@@ -412,6 +460,8 @@ SHIPPED: Dict[str, Callable[[Path], Path]] = {
 for _system, _prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
     SHIPPED[_prefix] = partial(write_free_run, system=_system, name=_prefix)
     SHIPPED[f"{_prefix}_following"] = partial(write_following, system=_system, name=f"{_prefix}_following")
+SHIPPED["alsu"] = write_alsu
+SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
 
 
 def write_shipped(root: Path = SSP_ROOT, names: Optional[Iterable[str]] = None) -> List[Path]:

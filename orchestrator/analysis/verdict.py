@@ -17,7 +17,7 @@ from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT
                               load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
-from fmus.signalling import alsn, cab_systems
+from fmus.signalling import alsn, alsu, cab_systems
 from fmus.signalling import digital_messages as digital
 from fmus.signalling import aspects as sig
 from fmus.signalling.aspects import ASPECT_NAMES
@@ -409,12 +409,13 @@ class _Receiver:
     rail: str
     coder: str
     slot: int                      # the train's index j on the rail line (1-based)
-    system: object                 # DigitalSystem, or None for ALSN
+    system: object                 # DigitalSystem or AlsuSystem, or None for ALSN
     category: str
     latency_s: float
     hold_s: float                                # a code that disappears may be shown this long (display hold)
     wrong_side: Optional[_Episodes] = None       # against the code the coder sent
     unsafe: Optional[_Episodes] = None           # against the real occupancy by the block rules
+    coding: Optional[alsu.BlockCoding] = None    # ALSU: the code the block rules give each circuit
 
     def __post_init__(self):
         self.wrong_side = self.wrong_side or _Episodes(self.latency_s)
@@ -440,10 +441,15 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         params = node.parameters
         try:
             system = cab_systems.digital_system(str(params.get("system", "ALSN")))
+            if cab_systems.is_alsu(str(params.get("system", "ALSN"))):
+                table = params.get("codes_file")
+                system = alsu.system(str(_data_file(table, alsu.CODES_FILE)) if table else None)
         except FmuInputError:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
-        if system is None:
+        if isinstance(system, alsu.AlsuSystem):
+            latency = alsu.STATED_LATENCY_S
+        elif system is None:
             latency = alsn.STATED_LATENCY_S
         else:
             carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
@@ -484,6 +490,11 @@ class ReceiverVerdict(_OutputJudge):
             track = self.tracks.get(r.rail)
             if track is not None:
                 r.unsafe = _Episodes(r.latency_s + track.detection_s)
+                if isinstance(r.system, alsu.AlsuSystem):
+                    try:
+                        r.coding = alsu.BlockCoding(track.line, track.block_aspects, r.system)
+                    except FmuInputError:
+                        r.unsafe = None    # a route the code table cannot send: the coder reports it
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
@@ -552,6 +563,9 @@ class ReceiverVerdict(_OutputJudge):
             allowed = alsn.NO_CODE if free == NO_CODE_FREE_BLOCKS else int(rules.alsn_code[circuit])
         elif free == NO_CODE_FREE_BLOCKS:
             allowed = None
+        elif r.coding is not None:
+            code = int(r.coding.codes(rules)[circuit])
+            allowed = r.system.indication(code, r.category) if code else None
         else:
             allowed = r.system.indication(r.system.command_for(min(free, FREE_BLOCKS_OPEN)), r.category)
         nothing_allowed = free == NO_CODE_FREE_BLOCKS

@@ -227,7 +227,92 @@ def receiver_vectors() -> RoleFile:
 
     for system_name in ("FIRE_DQPSK", "ALS-EN"):
         role.vectors.extend(_digital_receiver_vectors(role, system_name))
+    role.vectors.extend(_alsu_receiver_vectors(role))
     return role
+
+
+def _alsu_emf(seconds: float, plan: List[tuple], level: float = BENCH_COIL_COUPLING) -> np.ndarray:
+    """Section 1 of the ALSU coder core × ``level``: ``plan`` is (from s, code or a set of tone
+    numbers 0…5) in time order, sent through the core's test generator (its tones keep running)."""
+    from fmus.wayside_coder.alsu import AlsuCoderCore
+
+    coder = AlsuCoderCore(load_line(str(DEFAULT_LINE)), 8, FRAME, CoderSettings(fs_hz=FS_HZ, seed=1, block_aspects=4))
+    frames, current = [], None
+    for k in range(int(round(seconds * FS_HZ / FRAME))):
+        t = k * FRAME / FS_HZ
+        wanted = [what for start, what in plan if start <= t + 1e-9][-1]
+        if wanted is not current:
+            current = wanted
+            flags = coder.tones_of(wanted) if isinstance(wanted, int) else np.isin(np.arange(6), list(wanted))
+            coder.send(np.tile(flags, (8, 1)))
+        frames.append(coder.step(t, np.zeros(8, dtype=bool)).u_tx[0] * level)
+    return np.concatenate(frames)
+
+
+def _alsu_receiver_vectors(role: RoleFile) -> List[dict]:
+    """ALSU: codes acquired, changed and lost within the stated latency (2 s) and the hold;
+    three tones never a code (docs/loco_receiver.md#alsu). Readings: the shipped code table."""
+    from fmus.loco_receiver.alsu import DISPLAY_HOLD_S, MIN_DURATION_S
+    from fmus.signalling import alsu
+
+    system = alsu.system()
+    latency = alsu.STATED_LATENCY_S
+    params = {"system": "ALSU", "fs": FS_HZ}
+
+    def shows(code: int) -> list:
+        ind = system.indication(code, "passenger")
+        return [_cond("aspect", [ind.aspect]), _cond("free_blocks", [ind.free_blocks]), _cond("code_valid", [1])]
+
+    def at_most(code: int) -> list:
+        ind = system.indication(code, "passenger")
+        return [_cond("aspect", not_more_permissive(ind.aspect)), _rng("free_blocks", None, float(ind.free_blocks))]
+    vectors = []
+    change_s, loss_s = 4.0, 8.0
+    seconds = loss_s + DISPLAY_HOLD_S + 1.5
+    name = "alsu_9_then_4_then_loss"
+    vectors.append({
+        "name": name, "what": f"ALSU code 9 (tones 225 and 275 Hz, 0.4 V each) from cold, code 4 (175 and 225 Hz) "
+                              f"from {change_s:g} s, no tone from {loss_s:g} s",
+        "parameters": params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", _alsu_emf(seconds, [(0.0, 9), (change_s, 4), (loss_s, 0)]))},
+        "checks": [
+            {"kind": "latency", "label": "code 9 shown within the stated latency", "from_s": 0.0, "until": shows(9),
+             "bound_s": latency},
+            {"kind": "latency", "label": "restrictive change to code 4 within the stated latency", "from_s": change_s,
+             "until": shows(4), "bound_s": latency},
+            {"kind": "holds", "label": "never more permissive than code 4 after the stated latency",
+             "from_s": change_s + latency, "conditions": at_most(4), "bound_s": 0.0},
+            {"kind": "latency", "label": "loss: no code within the hold + 0.5 s", "from_s": loss_s,
+             "until": [_cond("aspect", [sig.WHITE]), _cond("code_valid", [0])], "bound_s": DISPLAY_HOLD_S + 0.5}]})
+    garbled_s = 3.0
+    seconds = garbled_s + 3.0
+    name = "alsu_three_tones"
+    vectors.append({
+        "name": name, "what": f"ALSU code 9, then from {garbled_s:g} s three tones (175, 225, 275 Hz)",
+        "parameters": params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", _alsu_emf(seconds, [(0.0, 9), (garbled_s, (1, 2, 3))]))},
+        "checks": [
+            {"kind": "latency", "label": "three tones: no code within the minimum duration + 0.3 s", "from_s": garbled_s,
+             "until": [_cond("code_valid", [0])], "bound_s": MIN_DURATION_S + 0.3},
+            {"kind": "holds", "label": "no code after that", "from_s": garbled_s + MIN_DURATION_S + 0.3,
+             "conditions": [_cond("code_valid", [0])], "bound_s": 0.0}]})
+    rng = np.random.default_rng(33)
+    seconds = 8.0
+    t = np.arange(int(seconds * FS_HZ)) / FS_HZ
+    hum = 0.8 * np.sin(2 * np.pi * 100 * t) + 0.8 * np.sin(2 * np.pi * 150 * t) + 0.8 * np.sin(2 * np.pi * 200 * t) \
+        + 0.8 * np.sin(2 * np.pi * 250 * t) + 2.0 * np.sin(2 * np.pi * 300 * t) + 0.8 * np.sin(2 * np.pi * 350 * t)
+    emf = _alsu_emf(seconds, [(0.0, 1)]) + np.sqrt(2 * 0.4 ** 2) * rng.standard_normal(t.size) + hum
+    name = "alsu_noise_code_1"
+    vectors.append({
+        "name": name, "what": "ALSU code 1 (125 and 175 Hz, 0.4 V each) in white noise at 0 dB full band with 0.8 V "
+                              "at 100, 150, 200, 250, 350 Hz and 2 V at 300 Hz (the traction harmonics between the tones)",
+        "parameters": params, "step": {"fs_hz": FS_HZ}, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", emf)},
+        "checks": [
+            {"kind": "latency", "label": "code 1 shown within the stated latency", "from_s": 0.0, "until": shows(1),
+             "bound_s": latency},
+            {"kind": "holds", "label": "never more permissive than code 1", "conditions": at_most(1), "bound_s": 0.0}]})
+    return vectors
 
 
 def _digital_receiver_vectors(role: RoleFile, system_name: str) -> List[dict]:
@@ -504,6 +589,7 @@ def coder_vectors() -> RoleFile:
              "to_s": 2.0, "at_least": 0.5 * CoderSettings().amplitude_v, "unit": "V"},
             {"kind": "frame_peak", "label": "no output with both failed (section 1)", "port": "u_tx[1]",
              "from_s": 2.0, "at_most": 0.0, "unit": "V"}]})
+    role.vectors.extend(_alsu_coder_vectors())
     # digital 2-out-of-2 comparison: a controller computing a wrong command is outvoted by the
     # more restrictive of the two (fmus/signalling/redundancy.py); expected from our core
     for system_name in ("FIRE_DQPSK", "ALS-EN"):
@@ -523,6 +609,53 @@ def coder_vectors() -> RoleFile:
                        {"kind": "table", "label": "status stays 0", "port": "status", "at_s": [1.0],
                         "expected": [[0]]}]})
     return role
+
+
+def _alsu_coder_vectors() -> List[dict]:
+    """ALSU: the block's codes of every section (4-aspect, from our block rules) and the two
+    tones a code sends (docs/wayside_coder.md#alsu)."""
+    from fmus.signalling import alsu
+    from fmus.wayside_coder.alsu import AlsuCoderCore
+
+    line = load_line(str(DEFAULT_LINE))
+    params = {"system": "ALSU", "fs": FS_HZ, "block_aspects": 4}
+    step = {"fs_hz": FS_HZ, "frame_port": "u_tx"}
+    core = AlsuCoderCore(line, 8, FRAME, CoderSettings(fs_hz=FS_HZ, block_aspects=4, seed=1))
+    patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(1, 8)]
+    hold_s = 0.05
+    times = [round(i * hold_s, 4) for i in range(len(patterns))]
+    at = [round(t + hold_s, 4) for t in times]
+    codes = [core.step(0.0, pattern).code_tx.tolist() for pattern in patterns]
+    vectors = [{
+        "name": "alsu_block_logic_4_aspect", "what": f"{len(patterns)} occupancy patterns, ALSU on a 4-aspect block",
+        "parameters": params, "step": step, "duration_s": round(len(patterns) * hold_s, 4),
+        "inputs": {"occupied": _schedule_input(times, [p.tolist() for p in patterns])},
+        "checks": [{"kind": "table", "label": "ALSU code of every section (block rules)", "port": "code_tx",
+                    "at_s": at, "expected": codes}]}]
+    tones = list(alsu.system().table.tones_hz)
+    amplitude = CoderSettings().amplitude_v
+    change_s, seconds = 1.0, 2.0
+    first = core.tone_mask[int(_coder_codes(core, np.zeros(8, dtype=bool))[0])]
+    occupied = np.eye(8, dtype=bool)[1]
+    second = core.tone_mask[int(_coder_codes(core, occupied)[0])]
+    checks = []
+    for (start, end), flags in (((0.1, change_s), first), ((change_s + 0.1, seconds), second)):
+        code = next(n for n in range(16) if (core.tone_mask[n] == flags).all())
+        checks.append({"kind": "tones", "label": f"section 1 sends code {code}: its two tones, no other",
+                       "port": "u_tx[1]", "from_s": start, "to_s": end, "fs_hz": FS_HZ, "frequencies_hz": tones,
+                       "present": [f for f, on in zip(tones, flags) if on], "at_least": 0.98 * amplitude,
+                       "at_most": 0.02 * amplitude, "unit": "V"})
+    vectors.append({
+        "name": "alsu_tones_section_1", "what": f"the line clear, then section 2 occupied from {change_s:g} s: "
+                                                f"the tones into section 1",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"occupied": _schedule_input([0.0, change_s], [np.zeros(8, dtype=bool).tolist(), occupied.tolist()])},
+        "record_frames": ["u_tx[1]"], "checks": checks})
+    return vectors
+
+
+def _coder_codes(core, occupied: np.ndarray) -> np.ndarray:
+    return core.step(0.0, occupied).code_tx.copy()
 
 
 # ---- rail_line ----------------------------------------------------------------------------------

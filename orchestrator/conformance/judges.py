@@ -209,10 +209,37 @@ def judge_frame_peak(trace: Trace, check: Mapping):
     return peak, f"≤ {_fmt(check['at_most'])}", unit, peak <= check["at_most"]
 
 
+def tone_amplitudes(samples: np.ndarray, fs_hz: float, frequencies_hz) -> np.ndarray:
+    """Peak amplitude of each frequency in ``samples``, by least squares on sines and cosines
+    of all the frequencies at once (exact for a sum of steady tones at those frequencies)."""
+    t = np.arange(samples.size) / fs_hz
+    w = 2.0 * np.pi * np.asarray(frequencies_hz, dtype=float)
+    basis = np.hstack([np.sin(np.outer(t, w)), np.cos(np.outer(t, w))])
+    coefficients, *_ = np.linalg.lstsq(basis, samples, rcond=None)
+    return np.hypot(coefficients[:w.size], coefficients[w.size:])
+
+
+def judge_tones(trace: Trace, check: Mapping):
+    """Which tones a recorded frame row carries in the window (an ALSU code: two of six): every
+    frequency in ``present`` at least ``at_least`` (peak), every other of ``frequencies_hz`` at
+    most ``at_most``. The measured figure is the weakest tone present, or the strongest absent
+    one when that is what fails."""
+    times = trace.sample_time_s
+    mask = (times >= check.get("from_s", -np.inf) - 1e-9) & (times < check.get("to_s", np.inf) - 1e-9)
+    amplitudes = tone_amplitudes(trace.samples[check["port"]][mask], check["fs_hz"], check["frequencies_hz"])
+    present = np.isin(np.asarray(check["frequencies_hz"], dtype=float), np.asarray(check["present"], dtype=float))
+    unit = check.get("unit", "")
+    absent = float(amplitudes[~present].max(initial=0.0))
+    if absent > check["at_most"]:
+        return absent, f"≤ {_fmt(check['at_most'])} (a tone not in the code)", unit, False
+    weakest = float(amplitudes[present].min(initial=np.inf))
+    return weakest, f"≥ {_fmt(check['at_least'])}", unit, weakest >= check["at_least"]
+
+
 JUDGES: Dict[str, Callable] = {
     "latency": judge_latency, "holds": judge_holds, "table": judge_table, "near": judge_near,
     "extreme": judge_extreme, "when": judge_when, "code_timing": judge_code_timing,
-    "frame_peak": judge_frame_peak,
+    "frame_peak": judge_frame_peak, "tones": judge_tones,
 }
 
 
@@ -223,7 +250,7 @@ def judge(vector: str, trace: Trace, check: Mapping) -> Verdict:
 
 def ports_of(check: Mapping) -> List[str]:
     """The recorded ports a check reads."""
-    if check["kind"] in ("code_timing", "frame_peak"):
+    if check["kind"] in ("code_timing", "frame_peak", "tones"):
         return []                                  # frame rows: the vector's record_frames
     ports = [check["port"]] if "port" in check else []
     for key in ("until", "conditions", "trigger", "where"):

@@ -23,6 +23,7 @@ _CHECK_FIELDS = {
     "extreme": ("port", "extreme"), "when": ("trigger", "port", "expected", "tolerance"),
     "code_timing": ("port", "pattern_s", "tolerance", "fs_hz", "carrier_hz", "cycle_s"),
     "frame_peak": ("port",),
+    "tones": ("port", "fs_hz", "frequencies_hz", "present", "at_least", "at_most"),
 }
 
 
@@ -118,7 +119,7 @@ def _check_ports(path: Path, where: str, vector: Mapping, required: List[str]) -
 
     used = [*vector.get("parameters", {}), *vector.get("inputs", {}), *vector.get("record_frames", [])]
     used += [p for check in vector["checks"] for p in ports_of(check) if not p.startswith("plant.")]
-    used += [check["port"] for check in vector["checks"] if check["kind"] in ("code_timing", "frame_peak")]
+    used += [check["port"] for check in vector["checks"] if check["kind"] in ("code_timing", "frame_peak", "tones")]
     missing = sorted({_base(p) for p in used} - set(required))
     _require(not missing, path, f"{where}", f"uses ports not in required_ports: {', '.join(missing)}")
 
