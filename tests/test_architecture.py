@@ -90,6 +90,18 @@ def test_every_product_module_keeps_its_import_rules():
     assert not broken, "import rules (docs/architecture.md) broken:\n" + "\n".join(broken)
 
 
+def test_tests_and_the_harness_import_no_benchmark():
+    """Tests rely on the product and on harness/, never on a benchmark; the harness serves both
+    and imports neither (docs/architecture.md)."""
+    broken = []
+    for folder, forbidden in (("tests", ("benchmarks",)), ("harness", ("benchmarks", "tests", "conftest"))):
+        for path in sorted((REPO / folder).rglob("*.py")):
+            for name, line in _imports(path):
+                if _within(name, forbidden):
+                    broken.append(f"{path.relative_to(REPO)}:{line} imports {name}")
+    assert not broken, "\n".join(broken)
+
+
 def test_the_bundled_package_holds_no_build_tooling_or_harness():
     names = {p.stem for p in (REPO / "fmus").rglob("*.py")}
     assert not names & {"build", "builder", "packaging", "packing", "contract", "loop", "closed_loop", "channel"}

@@ -290,10 +290,10 @@ def test_study_on_a_dask_scheduler_and_worker_started_as_processes(product_fmus,
                 process.wait()
 
 
-def test_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
+def test_noise_study_gives_the_counts_of_the_harness_chain(tmp_path):
     """The noise-immunity study's runs against the benchmark's chain called as its loop did,
     with the loop's seeds (reduced: a few hundred messages, two conditions)."""
-    import benchmarks.study_noise_immunity as noise
+    import harness.noise_immunity as noise
 
     shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity.toml")
     data = {**shipped.data, "arguments": {"messages": 300, "alsn_cycles": 30},
@@ -321,7 +321,7 @@ def test_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
 def test_alsu_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
     """The ALSU noise study's runs (white noise, DC joint pulses) against the chain called
     directly with the study's seeds (reduced: 200 messages)."""
-    import benchmarks.study_noise_immunity as noise
+    import harness.noise_immunity as noise
 
     shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity_alsu.toml")
     data = {**shipped.data, "arguments": {"messages": 200},
