@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from harness.alsu import AlsuBench, first_time, sendable_codes  # noqa: E402
+from harness.alsu import AlsuBench, first_time, sendable_codes, tones_after_code  # noqa: E402
 from fmus.data.loader import DATA, load_line  # noqa: E402
 from fmus.loco_receiver.alsu import DISPLAY_HOLD_S  # noqa: E402
 from fmus.signalling import alsu  # noqa: E402
@@ -54,17 +54,9 @@ def tone_counts():
     rows = []
     for flags in ([0] * 6, [1, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 1], [1, 1, 1, 0, 0, 0], [0, 0, 1, 1, 1, 0],
                   [1, 0, 1, 0, 1, 0], [1] * 6):
-        bench = AlsuBench()
-        bench.send_code(9)
-        bench.run(3.0)
-        bench.send_tones(flags)
-        start = bench.t
-        record = bench.run(4.0).arrays()
-        after = record["t"] > start
-        lost = first_time(bench.record, start, ~record["valid"])
-        other = bool((record["valid"][after] & (record["shown"][after] != 9)).any())
-        again = lost is not None and bool(record["valid"][record["t"] > start + lost].any())
-        rows.append((sum(flags), "".join(str(f) for f in flags), lost, other, again))
+        outcome = tones_after_code(flags, code=9, settle_s=3.0, watch_s=4.0)
+        rows.append((sum(flags), "".join(str(f) for f in flags), outcome.lost_s, outcome.other_code,
+                     outcome.shown_again))
     return rows
 
 

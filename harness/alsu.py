@@ -118,5 +118,30 @@ def first_time(record: Record, since_s: float, condition: np.ndarray) -> Optiona
     return None if hits.size == 0 else float(t[hits[0]] - since_s)
 
 
+@dataclass
+class ToneSetOutcome:
+    """What the display did after a set of tones replaced a code shown."""
+    lost_s: Optional[float]     # time to the no-code indication (None: never within the watch)
+    other_code: bool            # another code shown meanwhile (a wrong code)
+    shown_again: bool           # a code shown again after the no-code indication
+    aspect_at_end: int          # the aspect displayed when the watch ends
+
+
+def tones_after_code(flags: List[int], code: int = 9, settle_s: float = 3.0, watch_s: float = 4.0) -> ToneSetOutcome:
+    """Send ``code`` for ``settle_s``, then the tones ``flags`` (one 0/1 per tone f2…f7) for
+    ``watch_s``: how the display reacted (the exactly-two-tones rule, docs/loco_receiver.md#alsu)."""
+    bench = AlsuBench()
+    bench.send_code(code)
+    bench.run(settle_s)
+    bench.send_tones(flags)
+    start = bench.t
+    record = bench.run(watch_s).arrays()
+    after = record["t"] > start
+    lost = first_time(bench.record, start, ~record["valid"])
+    other = bool((record["valid"][after] & (record["shown"][after] != code)).any())
+    again = lost is not None and bool(record["valid"][record["t"] > start + lost].any())
+    return ToneSetOutcome(lost, other, again, int(record["aspect"][-1]))
+
+
 def sendable_codes() -> List[int]:
     return list(alsu.system().codes())

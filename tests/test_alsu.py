@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.alsu import AlsuBench, first_time
+from harness.alsu import AlsuBench, first_time, tones_after_code
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.alsu import AlsuReceiverCore, AlsuReceiverSettings, channel_design
@@ -252,18 +252,11 @@ def test_codes_decode_at_the_maximum_ballast():
 
 @pytest.mark.parametrize("flags", [[0] * 6, [0, 0, 0, 0, 1, 0], [0, 1, 1, 1, 0, 0]], ids=["none", "one", "three"])
 def test_none_one_or_three_tones_give_no_code_never_another(flags):
-    bench = AlsuBench()
-    bench.send_code(9)
-    bench.run(1.5)
-    bench.send_tones(flags)
-    start = bench.t
-    record = bench.run(2.0).arrays()
-    after = record["t"] > start
-    lost = first_time(bench.record, start, ~record["valid"])
-    assert lost is not None and lost <= (1.3 if not any(flags) else 0.8)     # hold / minimum duration + decay
-    assert not (record["valid"][after] & (record["shown"][after] != 9)).any()
-    assert not record["valid"][record["t"] > start + lost].any()
-    assert record["aspect"][-1] == sig.WHITE
+    outcome = tones_after_code(flags, code=9, settle_s=1.5, watch_s=2.0)
+    assert outcome.lost_s is not None and outcome.lost_s <= (1.3 if not any(flags) else 0.8)   # hold / minimum duration + decay
+    assert not outcome.other_code
+    assert not outcome.shown_again
+    assert outcome.aspect_at_end == sig.WHITE
 
 
 @pytest.mark.parametrize("old, new", [(9, 6), (6, 1), (9, 10), (1, 9), (4, 5), (9, 3)])
