@@ -68,7 +68,7 @@ def test_the_axle_netlist_puts_every_wheelset_at_its_axle():
     axles = [head - o for o in LIGHT_ENGINE]
     netlist = axle_netlist(circuit, axles, [head], Faults(), 50.0, 2.5, segment_m=2.0)
     cards = _cards(netlist)
-    # node positions: the pieces' lengths summed from the relay end, then the stub's
+    # node positions: the pieces' lengths summed from the relay end, then the overhang's
     position = {"p0": circuit.start_m}
     for name in sorted((n for n in cards if re.fullmatch(r"l[pq]\d+", n)), key=lambda n: (n[1], int(n[2:]))):
         a, b = cards["r" + name[1:]][0], cards[name][1]
@@ -77,8 +77,8 @@ def test_the_axle_netlist_puts_every_wheelset_at_its_axle():
         position[b] = position[a] + length_m
     at = sorted(position[cards[n][0]] for n in cards if n.startswith("rax"))
     assert at == pytest.approx(sorted(axles), abs=1e-6)
-    assert max(position.values()) == pytest.approx(circuit.end_m)     # the stub up to the exit joint
-    assert netlist.probes["head0"][0] == (1.0, "i(lq0)")               # the current into the stub
+    assert max(position.values()) == pytest.approx(circuit.end_m)     # the overhang up to the exit joint
+    assert netlist.probes["head0"][0] == (1.0, "i(lq0)")               # the current into the overhang
 
 
 def test_the_staircase_holds_each_sample_from_its_instant():

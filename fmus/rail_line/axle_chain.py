@@ -3,7 +3,7 @@ a chain of two-ports (no FMI here; docs/rail_line.md, wheelsets at their axles).
 
 The track circuit is a ladder along the rails: the relay end, the rail loop (a uniform line: its
 series impedance per km at the frequency and the ballast's conductance distributed along it),
-a 0.06 Ω wheelset wherever an axle stands, the feed end; beyond the feed leads a short stub of
+a 0.06 Ω wheelset wherever an axle stands, the feed end; beyond the feed leads a short overhang of
 rails up to the exit joint (open there: the insulated joint), on which an axle still shunts the
 feed. Solving it as a chain of 2×2 transmission (ABCD) matrices from the relay end to the feed
 is exact for that ladder (the rails are not cut into π sections), and costs a few complex
@@ -93,7 +93,7 @@ class AxleTable:
 
 class SectionChain:
     """One section's track circuit at one frequency, ballast and faults, as a chain from the
-    relay end (entry joint) to the feed leads, with the stub of rails beyond them up to the exit
+    relay end (entry joint) to the feed leads, with the overhang of rails beyond them up to the exit
     joint."""
 
     def __init__(self, circuit: TrackCircuit, faults: Faults, frequency_hz: float, transformer_ratio: float):
@@ -135,19 +135,19 @@ class SectionChain:
         section, each (start_m, end_m, table, first, last): axles ``first``…``last`` of ``table``
         (ascending), the first of them at ``start_m`` and the last at ``end_m`` (absolute). A
         probe is taken just on the feed side of a wheelset at the same position (the current
-        arriving at that axle); a probe beyond the feed leads is the current into the stub."""
+        arriving at that axle); a probe beyond the feed leads is the current into the overhang."""
         broken = self.broken_m
         v, i = 1.0 + 0j, self.relay_admittance           # at the relay end, V = 1 (scaled at the end)
         entry = i
         x = self.start_m
         wanted = sorted((position, index) for index, position in enumerate(probes))
-        # per probe (V, I) where it is read; None: beyond the feed leads (the current into the stub)
+        # per probe (V, I) where it is read; None: beyond the feed leads (the current into the overhang)
         found: List[Optional[Tuple[complex, complex]]] = [None] * len(probes)
         next_probe = 0
-        stub = []
+        overhang = []
         for start, end, table, first, last in runs:
-            if start > self.feed_m:                        # on the stub beyond the feed leads
-                stub.append((start, end, table, first, last))
+            if start > self.feed_m:                        # on the overhang beyond the feed leads
+                overhang.append((start, end, table, first, last))
                 continue
             while next_probe < len(wanted) and wanted[next_probe][0] < start:
                 v, i, x = self._rails(v, i, x, wanted[next_probe][0])
@@ -169,13 +169,13 @@ class SectionChain:
             found[wanted[next_probe][1]] = (v, i)
             next_probe += 1
         v, i, x = self._rails(v, i, x, self.feed_m)
-        into_stub = self._stub_admittance(stub) * v
+        into_overhang = self._overhang_admittance(overhang) * v
         # the feed: u·ratio behind the feed resistance, the bond winding across the rails
-        source = v + self.feed_r_ohm * (i + into_stub + self.feed_bond_admittance * v)
+        source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
         if self.feed_open or abs(source) == 0.0:
             return [0.0] * len(probes), 0.0, 0.0
         per_unit = self.ratio / source
-        currents = [abs(into_stub * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
+        currents = [abs(into_overhang * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
         return currents, abs(entry * per_unit), abs(per_unit)
 
     def _rails(self, v: complex, i: complex, x: float, to: float) -> Tuple[complex, complex, float]:
@@ -199,12 +199,12 @@ class SectionChain:
             i = i + self.g_shunt * v
         return v, i
 
-    def _stub_admittance(self, stub) -> complex:
-        """The stub from the feed leads to the exit joint (open: the insulated joint) with the
+    def _overhang_admittance(self, overhang) -> complex:
+        """The overhang from the feed leads to the exit joint (open: the insulated joint) with the
         wheelsets on it, as an admittance at the feed."""
-        if not stub:
+        if not overhang:
             return 0j
-        positions = sorted(p for start, end, table, first, last in stub
+        positions = sorted(p for start, end, table, first, last in overhang
                            for p in table_positions(table, first, last, start))
         # from the joint (open: no current) toward the feed, mirrored: the same uniform line
         v, i, x = 1.0 + 0j, 0j, self.end_m

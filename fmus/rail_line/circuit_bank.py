@@ -298,7 +298,7 @@ class TrackCircuitBank:
 
     def _wheelset_runs(self, k: int, chain: SectionChain, heads: List[float]) -> List[tuple]:
         """Section k's wheelsets as runs for the chain: per train the axles between the joints,
-        split at the feed leads (beyond them they stand on the stub up to the exit joint). The
+        split at the feed leads (beyond them they stand on the overhang up to the exit joint). The
         axles are found by their distance behind the head (a head exactly on a joint is on it)."""
         geometry = self.geometry
         start, feed, end = geometry.starts_list[k], geometry.feed_list[k], geometry.ends_list[k]
@@ -308,12 +308,12 @@ class TrackCircuitBank:
             if head < start or head - offsets[-1] > end:
                 continue
             last = len(offsets) - 1
-            # offsets within [head − end, head − start]: the stub's (before head − feed), the rails'
+            # offsets within [head − end, head − start]: the overhang's (before head − feed), the rails'
             first = bisect.bisect_left(offsets, head - end)
             to_feed = bisect.bisect_left(offsets, head - feed)
             behind = bisect.bisect_right(offsets, head - start) - 1
             table = chain.table(j, self._wheelsets[j])
-            for near, far in ((to_feed, behind), (first, to_feed - 1)):      # rails, then the stub
+            for near, far in ((to_feed, behind), (first, to_feed - 1)):      # rails, then the overhang
                 if near <= far:          # offsets near…far → table indices (ascending positions)
                     runs.append((head - offsets[far], head - offsets[near], table, last - far, last - near))
         runs.sort(key=lambda run: run[0])

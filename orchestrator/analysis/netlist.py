@@ -16,7 +16,7 @@ Two ways to put the trains on it:
   against.
 
 Node names: the rail nodes ``n0`` (relay end) … ``nS`` (feed) of the lumped network, ``p0`` …
-of the per-axle one, ``q1`` … on the stub beyond the feed leads; ground (0) is the other rail.
+of the per-axle one, ``q1`` … on the overhang beyond the feed leads; ground (0) is the other rail.
 ``Netlist.probes`` says which vectors of ngspice's output give each quantity (a sum of vectors
 times coefficients: a current at a point of the rails is its piece's series current less the
 half ballast lumped at that end).
@@ -129,7 +129,7 @@ def axle_netlist(circuit: TrackCircuit, axles_m: Sequence[float], heads_m: Seque
     those outside the circuit's joints are left out), the rails cut into pieces of at most
     ``segment_m`` and at every axle; probes ``relay``, ``entry`` and ``head<h>``: the current
     arriving from the feed at each position of ``heads_m`` (a train's first axle: the rail piece
-    on its feed side; beyond the feed leads, the current into the stub)."""
+    on its feed side; beyond the feed leads, the current into the overhang)."""
     p = circuit.params
     rail_r, rail_l = rail_impedance(p, frequency_hz)
     ballast = circuit.ballast(faults)
@@ -148,7 +148,7 @@ def axle_netlist(circuit: TrackCircuit, axles_m: Sequence[float], heads_m: Seque
         return keep
 
     inside = [a for a in axles if a <= feed]
-    stub = [a for a in axles if a > feed]
+    overhang = [a for a in axles if a > feed]
     points = cuts(start, feed, inside + ([broken] if broken is not None else []))
     cards = _header(circuit, faults, frequency_hz, f"rails in {len(points) - 1} pieces of at most {segment_m:g} m, "
                     f"{len(axles)} wheelsets at their axles")
@@ -159,17 +159,17 @@ def axle_netlist(circuit: TrackCircuit, axles_m: Sequence[float], heads_m: Seque
         series = OPEN_OHM if broken is not None and abs(a - broken) < 1e-6 else None
         _rail_piece(cards, f"p{i}", names[a], names[b], b - a, rail_r, rail_l, ballast, series)
     feed_node = names[points[-1]]
-    stub_points = cuts(feed, end, stub)[1:] if stub else []
-    stub_names = {x: f"q{i + 1}" for i, x in enumerate(stub_points)}
-    if stub_points:
+    overhang_points = cuts(feed, end, overhang)[1:] if overhang else []
+    overhang_names = {x: f"q{i + 1}" for i, x in enumerate(overhang_points)}
+    if overhang_points:
         cards.append("* rails beyond the feed leads up to the exit joint (open there), with the axles on them")
         previous, previous_name = feed, feed_node
-        for i, x in enumerate(stub_points):
-            _rail_piece(cards, f"q{i}", previous_name, stub_names[x], x - previous, rail_r, rail_l, ballast)
-            previous, previous_name = x, stub_names[x]
+        for i, x in enumerate(overhang_points):
+            _rail_piece(cards, f"q{i}", previous_name, overhang_names[x], x - previous, rail_r, rail_l, ballast)
+            previous, previous_name = x, overhang_names[x]
     _ends(cards, circuit, "p0", feed_node, faults, transformer_ratio)
     node_of = dict(names)
-    node_of.update(stub_names)
+    node_of.update(overhang_names)
     if axles:
         cards.append("* wheelsets at their axles")
         for i, a in enumerate(axles):
@@ -191,8 +191,8 @@ def axle_netlist(circuit: TrackCircuit, axles_m: Sequence[float], heads_m: Seque
             node = names[points[index]]
             probes[f"head{h}"] = [(-1.0, f"i(lp{index})"),
                                   (-half_ballast(points[index + 1] - points[index]), f"v({node})")]
-        elif stub_points:
-            probes[f"head{h}"] = [(1.0, "i(lq0)"), (half_ballast(stub_points[0] - feed), f"v({feed_node})")]
+        elif overhang_points:
+            probes[f"head{h}"] = [(1.0, "i(lq0)"), (half_ballast(overhang_points[0] - feed), f"v({feed_node})")]
         else:
             probes[f"head{h}"] = []
     return Netlist(title, cards, probes)
