@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Optional, Tuple
 
 import numpy as np
@@ -65,10 +66,12 @@ HOLD_S = 2.5                      # `inertia` 0: how long the word shown outlive
 #: the fs needed above the highest carrier: its image fs − f must stay out of the baseband
 #: low-pass (more than its stop band, 5× the corner) — fs ≥ 2·(2600 + 250) = 5.7 kHz for track 2
 IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
-#: from the last decision that supported the word shown to the restrictive display (s): the
-#: hold, then the next decision (one hop) — measured by tests/test_tvm430_receiver.py and
-#: benchmarks/tvm430_decode.py
-STATED_LATENCY_S = HOLD_S + HOP_S
+#: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
+#: to the restrictive display (s): a window that still holds part of the old word may read it
+#: (a whole window at most), then the hold, then the next decision. Measured: a lost carrier
+#: 2.5 s, every single- and double-bit corruption 3.4 s at worst
+#: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
+STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
 
 
 @dataclass
@@ -84,19 +87,24 @@ def resolve_inertia_s(inertia_s: float) -> float:
     return inertia_s if inertia_s > 0 else HOLD_S
 
 
+@lru_cache(maxsize=8)
 def low_pass_design(fs_hz: float) -> SosFilter:
     """The baseband low-pass of every carrier: Butterworth, LOW_PASS_ORDER, LOW_PASS_CORNER_HZ."""
     return sections(signal.buttap(LOW_PASS_ORDER), 2.0 * math.pi * LOW_PASS_CORNER_HZ, fs_hz, LOW_PASS_CORNER_HZ)
 
 
+@lru_cache(maxsize=8)
 def tone_fit(window: int, rate_hz: float) -> np.ndarray:
     """(1 + 2·27, window) pseudo-inverse of the window's model: a constant, then cos and sin of
     every tone, over ``window`` samples at ``rate_hz`` (the fit's time origin is the window's
-    first sample: the receiver does not know the coder's tone phases)."""
+    first sample: the receiver does not know the coder's tone phases). Shared, read-only: every
+    receiver at one rate fits with the same matrix."""
     t = np.arange(window) / rate_hz
     angle = np.multiply.outer(t, 2.0 * np.pi * tvm430.TONES_HZ)
     model = np.hstack([np.ones((window, 1)), np.cos(angle), np.sin(angle)])
-    return np.linalg.pinv(model)
+    fit = np.linalg.pinv(model)
+    fit.flags.writeable = False
+    return fit
 
 
 @dataclass(frozen=True)
