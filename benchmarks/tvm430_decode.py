@@ -1,0 +1,94 @@
+"""TVM-430 receiver: decode time and cost (harness/tvm430_receiver.py: carriers synthesised from
+fmus/signalling/tvm430.py's modulation, white noise; no rail line); the figures of
+docs/loco_receiver.md#tvm-430 and docs/performance.md#tvm-430-receiver.
+
+    python benchmarks/tvm430_decode.py [--seeds 16] [--quick]
+
+1. decode time: a word change at the coils (green 300/300 → 230/170 restrictive, then back,
+   permissive) → the new word on the display, over ``--seeds`` tone-phase seeds (the coder's
+   tone phases at the change instant; tvm430's tones repeat every 12.5 s) at 12 kHz, with no
+   noise and with 0.1 V rms white noise on a 0.3 V carrier (11.5 dB per sample, 24 dB in the
+   100 Hz baseband), a neighbour's carrier 20 dB down; also a cold start (nothing shown → the
+   word) and a lost carrier (→ the restrictive display);
+2. cost: the receiver core's CPU time per simulated second at 8 and 12 kHz, frames of 40
+   samples (the build's default), the signal synthesised beforehand (best of 3 runs of 20 s).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from fmus.loco_receiver import tvm430 as rx  # noqa: E402
+from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore, Tvm430ReceiverSettings  # noqa: E402
+from harness.tvm430_receiver import TONE_PERIOD_S, fm_carrier, run, word  # noqa: E402
+
+GREEN = word(300, 300)
+YELLOW = word(230, 170, 2750.0, -6.0)
+EMF_V, LEAK = 0.3, 0.1
+NOISE_V = (0.0, 0.1)
+
+
+def decode_times(seeds: int, noise_v: float, fs_hz: float = 12000.0):
+    """Per seed: (cold start, restrictive change, permissive change, lost carrier) in s."""
+    plan = [(0.0, {1700.0: (GREEN, EMF_V), 2300.0: (YELLOW, LEAK * EMF_V)}),
+            (5.0, {1700.0: (YELLOW, EMF_V), 2300.0: (GREEN, LEAK * EMF_V)}),
+            (10.0, {1700.0: (GREEN, EMF_V), 2300.0: (YELLOW, LEAK * EMF_V)}),
+            (15.0, {2300.0: (YELLOW, LEAK * EMF_V)})]
+    rows = []
+    for seed in range(seeds):
+        offset = seed * TONE_PERIOD_S / seeds
+        record, _ = run(plan, 20.0, fs_hz=fs_hz, noise_v=noise_v, seed=seed, tone_offset_s=offset)
+        wrong = set(record.code.tolist()) - {0, GREEN, YELLOW}
+        if wrong or (record.word_carrier_hz == 2300.0).any():
+            raise SystemExit(f"seed {seed}, noise {noise_v} V: a word not sent, or the neighbour's, was shown")
+        rows.append((record.first(0.0, record.code == GREEN), record.first(5.0, record.code == YELLOW),
+                     record.first(10.0, record.code == GREEN), record.first(15.0, ~record.valid)))
+    return np.array(rows, dtype=float)
+
+
+def cost_per_simulated_second(fs_hz: float, seconds: float = 20.0, frame: int = 40) -> float:
+    """CPU seconds of the core per simulated second (best of 3)."""
+    t = np.arange(int(seconds * fs_hz)) / fs_hz
+    e = fm_carrier(YELLOW, t, 1700.0, EMF_V) + fm_carrier(GREEN, t, 2300.0, LEAK * EMF_V) \
+        + np.random.default_rng(0).normal(0.0, 0.05, t.size)
+    best = np.inf
+    for _ in range(3):
+        core = Tvm430ReceiverCore(frame, Tvm430ReceiverSettings(fs_hz=fs_hz))
+        start = time.process_time()
+        for first in range(0, t.size - frame + 1, frame):
+            core.step(first / fs_hz, e[first:first + frame])
+        best = min(best, time.process_time() - start)
+        assert core.out.code == YELLOW
+    return best / seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=16)
+    parser.add_argument("--quick", action="store_true", help="4 seeds, 5 s cost runs")
+    args = parser.parse_args()
+    seeds = 4 if args.quick else args.seeds
+    print(f"window {rx.WINDOW_S:.4f} s, hop {rx.HOP_S} s, hold {rx.HOLD_S} s, "
+          f"stated latency {rx.STATED_LATENCY_S:.3f} s")
+    print(f"decode time, 12 kHz, {seeds} tone-phase seeds (min / median / max, s):")
+    print("| noise V rms | cold start | restrictive change | permissive change | lost carrier → restrictive |")
+    print("|---|---|---|---|---|")
+    for noise in NOISE_V:
+        times = decode_times(seeds, noise)
+        cells = [f"{np.min(c):.2f} / {np.median(c):.2f} / {np.max(c):.2f}" for c in times.T]
+        print(f"| {noise:g} | " + " | ".join(cells) + " |")
+    print("receiver core cost, frames of 40 samples:")
+    for fs in (8000.0, 12000.0):
+        cost = cost_per_simulated_second(fs, seconds=5.0 if args.quick else 20.0)
+        print(f"  {fs / 1000:g} kHz: {cost * 1000:.1f} ms CPU per simulated second "
+              f"({1 / cost:.0f}× real time), {cost / (fs / 40) * 1e6:.1f} µs per frame")
+
+
+if __name__ == "__main__":
+    main()
