@@ -61,7 +61,7 @@ def test_a_word_is_shown_with_its_meaning_and_a_neighbours_permissive_word_never
 
 
 def test_a_weak_carrier_in_noise_decodes_and_never_shows_another_word():
-    """Half the usual EMF, noise 0.1 V rms over 6 kHz (0.8 dB per sample; 19 dB in the 100 Hz
+    """Half the usual EMF, noise 0.1 V rms over 6 kHz (0.5 dB per sample; 18 dB in the 100 Hz
     the baseband keeps), on track 2's 2600 Hz at 12 kHz: the word shown, nothing else."""
     plan = [(0.0, {2600.0: (YELLOW, WEAK_V), 2000.0: (GREEN, LEAK * WEAK_V)})]
     record, _ = run(plan, 12.0, noise_v=0.1, settings=Tvm430ReceiverSettings(fs_hz=12000.0, track=2))
