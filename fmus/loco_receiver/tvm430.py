@@ -8,7 +8,7 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
   frame length gives the same samples), low-passed by a Butterworth of order
   LOW_PASS_ORDER at LOW_PASS_CORNER_HZ (python-control, second-order sections with carried
   state, fmus/dsp/filter_design.py; the FM of a full word stays within ±25 Hz of the carrier,
-  and the other track's carrier 300 Hz away is taken down by 120 dB) and kept every D-th
+  and the other track's carrier 300 Hz away is taken down by 62 dB) and kept every D-th
   sample (D = round(fs / BASEBAND_RATE_HZ), absolute sample index multiple of D: the same
   decimated samples for any frame length). The level of a carrier is the magnitude of its
   baseband (×2: the mixer halves it), its frequency offset the phase step between two
