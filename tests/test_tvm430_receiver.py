@@ -60,6 +60,24 @@ def test_a_word_is_shown_with_its_meaning_and_a_neighbours_permissive_word_never
     assert (record.word_carrier_hz[shown] == 1700.0).all()
 
 
+@pytest.mark.parametrize("fs", [10400.0, 16000.0, 11025.0])
+def test_other_sample_rates_decode_the_same(fs):
+    """Rates the rail line may choose, one whose decimation (fs/200) is not whole among them."""
+    plan = [(0.0, {1700.0: (YELLOW, EMF_V), 2300.0: (GREEN, LEAK * EMF_V)})]
+    record, core = run(plan, 3.0, fs_hz=fs, frame=400, noise_v=0.05)
+    assert core.window / core.rate_hz >= rx.WINDOW_S
+    assert set(record.code.tolist()) == {0, YELLOW} and record.code[-1] == YELLOW
+
+
+def test_the_other_tracks_carrier_as_strong_as_ours_is_not_heard():
+    """Track 2's receiver between its 2000 Hz carrier (YELLOW) and track 1's 2300 Hz at the same
+    level with GREEN (the neighbour track's circuit under the coils, at its worst): YELLOW only."""
+    plan = [(0.0, {2000.0: (YELLOW, EMF_V), 2300.0: (GREEN, EMF_V), 1700.0: (GREEN, EMF_V)})]
+    record, _ = run(plan, 4.0, settings=Tvm430ReceiverSettings(fs_hz=12000.0, track=2), noise_v=0.03)
+    assert set(record.code.tolist()) == {0, YELLOW} and record.code[-1] == YELLOW
+    assert (record.word_carrier_hz[record.code == YELLOW] == 2000.0).all()
+
+
 def test_a_weak_carrier_in_noise_decodes_and_never_shows_another_word():
     """Half the usual EMF, noise 0.1 V rms over 6 kHz (0.5 dB per sample; 18 dB in the 100 Hz
     the baseband keeps), on track 2's 2600 Hz at 12 kHz: the word shown, nothing else."""

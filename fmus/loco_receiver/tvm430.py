@@ -151,6 +151,7 @@ class Tvm430ReceiverCore:
         self.hold_s = resolve_inertia_s(s.inertia_s)
         self.dominance = 10.0 ** (DOMINANCE_DB / 20.0)
         self._shown: Optional[Tuple[int, float]] = None   # (word, carrier Hz)
+        self._shown_reading: Optional[tvm430.Reading] = None
         self._supported_s = 0.0
         self._pending: Optional[Tuple[int, float]] = None
         self._pending_count = 0
@@ -174,7 +175,7 @@ class Tvm430ReceiverCore:
         mixed[0::2] = x * np.cos(angle)
         mixed[1::2] = x * -np.sin(angle)
         baseband, self._lp_state = sos_frame(self.low_pass.sos, mixed, self._lp_state)
-        kept = np.flatnonzero(index % self.decimation == 0)
+        kept = np.arange((-first) % self.decimation, x.size, self.decimation)   # absolute index multiple of D
         if kept.size:
             z = 2.0 * (baseband[0::2, kept] + 1j * baseband[1::2, kept])
             before = z[:, :1] if self._previous is None else self._previous[:, None]
@@ -264,6 +265,7 @@ class Tvm430ReceiverCore:
 
     def _show(self, key: Tuple[int, float], time_s: float) -> None:
         self._shown, self._supported_s = key, time_s
+        self._shown_reading = self.tvm.reading(key[0])
         self._pending, self._pending_count = None, 0
 
     def _publish(self, level_v: float) -> None:
@@ -276,7 +278,7 @@ class Tvm430ReceiverCore:
             out.target_distance_m = out.gradient_permille = out.word_carrier_hz = 0.0
             return
         word, carrier = self._shown
-        read = self.tvm.reading(word)
+        read = self._shown_reading
         out.aspect, out.code, out.code_valid, out.free_blocks = read.aspect, word, True, read.free_blocks
         out.v_permitted_mps, out.v_target_mps = read.step_kmh / 3.6, read.next_kmh / 3.6
         out.target_distance_m, out.gradient_permille = read.target_distance_m, read.gradient_permille
