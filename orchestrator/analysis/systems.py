@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import fmus
+from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.analysis.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
@@ -55,11 +56,23 @@ ATO_STEP_S = 0.5
 def committed_ports(folder: Path, source: str) -> Optional[Ports]:
     """The committed contract manifest of a railcosim FMU (``fmus/<unit>/contract.json``, checked
     against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
-    (``Traction.fmu`` → ``fmus/traction``); None for any other FMU."""
+    (``Traction.fmu`` → ``fmus/traction``), its arrays sized as the source's folder says
+    (``k32m2n40/RailLine.fmu``: 32 sections); None for any other FMU."""
     stem = Path(source).stem
     unit = re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower()
     manifest = Path(fmus.__file__).parent / unit / "contract.json"
-    return read_manifest(manifest) if stem and manifest.is_file() else None
+    if not stem or not manifest.is_file():
+        return None
+    ports = read_manifest(manifest)
+    sizes = sizes_of_source(source)
+    if sizes is None:
+        return ports
+    # the manifests are the default build's: its K, M, N are distinct numbers, so every array
+    # dimension says which size it is
+    default = BuildConfig()
+    scale = {default.sections: sizes.sections, default.trains: sizes.trains, default.frame: sizes.frame}
+    return {name: ({**port, "shape": [scale.get(d, d) for d in port["shape"]]} if port.get("shape") else port)
+            for name, port in ports.items()}
 
 
 def write_ssd(folder: Path, name: str, components, connections, **options) -> Path:
