@@ -83,8 +83,10 @@ class Tvm430CoderCore:
         self._bits = np.zeros((k, tvm430.WORD_BITS))                 # b_k, one row per section
         rng = np.random.default_rng(s.seed)
         self._offset = rng.uniform(0.0, 2.0 * np.pi, k)              # offset_k (rad)
-        self._index = np.arange(frame, dtype=np.int64)
-        # per-frame work buffers (the frame's sample times, tone terms, phase of every section)
+        self._index = np.arange(frame, dtype=float)
+        # per-frame work buffers (the frame's sample indices and times, tone terms, carrier and
+        # total phase of every section)
+        self._samples = np.empty(frame)
         self._times = np.empty(frame)
         self._terms = np.empty((tvm430.TONE_COUNT, frame))
         self._cycles = np.empty((k, frame))
@@ -107,7 +109,7 @@ class Tvm430CoderCore:
         s, k, out = self.settings, self.count, self.out
         n = out.u_tx.shape[1]
         first = round(t * s.fs_hz)
-        index = self._index[:n] + first
+        index = np.add(self._index[:n], first, out=self._samples[:n])     # whole numbers, exact below 2⁵³
         times = np.divide(index, s.fs_hz, out=self._times[:n])
         terms = tvm430.modulation_phase_terms(times, out=self._terms[:, :n])
         state = (occupied[:k].tobytes(), fault_main, fault_reserve)
@@ -119,10 +121,11 @@ class Tvm430CoderCore:
             u.fill(0.0)
             return out
         # carrier cycles f_c·n/fs reduced mod 1 before the 2π: exact whatever the run's length
-        cycles = np.multiply.outer(self.carriers_hz, index.astype(float), out=self._cycles[:, :n])
+        cycles = np.multiply.outer(self.carriers_hz, index, out=self._cycles[:, :n])
         np.fmod(cycles, s.fs_hz, out=cycles)
+        cycles *= 2.0 * np.pi / s.fs_hz
         phase = np.matmul(self._bits, terms, out=self._phase[:, :n])
-        phase += cycles * (2.0 * np.pi / s.fs_hz)
+        phase += cycles
         phase += self._offset[:, None]
         np.sin(phase, out=u)
         u *= s.amplitude_v
