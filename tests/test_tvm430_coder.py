@@ -229,3 +229,21 @@ def test_the_coder_fmu_refuses_a_sample_rate_too_low_for_the_carriers(tmp_path, 
     code, _, stderr = railcosim("run", tmp_path / "sys", "--output", tmp_path / "out", "--no-build")
     assert code == 2 and "parameter fs: 4000 Hz cannot hold the carrier 2300 Hz" in stderr
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1, stderr
+
+
+def test_the_coder_fmu_reads_its_word_tables_from_codes_file(tmp_path, product_fmus):
+    """Through `railcosim run`: its check of the data files before the run reads a TVM430
+    component's codes_file as word tables (not as ALSN's transmitters), and the FMU sends them."""
+    tables = json.loads(tvm430.CODES_FILE.read_text(encoding="utf-8"))
+    tables["addresses"] = [3]
+    (tmp_path / "my_tables.json").write_text(json.dumps(tables))
+    parameters = {"system": "TVM430", "fs": FMU_FS_HZ, "line_file": str(write_tvm_line(tmp_path)),
+                  "codes_file": str(tmp_path / "my_tables.json")}
+    components = [ComponentSpec("coder", str(product_fmus / "WaysideCoder.fmu"), N / FMU_FS_HZ, parameters)]
+    write_ssd(tmp_path / "sys", "tvm_tables", components, [], stop_time=0.05)
+    code, _, stderr = railcosim("run", tmp_path / "sys", "--output", tmp_path / "out", "--no-build",
+                                "--output-interval", N / FMU_FS_HZ, "--record", "coder.code_tx[1]")
+    assert code == 0, stderr
+    header, data = read_csv(tmp_path / "out" / "results.csv")
+    word = int(data[-1, header.index("coder.code_tx[1]")])
+    assert tvm430.check_passes(word) and tvm430.field(word, "address") == 3
