@@ -80,6 +80,8 @@ class LocoReceiver(FrameFacadeSlave):
         return self.frame_experiment(ReceiverSettings.fs_hz)
 
     def create_core(self):
+        if cab_systems.is_tvm430(self.param("system")):
+            raise FmuInputError("parameter system: TVM430 has no receiver in this build (only its wayside coder)")
         if cab_systems.is_alsu(self.param("system")):
             table = alsu.load_codes(self.resource_path(self.param("codes_file") or str(alsu.CODES_FILE)))
             settings = receiver_settings(alsu.AlsuSystem(table), self.scalar_parameters())

@@ -1,6 +1,7 @@
 """The cab-signal systems a coder or receiver can be built for, by their `system` parameter:
 the frequency systems ALSN (numeric codes on one carrier) and ALSU (two of six tones,
-alsu.py), and the digital systems (digital_messages.py)."""
+alsu.py), TVM-430 (a 27-bit word of very-low tones on an audio-frequency carrier, tvm430.py),
+and the digital systems (digital_messages.py)."""
 from __future__ import annotations
 
 from typing import Optional
@@ -11,8 +12,9 @@ from fmus.errors import FmuInputError
 
 ALSN = "ALSN"
 ALSU = "ALSU"
+TVM430 = "TVM430"
 DIGITAL = {als_en.SYSTEM.name: als_en.SYSTEM, fire_dqpsk.SYSTEM.name: fire_dqpsk.SYSTEM}
-NAMES = (ALSN, ALSU) + tuple(DIGITAL)
+NAMES = (ALSN, ALSU, TVM430) + tuple(DIGITAL)
 
 
 def check_name(name: str) -> str:
@@ -23,9 +25,13 @@ def check_name(name: str) -> str:
 
 
 def digital_system(name: str) -> Optional[DigitalSystem]:
-    """The digital system of that name, None for ALSN and ALSU; an unknown name is an input error."""
+    """The digital system of that name, None for ALSN, ALSU and TVM430; an unknown name is an input error."""
     return DIGITAL.get(check_name(name))
 
 
 def is_alsu(name: str) -> bool:
     return check_name(name) == ALSU
+
+
+def is_tvm430(name: str) -> bool:
+    return check_name(name) == TVM430
