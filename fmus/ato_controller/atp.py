@@ -46,16 +46,17 @@ deceleration a. Above it by dV_sbi the ATP commands full service braking until t
 back under the permitted speed; above it by dV_ebi (7.5 km/h up to 110 km/h, rising linearly
 to 15 km/h at 210 km/h [S]) it applies the emergency brake until standstill.
 
-TVM-430 supervision (docs/ato.md#tvm-430) replaces the emergency margin by two trip levels:
-the control level, step + 15 km/h, and for each target a trip curve — the highest speed from
-which the emergency brake, applied now and effective after the brake's lead time, still
-brings the train to the target at its trip speed (a stop: 0 at the target point; the next
-step: its own control level at the block exit), at the stock's emergency deceleration less
-the transmitted falling gradient. The service (warning) curve is the supervision deceleration
-less the gradient, and stays ``2·dV_sbi`` under the trip curve, so the service intervention
-always comes first. Passing the target point of a stop is a signal passed at danger. A lost or
-invalid word is the most restrictive indication, step 0: braking to a stand begins at once
-(no driver's reaction time), the last valid word's targets staying where they were.
+TVM-430 supervision (docs/ato.md#tvm-430) replaces the emergency margin by trip levels: the
+control level, step + 15 km/h, and for each target a trip curve at the stock's emergency
+deceleration less the transmitted falling gradient — towards the next step, its control level
+at the block exit; towards a stop, the highest speed from which the emergency brake, applied now
+and effective after the brake's lead time, stands the train by the end of the buffer section
+(the track circuit that begins at the target point). The service (warning) curve is the
+supervision deceleration less the gradient, 0 at the target point, and towards a stop stays
+``2·dV_sbi`` under the trip curve, so the service intervention always comes first. Passing a
+stop's target point at a block marker is a signal passed at danger. A lost or invalid word is
+the most restrictive indication, step 0: its control level (15 km/h) trips a moving train at
+once; the last valid word's targets stay where they were.
 """
 from __future__ import annotations
 
