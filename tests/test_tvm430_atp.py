@@ -366,3 +366,27 @@ def test_a_standing_train_departs_only_on_a_valid_word_with_a_step_above_0(tmp_p
         for k in range(60):
             out = ato.step(0.5 * k, 0.5, 400.0, 0.0, **words.word(0))
         assert (out.command > 0.0) == departs, occupied
+
+
+@pytest.mark.parametrize("carrier_hz, departs", [(50.0, True), (75.0, False)])
+def test_the_fmu_reads_the_word_on_its_new_inputs(tmp_path, product_fmus, carrier_hz, departs):
+    """ato_only with cab_signal = TVM430 and the receiver's word set by scenario events: a 160 km/h
+    step on the default line's 50 Hz carrier lets the train depart at 60 s, and the word's loss at
+    120 s trips it; a word on a carrier of no block (75 Hz) is no word: the train never departs."""
+    from helpers import railcosim
+
+    word = {"code_valid": True, "aspect": sig.GREEN, "v_permitted": 160 * MPS_PER_KMH,
+            "v_target": 160 * MPS_PER_KMH, "target_distance": NO_TARGET_M, "gradient": -2.0,
+            "word_carrier": carrier_hz}
+    events = [{"time": 0.0, "model": "ato", "variable": name, "action": "set", "value": value}
+              for name, value in word.items()]
+    events.append({"time": 120.0, "model": "ato", "variable": "code_valid", "action": "set", "value": False})
+    scenario = tmp_path / "words.json"
+    scenario.write_text(json.dumps({"events": events}))
+    out = tmp_path / "run"
+    code, _, stderr = railcosim("run", "ato_only", "--output", out, "--no-build", "--stop-time", "180",
+                                "--scenario", scenario, "--set", "ato.cab_signal=TVM430")
+    assert code == 0, stderr
+    (train,) = json.loads((out / "summary.json").read_text())["trains"]
+    assert train["emergency_brakings"] == (1 if departs else 0)
+    assert (train["departure_hold_s"] > 100.0) == (not departs)

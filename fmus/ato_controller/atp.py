@@ -237,6 +237,7 @@ class Atp:
         self.tvm_stop_m: Optional[float] = None
         self._x_before: Optional[float] = None
         self.trip_mps = _INF                     # TVM430: the trip level at the head, last step
+        self.code_shown = False                  # a valid code at the last step (TVM430: a word of ours)
         self.section_carriers = [sec.carrier_hz for sec in line.sections]
         self.circuit_starts = [sec.start_m for sec in line.sections]
         self.circuit_ends = [sec.end_m for sec in line.sections]
@@ -388,6 +389,7 @@ class Atp:
             word_block = self.word_block(x, word_carrier_hz) if code_valid else None
             code_valid = word_block is not None       # a word from no block behind us is none
             self._check_stop_point(x)
+        self.code_shown = code_valid
         c = self.line_constraints(x, v)
         c.add(self.restriction_constraints(x, v))
         k = self.section_of(x)

@@ -344,7 +344,8 @@ class AtoCore:
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code,
                                  target_distance, gradient, word_carrier)
-        permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
+        # TVM430: a word on a carrier of no block of ours is no word (atp.word_block)
+        permissive = self.atp.permits_departure(aspect, self.atp.code_shown, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
         if bridging and command > 0.0:
