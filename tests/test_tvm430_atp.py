@@ -311,6 +311,24 @@ def test_a_train_at_300_closing_on_an_occupied_block_slows_by_the_steps_and_stop
         assert entering <= STEPS_KMH[occupied - k - 1][0] * MPS_PER_KMH + 1e-6, k
 
 
+def test_when_the_block_ahead_clears_the_standing_train_moves_on_to_the_end_station(tmp_path):
+    line_file = _high_speed_line(tmp_path)
+    words = BlockWords(line_file, occupied=24)
+
+    def leader_leaves(t, ato):
+        if t >= 700.0:
+            words.occupied = BLOCKS
+
+    loop = run_closed_loop(1300.0, 0.5, AtoSettings(cab_signal="TVM430", strategy="flat_out"),
+                           line_file=line_file, stock_file=TGV, timetable_file=_timetable(tmp_path, 1000.0),
+                           cab_signal=words, before_step=leader_leaves)
+    t, x, v = loop.column("t"), loop.column("x"), loop.column("v")
+    assert v[t == 699.5][0] == 0.0 and x[t == 699.5][0] < 23 * BLOCK_M          # stood before the target
+    assert [a["station"] for a in loop.ato.arrivals] == ["Z"]
+    assert abs(loop.ato.arrivals[0]["stop_error_m"]) < 1.0
+    assert loop.ato.atp.interventions == 0 and loop.ato.atp.signals_passed_at_danger == 0
+
+
 def test_a_train_too_fast_for_the_steps_is_tripped_before_the_target(tmp_path):
     """An ATO that does not brake for the steps (a driver ignoring them): the ATP's service
     intervention, then if need be its trip, stop the train before the buffer section's end."""
