@@ -412,15 +412,44 @@ DEFAULT_WHEELBASE_PER_GAP_M = 2.4      # a bogie's outer axles apart per gap bet
 DEFAULT_BOGIE_CENTRES_SHARE = 0.7      # bogie pivots apart / body length [U]
 
 
+def _unit_length(u: dict) -> float:
+    """A unit's given length over its bodies (m): bodies × vehicle_length_m, an articulated set's
+    two end bodies at end_body_length_m."""
+    bodies, body = u.get("bodies", 1), u["vehicle_length_m"]
+    if u.get("articulated", False):
+        return u["count"] * ((bodies - 2) * body + 2 * u.get("end_body_length_m", body))
+    return u["count"] * bodies * body
+
+
+def _articulated_pivots(u: dict, k: int, path) -> List[float]:
+    """Bogie pivots of one articulated vehicle from its front (m): a Jacobs bogie at each joint
+    between two bodies, the end bogies ``bogie_centres_m`` ahead of the first joint and behind the
+    last (docs/traction.md)."""
+    bodies = u.get("bodies", 1)
+    if bodies < 2:
+        _fail(path, f"units[{k}].bodies", "an articulated vehicle needs at least 2 bodies")
+    body = float(u["vehicle_length_m"])
+    end = float(u.get("end_body_length_m", body))
+    centres = float(u.get("bogie_centres_m", body))
+    joints = [end + j * body for j in range(bodies - 1)]
+    if centres > end:
+        _fail(path, f"units[{k}].bogie_centres_m", f"an end bogie {centres:g} m from the joint lies outside "
+                                                   f"the {end:g} m end body")
+    return [joints[0] - centres] + joints + [joints[-1] + centres]
+
+
 def wheelset_offsets(document: dict, path) -> np.ndarray:
     """The train's wheelsets as distances behind its first one (m, ascending, 0 first), from its
     units' bodies placed nose to tail from the front (docs/interfaces.md#rolling-stock-file): a
     body of length L on two bogies whose pivots are ``bogie_centres_m`` apart, centred in it, each
-    bogie's axles spread evenly over ``bogie_wheelbase_m``. Bodies without a length share what the
-    train's length_m leaves equally."""
+    bogie's axles spread evenly over ``bogie_wheelbase_m``; an articulated vehicle's bodies share a
+    bogie at each joint. Bodies without a length share what the train's length_m leaves equally."""
     units = document["units"]
     length = float(document["length_m"])
-    given = sum(u["count"] * u.get("bodies", 1) * u["vehicle_length_m"] for u in units if "vehicle_length_m" in u)
+    for k, u in enumerate(units):
+        if u.get("articulated", False) and "vehicle_length_m" not in u:
+            _fail(path, f"units[{k}].vehicle_length_m", "an articulated vehicle needs its bodies' length")
+    given = sum(_unit_length(u) for u in units if "vehicle_length_m" in u)
     sharing = sum(u["count"] * u.get("bodies", 1) for u in units if "vehicle_length_m" not in u)
     if given > length + 1e-6:
         _fail(path, "units", f"the bodies' vehicle_length_m add up to {given:g} m, more than the train's "
@@ -433,19 +462,33 @@ def wheelset_offsets(document: dict, path) -> np.ndarray:
     front = 0.0
     for k, u in enumerate(units):
         bodies = u.get("bodies", 1)
-        if u["axles"] % (2 * bodies):
-            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bodies} bodies of two bogies")
-        per_bogie = u["axles"] // (2 * bodies)
+        articulated = u.get("articulated", False)
+        bogies = bodies + 1 if articulated else 2 * bodies
+        if u["axles"] % bogies:
+            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bogies} bogies "
+                                             f"of {bodies} {'articulated ' if articulated else ''}bodies")
+        per_bogie = u["axles"] // bogies
         body = float(u.get("vehicle_length_m", shared))
         # absent values are defaults that always fit: a bogie at most 0.3 of the body, its pivots
         # at most 0.9 of the rest apart (the outer axles stay inside the body)
         wheelbase = float(u.get("bogie_wheelbase_m",
                                 min(DEFAULT_WHEELBASE_PER_GAP_M * (per_bogie - 1), 0.3 * body)))
+        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
+        if articulated:
+            pivots = _articulated_pivots(u, k, path)
+            vehicle = _unit_length(u) / u["count"]
+            if pivots[0] < 0.5 * wheelbase:
+                _fail(path, f"units[{k}].bogie_wheelbase_m", f"an end bogie's {wheelbase:g} m wheelbase "
+                                                             f"reaches beyond the end body")
+            for _ in range(u["count"]):
+                for pivot in pivots:
+                    positions += (front + pivot + axles).tolist()
+                front += vehicle
+            continue
         centres = float(u.get("bogie_centres_m", min(DEFAULT_BOGIE_CENTRES_SHARE * body, 0.9 * (body - wheelbase))))
         if centres + wheelbase > body + 1e-9:
             _fail(path, f"units[{k}].bogie_centres_m", f"bogies {centres:g} m apart with a {wheelbase:g} m "
                                                        f"wheelbase do not fit in a {body:g} m body")
-        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
         for _ in range(u["count"] * bodies):
             overhang = 0.5 * (body - centres)
             for pivot in (overhang, overhang + centres):
