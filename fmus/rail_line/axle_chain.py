@@ -25,7 +25,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.rail_line.track_circuit import OPEN_OHM, CircuitParameters, Faults, TrackCircuit, rail_impedance
+from fmus.rail_line.track_circuit import (OPEN_OHM, CircuitParameters, Faults, TrackCircuit, end_admittance,
+                                         rail_impedance)
 
 # a 2×2 complex matrix as a tuple (a, b, c, d): [[a, b], [c, d]] acting on (V, I), I the rail-loop
 # current flowing toward the relay end
@@ -101,10 +102,10 @@ class SectionChain:
         self.circuit, self.faults = circuit, faults
         self.start_m, self.feed_m, self.end_m = float(circuit.start_m), float(circuit.feed_m), float(circuit.end_m)
         self.line = RailLine(p, circuit.ballast(faults), frequency_hz)
-        omega = 2.0 * math.pi * frequency_hz
-        bond = complex(p.bond_r_ohm, omega * p.bond_l_h)
-        self.relay_admittance = 1.0 / p.relay_r_ohm + 1.0 / bond
-        self.feed_bond_admittance = 1.0 / bond
+        # each end's bond winding, or its tuned separation zone (a TVM circuit)
+        termination = end_admittance(p, circuit.ballast(faults), frequency_hz)
+        self.relay_admittance = 1.0 / p.relay_r_ohm + termination
+        self.feed_bond_admittance = termination
         self.feed_r_ohm, self.ratio = p.feed_r_ohm, transformer_ratio
         self.g_shunt = 1.0 / p.shunt_r_ohm
         self.feed_open = faults.feed_open
@@ -170,7 +171,7 @@ class SectionChain:
             next_probe += 1
         v, i, x = self._rails(v, i, x, self.feed_m)
         into_overhang = self._overhang_admittance(overhang) * v
-        # the feed: u·ratio behind the feed resistance, the bond winding across the rails
+        # the feed: u·ratio behind the feed resistance, the bond winding (or zone) across the rails
         source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
         if self.feed_open or abs(source) == 0.0:
             return [0.0] * len(probes), 0.0, 0.0
