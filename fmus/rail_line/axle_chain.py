@@ -137,6 +137,28 @@ class SectionChain:
         (ascending), the first of them at ``start_m`` and the last at ``end_m`` (absolute). A
         probe is taken just on the feed side of a wheelset at the same position (the current
         arriving at that axle); a probe beyond the feed leads is the current into the overhang."""
+        v, i, entry, found, into_overhang = self._walk(runs, probes)
+        # the feed: u·ratio behind the feed resistance, the bond winding (or zone) across the rails
+        source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
+        if self.feed_open or abs(source) == 0.0:
+            return [0.0] * len(probes), 0.0, 0.0
+        per_unit = self.ratio / source
+        currents = [abs(into_overhang * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
+        return currents, abs(entry * per_unit), abs(per_unit)
+
+    def seen_from_feed(self, runs: Sequence[tuple], probes: Sequence[float] = ()):
+        """The rails with these wheelsets as the feed node sees them, without the feed's own
+        equipment: (their admittance at the feed node (rails toward the relay end with the relay
+        end's termination, and the overhang), S; the current arriving at each probe per volt at
+        the feed node, A/V, complex). What a voltage applied at the feed node from outside (a
+        neighbour's carrier through the separation zone) drives into the rails."""
+        v, i, _, found, into_overhang = self._walk(runs, probes)
+        return (i + into_overhang) / v, [into_overhang / v if point is None else point[1] / v for point in found]
+
+    def _walk(self, runs: Sequence[tuple], probes: Sequence[float]):
+        """From the relay end (V = 1) through the rails and wheelsets to the feed node: (V, I
+        there, the entry-end current, (V, I) at each probe (None: beyond the feed leads), the
+        overhang's current at the feed)."""
         broken = self.broken_m
         v, i = 1.0 + 0j, self.relay_admittance           # at the relay end, V = 1 (scaled at the end)
         entry = i
@@ -170,14 +192,7 @@ class SectionChain:
             found[wanted[next_probe][1]] = (v, i)
             next_probe += 1
         v, i, x = self._rails(v, i, x, self.feed_m)
-        into_overhang = self._overhang_admittance(overhang) * v
-        # the feed: u·ratio behind the feed resistance, the bond winding (or zone) across the rails
-        source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
-        if self.feed_open or abs(source) == 0.0:
-            return [0.0] * len(probes), 0.0, 0.0
-        per_unit = self.ratio / source
-        currents = [abs(into_overhang * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
-        return currents, abs(entry * per_unit), abs(per_unit)
+        return v, i, entry, found, self._overhang_admittance(overhang) * v
 
     def _rails(self, v: complex, i: complex, x: float, to: float) -> Tuple[complex, complex, float]:
         """Along the rails from x to ``to`` (≥ x), through a broken rail if one lies between."""

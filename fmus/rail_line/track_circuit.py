@@ -107,6 +107,12 @@ class CircuitParameters:
                                            # (instead of the bonds); None: insulated joints
 
 
+def near_unit_admittance(params: CircuitParameters, frequency_hz: float) -> complex:
+    """The admittance of a UM71 circuit's own tuned unit at either end (the zone's near unit)."""
+    omega = 2 * np.pi * frequency_hz
+    return sum(1.0 / _series_impedance(b, omega) for b in _tuned_units(params.zone, params)[0])
+
+
 def end_admittance(params: CircuitParameters, ballast_ohm_km: float, frequency_hz: float) -> complex:
     """What terminates either end of a circuit across the rails besides its relay or source, at
     ``frequency_hz``: the impedance bond's signal winding at an insulated joint, or the tuned
