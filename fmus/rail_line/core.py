@@ -139,6 +139,13 @@ class RailLineCore:
             raise FmuInputError(f"parameter shunt_margin: {s.shunt_margin:g} (need ≥ 0)")
         if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz / 4:
             raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz (0: the line file's; else up to fs/4)")
+        for k, section in enumerate(line.sections):
+            # the network's zero-order hold and the coil's backward difference lose 2 sin(πf/fs)/(2πf/fs)
+            # of the carrier's level: ≤ 10 % at fs/4 (docs/rail_line.md#sample-rate-of-the-tvm-chain)
+            if section.carrier_hz > s.fs_hz / 4:
+                raise FmuInputError(f"{line.path}: field block_sections[{k}].carrier_hz: {section.carrier_hz:g} Hz "
+                                    f"needs fs ≥ {4 * section.carrier_hz:g} Hz (carriers up to fs/4), "
+                                    f"parameter fs is {s.fs_hz:g} Hz")
         low, high = s.tone_band_hz
         if (low or high) and not 0 < low < high <= s.fs_hz / 4:
             raise FmuInputError(f"parameter tone_band_max: the tone band {low:g}…{high:g} Hz needs "
