@@ -137,7 +137,7 @@ def _fail(path, field: str, message: str):
 # ---- line ---------------------------------------------------------------------------------------
 DEFAULT_MAX_BALLAST_OHM_KM = 50.0
 #: the transmitter of an audio-frequency TVM track circuit, and the carriers per track: a track's
-#: sections alternate its two carriers block by block (docs/interfaces.md#line-file)
+#: sections alternate its two carriers block by block (docs/interfaces.md#line-file-tvm-430-sections)
 TVM_TRANSMITTER = "UM71"
 TVM_TRACK_CARRIERS_HZ = ((1700.0, 2300.0), (2000.0, 2600.0))
 ALSN_CARRIERS_HZ = (25.0, 50.0, 75.0)
