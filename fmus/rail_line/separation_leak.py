@@ -96,9 +96,11 @@ def leak_at(head_before_zone_m: float, own_hz: float, neighbour_hz: float, balla
                 ballast_own_ohm_km, ballast_neighbour_ohm_km, float(own_current), float(neighbour_current))
 
 
-# the coils' centre ahead of the first wheelset (RailSettings: coil_offset_m + coil_length_m / 2): a
-# head nearer the zone has its coils over the zone (lumped at one point here) or beyond it
-COILS_AHEAD_M = 1.65
+# the nearest a train's first wheelset comes to the zone with its coils still over its own
+# section's rails: the feed leads 1 m before the zone, the coils' window reaching 1.65 m ahead of
+# the wheelset (RailSettings: coil_offset_m + coil_length_m / 2), 0.05 m to spare. Nearer, the
+# coils are over the last metre and the zone, which the lumped zone does not resolve
+NEAREST_HEAD_BEFORE_ZONE_M = 2.7
 
 
 def worst_leak(wheelsets_m: Sequence[float], pair_hz=(1700.0, 2300.0), ballasts_ohm_km=(1.0, 50.0),
@@ -108,7 +110,7 @@ def worst_leak(wheelsets_m: Sequence[float], pair_hz=(1700.0, 2300.0), ballasts_
     carriers of ``pair_hz``."""
     length = section.get("length_m", 1500.0)
     heads = heads_before_zone_m if heads_before_zone_m is not None else \
-        np.concatenate([np.arange(COILS_AHEAD_M, 20.0, 0.5), np.geomspace(20.0, length - 1.0, 40)])
+        np.concatenate([np.arange(NEAREST_HEAD_BEFORE_ZONE_M, 20.0, 0.5), np.geomspace(20.0, length - 1.0, 40)])
     worst = None
     for own, neighbour in (pair_hz, pair_hz[::-1]):
         for ballast_own in ballasts_ohm_km:
