@@ -10,7 +10,7 @@ The core composes three parts, each with one job:
 * traction_interference.py — the traction interference under the coils: the traction return
   current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
   asymmetry per section passing from one section's to the next across each joint's bond-lead
-  zone, plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
+  zone (or TVM separation zone), plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
   mismatch).
 
 What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),

@@ -1,8 +1,8 @@
 """Where the line's track circuits lie (no FMI here; docs/rail_line.md): each section's track
-circuit (its feed leads, network nodes and segments, its ballast), the insulated joints'
-bond-lead zones, each section's code carrier and track-circuit frequency, and which section and
-which network node a position falls on; for a code of several tones (ALSU) the band the
-rails' impedance follows.
+circuit (its feed leads, network nodes and segments, its ballast; a TVM section's zones), the
+insulated joints' bond-lead zones and the TVM sections' separation zones, each section's code
+carrier and track-circuit frequency, and which section and which network node a position falls
+on; for a code of several tones (ALSU) the band the rails' impedance follows.
 """
 from __future__ import annotations
 
@@ -56,6 +56,10 @@ class LineGeometry:
                          for sec in line.sections]
         # (bond lead before, joint, bond lead beyond) of every insulated joint
         self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
+        # (start, boundary, end) of every tuned separation zone between two TVM sections: the
+        # traction current's asymmetry passes from one section's to the next across it
+        self.separation_zones = [(position - 0.5 * length, position, position + 0.5 * length)
+                                 for position, length in sorted(line.separation_zones.items())]
         self.starts = np.array([sec.start_m for sec in line.sections])
         self.ends = np.array([sec.end_m for sec in line.sections])
         self._ends_ext = np.append(self.ends, -np.inf)
