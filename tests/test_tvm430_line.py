@@ -328,3 +328,35 @@ def test_the_traction_interference_passes_a_separation_zone_without_a_spike():
     crossing = (coil >= 1480.0) & (coil <= 1520.0)
     assert emf[steady].max() > 1.0                             # the 50 Hz interference is there
     assert emf[crossing].max() <= 1.01 * emf[steady].max()
+
+
+@pytest.mark.parametrize("own, other", [(1700.0, 2300.0), (2300.0, 1700.0)])
+@pytest.mark.parametrize("ballasts", [(1.0, 50.0), (1.0, 1.0), (50.0, 50.0)])
+def test_the_leaks_two_port_solution_meets_the_two_circuits_joined_in_one_network(own, other, ballasts):
+    """The two circuits and the zone between them as one nodal network (network.py, 50 m π
+    sections; B's transmitter on, A's silent, one wheelset at a node of A): the neighbour's
+    current arriving at it is the two-port chains' (separation_leak.leak_at) within 1 %."""
+    from fmus.rail_line.network import Conductance, NortonSource, RLBranch
+    from fmus.rail_line.separation_leak import _params
+
+    ballast_a, ballast_b = ballasts
+    p_a, p_b = (_params(own, other, ballast_a, 26.0, CircuitParameters()),
+                _params(other, own, ballast_b, 26.0, CircuitParameters()))
+    a, b = TrackCircuit(0.0, 1500.0, 1.0, p_a), TrackCircuit(0.0, 1500.0, 1.0, p_b)
+    for node in (20, 29):
+        net = a.network(node, Faults(), 2.5, other)          # A's exit zone ends at "feed_zone_far": B's entry
+        net.inputs = 2
+        r, l = rail_impedance(p_b, other)
+        km = (b.feed_m - b.start_m) / 1000.0 / b.segments
+        names = ["feed_zone_far"] + [f"b{k}" for k in range(1, b.segments + 1)]
+        for k in range(b.segments):
+            net.add(RLBranch(names[k], names[k + 1], r * km, l * km),
+                    Conductance(names[k], "0", 0.5 * km / ballast_b), Conductance(names[k + 1], "0", 0.5 * km / ballast_b))
+        net.add(Conductance(names[0], "0", 1.0 / p_b.relay_r_ohm))
+        b._terminate(net, names[-1], "b_exit", Faults(ballast_b), other, r, l)
+        net.add(NortonSource(names[-1], "0", 1.0 / p_b.feed_r_ohm, 1, 2.5))
+        y, p, _, z = net._admittance(2 * np.pi * other)
+        v = np.linalg.solve(y, p @ np.array([0.0, 1.0], dtype=complex))
+        nodal = abs((v[net.node_index[f"n{node}"]] - v[net.node_index[f"n{node + 1}"]]) / z[node])
+        chain = leak_at(1500.0 - float(a.nodes_m[node]), own, other, ballast_a, ballast_b, [0.0]).neighbour_current_a
+        assert nodal == pytest.approx(chain, rel=0.01)

@@ -80,11 +80,12 @@ def leak_at(head_before_zone_m: float, own_hz: float, neighbour_hz: float, balla
     feed_b = 1.0 / p_b.feed_r_ohm + end_admittance(p_b, ballast_neighbour_ohm_km, neighbour_hz)
     short_circuit = transformer_ratio / p_b.feed_r_ohm / (d + feed_b * b)
     source_admittance = (c + feed_b * a) / (d + feed_b * b)
-    # the zone: B's tuned unit (high at f_B), B's receiver and the zone's ballast at B's entry; its rails
+    # the zone: B's tuned unit (high at f_B), B's receiver and the zone's ballast (A's, as section A's
+    # own network has it: track_circuit.end_admittance) at B's entry; its rails
     km = zone_length_m / 1000.0
     r_zone, l_zone = rail_impedance(p_a, neighbour_hz)
     zone_rails = complex(r_zone * km, w * l_zone * km)
-    at_entry_b = near_unit_admittance(p_b, neighbour_hz) + 1.0 / p_b.relay_r_ohm + km / ballast_neighbour_ohm_km
+    at_entry_b = near_unit_admittance(p_b, neighbour_hz) + 1.0 / p_b.relay_r_ohm + km / ballast_own_ohm_km
     # A's feed node: A's tuned unit (a short at f_B), its transmitter's resistance, its rails and the train
     chain_b_in_a = SectionChain(section_a, Faults(), neighbour_hz, transformer_ratio)
     rails_a, per_volt = chain_b_in_a.seen_from_feed(runs(chain_b_in_a), [head])
