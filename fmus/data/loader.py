@@ -136,6 +136,12 @@ def _fail(path, field: str, message: str):
 
 # ---- line ---------------------------------------------------------------------------------------
 DEFAULT_MAX_BALLAST_OHM_KM = 50.0
+#: the transmitter of an audio-frequency TVM track circuit, and the carriers per track: a track's
+#: sections alternate its two carriers block by block (docs/interfaces.md#line-file-tvm-430-sections)
+TVM_TRANSMITTER = "UM71"
+TVM_TRACK_CARRIERS_HZ = ((1700.0, 2300.0), (2000.0, 2600.0))
+ALSN_CARRIERS_HZ = (25.0, 50.0, 75.0)
+DEFAULT_ZONE_LENGTH_M = 26.0
 
 
 @dataclass(frozen=True)
@@ -185,6 +191,9 @@ class Line:
         self.sections = [BlockSection(**s) for s in document["block_sections"]]
         self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
         self.joints = document.get("insulated_joints", [])
+        # position → length of every tuned separation zone (between two TVM sections)
+        self.separation_zones = {float(z["position_m"]): float(z.get("length_m", DEFAULT_ZONE_LENGTH_M))
+                                 for z in document.get("separation_zones", [])}
         # the track circuits' ballast range: each section's minimum, one maximum for the line (a
         # dry or frozen bed, docs/rail_line.md: above it the shunt-mode level hardly changes)
         self.max_ballast_ohm_km = float(document.get("max_ballast_ohm_km", DEFAULT_MAX_BALLAST_OHM_KM))
@@ -234,6 +243,7 @@ class Line:
         for k, j in enumerate(self.joints):
             if j["position_m"] > self.length_m:
                 _fail(p, f"insulated_joints[{k}].position_m", f"{j['position_m']} is outside the line (0..{self.length_m})")
+        self._check_tvm(document)
         for k, st in enumerate(self.stations):
             if st.stop_m > self.length_m:
                 _fail(p, f"stations[{k}].stop_m", f"{st.stop_m} is outside the line")
@@ -249,6 +259,61 @@ class Line:
         for k, c in enumerate(document["curves"]):
             if c["end_m"] <= c["start_m"] or c["end_m"] > self.length_m:
                 _fail(p, f"curves[{k}].end_m", "must be after start_m and within the line")
+
+    def _check_tvm(self, document: dict) -> None:
+        """Audio-frequency (UM71) sections: a TVM carrier on a UM71 transmitter and an ALSN one on a
+        KPT; one track's pair of carriers on the whole line, alternating from section to section;
+        a separation zone at every boundary between two UM71 sections and nowhere else; an
+        insulated joint where a UM71 section meets an ALSN one (the zone cannot stop 25–75 Hz)."""
+        p, sections = self.path, self.sections
+        tvm = [s.transmitter == TVM_TRANSMITTER for s in sections]
+        pair = None
+        for k, (s, is_tvm) in enumerate(zip(sections, tvm)):
+            if is_tvm != (float(s.carrier_hz) not in ALSN_CARRIERS_HZ):
+                _fail(p, f"block_sections[{k}].carrier_hz",
+                      f"{s.carrier_hz:g} Hz does not go with transmitter {s.transmitter} "
+                      f"({TVM_TRANSMITTER}: 1700/2000/2300/2600 Hz; KPT-5/KPT-7: 25/50/75 Hz)")
+            if is_tvm:
+                own = next(track for track in TVM_TRACK_CARRIERS_HZ if float(s.carrier_hz) in track)
+                if pair is not None and own != pair:
+                    _fail(p, f"block_sections[{k}].carrier_hz",
+                          f"{s.carrier_hz:g} Hz is track {TVM_TRACK_CARRIERS_HZ.index(own) + 1}'s carrier, but the "
+                          f"line's TVM sections use track {TVM_TRACK_CARRIERS_HZ.index(pair) + 1}'s "
+                          f"{pair[0]:g}/{pair[1]:g} Hz")
+                pair = own
+        joints = {round(float(j["position_m"]), 6) for j in self.joints}
+        zones = {round(position, 6): k for k, position in enumerate(self.separation_zones)}
+        boundaries = set()
+        for k in range(1, len(sections)):
+            before, after = sections[k - 1], sections[k]
+            if abs(after.start_m - before.end_m) > 1e-6:
+                continue                               # a gap: the sections do not touch
+            at = round(after.start_m, 6)
+            boundaries.add(at)
+            if tvm[k - 1] and tvm[k]:
+                if before.carrier_hz == after.carrier_hz:
+                    _fail(p, f"block_sections[{k}].carrier_hz",
+                          f"{after.carrier_hz:g} Hz again after section '{before.name}': adjacent TVM sections "
+                          f"alternate their track's two carriers")
+                if at not in zones:
+                    _fail(p, "separation_zones", f"no separation zone at {after.start_m:g} m between the TVM "
+                                                 f"sections '{before.name}' and '{after.name}'")
+                if at in joints:
+                    _fail(p, "insulated_joints", f"an insulated joint at {after.start_m:g} m between the TVM "
+                                                 f"sections '{before.name}' and '{after.name}' (a separation zone goes there)")
+            elif tvm[k - 1] != tvm[k]:
+                if at not in joints:
+                    _fail(p, "insulated_joints",
+                          f"the TVM and ALSN sections '{before.name}' and '{after.name}' meet at {after.start_m:g} m "
+                          f"without an insulated joint (a separation zone cannot stop a 25–75 Hz carrier)")
+                if at in zones:
+                    _fail(p, f"separation_zones[{zones[at]}].position_m",
+                          f"{after.start_m:g} m is where TVM and ALSN sections meet (an insulated joint goes there)")
+        for position, k in zones.items():
+            if position not in boundaries or not any(tvm[i] and round(s.start_m, 6) == position
+                                                     for i, s in enumerate(sections)):
+                _fail(p, f"separation_zones[{k}].position_m",
+                      f"{position:g} m is not a boundary between two TVM (UM71) sections")
 
     def _restrictions(self, items) -> List[TemporaryRestriction]:
         restrictions = []
