@@ -2,7 +2,8 @@
 and the benchmarks. The coupling is the shipped system's (ssp/free_run): Gauss-Seidel, the ATO
 reads the train's position and speed at the start of each step, the train gets its command.
 The cab signal comes from a function of (t, x) returning (aspect, code_valid), or for a digital
-cab signal (aspect, code_valid, v_permitted_mps, v_target_mps, free_blocks).
+cab signal (aspect, code_valid, v_permitted_mps, v_target_mps, free_blocks), or a dict of
+AtoCore.step's keyword arguments (TVM-430: target_distance, gradient, word_carrier too).
 """
 from __future__ import annotations
 
@@ -66,7 +67,8 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
         shown = cab_signal(t, state.x_m) if cab_signal else (sig.GREEN, True)
         if before_step is not None:
             before_step(t, ato)
-        out = ato.step(t, step_s, state.x_m, state.v_mps, *shown)
+        out = ato.step(t, step_s, state.x_m, state.v_mps, **shown) if isinstance(shown, dict) \
+            else ato.step(t, step_s, state.x_m, state.v_mps, *shown)
         trace[k] = (t, state.x_m, state.v_mps, out.command, out.mode, out.v_permitted_mps, out.aspect, state.energy_j,
                     out.schedule_deviation_s)
         state = train.step(t, step_s, out.command, out.emergency_brake)

@@ -76,7 +76,7 @@ def _system_path(name: Optional[str]) -> Path:
 
 
 def cmd_build(args) -> int:
-    from orchestrator.packaging.builder import build_all
+    from orchestrator.packaging.builder import build_all, build_sized_for
     from fmus.sizes import BuildConfig
     from orchestrator.packaging.packing import pack_systems
 
@@ -87,11 +87,13 @@ def cmd_build(args) -> int:
     config = BuildConfig(args.sections, args.trains, args.frame)
     dest = Path(args.dest) if args.dest else _build_dir()
     results = build_all(dest, config, force=args.force)
+    _write_shipped_systems()
+    if config == BuildConfig():        # and the other sizes a shipped system names (TVM-430's 32 sections)
+        results += build_sized_for(dest, [p for p in SSP_ROOT.iterdir() if p.is_dir()], force=args.force)
     for result in results:
         print(f"{'built ' if result.rebuilt else 'up to date'} {result.path}")
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
-    _write_shipped_systems()
     repacked: List[Path] = []
     for archive in pack_systems(SSP_ROOT, dest, dest.parent, force=args.force, repacked=repacked):
         print(f"{'packed    ' if archive in repacked else 'up to date'} {archive}")
@@ -150,9 +152,10 @@ def _run_command(args) -> int:
     system = _system_path(args.system)
     overrides = _overrides(args)    # a malformed --set is refused before the build
     if not args.no_build:
-        from orchestrator.packaging.builder import build_all
+        from orchestrator.packaging.builder import build_all, build_sized_for
 
         build_all(_build_dir())
+        build_sized_for(_build_dir(), [system.parent if system.is_file() else system])
     from orchestrator.dcp.master import parse_swap
 
     swaps = {}
@@ -310,9 +313,10 @@ def cmd_study(args) -> int:
         system = beside if beside.exists() else _system_path(given)
         system = system.resolve()
         if not args.no_build:
-            from orchestrator.packaging.builder import build_all
+            from orchestrator.packaging.builder import build_all, build_sized_for
 
             build_all(_build_dir())
+            build_sized_for(_build_dir(), [system.parent if system.is_file() else system])
         check_against_system(spec, system, [_build_dir()])
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:

@@ -15,7 +15,7 @@ import math
 import shutil
 import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Dict, List, Optional, Tuple
 
 from lxml import etree
@@ -492,10 +492,18 @@ def _resolve_fmu(folder: Path, source: str, fmu_dirs) -> Optional[Path]:
     if candidate.is_file():
         return candidate
     for directory in fmu_dirs:
-        other = Path(directory) / Path(source).name
+        other = Path(directory) / in_build_folder(source)
         if other.is_file():
             return other
     return candidate
+
+
+def in_build_folder(source: str) -> str:
+    """Where a build folder keeps the FMU a component source names: the source's path below its
+    first folder (``resources/k32m2n40/RailLine.fmu`` → ``k32m2n40/RailLine.fmu``: FMUs built
+    with other sizes live in a folder of their own, docs/architecture.md#build-sizes)."""
+    parts = PurePosixPath(source).parts
+    return str(PurePosixPath(*parts[1:])) if len(parts) > 1 else parts[0]
 
 
 def load_parameter_set(system: SystemDescription, name: str) -> List[ParameterValue]:

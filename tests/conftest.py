@@ -37,8 +37,9 @@ def test_fmus_by_frame():
 @pytest.fixture(scope="session")
 def product_fmus():
     """The product FMUs, built (or found up to date) in build/fmus."""
-    from orchestrator.packaging.builder import build_all, default_build_dir
+    from orchestrator.packaging.builder import build_all, build_sized_for, default_build_dir
 
     dest = default_build_dir(REPO)
     build_all(dest)
+    build_sized_for(dest, [p for p in (REPO / "ssp").iterdir() if p.is_dir()])     # TVM-430's 32 sections
     return dest

@@ -334,6 +334,21 @@ def test_coder_and_receiver_fmus_run_alsu_through_the_orchestrator(tmp_path, pro
     assert last["rx.v_target"] == pytest.approx(100 / 3.6)
 
 
+def test_a_run_reads_an_alsu_coders_codes_file_as_an_alsu_table(tmp_path, product_fmus):
+    """The check of the data files before a run reads a codes_file by its component's system
+    (it read every one as ALSN's transmitters, refusing a valid ALSU table)."""
+    table = tmp_path / "my_alsu_codes.json"
+    table.write_text(alsu.CODES_FILE.read_text(encoding="utf-8"), encoding="utf-8")
+    components = [ComponentSpec("coder", str(product_fmus / "WaysideCoder.fmu"), 0.01,
+                                {"system": "ALSU", "codes_file": str(table)})]
+    write_ssd(tmp_path / "sys", "alsu_table", components, [], stop_time=0.1)
+    code, _, stderr = railcosim("run", tmp_path / "sys", "--output", tmp_path / "out", "--no-build",
+                                "--record", "coder.code_tx[1]")
+    assert code == 0, stderr
+    header, data = read_csv(tmp_path / "out" / "results.csv")
+    assert data[-1, header.index("coder.code_tx[1]")] == 9
+
+
 def test_an_alsu_receiver_with_a_carrier_is_one_error(tmp_path, product_fmus):
     components = [ComponentSpec("rx", str(product_fmus / "LocoReceiver.fmu"), 0.01, {"system": "ALSU", "carrier": 50.0})]
     write_ssd(tmp_path / "sys", "bad", components, [], stop_time=0.1)

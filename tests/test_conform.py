@@ -61,7 +61,7 @@ def test_a_receiver_that_shows_the_last_code_forever_fails(broken_fmus):
 def test_a_coder_without_its_two_out_of_two_fails_and_the_table_names_it(broken_fmus):
     code, out, _ = railcosim("conform", "--role", "wayside_coder", broken_fmus["NoFailoverCoder"])
     assert code == 1
-    assert out.strip().splitlines()[-1].endswith("1 of 13 vectors fail: two_out_of_two_faults")
+    assert out.strip().splitlines()[-1].endswith("1 of 15 vectors fail: two_out_of_two_faults")
     rows = [line for line in out.splitlines() if line.startswith("two_out_of_two_faults")]
     assert any("no output with both failed" in row and row.rstrip().endswith("FAIL") for row in rows)
 

@@ -13,6 +13,11 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   ``v_permitted`` from now on, ``v_target`` at the next signal (the exit of the current section),
   and a stop at the end of the ``free_blocks``-th section ahead while ``free_blocks`` is below 6
   (the section after the free ones is occupied; fmus/signalling/digital_messages.py).
+  ``"TVM430"``: the cab's speed step ``v_permitted`` with a trip at its control level (step +
+  15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
+  target point (the word's block start + ``target_distance``) on a continuous curve from the
+  transmitted ``gradient`` and the train's braking; the word's block is found by its carrier
+  (``word_carrier``, :meth:`Atp.word_block`). See "TVM-430 supervision" below.
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -40,6 +45,18 @@ head is min(ceiling, sqrt(v_t² + 2·a·(x_t − x)) over the targets) with the 
 deceleration a. Above it by dV_sbi the ATP commands full service braking until the train is
 back under the permitted speed; above it by dV_ebi (7.5 km/h up to 110 km/h, rising linearly
 to 15 km/h at 210 km/h [S]) it applies the emergency brake until standstill.
+
+TVM-430 supervision (docs/ato.md#tvm-430) replaces the emergency margin by trip levels: the
+control level, step + 15 km/h, and for each target a trip curve at the stock's emergency
+deceleration less the transmitted falling gradient — towards the next step, its control level
+at the block exit; towards a stop, the highest speed from which the emergency brake, applied now
+and effective after the brake's lead time, stands the train by the end of the buffer section
+(the track circuit that begins at the target point). The service (warning) curve is the
+supervision deceleration less the gradient, 0 at the target point, and towards a stop stays
+``2·dV_sbi`` under the trip curve, so the service intervention always comes first. Passing a
+stop's target point at a block marker is a signal passed at danger. A lost or invalid word is
+the most restrictive indication, step 0: its control level (15 km/h) trips a moving train at
+once; the last valid word's targets stay where they were.
 """
 from __future__ import annotations
 
@@ -55,9 +72,9 @@ from fmus.data.loader import Line, TemporaryRestriction
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.units import KMH_PER_MPS, MPS_PER_KMH
+from fmus.units import KMH_PER_MPS, MPS_PER_KMH, STANDARD_GRAVITY_MPS2
 
-CAB_SIGNAL_MODES = ("ALSN", "ALSU", "digital", "off")
+CAB_SIGNAL_MODES = ("ALSN", "ALSU", "digital", "TVM430", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 # aspects a train may start on (docs/ato.md, departure hold): red-yellow too, since it permits
 # moving up to the exit signal, which the ATP supervises as a stop target; white (no code) and
@@ -69,6 +86,13 @@ STANDSTILL_MPS = 1e-3
 # driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
 # curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
 T_DRIVER_S = 4.0
+# TVM-430: the control (trip) level lies this far above the cab's speed step (300 → 315 km/h,
+# docs/ato.md#tvm-430) [U]
+TVM_CONTROL_MARGIN_MPS = 15.0 * MPS_PER_KMH
+# TVM-430: a word is looked for in the head's block and at most this many blocks behind it (the
+# receiver shows the previous block's word only just after a boundary, until it has decoded the
+# new one); a carrier found in neither is no word of ours: treated as lost
+TVM_WORD_BLOCKS_BACK = 1
 
 
 def dv_ebi_mps(v_mps: float) -> float:
@@ -94,6 +118,11 @@ class Target:
     speed_mps: float
     signal: bool = False          # a stop target at a signal (the ATO stops short of it)
     braking_share: float = 1.0    # of the supervision deceleration (ALSU: a permanent restriction's is gentler)
+    # TVM430: the speed of the trip curve at the target (its control level; a stop: 0), and the
+    # transmitted gradient (‰, + uphill) the curves are computed on; None: an ETCS-like target
+    trip_speed_mps: Optional[float] = None
+    gradient_permille: float = 0.0
+    trip_position_m: Optional[float] = None   # TVM430: where the trip curve ends; None: position_m
 
 
 @dataclass
@@ -163,7 +192,11 @@ class Atp:
     event_restrictions: Tuple[TemporaryRestriction, ...] = ()
 
     def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
-                 supervision_decel_mps2: float, decoding_latency_s: float):
+                 supervision_decel_mps2: float, decoding_latency_s: float,
+                 emergency_decel_mps2: float = 0.0, brake_lead_s: float = 0.0):
+        """``emergency_decel_mps2`` and ``brake_lead_s`` (the stock's emergency deceleration and
+        the time until a brake demand takes effect) set TVM430's trip curves; 0: the supervision
+        deceleration, no lead."""
         if cab_signal not in CAB_SIGNAL_MODES:
             raise FmuInputError(f"parameter cab_signal: {cab_signal!r} is not one of {', '.join(CAB_SIGNAL_MODES)}")
         if not supervision_decel_mps2 > 0:
@@ -198,6 +231,16 @@ class Atp:
         self.emergency_brakings = 0
         self.signals_passed_at_danger = 0
         self.max_overspeed_mps = 0.0
+        # TVM430: trip curves, the stop point of the last valid word, the head at the last step
+        self.emergency_decel = emergency_decel_mps2 if emergency_decel_mps2 > 0 else supervision_decel_mps2
+        self.brake_lead_s = max(brake_lead_s, 0.0)
+        self.tvm_stop_m: Optional[float] = None
+        self._x_before: Optional[float] = None
+        self.trip_mps = _INF                     # TVM430: the trip level at the head, last step
+        self.code_shown = False                  # a valid code at the last step (TVM430: a word of ours)
+        self.section_carriers = [sec.carrier_hz for sec in line.sections]
+        self.circuit_starts = [sec.start_m for sec in line.sections]
+        self.circuit_ends = [sec.end_m for sec in line.sections]
 
     # ---- geometry ---------------------------------------------------------------------------
     def section_of(self, x: float) -> Optional[int]:
@@ -253,6 +296,72 @@ class Atp:
                                     braking_share=alsu.BRAKING_SHARE[self.alsu.braking(code)]))
         return c
 
+    def word_block(self, x: float, word_carrier_hz: float) -> Optional[int]:
+        """The track circuit (TVM block) the shown word comes from: the latest one at or behind
+        the head whose line-file carrier is the word's, looking back at most
+        TVM_WORD_BLOCKS_BACK circuits; None when no such circuit (then the word is not ours)."""
+        k = bisect.bisect_right(self.circuit_starts, x) - 1
+        if k < 0 or x >= self.circuit_ends[-1] or word_carrier_hz <= 0.0:
+            return None
+        for j in range(k, max(k - TVM_WORD_BLOCKS_BACK, 0) - 1, -1):
+            if abs(self.section_carriers[j] - word_carrier_hz) < 0.5:
+                return j
+        return None
+
+    def _tvm430(self, v_step: float, v_next: float, target_distance_m: float, gradient_permille: float,
+                block: int) -> Constraints:
+        """The constraints of a TVM-430 word from track circuit ``block``: the step from now on
+        (trip at its control level), the next step at the block's exit (trip at the next
+        control level), and — when a lower step is announced or the step is 0 — a stop at the
+        target point, the block's start + ``target_distance_m`` (the block rules put it at the
+        entry of the buffer section before the occupied block)."""
+        v_step, v_next = max(v_step, 0.0), max(v_next, 0.0)
+        c = Constraints(v_step)
+        grade = min(gradient_permille, 0.0)        # only a falling gradient lengthens the braking
+        exit_m = self.circuit_ends[block]
+        if v_next < v_step:
+            c.targets.append(Target(exit_m, v_next, trip_speed_mps=v_next + TVM_CONTROL_MARGIN_MPS,
+                                    gradient_permille=grade))
+        if v_next < v_step or v_step == 0.0:
+            stop_m = self.circuit_starts[block] + max(target_distance_m, 0.0)
+            c.targets.append(Target(stop_m, 0.0, signal=True, trip_speed_mps=0.0, gradient_permille=grade,
+                                    trip_position_m=self.danger_point_m(stop_m)))
+        return c
+
+    def danger_point_m(self, stop_m: float) -> float:
+        """Where a TVM430 stop's trip curve ends: the end of the track circuit that begins at
+        (or holds) the stop point — the buffer section before the occupied block is the overlap
+        the emergency brake may use; the service curve ends at the stop point itself."""
+        k = bisect.bisect_right(self.circuit_starts, stop_m) - 1
+        if k < 0 or stop_m >= self.circuit_ends[-1]:
+            return stop_m
+        return self.circuit_ends[k]
+
+    def is_block_marker(self, position_m: float) -> bool:
+        """A TVM430 stop point at a block boundary (its marker board), within 0.5 m."""
+        k = bisect.bisect_left(self.circuit_starts, position_m - 0.5)
+        return k < len(self.circuit_starts) and abs(self.circuit_starts[k] - position_m) <= 0.5
+
+    def _tvm_decel(self, decel: float, gradient_permille: float) -> float:
+        """A deceleration less what a falling gradient (‰, negative) takes from it; at least a tenth
+        of it, so a curve always exists (a steeper line is refused by the line schema anyway)."""
+        return max(decel + STANDARD_GRAVITY_MPS2 * gradient_permille / 1000.0, 0.1 * decel)
+
+    def tvm_trip_curve(self, target: Target, x: float) -> float:
+        """Trip speed at ``x`` for a TVM430 target: the highest speed v with
+        v·T_lead + (v² − v_t²)/(2·a_e) ≤ x_t − x, so the emergency brake applied now, effective
+        after the brake's lead time, brings the train to the target's trip speed v_t at x_t; v_t
+        beyond the target. The lead counts towards a stop only: at a block exit the next step's
+        control level takes over and trips at once."""
+        v_t = target.trip_speed_mps
+        end = target.position_m if target.trip_position_m is None else target.trip_position_m
+        distance = end - x
+        if distance <= 0.0:
+            return v_t
+        a = self._tvm_decel(self.emergency_decel, target.gradient_permille)
+        lead = self.brake_lead_s if v_t == 0.0 else 0.0
+        return -a * lead + math.sqrt(a * a * lead * lead + v_t * v_t + 2.0 * a * distance)
+
     def permits_departure(self, aspect: int, code_valid: bool, v_permitted_mps: float) -> bool:
         """A standing train may start only on a valid permissive cab code (docs/ato.md,
         departure hold): what the receiver shows now, not a remembered code. ``off`` (no cab
@@ -264,12 +373,23 @@ class Atp:
         return self.mode in ("ALSN", "ALSU") or v_permitted_mps > 0.0
 
     def _no_code(self) -> Constraints:
+        if self.mode == "TVM430":
+            return Constraints(0.0)               # the most restrictive indication: step 0
         return self._alsn(sig.WHITE, None)
 
     def supervise(self, t: float, x: float, v: float, aspect: int, code_valid: bool,
-                  v_permitted: float, v_target: float, free_blocks: int, code: int = 0) -> AtpResult:
-        """One step; ``code`` is the ALSU code shown (the receiver's ``code``), read in ALSU mode."""
+                  v_permitted: float, v_target: float, free_blocks: int, code: int = 0,
+                  target_distance_m: float = 0.0, gradient_permille: float = 0.0,
+                  word_carrier_hz: float = 0.0) -> AtpResult:
+        """One step; ``code`` is the ALSU code shown (the receiver's ``code``), read in ALSU mode;
+        ``target_distance_m``, ``gradient_permille`` and ``word_carrier_hz`` in TVM430 mode."""
         result = AtpResult()
+        word_block = None
+        if self.mode == "TVM430":
+            word_block = self.word_block(x, word_carrier_hz) if code_valid else None
+            code_valid = word_block is not None       # a word from no block behind us is none
+            self._check_stop_point(x)
+        self.code_shown = code_valid
         c = self.line_constraints(x, v)
         c.add(self.restriction_constraints(x, v))
         k = self.section_of(x)
@@ -283,13 +403,21 @@ class Atp:
                 shown = self._alsn(aspect, k)
             elif self.mode == "ALSU":
                 shown = self._alsu(code, k) if code_valid else self._no_code()
+            elif self.mode == "TVM430":
+                shown = self._tvm430(v_permitted, v_target, target_distance_m, gradient_permille, word_block) \
+                    if code_valid else self._no_code()
             else:
                 shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
-            acted_aspect = int(aspect)
+            acted_aspect = int(aspect) if code_valid or self.mode != "TVM430" else sig.RED_YELLOW
             cab = Constraints()
             if code_valid:
                 self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
                 self.last_valid_code = int(code)
+                if self.mode == "TVM430":
+                    # a stop at a block's marker board is a signal to pass at danger; a station's
+                    # stop point inside a block is not (a precise stop may end a little past it)
+                    self.tvm_stop_m = next((tg.position_m for tg in shown.targets
+                                            if tg.signal and self.is_block_marker(tg.position_m)), None)
             elif self.last_valid is not None:
                 # no code displayed (the receiver's hold is over): the last valid code's
                 # constraints stay where they were, with the no-code ones
@@ -311,10 +439,44 @@ class Atp:
                 permitted = min(permitted, math.sqrt(target.speed_mps ** 2 + 2.0 * decel * (target.position_m - x)))
             else:
                 permitted = min(permitted, target.speed_mps)
+        trip = _INF
+        if self.mode == "TVM430":
+            trip, permitted = self._tvm_levels(c, x, v, permitted)
+        self.trip_mps = trip
         result.permitted_mps = permitted
         self.max_overspeed_mps = max(self.max_overspeed_mps, v - c.ceiling_mps)
-        result.intervention = self._intervene(v, permitted)
+        result.intervention = self._intervene(v, permitted, trip)
         return result
+
+    def _tvm_levels(self, c: Constraints, x: float, v: float, permitted: float) -> Tuple[float, float]:
+        """(trip level, permitted speed) at the head in TVM430 mode. The trip is the control
+        level of the cab's step (+ 15 km/h; of the step shown, not of a higher one held while a
+        fall is braked for) and the targets' trip curves. The permitted speed is the ceiling and
+        the service curves (supervision deceleration less the gradient); towards a stop, where
+        the trip curve's brake lead brings it down to the service curve, it stays 2·dV_sbi under
+        the trip curve, so the service intervention always comes first."""
+        trip = min(c.ceiling_mps, self.cab_ceiling_mps) + TVM_CONTROL_MARGIN_MPS
+        for target in c.targets:
+            if target.trip_speed_mps is None:
+                continue
+            curve = self.tvm_trip_curve(target, x)
+            trip = min(trip, curve)
+            if target.position_m >= x:
+                decel = self._tvm_decel(self.decel, target.gradient_permille)
+                service = math.sqrt(target.speed_mps ** 2 + 2.0 * decel * (target.position_m - x))
+                if target.trip_speed_mps == 0.0:
+                    service = min(service, curve - 2.0 * dv_sbi_mps(v))
+                permitted = min(permitted, max(service, 0.0))
+        return trip, permitted
+
+    def _check_stop_point(self, x: float) -> None:
+        """TVM430: the head passing the stop point of the last valid word at a block marker (the
+        entry of the buffer section) is a signal passed at danger: counted, emergency brake."""
+        before, self._x_before = self._x_before, x
+        stop = self.tvm_stop_m
+        if stop is not None and before is not None and before < stop <= x:
+            self.signals_passed_at_danger += 1
+            self._emergency()
 
     def _ceiling_on_a_curve(self, cab: Constraints, x: float, v: float) -> Constraints:
         """The cab-signal constraints with a fall of their ceiling below the speed supervised
@@ -341,7 +503,9 @@ class Atp:
         return Constraints(max(ceiling, self.ceiling_before_mps), cab.targets + [drop])
 
     def _reach_m(self, v: float, ceiling: float) -> float:
-        return v * T_DRIVER_S + (v * v - ceiling * ceiling) / (2.0 * self.decel)
+        # TVM430: a lost word is braked for at once (the cab's reaction, no driver's time)
+        reaction = 0.0 if self.mode == "TVM430" else T_DRIVER_S
+        return v * reaction + (v * v - ceiling * ceiling) / (2.0 * self.decel)
 
     def _passed_signal(self, t: float) -> None:
         """The head passed the exit signal of the previous section."""
@@ -376,6 +540,12 @@ class Atp:
             worst = self.alsu.worst_next(shown) if shown else alsu.RED_CODE
             self.assumed_aspect = self.alsu.indication(worst, self.category).aspect
             self.assumed = self._alsu(worst, entered)
+        elif self.mode == "TVM430":
+            # the word's targets lie where they are on the line (carrier matching), so the last
+            # valid word's constraints hold as they are until the new block's word shows; passing
+            # a stop point is counted where it lies (_check_stop_point), not at a block exit
+            self.assumed_aspect = active
+            self.assumed = self.last_valid
         else:
             stop_here = self.last_valid is not None and any(
                 tg.signal and abs(tg.position_m - self.section_ends[previous]) < 1e-6
@@ -399,10 +569,11 @@ class Atp:
             self.emergency_brakings += 1
             self.interventions += 1
 
-    def _intervene(self, v: float, permitted: float) -> int:
+    def _intervene(self, v: float, permitted: float, trip: float = _INF) -> int:
+        """``trip``: TVM430's trip level (it replaces the dV_ebi margin); inf in the other modes."""
         if self.emergency_latched and v <= STANDSTILL_MPS:
             self.emergency_latched = False
-        if v > permitted + dv_ebi_mps(v):
+        if v > (trip if trip < _INF else permitted + dv_ebi_mps(v)):
             self._emergency()
         if self.emergency_latched:
             self.service_active = False

@@ -95,7 +95,9 @@ def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
     with a cab signal, the digital speeds and free blocks with a digital one. The others the
     controller does not read in that mode."""
     return ("x", "v") + {"off": (), "ALSN": ("aspect",), "ALSU": ("aspect", "cab_code"),
-                         "digital": ("aspect", "v_permitted", "v_target", "free_blocks")}.get(cab_signal, ())
+                         "digital": ("aspect", "v_permitted", "v_target", "free_blocks"),
+                         "TVM430": ("aspect", "v_permitted", "v_target", "target_distance", "gradient",
+                                    "word_carrier")}.get(cab_signal, ())
 
 
 def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
@@ -103,6 +105,15 @@ def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestrictio
     return [TemporaryRestriction(float(a), float(b), float(v), name=f"tsr[{k + 1}]")
             for k, (a, b, v) in enumerate(zip(np.ravel(starts_m), np.ravel(ends_m), np.ravel(speeds_mps)))
             if v > 0.0 and b > a]
+
+
+def default_plan_decel_mps2(stock, cab_signal: str) -> float:
+    """The ATO's planned deceleration when parameter ``braking_decel`` is 0: 0.6 × the stock's
+    service deceleration, at most 0.5 m/s² — except under TVM430, whose block rules announce a
+    stop only four blocks ahead, so a train at 300 km/h must plan at 0.58 m/s² or more
+    (docs/ato.md#tvm-430)."""
+    planned = PLAN_DECEL_SHARE * stock.service_decel
+    return planned if cab_signal == "TVM430" else min(PLAN_DECEL_MAX_MPS2, planned)
 
 
 def default_atp_decel_mps2(stock) -> float:
@@ -195,12 +206,14 @@ class AtoCore:
         self.line, self.stock, self.category = line, stock, category
         self.timetable = timetable
         self.train = NominalTrain(stock, line)
-        self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else min(PLAN_DECEL_MAX_MPS2, PLAN_DECEL_SHARE * stock.service_decel)
+        self.a_plan = s.braking_decel_mps2 if s.braking_decel_mps2 > 0 else default_plan_decel_mps2(stock, s.cab_signal)
         a_atp = s.atp_decel_mps2 if s.atp_decel_mps2 > 0 else default_atp_decel_mps2(stock)
         if self.a_plan >= a_atp:
             raise FmuInputError(f"parameter braking_decel: {self.a_plan} m/s² must be below the ATP "
                                 f"supervision deceleration {a_atp} m/s²")
-        self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s)
+        self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
+        self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s,
+                       emergency_decel_mps2=stock.emergency_decel, brake_lead_s=self.brake_lead_s)
         self.atp.attach_vigilance(s.vigilance_period_s, s.vigilance_answer_s)
         planner = StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps)
         self.plans = []
@@ -229,7 +242,6 @@ class AtoCore:
         self.code_lost_s: Optional[float] = None   # when the digital code was lost, while it is
         self._last_regime = None
         self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
-        self.brake_lead_s = s.brake_lead_s if s.brake_lead_s >= 0 else brake_lead_s(stock)
         # a driver releases the train brake before the departure time: its delay + build-down
         self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
         # a slow brake: the ATO follows its pipeline every step and predicts the stopping point
@@ -252,8 +264,12 @@ class AtoCore:
         """What the ATO brakes for, ahead of the head: the stop point and the ATP's targets
         with the ATO's margins."""
         s = self.settings
-        targets = [self._stop_targets[self.stage]]
+        stop_point = self._stop_targets[self.stage]
+        targets = [stop_point]
         for target in atp_result.constraints.targets:
+            if target.signal and self.settings.cab_signal == "TVM430" \
+                    and target.position_m >= stop_point.position_m - s.stop_window_m:
+                continue        # a TVM stop at the station's stop point (or beyond): the stop point itself
             if target.signal:
                 targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0))
             else:
@@ -314,16 +330,22 @@ class AtoCore:
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0,
-             vigilance_ack: bool = False, cab_code: int = 0) -> AtoOutputs:
-        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks, cab_code, code_valid)
+             vigilance_ack: bool = False, cab_code: int = 0, target_distance: float = 0.0,
+             gradient: float = 0.0, word_carrier: float = 0.0) -> AtoOutputs:
+        """One ATO step; ``target_distance`` (m), ``gradient`` (‰) and ``word_carrier`` (Hz) are
+        the TVM-430 receiver's outputs, read in TVM430 mode."""
+        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks, cab_code, code_valid,
+                                            target_distance, gradient, word_carrier)
         if self.fault is not None:
             return self._fail_safe(t)
         self._measure_acceleration(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
-        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code)
-        permissive = self.atp.permits_departure(aspect, code_valid, v_permitted)
+        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code,
+                                 target_distance, gradient, word_carrier)
+        # TVM430: a word on a carrier of no block of ours is no word (atp.word_block)
+        permissive = self.atp.permits_departure(aspect, self.atp.code_shown, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
         if bridging and command > 0.0:
@@ -356,7 +378,9 @@ class AtoCore:
                        aspect=self.atp.last_valid_aspect)
 
     def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
-                          free_blocks: int, cab_code: int = 0, code_valid: bool = False) -> Optional[Tuple[str, str]]:
+                          free_blocks: int, cab_code: int = 0, code_valid: bool = False,
+                          target_distance: float = 0.0, gradient: float = 0.0,
+                          word_carrier: float = 0.0) -> Optional[Tuple[str, str]]:
         """(input, why) when a measurement the ATP relies on cannot be true, else None. Which
         measurements it judges: :func:`judged_measurements`."""
         if not math.isfinite(x):
@@ -375,6 +399,12 @@ class AtoCore:
                     return name, f"cab-signal speed {name} = {value:g} m/s is impossible"
             if free_blocks < 0:
                 return "free_blocks", f"free_blocks = {free_blocks} is negative"
+        if self.settings.cab_signal == "TVM430":
+            for name, value, lowest in (("v_permitted", v_permitted, 0.0), ("v_target", v_target, 0.0),
+                                        ("target_distance", target_distance, 0.0), ("gradient", gradient, -_INF),
+                                        ("word_carrier", word_carrier, 0.0)):
+                if not (math.isfinite(value) and value >= lowest):
+                    return name, f"TVM-430 {name} = {value:g} is impossible"
         return None
 
     def _fail_safe(self, t: float) -> AtoOutputs:

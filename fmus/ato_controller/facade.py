@@ -24,6 +24,7 @@ class AtoController(FacadeSlave):
             Port("strategy", "parameter", "String", start=s.strategy, description="programme | predictive | flat_out"),
             Port("cab_signal", "parameter", "String", start=s.cab_signal,
                  description="ALSN (aspect) | ALSU (cab_code) | digital (v_permitted, v_target, free_blocks) | "
+                             "TVM430 (v_permitted, v_target, target_distance, gradient, word_carrier) | "
                              "off (line limits only)"),
             Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
@@ -67,6 +68,12 @@ class AtoController(FacadeSlave):
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
             Port("cab_code", "input", "Integer", start=0, min=0, bad_input="unit",
                  description="ALSU: the code the receiver shows (its code output), 0 none"),
+            Port("target_distance", "input", unit="m", start=0.0, min=0.0, bad_input="unit",
+                 description="TVM430: from the entry of the word's block to the target point"),
+            Port("gradient", "input", unit="1", start=0.0, bad_input="unit",
+                 description="TVM430: most falling gradient to the target point, per mille, + uphill"),
+            Port("word_carrier", "input", unit="Hz", start=0.0, min=0.0, bad_input="unit",
+                 description="TVM430: carrier of the track circuit the shown word came from; 0 none"),
             # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
             # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
             Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
@@ -140,7 +147,8 @@ class AtoController(FacadeSlave):
         core.set_restrictions(event_restrictions(io["tsr_start"], io["tsr_end"], io["tsr_speed"]))
         self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
                               bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
-                              int(io["free_blocks"]), bool(io["vigilance_ack"]), int(io["cab_code"])))
+                              int(io["free_blocks"]), bool(io["vigilance_ack"]), int(io["cab_code"]),
+                              float(io["target_distance"]), float(io["gradient"]), float(io["word_carrier"])))
         fault = core.fault[0] if core.fault else None
         if fault != self._fault_logged:                 # once per fault, not every step
             if core.fault:

@@ -136,6 +136,12 @@ def _fail(path, field: str, message: str):
 
 # ---- line ---------------------------------------------------------------------------------------
 DEFAULT_MAX_BALLAST_OHM_KM = 50.0
+#: the transmitter of an audio-frequency TVM track circuit, and the carriers per track: a track's
+#: sections alternate its two carriers block by block (docs/interfaces.md#line-file-tvm-430-sections)
+TVM_TRANSMITTER = "UM71"
+TVM_TRACK_CARRIERS_HZ = ((1700.0, 2300.0), (2000.0, 2600.0))
+ALSN_CARRIERS_HZ = (25.0, 50.0, 75.0)
+DEFAULT_ZONE_LENGTH_M = 26.0
 
 
 @dataclass(frozen=True)
@@ -185,6 +191,9 @@ class Line:
         self.sections = [BlockSection(**s) for s in document["block_sections"]]
         self.stations = [Station(s["name"], float(s["stop_m"])) for s in document["stations"]]
         self.joints = document.get("insulated_joints", [])
+        # position → length of every tuned separation zone (between two TVM sections)
+        self.separation_zones = {float(z["position_m"]): float(z.get("length_m", DEFAULT_ZONE_LENGTH_M))
+                                 for z in document.get("separation_zones", [])}
         # the track circuits' ballast range: each section's minimum, one maximum for the line (a
         # dry or frozen bed, docs/rail_line.md: above it the shunt-mode level hardly changes)
         self.max_ballast_ohm_km = float(document.get("max_ballast_ohm_km", DEFAULT_MAX_BALLAST_OHM_KM))
@@ -234,6 +243,7 @@ class Line:
         for k, j in enumerate(self.joints):
             if j["position_m"] > self.length_m:
                 _fail(p, f"insulated_joints[{k}].position_m", f"{j['position_m']} is outside the line (0..{self.length_m})")
+        self._check_tvm(document)
         for k, st in enumerate(self.stations):
             if st.stop_m > self.length_m:
                 _fail(p, f"stations[{k}].stop_m", f"{st.stop_m} is outside the line")
@@ -249,6 +259,61 @@ class Line:
         for k, c in enumerate(document["curves"]):
             if c["end_m"] <= c["start_m"] or c["end_m"] > self.length_m:
                 _fail(p, f"curves[{k}].end_m", "must be after start_m and within the line")
+
+    def _check_tvm(self, document: dict) -> None:
+        """Audio-frequency (UM71) sections: a TVM carrier on a UM71 transmitter and an ALSN one on a
+        KPT; one track's pair of carriers on the whole line, alternating from section to section;
+        a separation zone at every boundary between two UM71 sections and nowhere else; an
+        insulated joint where a UM71 section meets an ALSN one (the zone cannot stop 25–75 Hz)."""
+        p, sections = self.path, self.sections
+        tvm = [s.transmitter == TVM_TRANSMITTER for s in sections]
+        pair = None
+        for k, (s, is_tvm) in enumerate(zip(sections, tvm)):
+            if is_tvm != (float(s.carrier_hz) not in ALSN_CARRIERS_HZ):
+                _fail(p, f"block_sections[{k}].carrier_hz",
+                      f"{s.carrier_hz:g} Hz does not go with transmitter {s.transmitter} "
+                      f"({TVM_TRANSMITTER}: 1700/2000/2300/2600 Hz; KPT-5/KPT-7: 25/50/75 Hz)")
+            if is_tvm:
+                own = next(track for track in TVM_TRACK_CARRIERS_HZ if float(s.carrier_hz) in track)
+                if pair is not None and own != pair:
+                    _fail(p, f"block_sections[{k}].carrier_hz",
+                          f"{s.carrier_hz:g} Hz is track {TVM_TRACK_CARRIERS_HZ.index(own) + 1}'s carrier, but the "
+                          f"line's TVM sections use track {TVM_TRACK_CARRIERS_HZ.index(pair) + 1}'s "
+                          f"{pair[0]:g}/{pair[1]:g} Hz")
+                pair = own
+        joints = {round(float(j["position_m"]), 6) for j in self.joints}
+        zones = {round(position, 6): k for k, position in enumerate(self.separation_zones)}
+        boundaries = set()
+        for k in range(1, len(sections)):
+            before, after = sections[k - 1], sections[k]
+            if abs(after.start_m - before.end_m) > 1e-6:
+                continue                               # a gap: the sections do not touch
+            at = round(after.start_m, 6)
+            boundaries.add(at)
+            if tvm[k - 1] and tvm[k]:
+                if before.carrier_hz == after.carrier_hz:
+                    _fail(p, f"block_sections[{k}].carrier_hz",
+                          f"{after.carrier_hz:g} Hz again after section '{before.name}': adjacent TVM sections "
+                          f"alternate their track's two carriers")
+                if at not in zones:
+                    _fail(p, "separation_zones", f"no separation zone at {after.start_m:g} m between the TVM "
+                                                 f"sections '{before.name}' and '{after.name}'")
+                if at in joints:
+                    _fail(p, "insulated_joints", f"an insulated joint at {after.start_m:g} m between the TVM "
+                                                 f"sections '{before.name}' and '{after.name}' (a separation zone goes there)")
+            elif tvm[k - 1] != tvm[k]:
+                if at not in joints:
+                    _fail(p, "insulated_joints",
+                          f"the TVM and ALSN sections '{before.name}' and '{after.name}' meet at {after.start_m:g} m "
+                          f"without an insulated joint (a separation zone cannot stop a 25–75 Hz carrier)")
+                if at in zones:
+                    _fail(p, f"separation_zones[{zones[at]}].position_m",
+                          f"{after.start_m:g} m is where TVM and ALSN sections meet (an insulated joint goes there)")
+        for position, k in zones.items():
+            if position not in boundaries or not any(tvm[i] and round(s.start_m, 6) == position
+                                                     for i, s in enumerate(sections)):
+                _fail(p, f"separation_zones[{k}].position_m",
+                      f"{position:g} m is not a boundary between two TVM (UM71) sections")
 
     def _restrictions(self, items) -> List[TemporaryRestriction]:
         restrictions = []
@@ -412,15 +477,44 @@ DEFAULT_WHEELBASE_PER_GAP_M = 2.4      # a bogie's outer axles apart per gap bet
 DEFAULT_BOGIE_CENTRES_SHARE = 0.7      # bogie pivots apart / body length [U]
 
 
+def _unit_length(u: dict) -> float:
+    """A unit's given length over its bodies (m): bodies × vehicle_length_m, an articulated set's
+    two end bodies at end_body_length_m."""
+    bodies, body = u.get("bodies", 1), u["vehicle_length_m"]
+    if u.get("articulated", False):
+        return u["count"] * ((bodies - 2) * body + 2 * u.get("end_body_length_m", body))
+    return u["count"] * bodies * body
+
+
+def _articulated_pivots(u: dict, k: int, path) -> List[float]:
+    """Bogie pivots of one articulated vehicle from its front (m): a Jacobs bogie at each joint
+    between two bodies, the end bogies ``bogie_centres_m`` ahead of the first joint and behind the
+    last (docs/traction.md)."""
+    bodies = u.get("bodies", 1)
+    if bodies < 2:
+        _fail(path, f"units[{k}].bodies", "an articulated vehicle needs at least 2 bodies")
+    body = float(u["vehicle_length_m"])
+    end = float(u.get("end_body_length_m", body))
+    centres = float(u.get("bogie_centres_m", body))
+    joints = [end + j * body for j in range(bodies - 1)]
+    if centres > end:
+        _fail(path, f"units[{k}].bogie_centres_m", f"an end bogie {centres:g} m from the joint lies outside "
+                                                   f"the {end:g} m end body")
+    return [joints[0] - centres] + joints + [joints[-1] + centres]
+
+
 def wheelset_offsets(document: dict, path) -> np.ndarray:
     """The train's wheelsets as distances behind its first one (m, ascending, 0 first), from its
     units' bodies placed nose to tail from the front (docs/interfaces.md#rolling-stock-file): a
     body of length L on two bogies whose pivots are ``bogie_centres_m`` apart, centred in it, each
-    bogie's axles spread evenly over ``bogie_wheelbase_m``. Bodies without a length share what the
-    train's length_m leaves equally."""
+    bogie's axles spread evenly over ``bogie_wheelbase_m``; an articulated vehicle's bodies share a
+    bogie at each joint. Bodies without a length share what the train's length_m leaves equally."""
     units = document["units"]
     length = float(document["length_m"])
-    given = sum(u["count"] * u.get("bodies", 1) * u["vehicle_length_m"] for u in units if "vehicle_length_m" in u)
+    for k, u in enumerate(units):
+        if u.get("articulated", False) and "vehicle_length_m" not in u:
+            _fail(path, f"units[{k}].vehicle_length_m", "an articulated vehicle needs its bodies' length")
+    given = sum(_unit_length(u) for u in units if "vehicle_length_m" in u)
     sharing = sum(u["count"] * u.get("bodies", 1) for u in units if "vehicle_length_m" not in u)
     if given > length + 1e-6:
         _fail(path, "units", f"the bodies' vehicle_length_m add up to {given:g} m, more than the train's "
@@ -433,19 +527,33 @@ def wheelset_offsets(document: dict, path) -> np.ndarray:
     front = 0.0
     for k, u in enumerate(units):
         bodies = u.get("bodies", 1)
-        if u["axles"] % (2 * bodies):
-            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bodies} bodies of two bogies")
-        per_bogie = u["axles"] // (2 * bodies)
+        articulated = u.get("articulated", False)
+        bogies = bodies + 1 if articulated else 2 * bodies
+        if u["axles"] % bogies:
+            _fail(path, f"units[{k}].axles", f"{u['axles']} axles do not divide onto {bogies} bogies "
+                                             f"of {bodies} {'articulated ' if articulated else ''}bodies")
+        per_bogie = u["axles"] // bogies
         body = float(u.get("vehicle_length_m", shared))
         # absent values are defaults that always fit: a bogie at most 0.3 of the body, its pivots
         # at most 0.9 of the rest apart (the outer axles stay inside the body)
         wheelbase = float(u.get("bogie_wheelbase_m",
                                 min(DEFAULT_WHEELBASE_PER_GAP_M * (per_bogie - 1), 0.3 * body)))
+        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
+        if articulated:
+            pivots = _articulated_pivots(u, k, path)
+            vehicle = _unit_length(u) / u["count"]
+            if pivots[0] < 0.5 * wheelbase:
+                _fail(path, f"units[{k}].bogie_wheelbase_m", f"an end bogie's {wheelbase:g} m wheelbase "
+                                                             f"reaches beyond the end body")
+            for _ in range(u["count"]):
+                for pivot in pivots:
+                    positions += (front + pivot + axles).tolist()
+                front += vehicle
+            continue
         centres = float(u.get("bogie_centres_m", min(DEFAULT_BOGIE_CENTRES_SHARE * body, 0.9 * (body - wheelbase))))
         if centres + wheelbase > body + 1e-9:
             _fail(path, f"units[{k}].bogie_centres_m", f"bogies {centres:g} m apart with a {wheelbase:g} m "
                                                        f"wheelbase do not fit in a {body:g} m body")
-        axles = (np.linspace(-0.5, 0.5, per_bogie) * wheelbase) if per_bogie > 1 else np.zeros(1)
         for _ in range(u["count"] * bodies):
             overhang = 0.5 * (body - centres)
             for pivot in (overhang, overhang + centres):

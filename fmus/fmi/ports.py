@@ -79,7 +79,7 @@ def line_file_port() -> Port:
 
 def cab_system_port() -> Port:
     """The cab-signalling system a coder sends and a receiver decodes."""
-    return Port("system", "parameter", "String", start="ALSN", description="ALSN | ALSU | ALS-EN | FIRE_DQPSK")
+    return Port("system", "parameter", "String", start="ALSN", description="ALSN | ALSU | TVM430 | ALS-EN | FIRE_DQPSK")
 
 
 def sample_rate_port(fs_hz: float, frame: int) -> Port:

@@ -25,7 +25,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.rail_line.track_circuit import OPEN_OHM, CircuitParameters, Faults, TrackCircuit, rail_impedance
+from fmus.rail_line.track_circuit import (OPEN_OHM, CircuitParameters, Faults, TrackCircuit, end_admittance,
+                                         rail_impedance)
 
 # a 2×2 complex matrix as a tuple (a, b, c, d): [[a, b], [c, d]] acting on (V, I), I the rail-loop
 # current flowing toward the relay end
@@ -101,10 +102,10 @@ class SectionChain:
         self.circuit, self.faults = circuit, faults
         self.start_m, self.feed_m, self.end_m = float(circuit.start_m), float(circuit.feed_m), float(circuit.end_m)
         self.line = RailLine(p, circuit.ballast(faults), frequency_hz)
-        omega = 2.0 * math.pi * frequency_hz
-        bond = complex(p.bond_r_ohm, omega * p.bond_l_h)
-        self.relay_admittance = 1.0 / p.relay_r_ohm + 1.0 / bond
-        self.feed_bond_admittance = 1.0 / bond
+        # each end's bond winding, or its tuned separation zone (a TVM circuit)
+        termination = end_admittance(p, circuit.ballast(faults), frequency_hz)
+        self.relay_admittance = 1.0 / p.relay_r_ohm + termination
+        self.feed_bond_admittance = termination
         self.feed_r_ohm, self.ratio = p.feed_r_ohm, transformer_ratio
         self.g_shunt = 1.0 / p.shunt_r_ohm
         self.feed_open = faults.feed_open
@@ -136,6 +137,28 @@ class SectionChain:
         (ascending), the first of them at ``start_m`` and the last at ``end_m`` (absolute). A
         probe is taken just on the feed side of a wheelset at the same position (the current
         arriving at that axle); a probe beyond the feed leads is the current into the overhang."""
+        v, i, entry, found, into_overhang = self._walk(runs, probes)
+        # the feed: u·ratio behind the feed resistance, the bond winding (or zone) across the rails
+        source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
+        if self.feed_open or abs(source) == 0.0:
+            return [0.0] * len(probes), 0.0, 0.0
+        per_unit = self.ratio / source
+        currents = [abs(into_overhang * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
+        return currents, abs(entry * per_unit), abs(per_unit)
+
+    def seen_from_feed(self, runs: Sequence[tuple], probes: Sequence[float] = ()):
+        """The rails with these wheelsets as the feed node sees them, without the feed's own
+        equipment: (their admittance at the feed node (rails toward the relay end with the relay
+        end's termination, and the overhang), S; the current arriving at each probe per volt at
+        the feed node, A/V, complex). What a voltage applied at the feed node from outside (a
+        neighbour's carrier through the separation zone) drives into the rails."""
+        v, i, _, found, into_overhang = self._walk(runs, probes)
+        return (i + into_overhang) / v, [into_overhang / v if point is None else point[1] / v for point in found]
+
+    def _walk(self, runs: Sequence[tuple], probes: Sequence[float]):
+        """From the relay end (V = 1) through the rails and wheelsets to the feed node: (V, I
+        there, the entry-end current, (V, I) at each probe (None: beyond the feed leads), the
+        overhang's current at the feed)."""
         broken = self.broken_m
         v, i = 1.0 + 0j, self.relay_admittance           # at the relay end, V = 1 (scaled at the end)
         entry = i
@@ -169,14 +192,7 @@ class SectionChain:
             found[wanted[next_probe][1]] = (v, i)
             next_probe += 1
         v, i, x = self._rails(v, i, x, self.feed_m)
-        into_overhang = self._overhang_admittance(overhang) * v
-        # the feed: u·ratio behind the feed resistance, the bond winding across the rails
-        source = v + self.feed_r_ohm * (i + into_overhang + self.feed_bond_admittance * v)
-        if self.feed_open or abs(source) == 0.0:
-            return [0.0] * len(probes), 0.0, 0.0
-        per_unit = self.ratio / source
-        currents = [abs(into_overhang * per_unit) if point is None else abs(point[1] * per_unit) for point in found]
-        return currents, abs(entry * per_unit), abs(per_unit)
+        return v, i, entry, found, self._overhang_admittance(overhang) * v
 
     def _rails(self, v: complex, i: complex, x: float, to: float) -> Tuple[complex, complex, float]:
         """Along the rails from x to ``to`` (≥ x), through a broken rail if one lies between."""

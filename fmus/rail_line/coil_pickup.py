@@ -39,12 +39,13 @@ class CoilPickup:
         self._emf_gain = s.fs_hz * s.coil_gain_h
         self._last_current = [0.0] * trains
         self._sensing = [False] * trains
-        # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones
-        # and from each feed to its section's end, widened by the coil length
+        # where the coil needs the sample-by-sample treatment: around the joints' bond-lead zones,
+        # over the separation zones and from each feed to its section's end, widened by the coil length
         margin = s.coil_length_m
         reach = interference.reach_m
         bands = sorted([(min(lo, joint - reach) - margin, max(hi, joint + reach) + margin)
                         for lo, joint, hi in geometry.joint_zones] +
+                       [(lo - margin, hi + margin) for lo, _, hi in geometry.separation_zones] +
                        [(c.feed_m - margin, c.end_m + margin) for c in geometry.circuits])
         merged: List[List[float]] = []
         for lo, hi in bands:                    # touching or overlapping bands merged: disjoint, sorted

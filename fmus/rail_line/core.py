@@ -10,7 +10,7 @@ The core composes three parts, each with one job:
 * traction_interference.py — the traction interference under the coils: the traction return
   current (lagged, with DC ripple or AC harmonics) times a coupling along the line, the rails'
   asymmetry per section passing from one section's to the next across each joint's bond-lead
-  zone, plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
+  zone (or TVM separation zone), plus the bond leads' and jumper's trapezoid around each joint (with the coil pair's
   mismatch).
 
 What stays here is the trains' motion: a new position update starts x(t) = x_k + v_k·(t − t_k),
@@ -41,6 +41,10 @@ CONFIG_TICK_S = 0.01
 POSITION_BLEND_S = 0.25     # a position update's correction is spread over this time
 POSITION_JUMP_M = 5.0       # a correction larger than this is a jump (a train placed), not blended
 SPEED_JUMP_MPS = 2.0        # likewise for the speed (a train set going)
+# the highest carrier per sample rate: the network's zero-order hold and the coil's backward
+# difference lose 2 sin(πf/fs)/(2πf/fs) of the carrier's level, ≤ 10 % at fs/4
+# (docs/rail_line.md#tvm-430-track-circuits, sample rate)
+MAX_CARRIER_SHARE_OF_FS = 0.25
 
 
 @dataclass
@@ -137,8 +141,13 @@ class RailLineCore:
             raise FmuInputError(f"parameter supply_tolerance: {s.supply_tolerance:g} (need 0 ≤ tolerance < 0.5)")
         if not s.shunt_margin >= 0:
             raise FmuInputError(f"parameter shunt_margin: {s.shunt_margin:g} (need ≥ 0)")
-        if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz / 4:
+        if s.carrier_hz < 0 or s.carrier_hz > s.fs_hz * MAX_CARRIER_SHARE_OF_FS:
             raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz (0: the line file's; else up to fs/4)")
+        for k, section in enumerate(line.sections):
+            if section.carrier_hz > s.fs_hz * MAX_CARRIER_SHARE_OF_FS:
+                raise FmuInputError(f"{line.path}: field block_sections[{k}].carrier_hz: {section.carrier_hz:g} Hz "
+                                    f"needs fs ≥ {4 * section.carrier_hz:g} Hz (carriers up to fs/4), "
+                                    f"parameter fs is {s.fs_hz:g} Hz")
         low, high = s.tone_band_hz
         if (low or high) and not 0 < low < high <= s.fs_hz / 4:
             raise FmuInputError(f"parameter tone_band_max: the tone band {low:g}…{high:g} Hz needs "

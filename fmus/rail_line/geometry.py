@@ -1,8 +1,8 @@
 """Where the line's track circuits lie (no FMI here; docs/rail_line.md): each section's track
-circuit (its feed leads, network nodes and segments, its ballast), the insulated joints'
-bond-lead zones, each section's code carrier and track-circuit frequency, and which section and
-which network node a position falls on; for a code of several tones (ALSU) the band the
-rails' impedance follows.
+circuit (its feed leads, network nodes and segments, its ballast; a TVM section's zones), the
+insulated joints' bond-lead zones and the TVM sections' separation zones, each section's code
+carrier and track-circuit frequency, and which section and which network node a position falls
+on; for a code of several tones (ALSU) the band the rails' impedance follows.
 """
 from __future__ import annotations
 
@@ -13,8 +13,31 @@ from typing import Tuple
 
 import numpy as np
 
-from fmus.data.loader import Line, check_carrier_under_traction
-from fmus.rail_line.track_circuit import TrackCircuit
+from fmus.data.loader import (DEFAULT_ZONE_LENGTH_M, TVM_TRACK_CARRIERS_HZ, TVM_TRANSMITTER, Line,
+                              check_carrier_under_traction)
+from fmus.rail_line.track_circuit import (UM71_RECEIVER_R_OHM, UM71_TRANSMITTER_R_OHM, SeparationZone,
+                                         TrackCircuit)
+
+
+def _section_parameters(c, line: Line, section):
+    """A section's circuit parameters: its ballast, and for a UM71 circuit its zones and equipment."""
+    ballast = c.ballast_ohm_km if c.ballast_ohm_km > 0 else float(section.ballast_ohm_km)
+    zone = _zone(line, section)
+    if zone is None:
+        return replace(c, ballast_ohm_km=ballast)
+    return replace(c, ballast_ohm_km=ballast, zone=zone, feed_r_ohm=UM71_TRANSMITTER_R_OHM,
+                   relay_r_ohm=UM71_RECEIVER_R_OHM)
+
+
+def _zone(line: Line, section):
+    """A UM71 section's separation zones (None: an ALSN circuit between insulated joints)."""
+    if section.transmitter != TVM_TRANSMITTER:
+        return None
+    own = float(section.carrier_hz)
+    pair = next(track for track in TVM_TRACK_CARRIERS_HZ if own in track)
+    zones = line.separation_zones
+    length = zones.get(float(section.end_m), zones.get(float(section.start_m), DEFAULT_ZONE_LENGTH_M))
+    return SeparationZone(own, pair[1] if own == pair[0] else pair[0], length)
 
 
 class LineGeometry:
@@ -25,13 +48,18 @@ class LineGeometry:
         self.count = len(line.sections)
         leads = [(float(j["position_m"]), float(j.get("bond_lead_offset_m", 1.0))) for j in line.joints]
         offsets = {round(position, 6): offset for position, offset in leads}
-        # each circuit's ballast: the line file's per-section minimum unless the `ballast` parameter overrides all
+        # each circuit's ballast: the line file's per-section minimum unless the `ballast` parameter
+        # overrides all; a TVM (UM71) circuit ends in tuned separation zones for its track's pair of
+        # carriers (the zone's length: the line file's at the section's exit, else at its entry)
         self.circuits = [TrackCircuit(sec.start_m, sec.end_m, offsets.get(round(sec.end_m, 6), 1.0),
-                                      replace(c, ballast_ohm_km=c.ballast_ohm_km if c.ballast_ohm_km > 0
-                                              else float(sec.ballast_ohm_km)))
+                                      _section_parameters(c, line, sec))
                          for sec in line.sections]
         # (bond lead before, joint, bond lead beyond) of every insulated joint
         self.joint_zones = [(position - offset, position, position + offset) for position, offset in leads]
+        # (start, boundary, end) of every tuned separation zone between two TVM sections: the
+        # traction current's asymmetry passes from one section's to the next across it
+        self.separation_zones = [(position - 0.5 * length, position, position + 0.5 * length)
+                                 for position, length in sorted(line.separation_zones.items())]
         self.starts = np.array([sec.start_m for sec in line.sections])
         self.ends = np.array([sec.end_m for sec in line.sections])
         self._ends_ext = np.append(self.ends, -np.inf)

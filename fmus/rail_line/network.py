@@ -8,16 +8,23 @@ matrices. Three kinds cover the track circuit (a new component is one small clas
 * ``RLBranch(a, b, r, l)`` — series R–L (rail segment, impedance-bond winding); its current
   a → b is a state;
 * ``NortonSource(a, b, g, input, gain)`` — a voltage gain·u[input] behind an internal
-  resistance 1/g.
+  resistance 1/g;
+* ``RLCBranch(a, b, r, l, c)`` — series R–L–C (a tuned unit of a separation zone, a capacitor
+  with its lead inductance); its current a → b and its capacitor's voltage are states.
 
-With node voltages v, branch currents i and inputs u:
+With node voltages v, branch currents i, the series capacitors' voltages w and inputs u:
 
     KCL:       G·v + Q·i = P·u            (Q[a,k] = +1, Q[b,k] = −1: branch k leaves a)
-    branches:  L·di/dt = Qᵀ·v − R·i
+    branches:  L·di/dt = Qᵀ·v − R·i − S·w (S[k,c] = 1: capacitor c sits in branch k)
+    capacitors: C·dw/dt = Sᵀ·i
 
-so the node voltages are algebraic (there is a conductance to ground at every node) and
+so the node voltages are algebraic (there is a conductance to ground at every node) and, with
+the states x = [i; w],
 
-    di/dt = A·i + B·u,  A = −L⁻¹(Qᵀ G⁻¹ Q + R),  B = L⁻¹ Qᵀ G⁻¹ P,  v = G⁻¹(P·u − Q·i).
+    dx/dt = A·x + B·u,  A = [[−L⁻¹(Qᵀ G⁻¹ Q + R), −L⁻¹S], [C⁻¹Sᵀ, 0]],  B = [[L⁻¹ Qᵀ G⁻¹ P], [0]],
+    v = G⁻¹(P·u − Q·i).
+
+The capacitors' voltages come after every branch current, so state k is still branch k's current.
 
 ``phasor_with_shunt`` solves the same equations at one frequency; ``discretise`` gives the exact
 zero-order-hold model at the sample rate (scipy.linalg.expm of the augmented matrix).
@@ -56,6 +63,20 @@ class RLBranch:
 
 
 @dataclass(frozen=True)
+class RLCBranch:
+    """Series R–L–C from a to b (C in farads > 0); a capacitor alone is given its lead
+    inductance, since every branch's current is a state."""
+    a: str
+    b: str
+    r: float
+    l: float
+    c: float
+
+    def stamp(self, net: "Network") -> None:
+        net._branch(self.a, self.b, self.r, self.l, self.c)
+
+
+@dataclass(frozen=True)
 class NortonSource:
     """Voltage gain·u[input] behind the internal resistance 1/g."""
     a: str
@@ -73,7 +94,7 @@ class NortonSource:
 class StateSpace:
     a: np.ndarray
     b: np.ndarray
-    node_from_state: np.ndarray      # v = node_from_state @ i + node_from_input @ u
+    node_from_state: np.ndarray      # v = node_from_state @ x + node_from_input @ u (x = [i; w])
     node_from_input: np.ndarray
 
 
@@ -83,7 +104,7 @@ class Network:
         self.node_index: Dict[str, int] = {}
         self._g: List[Tuple[int, int, float]] = []
         self._p: List[Tuple[int, int, float]] = []
-        self.branches: List[Tuple[int, int, float, float]] = []
+        self.branches: List[Tuple[int, int, float, float, float]] = []   # (a, b, r, l, c; c = 0: none)
 
     def node(self, name: str) -> int:
         if name == GROUND:
@@ -108,8 +129,8 @@ class Network:
         if ib >= 0:
             self._p.append((ib, input_index, -g))
 
-    def _branch(self, a: str, b: str, r: float, l: float) -> None:
-        self.branches.append((self.node(a), self.node(b), r, l))
+    def _branch(self, a: str, b: str, r: float, l: float, c: float = 0.0) -> None:
+        self.branches.append((self.node(a), self.node(b), r, l, c))
 
     # ---- matrices -----------------------------------------------------------------------------
     def matrices(self):
@@ -121,19 +142,22 @@ class Network:
         for i, k, value in self._p:
             p[i, k] += value
         q = np.zeros((n, m))
-        for k, (a, b, _, _) in enumerate(self.branches):
+        for k, (a, b, *_) in enumerate(self.branches):
             if a >= 0:
                 q[a, k] = 1.0
             if b >= 0:
                 q[b, k] = -1.0
         r = np.array([b[2] for b in self.branches])
         l = np.array([b[3] for b in self.branches])
-        return g, p, q, r, l
+        c = np.array([b[4] for b in self.branches])
+        return g, p, q, r, l, c
 
     def _admittance(self, omega: float):
         """(nodal admittance matrix Y at ω, injection P·u matrix P, Q, branch impedances z)."""
-        g, p, q, r, l = self.matrices()
+        g, p, q, r, l, c = self.matrices()
         z = r + 1j * omega * l
+        with np.errstate(divide="ignore"):
+            z = z + np.where(c > 0, 1.0 / (1j * omega * np.where(c > 0, c, 1.0)), 0.0)
         return g + (q / z) @ q.T, p, q, z
 
     def phasor_with_shunt(self, omega: float, u: np.ndarray, g: float, observe: int):
@@ -149,15 +173,25 @@ class Network:
         return at_node, at_observe, free[observe]
 
     def state_space(self) -> StateSpace:
-        g, p, q, r, l = self.matrices()
-        return _state_space(q, r, l, np.linalg.solve(g, q), np.linalg.solve(g, p))
+        g, p, q, r, l, c = self.matrices()
+        return _state_space(q, r, l, c, np.linalg.solve(g, q), np.linalg.solve(g, p))
 
 
-def _state_space(q, r, l, g_inv_q, g_inv_p) -> StateSpace:
-    """di/dt = A·i + B·u and the node voltages, from G⁻¹Q and G⁻¹P (module docstring)."""
+def _state_space(q, r, l, c, g_inv_q, g_inv_p) -> StateSpace:
+    """dx/dt = A·x + B·u and the node voltages, from G⁻¹Q and G⁻¹P (module docstring); x is the
+    branch currents followed by the series capacitors' voltages (none: x = i, as before)."""
     a = -(q.T @ g_inv_q + np.diag(r)) / l[:, None]
     b = (q.T @ g_inv_p) / l[:, None]
-    return StateSpace(a, b, -g_inv_q, g_inv_p)
+    node_from_state = -g_inv_q
+    with_c = np.flatnonzero(c > 0)
+    if with_c.size:
+        m, n = len(r), with_c.size
+        select = np.zeros((m, n))
+        select[with_c, np.arange(n)] = 1.0
+        a = np.block([[a, -select / l[:, None]], [select.T / c[with_c][:, None], np.zeros((n, n))]])
+        b = np.vstack([b, np.zeros((n, b.shape[1]))])
+        node_from_state = np.hstack([node_from_state, np.zeros((node_from_state.shape[0], n))])
+    return StateSpace(a, b, node_from_state, g_inv_p)
 
 
 class ShuntFamily:
@@ -168,7 +202,7 @@ class ShuntFamily:
 
     def __init__(self, net: Network, g: float):
         self.g = g
-        g_matrix, p, self.q, self.r, self.l = net.matrices()
+        g_matrix, p, self.q, self.r, self.l, self.c = net.matrices()
         self.g_inv = np.linalg.inv(g_matrix)
         self.g_inv_q = self.g_inv @ self.q
         self.g_inv_p = self.g_inv @ p
@@ -184,7 +218,7 @@ class ShuntFamily:
             core = np.eye(idx.size) / self.g + self.g_inv[np.ix_(idx, idx)]
             g_inv_q = g_inv_q - self.g_inv[:, idx] @ np.linalg.solve(core, g_inv_q[idx])
             g_inv_p = g_inv_p - self.g_inv[:, idx] @ np.linalg.solve(core, g_inv_p[idx])
-        return _state_space(self.q, self.r, self.l, g_inv_q, g_inv_p)
+        return _state_space(self.q, self.r, self.l, self.c, g_inv_q, g_inv_p)
 
 
 class PhasorFamily:

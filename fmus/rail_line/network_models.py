@@ -80,8 +80,8 @@ class NetworkModels:
         family_key = (k, faults)
         if family_key not in self._families:
             net = circuit.network(None, faults, self.settings.transformer_ratio, carrier, self.geometry.band_hz)
-            self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index)
-        family, node_index = self._families[family_key]
+            self._families[family_key] = (ShuntFamily(net, self.g_shunt), net.node_index, net.feed_branches)
+        family, node_index, feed_branches = self._families[family_key]
         shunts, heads = config
         system = family.state_space([node_index[f"n{node}"] for node in shunts])
         phi, gamma = discretise(system, self.dt)
@@ -89,7 +89,7 @@ class NetworkModels:
         nx = phi.shape[0]
         segments = circuit.segments
         # output rows: the current arriving from the feed at each head (−segment current ahead of
-        # its node; at the feed node, what the feed delivers: source − bond winding), then the
+        # its node; at the feed node, what the feed delivers: source − bond winding or zone), then the
         # entry-end current (−segment 0)
         rows = np.zeros((len(heads) + 1, nx))
         direct = np.zeros(len(heads) + 1)
@@ -97,9 +97,9 @@ class NetworkModels:
             if node < segments:
                 rows[h, node] = -1.0
             elif not faults.feed_open:
-                g_feed, feed = 1.0 / self.settings.circuit.feed_r_ohm, node_index[f"n{segments}"]
+                g_feed, feed = 1.0 / circuit.params.feed_r_ohm, node_index[f"n{segments}"]
                 rows[h] = -g_feed * system.node_from_state[feed]
-                rows[h, segments + 1] -= 1.0                 # the feed bond winding's branch
+                rows[h, feed_branches] -= 1.0                # the feed bond winding's (or zone's) branches
                 direct[h] = g_feed * (self.settings.transformer_ratio - system.node_from_input[feed, 0])
         rows[-1, 0] = -1.0
         out_o = np.empty((n, len(rows), nx))

@@ -29,9 +29,64 @@ from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.rail_line.network import Conductance, Network, NortonSource, RLBranch
+from fmus.rail_line.network import Conductance, Network, NortonSource, RLBranch, RLCBranch
 
 OPEN_OHM = 1e9
+# a UM71 circuit's equipment at the rails, in place of the feed_r and relay_r of the ALSN circuits:
+# the transmitter behind its matching transformer (nearer a current source, so a wheelset on its
+# zone does not take the whole level at maximum ballast) and the receiver's input [U]; with them
+# a 1500 m circuit calibrates at 1–50 Ω·km at 1700 and 2300 Hz (docs/rail_line.md)
+UM71_TRANSMITTER_R_OHM = 5.0
+UM71_RECEIVER_R_OHM = 20.0
+
+
+@dataclass(frozen=True)
+class SeparationZone:
+    """The tuned electrical separation zone at each end of an audio-frequency (TVM) track circuit
+    without insulated joints (docs/rail_line.md, separation zones): two tuned units across the
+    rails ``length_m`` apart, each a series L–C resonant at the OTHER side's carrier (a short for
+    it); the rails between them and the far unit make the near one a parallel resonance at its
+    own carrier (a high impedance: its transmitter's or receiver's level is not shorted). The
+    unit of the higher carrier has a capacitor in parallel (a series L–C is inductive above its
+    resonance and could not resonate with the zone's rails). Values are designed from the rails'
+    impedance at the two carriers [U: our design, docs/sources.md#tvm-430-track-circuits]."""
+    own_hz: float                     # the section's carrier
+    other_hz: float                   # the carrier on the other side of the zone (the track's pair)
+    length_m: float = 26.0            # between the two tuned units [U]
+    unit_q: float = 30.0              # quality factor of the tuned units' inductors [U]
+    capacitor_q: float = 200.0        # of the parallel capacitor [U]
+    capacitor_lead_h: float = 1e-6    # the parallel capacitor's lead inductance [U]
+
+
+def _tuned_units(zone: SeparationZone, params: "CircuitParameters"):
+    """The zone's two tuned units as series branches (r Ω, l H, c F): (the lower carrier's unit,
+    the higher carrier's unit) each a list of branches across the rails; lossless design, the
+    losses added from the quality factors."""
+    low, high = sorted((zone.own_hz, zone.other_hz))
+    w_low, w_high = 2 * np.pi * low, 2 * np.pi * high
+    km = zone.length_m / 1000.0
+    l_rails_low = rail_impedance(params, low)[1] * km
+    l_rails_high = rail_impedance(params, high)[1] * km
+    # the lower unit: series resonance at the higher carrier, its capacitive reactance at the lower
+    # one cancelling the zone's rails (the far unit shorts the lower carrier): ωL_u(ω_H²/ω² − 1) = ωL_z
+    l_low = l_rails_low / ((w_high / w_low) ** 2 - 1.0)
+    c_low = 1.0 / (w_high ** 2 * l_low)
+    # the higher unit: the same inductor, series resonance at the lower carrier; in parallel a
+    # capacitor whose susceptance at the higher carrier cancels the series branch's and the rails'
+    l_high = l_low
+    c_high = 1.0 / (w_low ** 2 * l_high)
+    x_series = w_high * l_high - 1.0 / (w_high * c_high)
+    susceptance = 1.0 / x_series + 1.0 / (w_high * l_rails_high)
+    c_parallel = 1.0 / (w_high * (1.0 / susceptance + w_high * zone.capacitor_lead_h))
+    lower = [(w_high * l_low / zone.unit_q, l_low, c_low)]
+    higher = [(w_low * l_high / zone.unit_q, l_high, c_high),
+              (1.0 / (w_high * c_parallel) / zone.capacitor_q, zone.capacitor_lead_h, c_parallel)]
+    return (lower, higher) if zone.own_hz < zone.other_hz else (higher, lower)
+
+
+def _series_impedance(branch, omega: float) -> complex:
+    r, l, c = branch
+    return complex(r, omega * l - 1.0 / (omega * c))
 
 
 @dataclass(frozen=True)
@@ -48,6 +103,31 @@ class CircuitParameters:
     bond_l_h: float = 0.02                 # (|Z| ≈ 6.3 Ω at 50 Hz) [U]
     shunt_r_ohm: float = 0.06              # normative train shunt [S]
     segment_m: float = 50.0
+    zone: Optional[SeparationZone] = None  # a TVM circuit: both ends in tuned separation zones
+                                           # (instead of the bonds); None: insulated joints
+
+
+def near_unit_admittance(params: CircuitParameters, frequency_hz: float) -> complex:
+    """The admittance of a UM71 circuit's own tuned unit at either end (the zone's near unit)."""
+    omega = 2 * np.pi * frequency_hz
+    return sum(1.0 / _series_impedance(b, omega) for b in _tuned_units(params.zone, params)[0])
+
+
+def end_admittance(params: CircuitParameters, ballast_ohm_km: float, frequency_hz: float) -> complex:
+    """What terminates either end of a circuit across the rails besides its relay or source, at
+    ``frequency_hz``: the impedance bond's signal winding at an insulated joint, or the tuned
+    separation zone (its near unit in parallel with the zone's rails leading to the far unit,
+    which sits on the zone's ballast)."""
+    omega = 2 * np.pi * frequency_hz
+    zone = params.zone
+    if zone is None:
+        return 1.0 / complex(params.bond_r_ohm, omega * params.bond_l_h)
+    near, far = _tuned_units(zone, params)
+    r, l = rail_impedance(params, frequency_hz)
+    km = zone.length_m / 1000.0
+    far_admittance = km / ballast_ohm_km + sum(1.0 / _series_impedance(b, omega) for b in far)
+    return (sum(1.0 / _series_impedance(b, omega) for b in near)
+            + 1.0 / (complex(r * km, omega * l * km) + 1.0 / far_admittance))
 
 
 @dataclass(frozen=True)
@@ -142,10 +222,17 @@ class TrackCircuit:
             if ladder:
                 net.add(Conductance(f"m{k}", b, 1.0 / (ladder[2] * length_km)))
         feed, relay = f"n{self.segments}", "n0"
-        net.add(RLBranch(relay, "0", p.bond_r_ohm, p.bond_l_h), Conductance(relay, "0", 1.0 / p.relay_r_ohm))
+        first = len(net.branches)
+        self._terminate(net, relay, "relay_zone", faults, frequency_hz, rail_r, rail_l)
+        net.add(Conductance(relay, "0", 1.0 / p.relay_r_ohm))
+        # the branches leaving the feed node other than the rails (the feed's current into the rails
+        # is the source's less theirs: network_models.py)
+        before_feed = len(net.branches)
+        self._terminate(net, feed, "feed_zone", faults, frequency_hz, rail_r, rail_l)
+        net.feed_branches = [k for k in range(before_feed, len(net.branches)) if net.branches[k][0] == net.node(feed)]
+        net.end_branches = list(range(first, len(net.branches)))
         if not faults.feed_open:
-            net.add(RLBranch(feed, "0", p.bond_r_ohm, p.bond_l_h),
-                    NortonSource(feed, "0", 1.0 / p.feed_r_ohm, 0, transformer_ratio))
+            net.add(NortonSource(feed, "0", 1.0 / p.feed_r_ohm, 0, transformer_ratio))
         else:
             net.add(Conductance(feed, "0", 1.0 / OPEN_OHM))
         if shunt_node is not None:
@@ -154,6 +241,22 @@ class TrackCircuit:
             for k in range(self.segments):
                 net.add(RLBranch(f"m{k}", f"n{k + 1}", 0.0, ladder[3] * length_km))
         return net
+
+    def _terminate(self, net: Network, node: str, name: str, faults: Faults, frequency_hz: Optional[float],
+                   rail_r: float, rail_l: float) -> None:
+        """The end network across the rails at ``node`` (end_admittance, as branches): the bond
+        winding, or the separation zone: the near tuned unit, the zone's rails (the section's
+        rail R and L) to an inner node on the zone's ballast, the far tuned unit there."""
+        p = self.params
+        if p.zone is None:
+            net.add(RLBranch(node, "0", p.bond_r_ohm, p.bond_l_h))
+            return
+        near, far = _tuned_units(p.zone, p)
+        km = p.zone.length_m / 1000.0
+        inner = f"{name}_far"
+        net.add(*(RLCBranch(node, "0", r, l, c) for r, l, c in near))
+        net.add(RLBranch(node, inner, rail_r * km, rail_l * km), Conductance(inner, "0", km / self.ballast(faults)))
+        net.add(*(RLCBranch(inner, "0", r, l, c) for r, l, c in far))
 
 
 def cascade_shunt_current(circuit: TrackCircuit, x_m: float, train_length_m: float = 0.0,

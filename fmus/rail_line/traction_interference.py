@@ -68,8 +68,9 @@ class TractionInterference:
         self.joints = np.sort(np.array([joint for _, joint, _ in geometry.joint_zones], dtype=float))
         # each bond-lead zone with the sections on either side (−1: off the line); indices, not
         # values, because a study may overwrite the asymmetries after construction
+        # (a separation zone between TVM sections likewise, over its length, without a joint's trapezoid)
         self.lead_zones = sorted((lo_m, hi_m, geometry.section_at(lo_m - 1e-9), geometry.section_at(hi_m))
-                                 for lo_m, _, hi_m in geometry.joint_zones)
+                                 for lo_m, _, hi_m in geometry.joint_zones + geometry.separation_zones)
         self._lead_starts = [zone[0] for zone in self.lead_zones]
         self._lead_ends = [zone[1] for zone in self.lead_zones]
         self.reach_m = JOINT_RAMP_M + 0.5 * JOINT_TOP_M     # b(x) is zero farther than this from a joint

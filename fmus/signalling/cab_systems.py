@@ -1,7 +1,7 @@
 """The cab-signal systems a coder or receiver can be built for, by their `system` parameter:
-the frequency systems ALSN (numeric codes on one carrier), ALSU (two of six tones, alsu.py)
-and TVM430 (a 27-bit word of very-low tones on an audio-frequency carrier, tvm430.py), and the
-digital systems (digital_messages.py)."""
+the frequency systems ALSN (numeric codes on one carrier) and ALSU (two of six tones,
+alsu.py), TVM-430 (a 27-bit word of very-low tones on an audio-frequency carrier, tvm430.py),
+and the digital systems (digital_messages.py)."""
 from __future__ import annotations
 
 from typing import Optional

@@ -40,6 +40,7 @@ import numpy as np
 
 from fmus.errors import FmuInputError, non_finite_number
 from fmus.signalling import aspects as sig
+from fmus.signalling.digital_messages import Indication
 
 NAME = "TVM430"
 CODES_FILE = Path(__file__).resolve().parent / "tvm430_codes.json"
@@ -264,6 +265,17 @@ class Tvm430System:
         blocks = FREE_BLOCKS_OPEN if no_target else self.blocks_before_target(step, following)
         return Reading(word, step, following, t.control_kmh(step), distance * t.distance_step_m, no_target,
                        t.gradient_permille[field(word, "gradient")], aspect, blocks)
+
+    def command_of_code(self, code: int) -> Optional[int]:
+        """The word a coder's raw ``code_tx`` stands for; None for no word or one a receiver
+        cannot read (the verdicts' reading, as for the other systems)."""
+        return None if self.reading(int(code)) is None else int(code)
+
+    def indication(self, word: int, category: str) -> Indication:
+        """The word as the other systems' indications (the same for every train category: TVM
+        steps are the line's, for the high-speed trains it is built for)."""
+        read = self.reading(word)
+        return Indication(word, read.aspect, read.free_blocks, read.step_kmh, read.next_kmh)
 
     def blocks_before_target(self, step_kmh: float, next_kmh: float) -> int:
         for m, pair in enumerate(self.pair_of_blocks):

@@ -1,16 +1,18 @@
-"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN), AlsuCoderCore (ALSU) or
-DigitalCoderCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital_generator.py)."""
-from fmus.signalling import alsn, alsu, cab_systems
+"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN), AlsuCoderCore (ALSU), Tvm430CoderCore
+(TVM430) or DigitalCoderCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, tvm430.py,
+digital_generator.py)."""
+from fmus.signalling import alsn, alsu, cab_systems, tvm430
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, cab_system_port, sample_rate_port
 from fmus.wayside_coder.alsu import AlsuCoderCore
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore, bind_outputs
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
+from fmus.wayside_coder.tvm430 import Tvm430CoderCore
 
 
 class WaysideCoder(FrameFacadeSlave):
     description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters, "
-                   "ALSU two-of-six tone generators or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
+                   "ALSU two-of-six tone generators, TVM-430 word generators or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
 
     @classmethod
     def declare_ports(cls, build):
@@ -19,14 +21,19 @@ class WaysideCoder(FrameFacadeSlave):
         return [
             line_file_port(),
             Port("codes_file", "parameter", "String", start="",
-                 description="code tables (JSON); empty: the bundled ones (ALSN KPT-5/KPT-7 timings, ALSU tone pairs)"),
+                 description="code tables (JSON); empty: the bundled ones (ALSN KPT-5/KPT-7 timings, ALSU tone pairs, "
+                             "TVM-430 word tables)"),
             cab_system_port(),
             sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: ALSN each section's carrier from the line file, digital the system's "
-                             "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz), ALSU its six tones; else this carrier for all"),
+                             "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz), ALSU its six tones, TVM430 each section's "
+                             "from the line file; else this carrier for all (ALSN, digital)"),
             Port("amplitude", "parameter", unit="V", start=s.amplitude_v, min=0.0,
                  description="peak transmitter voltage (ALSU: of each tone)"),
+            Port("address", "parameter", "Integer", start=0, min=0, max=7,
+                 description="TVM430: network address sent in every word (one of the word tables' addresses); "
+                             "0: the tables' first"),
             Port("block_aspects", "parameter", "Integer", start=s.block_aspects, min=3, max=4,
                  description="automatic block with 3 or 4 signal aspects"),
             Port("coding", "parameter", "String", start=s.coding, description="always | on_occupation"),
@@ -54,7 +61,7 @@ class WaysideCoder(FrameFacadeSlave):
             Port("u_tx", "output", unit="V", shape=(k, n), frame=True, description="transmitter voltage into each section"),
             Port("code_tx", "output", "Integer", start=0, shape=(k,),
                  description="code in the frame's last sample, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; ALSU code 1-13; "
-                             "FIRE_DQPSK command 1-16; ALS-EN KLUB register"),
+                             "FIRE_DQPSK command 1-16; ALS-EN KLUB register; TVM430 the 27-bit word"),
             Port("signal", "output", "Integer", start=0, shape=(k,),
                  description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
             Port("status", "output", "Integer", start=0, description="0 ok, 1 one transmitter/controller failed, 2 both"),
@@ -75,6 +82,10 @@ class WaysideCoder(FrameFacadeSlave):
         if cab_systems.is_alsu(p("system")):
             table = alsu.load_codes(self.resource_path(p("codes_file") or str(alsu.CODES_FILE)))
             core = AlsuCoderCore(line, self.build.sections, self.build.frame, settings, table)
+        elif cab_systems.is_tvm430(p("system")):
+            table = tvm430.load_codes(self.resource_path(p("codes_file") or str(tvm430.CODES_FILE)))
+            core = Tvm430CoderCore(line, self.build.sections, self.build.frame, settings, table,
+                                   p("address") or None)
         elif system is None:
             codes = alsn.load_transmitters(self.resource_path(p("codes_file") or str(alsn.CODES_FILE)))
             core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)

@@ -27,6 +27,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from fmus.data.loader import DATA, DEFAULT_ROLLING_STOCK, Line, load_line, load_rolling_stock
+from fmus.errors import FmuInputError
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.geometry import LineGeometry
 from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
@@ -123,6 +124,9 @@ def _designs(line: Line, settings: RailSettings, only: Optional[int] = None) -> 
     the design of that section (an index) alone."""
     groups: Dict[tuple, Tuple[List[int], TrackCircuit]] = {}
     for k, circuit in enumerate(LineGeometry(line, settings).circuits):
+        if circuit.params.zone is not None:       # netlist.py writes bonds, not tuned zones
+            raise FmuInputError(f"{line.path}: field block_sections[{k}].transmitter: the ngspice cross-check "
+                                f"covers the ALSN circuits; '{line.sections[k].name}' is a UM71 (TVM) circuit")
         key = (circuit.segments, round(circuit.feed_m - circuit.start_m, 6), round(circuit.end_m - circuit.start_m, 6),
                circuit.params)
         groups.setdefault(key, ([], circuit))[0].append(k)

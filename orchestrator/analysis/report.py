@@ -355,14 +355,14 @@ def read_results_file(path: Path):
 
 def _receiver_band_pass(params: dict):
     """The band-pass the receiver FMU designs from these parameters: its own settings mapping
-    and filter design; None for ALSU (six channels) and TVM430 (a baseband low-pass per carrier)."""
+    and filter design; None for ALSU (six channels) and TVM430 (its track's carriers)."""
     from fmus.loco_receiver.filters import receiver_band_pass
     from fmus.loco_receiver.parameters import receiver_settings
     from fmus.signalling import cab_systems
 
     name = str(params.get("system", "ALSN"))
     if name in (cab_systems.ALSU, cab_systems.TVM430):
-        return None              # six tone channels / two carriers, no one band-pass: the EMF alone is drawn
+        return None              # ALSU's six tone channels, TVM's four carriers: the EMF alone is drawn
     system = cab_systems.DIGITAL.get(name)
     return receiver_band_pass(receiver_settings(system, params), system)
 

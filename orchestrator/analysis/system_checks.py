@@ -31,7 +31,7 @@ import fmus
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
-from fmus.signalling import alsn
+from fmus.signalling import alsn, alsu, tvm430
 from orchestrator.errors import RefusedComponents, UserError, print_warning
 from orchestrator.graph import SystemGraph
 
@@ -79,7 +79,9 @@ def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_w
                                            graph.nodes)
     for name in lines:                    # a timetable is read against its component's line
         load("timetable_file", lambda p: load_timetable(p, lines[name]), DEFAULT_TIMETABLE, [name])
-    load("codes_file", alsn.load_transmitters, alsn.CODES_FILE, graph.nodes)
+    # a code table is the one its component's system reads (ALSN's transmitters otherwise)
+    for system, (loader, default) in CODE_TABLES.items():
+        load("codes_file", loader, default, [name for name in graph.nodes if _system_of(graph, name) == system])
     paths = {name: _data_path(graph.nodes[name].parameters.get("line_file"), DEFAULT_LINE) for name in lines}
     for error in shared_line_problems(graph, paths):
         note(error)
@@ -87,6 +89,18 @@ def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_w
         note(error, refused)
     if defects:
         raise RefusedComponents(defects)
+
+
+#: system → (loader, bundled default) of a ``codes_file``; every other system: ALSN's
+CODE_TABLES = {"ALSN": (alsn.load_transmitters, alsn.CODES_FILE), "ALSU": (alsu.load_codes, alsu.CODES_FILE),
+               "TVM430": (tvm430.load_codes, tvm430.CODES_FILE)}
+
+
+def _system_of(graph: SystemGraph, name: str) -> str:
+    """The system whose code table a component's ``codes_file`` is (an unknown name: ALSN's, the
+    FMU refuses the name itself)."""
+    system = str(graph.nodes[name].parameters.get("system", "ALSN"))
+    return system if system in CODE_TABLES else "ALSN"
 
 
 def check_sections_contiguous(line: Line) -> None:

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import fmus
+from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.analysis.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
@@ -55,11 +56,23 @@ ATO_STEP_S = 0.5
 def committed_ports(folder: Path, source: str) -> Optional[Ports]:
     """The committed contract manifest of a railcosim FMU (``fmus/<unit>/contract.json``, checked
     against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
-    (``Traction.fmu`` → ``fmus/traction``); None for any other FMU."""
+    (``Traction.fmu`` → ``fmus/traction``), its arrays sized as the source's folder says
+    (``k32m2n40/RailLine.fmu``: 32 sections); None for any other FMU."""
     stem = Path(source).stem
     unit = re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower()
     manifest = Path(fmus.__file__).parent / unit / "contract.json"
-    return read_manifest(manifest) if stem and manifest.is_file() else None
+    if not stem or not manifest.is_file():
+        return None
+    ports = read_manifest(manifest)
+    sizes = sizes_of_source(source)
+    if sizes is None:
+        return ports
+    # the manifests are the default build's: its K, M, N are distinct numbers, so every array
+    # dimension says which size it is
+    default = BuildConfig()
+    scale = {default.sections: sizes.sections, default.trains: sizes.trains, default.frame: sizes.frame}
+    return {name: ({**port, "shape": [scale.get(d, d) for d in port["shape"]]} if port.get("shape") else port)
+            for name, port in ports.items()}
 
 
 def write_ssd(folder: Path, name: str, components, connections, **options) -> Path:
@@ -131,19 +144,23 @@ def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict
 
 SIGNAL_FS_HZ = 4000.0
 CHAIN_PORTS = ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")
+TVM430_PORTS = ("target_distance", "gradient", "word_carrier")
 
 
 def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sections: int = 8, frame: int = 40,
                  fmu_folder: str = "resources", coder: Dict[str, object] = None, rail: Dict[str, object] = None,
                  receiver: Dict[str, object] = None, stocks: Optional[Sequence] = None,
-                 parameter_file: Optional[str] = None):
+                 parameter_file: Optional[str] = None, fs_hz: float = SIGNAL_FS_HZ):
     """Coder → rail line → one receiver per train (``rx``, or ``rx1``, ``rx2`` … for several) →
     its ATO, and each train's position back into the rail line (train j on slot j). The rail
     line's ``train_length[j]`` is the length in train j's rolling-stock file (``stocks[j-1]``,
     default the bundled default stock) and its ``rolling_stock_file[j]`` that file, so the rail
     line shunts the train the Traction moves, at its wheelsets.
-    ``parameter_file``: an .ssv the coder and the rail line also bind (e.g. the line file)."""
-    step = frame / SIGNAL_FS_HZ                  # a signal FMU steps one frame
+    ``parameter_file``: an .ssv the coder and the rail line also bind (e.g. the line file);
+    ``fs_hz``: the chain's sample rate (set on the three signal FMUs when not the default)."""
+    step = frame / fs_hz                         # a signal FMU steps one frame
+    if fs_hz != SIGNAL_FS_HZ:
+        coder, rail, receiver = ({**(part or {}), "fs": fs_hz} for part in (coder, rail, receiver))
     stocks = list(stocks) if stocks is not None else [None] * len(trains)
     lengths = {f"train_length[{j}]": stock_length_m(stock) for j, stock in enumerate(stocks, start=1)}
     # where each train's wheelsets are (an empty file name: the bundled default stock's)
@@ -156,6 +173,7 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
     connections += [ConnectionSpec(f"rail.occupied[{k}]", f"coder.occupied[{k}]") for k in range(1, sections + 1)]
     alsu_chain = (receiver or {}).get("system") == "ALSU"
+    tvm_chain = (receiver or {}).get("system") == "TVM430"
     for j, (train, ato) in enumerate(trains, start=1):
         rx = "rx" if len(trains) == 1 else f"rx{j}"
         components.append(ComponentSpec(rx, f"{fmu_folder}/LocoReceiver.fmu", step, dict(receiver or {})))
@@ -167,6 +185,8 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
         connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in CHAIN_PORTS]
         if alsu_chain:                     # the ATP reads the ALSU code shown
             connections.append(ConnectionSpec(f"{rx}.code", f"{ato}.cab_code"))
+        if tvm_chain:                      # and TVM-430's target and gradient
+            connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in TVM430_PORTS]
     return components, connections
 
 

@@ -520,7 +520,8 @@ def _coder_core(block_aspects: int = 3, system: Optional[str] = None):
 
 
 def coder_vectors() -> RoleFile:
-    role = RoleFile("wayside_coder", ["system", "fs", "block_aspects", "occupied", "fault_main", "fault_reserve",
+    role = RoleFile("wayside_coder", ["system", "fs", "block_aspects", "line_file", "occupied", "fault_main",
+                                      "fault_reserve",
                                       "wrong_command_main",
                                       "u_tx", "code_tx", "signal", "status"])
     line = load_line(str(DEFAULT_LINE))
@@ -590,6 +591,8 @@ def coder_vectors() -> RoleFile:
             {"kind": "frame_peak", "label": "no output with both failed (section 1)", "port": "u_tx[1]",
              "from_s": 2.0, "at_most": 0.0, "unit": "V"}]})
     role.vectors.extend(_alsu_coder_vectors())
+    role.data_files[TVM_LINE_FILE] = _tvm_line()
+    role.vectors.extend(_tvm430_coder_vectors())
     # digital 2-out-of-2 comparison: a controller computing a wrong command is outvoted by the
     # more restrictive of the two (fmus/signalling/redundancy.py); expected from our core
     for system_name in ("FIRE_DQPSK", "ALS-EN"):
@@ -650,6 +653,75 @@ def _alsu_coder_vectors() -> List[dict]:
                                                 f"the tones into section 1",
         "parameters": params, "step": step, "duration_s": seconds,
         "inputs": {"occupied": _schedule_input([0.0, change_s], [np.zeros(8, dtype=bool).tolist(), occupied.tolist()])},
+        "record_frames": ["u_tx[1]"], "checks": checks})
+    return vectors
+
+
+TVM_LINE_FILE = "wayside_coder_tvm430_line.json"
+TVM_FS_HZ = 8000.0          # the 4 kHz of the other vectors cannot hold a 2300 Hz carrier
+
+
+def _tvm_line() -> dict:
+    """8 blocks of 1500 m on track 1 (carriers 1700 / 2300 Hz alternating), a 10 ‰ fall from
+    4 km, the station stop near the end: every TVM-430 speed pair within 8 sections."""
+    blocks = [{"name": f"B{b + 1}", "start_m": 1500.0 * b, "end_m": 1500.0 * (b + 1), "signal": f"M{b + 1}",
+               "transmitter": "KPT-5", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0} for b in range(8)]
+    return {"name": "TVM-430 coder vectors", "length_m": 12000.0, "electrification": {"system": "AC25000"},
+            "block_sections": blocks, "stations": [{"name": "end", "stop_m": 11800.0}],
+            "gradients": [{"start_m": 0, "permille": 0.0}, {"start_m": 4000, "permille": -10.0}], "curves": [],
+            "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90, "high_speed_kmh": 300}]}
+
+
+def _tvm430_coder_vectors() -> List[dict]:
+    """TVM-430: the block rules' word of every section for a train in each block, and the word's
+    tones on section 1's carrier before and after a change, with no phase step at the change
+    (docs/wayside_coder.md#tvm-430)."""
+    import tempfile
+
+    from fmus.signalling import tvm430
+    from fmus.wayside_coder.tvm430 import PEAK_DEVIATION_HZ, Tvm430CoderCore
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / TVM_LINE_FILE
+        path.write_text(json.dumps(_tvm_line()), encoding="utf-8")
+        line = load_line(str(path))
+    params = {"system": "TVM430", "fs": TVM_FS_HZ, "line_file": TVM_LINE_FILE}
+    step = {"fs_hz": TVM_FS_HZ, "frame_port": "u_tx"}
+    core = Tvm430CoderCore(line, 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
+    patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(8)]
+    hold_s = 0.05
+    times = [round(i * hold_s, 4) for i in range(len(patterns))]
+    at = [round(t + hold_s, 4) for t in times]
+    words = [core.step(0.0, pattern).code_tx.tolist() for pattern in patterns]
+    vectors = [{
+        "name": "tvm430_block_words", "what": f"{len(patterns)} occupancy patterns (the line clear, a train in each "
+                                              f"block) on an 8-block TVM-430 line",
+        "parameters": params, "step": step, "duration_s": round(len(patterns) * hold_s, 4),
+        "inputs": {"occupied": _schedule_input(times, [p.tolist() for p in patterns])},
+        "checks": [{"kind": "table", "label": "TVM-430 word of every section (block rules)", "port": "code_tx",
+                    "at_s": at, "expected": words}]}]
+    change_s, seconds = 3.0, 6.0
+    clear, occupied = np.zeros(8, dtype=bool), np.eye(8, dtype=bool)[2]
+    first, second = (int(core.step(0.0, pattern).code_tx[0]) for pattern in (clear, occupied))
+    carrier = float(line.sections[0].carrier_hz)
+    tones = [round(float(f), 2) for f in tvm430.TONES_HZ]
+    checks = []
+    for (start, end), word in (((0.2, change_s - 0.2), first), ((change_s + 0.2, seconds - 0.2), second)):
+        bits = tvm430.bits_of(word)
+        checks.append({"kind": "fm_tones", "label": f"section 1 sends word {word}: its tones, no other",
+                       "port": "u_tx[1]", "from_s": start, "to_s": end, "fs_hz": TVM_FS_HZ, "carrier_hz": carrier,
+                       "frequencies_hz": tones, "present": [f for f, bit in zip(tones, bits) if bit],
+                       "at_least": 0.9 * tvm430.DEVIATION_HZ_PER_TONE,
+                       "at_most": 0.1 * tvm430.DEVIATION_HZ_PER_TONE, "unit": "Hz"})
+    checks.append({"kind": "frequency_excursion", "label": "no phase step at the word change: the carrier stays "
+                                                          f"within ±{PEAK_DEVIATION_HZ:g} Hz",
+                   "port": "u_tx[1]", "from_s": 0.2, "to_s": seconds - 0.2, "fs_hz": TVM_FS_HZ,
+                   "carrier_hz": carrier, "at_most": PEAK_DEVIATION_HZ, "unit": "Hz"})
+    vectors.append({
+        "name": "tvm430_word_section_1", "what": f"the line clear, then block 3 occupied from {change_s:g} s: "
+                                                 f"the word's tones on section 1's {carrier:g} Hz carrier",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"occupied": _schedule_input([0.0, change_s], [clear.tolist(), occupied.tolist()])},
         "record_frames": ["u_tx[1]"], "checks": checks})
     return vectors
 

@@ -236,10 +236,56 @@ def judge_tones(trace: Trace, check: Mapping):
     return weakest, f"≥ {_fmt(check['at_least'])}", unit, weakest >= check["at_least"]
 
 
+def frequency_offset_hz(samples: np.ndarray, fs_hz: float, carrier_hz: float) -> np.ndarray:
+    """The instantaneous frequency of a frequency-modulated carrier minus the carrier, between
+    consecutive samples (from the phase of the analytic signal of the whole row)."""
+    from scipy.signal import hilbert
+
+    phase = np.unwrap(np.angle(hilbert(samples)))
+    return np.diff(phase) * fs_hz / (2.0 * np.pi) - carrier_hz
+
+
+def _fm_window(trace: Trace, check: Mapping):
+    """(offset Hz, its instants) of a recorded frame row in the check's window."""
+    offset = frequency_offset_hz(trace.samples[check["port"]], check["fs_hz"], check["carrier_hz"])
+    times = trace.sample_time_s[:-1] + 0.5 / check["fs_hz"]           # between samples n and n+1
+    mask = (times >= check.get("from_s", -np.inf) - 1e-9) & (times < check.get("to_s", np.inf) - 1e-9)
+    return offset[mask], times[mask]
+
+
+def judge_fm_tones(trace: Trace, check: Mapping):
+    """Which modulation tones a frequency-modulated carrier carries in the window (a TVM-430
+    word: one tone per bit): the frequency deviation's amplitude at each of ``frequencies_hz``,
+    by least squares on sines and cosines of all of them at once; every frequency in ``present``
+    at least ``at_least`` (Hz of deviation), every other at most ``at_most``."""
+    offset, times = _fm_window(trace, check)
+    w = 2.0 * np.pi * np.asarray(check["frequencies_hz"], dtype=float)
+    basis = np.hstack([np.sin(np.outer(times, w)), np.cos(np.outer(times, w)), np.ones((times.size, 1))])
+    coefficients, *_ = np.linalg.lstsq(basis, offset, rcond=None)
+    amplitudes = np.hypot(coefficients[:w.size], coefficients[w.size:2 * w.size])
+    present = np.isin(np.asarray(check["frequencies_hz"], dtype=float), np.asarray(check["present"], dtype=float))
+    unit = check.get("unit", "Hz")
+    absent = float(amplitudes[~present].max(initial=0.0))
+    if absent > check["at_most"]:
+        return absent, f"≤ {_fmt(check['at_most'])} (a tone not in the word)", unit, False
+    weakest = float(amplitudes[present].min(initial=np.inf))
+    return weakest, f"≥ {_fmt(check['at_least'])}", unit, weakest >= check["at_least"]
+
+
+def judge_frequency_excursion(trace: Trace, check: Mapping):
+    """The largest |instantaneous frequency − carrier| of a frequency-modulated frame row in the
+    window, at most ``at_most``: a phase step (a transmitter restarting its phase) shows as a
+    frequency far off the carrier for one sample."""
+    offset, _ = _fm_window(trace, check)
+    largest = float(np.max(np.abs(offset), initial=0.0))
+    return largest, f"≤ {_fmt(check['at_most'])}", check.get("unit", "Hz"), largest <= check["at_most"]
+
+
 JUDGES: Dict[str, Callable] = {
     "latency": judge_latency, "holds": judge_holds, "table": judge_table, "near": judge_near,
     "extreme": judge_extreme, "when": judge_when, "code_timing": judge_code_timing,
-    "frame_peak": judge_frame_peak, "tones": judge_tones,
+    "frame_peak": judge_frame_peak, "tones": judge_tones, "fm_tones": judge_fm_tones,
+    "frequency_excursion": judge_frequency_excursion,
 }
 
 
@@ -248,9 +294,13 @@ def judge(vector: str, trace: Trace, check: Mapping) -> Verdict:
     return Verdict(vector, check["label"], measured, bound, unit, bool(passed), check.get("note", ""))
 
 
+#: the kinds that read a recorded frame row (the vector's record_frames), not a port per step
+FRAME_KINDS = ("code_timing", "frame_peak", "tones", "fm_tones", "frequency_excursion")
+
+
 def ports_of(check: Mapping) -> List[str]:
     """The recorded ports a check reads."""
-    if check["kind"] in ("code_timing", "frame_peak", "tones"):
+    if check["kind"] in FRAME_KINDS:
         return []                                  # frame rows: the vector's record_frames
     ports = [check["port"]] if "port" in check else []
     for key in ("until", "conditions", "trigger", "where"):

@@ -24,6 +24,8 @@ _CHECK_FIELDS = {
     "code_timing": ("port", "pattern_s", "tolerance", "fs_hz", "carrier_hz", "cycle_s"),
     "frame_peak": ("port",),
     "tones": ("port", "fs_hz", "frequencies_hz", "present", "at_least", "at_most"),
+    "fm_tones": ("port", "fs_hz", "carrier_hz", "frequencies_hz", "present", "at_least", "at_most"),
+    "frequency_excursion": ("port", "fs_hz", "carrier_hz", "at_most"),
 }
 
 
@@ -115,11 +117,11 @@ def _base(port: str) -> str:
 def _check_ports(path: Path, where: str, vector: Mapping, required: List[str]) -> None:
     """Every port a vector uses is one of the role's required ports, so that a target lacking
     it is refused before anything runs."""
-    from orchestrator.conformance.judges import ports_of
+    from orchestrator.conformance.judges import FRAME_KINDS, ports_of
 
     used = [*vector.get("parameters", {}), *vector.get("inputs", {}), *vector.get("record_frames", [])]
     used += [p for check in vector["checks"] for p in ports_of(check) if not p.startswith("plant.")]
-    used += [check["port"] for check in vector["checks"] if check["kind"] in ("code_timing", "frame_peak", "tones")]
+    used += [check["port"] for check in vector["checks"] if check["kind"] in FRAME_KINDS]
     missing = sorted({_base(p) for p in used} - set(required))
     _require(not missing, path, f"{where}", f"uses ports not in required_ports: {', '.join(missing)}")
 

@@ -285,6 +285,34 @@ def build_all(dest: Path, config: BuildConfig = BuildConfig(), units: Optional[I
     return results
 
 
+def build_sized_for(dest: Path, system_folders: Iterable[Path], force: bool = False) -> List[BuildResult]:
+    """Build the FMUs of other sizes the systems in ``system_folders`` name (a source in a folder
+    such as ``resources/k32m2n40/``, fmus/sizes.py) into that folder of ``dest``, each unit
+    with the sizes its sources ask for; the default sizes are ``build_all``'s."""
+    from lxml import etree
+
+    from fmus.sizes import sizes_of_source
+    from orchestrator.ssp import NS
+
+    by_identifier = {spec.model_identifier: spec for spec in discover_units()}
+    wanted = set()
+    for folder in system_folders:
+        ssd = Path(folder) / "SystemStructure.ssd"
+        if not ssd.is_file():
+            continue
+        for component in etree.parse(str(ssd)).getroot().iter(f"{{{NS['ssd']}}}Component"):
+            source = component.get("source") or ""
+            sizes = sizes_of_source(source)
+            spec = by_identifier.get(Path(source).stem)
+            if sizes is not None and sizes.folder_name and spec is not None:
+                wanted.add((spec.unit, sizes))
+    results = []
+    for unit, sizes in sorted(wanted, key=lambda item: (item[0], item[1].folder_name)):
+        spec = next(s for s in by_identifier.values() if s.unit == unit)
+        results.append(build_unit(spec, dest / sizes.folder_name, sizes, force=force))
+    return results
+
+
 def default_build_dir(repo_root: Optional[Path] = None) -> Path:
     root = repo_root if repo_root is not None else FMUS_ROOT.parent
     return root / "build" / "fmus"

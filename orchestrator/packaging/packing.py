@@ -20,7 +20,7 @@ from typing import List, Optional
 from lxml import etree
 
 from orchestrator.packaging.builder import stored_hash
-from orchestrator.ssp import NS
+from orchestrator.ssp import NS, in_build_folder
 
 
 #: bump when the archive layout changes, so that archives packed by older code are repacked
@@ -54,7 +54,7 @@ def fingerprint(folder: Path, fmu_dir: Path, sources: List[str]) -> bytes:
         digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + _file_digest(path))
     for source in sorted(set(sources)):
         if not (folder / source).is_file():
-            digest.update(source.encode() + b"\0" + _fmu_digest(fmu_dir / Path(source).name))
+            digest.update(source.encode() + b"\0" + _fmu_digest(fmu_dir / in_build_folder(source)))
     return PACK_FORMAT + b" " + digest.hexdigest().encode()
 
 
@@ -98,7 +98,7 @@ def _pack(folder: Path, sources: List[str], fmu_dir: Path, dest: Path, force: bo
                                 if p.is_file() and p.suffix != ".fmu")
             for source in sorted(set(sources)):
                 if not (folder / source).is_file():
-                    _write_fmu(archive, fmu_dir / Path(source).name, source, data_files)
+                    _write_fmu(archive, fmu_dir / in_build_folder(source), source, data_files)
         os.chmod(temp, 0o644)             # mkstemp makes it private; an archive is for everyone
         os.replace(temp, target)
     except BaseException:
@@ -134,7 +134,7 @@ def pack_systems(ssp_root: Path, fmu_dir: Path, dest: Path, force: bool = False,
         return packed
     for folder in sorted(p for p in ssp_root.iterdir() if (p / "SystemStructure.ssd").is_file()):
         sources = _sources(folder)
-        if all((folder / s).is_file() or (fmu_dir / Path(s).name).is_file() for s in sources):
+        if all((folder / s).is_file() or (fmu_dir / in_build_folder(s)).is_file() for s in sources):
             target, written = _pack(folder, sources, fmu_dir, dest, force)
             packed.append(target)
             if written and repacked is not None:
