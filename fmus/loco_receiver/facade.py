@@ -53,7 +53,7 @@ class LocoReceiver(FrameFacadeSlave):
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
             Port("min_level", "parameter", unit="V", start=d.min_level_v, min=0.0,
-                 description="digital and TVM430: squelch, carrier amplitude below which nothing is decided"),
+                 description="digital: squelch, carrier amplitude below which nothing is decided"),
             Port("track", "parameter", "Integer", start=tvm.track, min=1, max=2,
                  description="TVM430: the track whose carriers are decoded (1: 1700 / 2300 Hz, 2: 2000 / 2600 Hz)"),
             Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,), min=0, max=3,

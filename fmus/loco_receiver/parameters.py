@@ -26,9 +26,8 @@ ALSU_PARAMETERS = {
     "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps", "filter_bandwidth": "filter_bandwidth_hz",
     "pick_up": "pick_up_v", "drop_out": "drop_out_v", "inertia": "inertia_s", "codes_file": "codes_file",
 }
-TVM430_PARAMETERS = {
-    "fs": "fs_hz", "track": "track", "min_level": "min_level_v", "inertia": "inertia_s", "codes_file": "codes_file",
-}
+# TVM430's squelch is its own (tvm430.SQUELCH_V): `min_level`'s 0.1 V is the digital receivers'
+TVM430_PARAMETERS = {"fs": "fs_hz", "track": "track", "inertia": "inertia_s", "codes_file": "codes_file"}
 DIGITAL_PARAMETERS = {
     "carrier": "carrier_hz", "fs": "fs_hz", "train_category": "train_category", "v_max": "v_max_mps",
     "filter_bandwidth": "filter_bandwidth_hz", "track_parity": "track_parity", "limiter": "limiter_v",

@@ -14,7 +14,7 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
   baseband (×2: the mixer halves it), its frequency offset the phase step between two
   decimated samples × rate / 2π (the discriminator ignores the amplitude).
 * **Which carrier.** At each decision (every HOP_S) the carrier with the largest level over
-  the hop is decoded only when it is above ``min_level`` (the squelch) over the whole window
+  the hop is decoded only when it is above SQUELCH_V over the whole window
   and at least DOMINANCE_DB above every other carrier of the track: a neighbour's carrier
   leaking through a separation zone 20 dB down is 10 dB short of the margin and never decoded;
   where two are comparable (inside a separation zone) neither is.
@@ -63,6 +63,11 @@ ABSENT_FRACTION = 0.35            # below: absent; between: no word
 DOMINANCE_DB = 10.0               # the decoded carrier is this far above every other of the track
 CONFIRMATIONS = 2                 # consecutive decisions a non-restrictive change needs
 HOLD_S = 2.5                      # `inertia` 0: how long the word shown outlives its last support
+#: a carrier below this (coil EMF, peak, V) is not decoded: a third of the weakest carrier the
+#: rail line gives a train, 0.1 V 10 m into a 2300 Hz circuit at 1 Ω·km from the coder's 4 V
+#: (docs/rail_line.md#tvm-430-track-circuits, "Levels"); a carrier that stops falls below it
+#: within the low-pass's settling (a few ms)
+SQUELCH_V = 0.03
 #: the fs needed above the highest carrier: its image fs − f must stay out of the baseband
 #: low-pass (more than its stop band, 5× the corner) — fs ≥ 2·(2600 + 250) = 5.7 kHz for track 2
 IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
@@ -78,7 +83,7 @@ STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
 class Tvm430ReceiverSettings:
     fs_hz: float = DEFAULT_SAMPLE_RATE_HZ
     track: int = 1                          # 1: carriers 1700 / 2300 Hz, 2: 2000 / 2600 Hz
-    min_level_v: float = 0.1                # squelch: a carrier below this (coil EMF, peak) is not decoded
+    squelch_v: float = SQUELCH_V            # a carrier below this (coil EMF, peak) is not decoded
     inertia_s: float = 0.0                  # 0: HOLD_S
     codes_file: str = ""                    # empty: the shipped word tables
 
@@ -123,8 +128,8 @@ class Tvm430ReceiverCore:
         if s.track not in tvm430.TRACK_CARRIERS_HZ:
             raise FmuInputError(f"parameter track: {s.track} is not one of "
                                 f"{', '.join(map(str, tvm430.TRACK_CARRIERS_HZ))} (TVM430's tracks)")
-        if not s.min_level_v > 0:
-            raise FmuInputError(f"parameter min_level: must be positive, got {s.min_level_v}")
+        if not s.squelch_v > 0:
+            raise ValueError(f"Tvm430ReceiverSettings.squelch_v must be positive, got {s.squelch_v}")
         if s.inertia_s < 0:
             raise FmuInputError(f"parameter inertia: must not be negative, got {s.inertia_s}")
         self.carriers_hz = np.array(tvm430.TRACK_CARRIERS_HZ[s.track])
@@ -219,7 +224,7 @@ class Tvm430ReceiverCore:
         hop_levels = self._level[:, -self.hop:].mean(axis=1)
         best = int(np.argmax(hop_levels))
         others = np.delete(hop_levels, best)
-        squelch = self.settings.min_level_v
+        squelch = self.settings.squelch_v
         if self._level[best].min() < squelch or (others.size and hop_levels[best] < self.dominance * others.max()):
             return Decision(time_s, 0.0, None, tvm430.NO_WORD)
         coefficients = self.fit @ self._offset[best]
@@ -271,7 +276,7 @@ class Tvm430ReceiverCore:
     def _publish(self, level_v: float) -> None:
         out = self.out
         out.level_v = level_v
-        out.relay = level_v >= self.settings.min_level_v
+        out.relay = level_v >= self.settings.squelch_v
         if self._shown is None:
             out.aspect, out.code, out.code_valid, out.free_blocks = sig.RED, tvm430.NO_WORD, False, 0
             out.v_permitted_mps = out.v_target_mps = 0.0
