@@ -16,7 +16,8 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
 * **Which carrier.** At each decision (every HOP_S) the carrier with the largest level over
   the hop is decoded only when it is above SQUELCH_V over the whole window
   and at least DOMINANCE_DB above every other carrier of the track: a neighbour's carrier
-  leaking through a separation zone 20 dB down is 10 dB short of the margin and never decoded;
+  leaking through a separation zone (at worst 0.081 of the own EMF, −22 dB,
+  docs/rail_line.md#tvm-430-track-circuits) is 12 dB short of the margin and never decoded;
   where two are comparable (inside a separation zone) neither is.
 * **Tones.** The 27 tones are 0.64 Hz apart, so they are resolved only over a window of at
   least 1/0.64 = 1.5625 s (WINDOW_S): a least-squares fit of a constant (the carrier's offset)
