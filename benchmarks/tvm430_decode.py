@@ -14,7 +14,12 @@ docs/loco_receiver.md#tvm-430 and docs/performance.md#tvm-430-receiver.
    the share of decisions that read the word, valid words other than the one sent (must be 0),
    the smallest fitted amplitude of a present tone and the largest of an absent one (units of
    the deviation per tone; decided above 0.65, below 0.35);
-3. cost: the receiver core's CPU time per simulated second at 8 and 12 kHz, frames of 40
+3. every used field value through the high-speed line's rail line at 12 kHz (each of the 15
+   speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one running receiver),
+   a train standing 10 m into a 1700 Hz and a 2300 Hz section (where its code is weakest), the
+   neighbour sections sending a more permissive word: each word shown by the end of its slot,
+   nothing else ever shown, and the slowest decode;
+4. cost: the receiver core's CPU time per simulated second at 8 and 12 kHz, frames of 40
    samples (the build's default), the signal synthesised beforehand (best of 3 runs of 20 s).
 """
 from __future__ import annotations
@@ -80,6 +85,43 @@ def noise_margins(noise_v: float, seconds: float = 30.0, fs_hz: float = 12000.0,
     return right / decisions, other, present, absent
 
 
+def every_field_value(section: int, slot_s: float = 2.5):
+    """(words sent, shown by the end of their slot, words shown that were not sent, slowest
+    decode s, the coil EMF's peak V) for every used field value on ``section`` of the line."""
+    from fmus.data.loader import load_line
+    from harness.tvm_line import HSL_LINE
+    from harness.tvm430_receiver import rail_line_emf
+
+    tvm = tvm430.system()
+    table = tvm.table
+    address = table.addresses[0]
+    middle_gradient = table.gradient_code(0.0)
+    sent = [tvm430.assemble(address, code, table.distance_codes - 1 if pair == (300.0, 300.0) else 8, middle_gradient)
+            for code, pair in table.speed_codes.items()]
+    sent += [tvm430.assemble(address, table.speed_code(230.0, 170.0), d, middle_gradient) for d in range(table.distance_codes)]
+    sent += [tvm430.assemble(address, table.speed_code(230.0, 170.0), 8, g) for g in range(16)]
+    line = load_line(HSL_LINE)
+    schedule = []
+    for k, w in enumerate(sent):
+        words = [GREEN] * len(line.sections)
+        words[section] = w
+        schedule.append((k * slot_s, words))
+    seconds = len(sent) * slot_s
+    emf = rail_line_emf(schedule, line.sections[section].start_m + 10.0, seconds)
+    core = Tvm430ReceiverCore(120, Tvm430ReceiverSettings(fs_hz=12000.0))
+    shown = []
+    for first in range(0, emf.size, 120):
+        shown.append(core.step(first / 12000.0, emf[first:first + 120]).code)
+    shown = np.array(shown)
+    frames_per_slot = int(round(slot_s / 0.01))
+    at_end = [shown[(k + 1) * frames_per_slot - 1] == w for k, w in enumerate(sent)]
+    slowest = max(float(np.flatnonzero(shown[k * frames_per_slot:(k + 1) * frames_per_slot] == w)[0] + 1) * 0.01
+                  if (shown[k * frames_per_slot:(k + 1) * frames_per_slot] == w).any() else np.inf
+                  for k, w in enumerate(sent))
+    strangers = set(shown.tolist()) - set(sent) - {0}
+    return len(sent), sum(at_end), len(strangers), slowest, float(np.abs(emf).max())
+
+
 def cost_per_simulated_second(fs_hz: float, seconds: float = 20.0, frame: int = 40) -> float:
     """CPU seconds of the core per simulated second (best of 3)."""
     t = np.arange(int(seconds * fs_hz)) / fs_hz
@@ -120,6 +162,11 @@ def main() -> None:
         share, other, present, absent = noise_margins(noise, seconds=10.0 if args.quick else 30.0)
         snr_db = 10 * np.log10(EMF_V ** 2 / 2 / noise ** 2)
         print(f"| {noise:g} | {snr_db:.1f} dB | {100 * share:.0f} % | {other} | {present:.2f} | {absent:.2f} |")
+    print("every used field value through the rail line, 12 kHz, 10 m into the section:")
+    for section, name in ((0, "1700 Hz"), (1, "2300 Hz")):
+        count, shown, strangers, slowest, peak = every_field_value(section)
+        print(f"  {name}: {shown}/{count} words shown, {strangers} words shown that were not sent, "
+              f"slowest {slowest:.2f} s, EMF peak {peak:.3f} V")
     print("receiver core cost, frames of 40 samples:")
     for fs in (8000.0, 12000.0):
         cost = cost_per_simulated_second(fs, seconds=5.0 if args.quick else 20.0)

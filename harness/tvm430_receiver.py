@@ -92,12 +92,13 @@ def run(plan: Plan, duration_s: float, fs_hz: float = 12000.0, frame: int = 40, 
     return Record(*(np.array(c) for c in columns)), core
 
 
-def rail_line_emf(words: Sequence[int], head_m: float, seconds: float, fs_hz: float = 12000.0,
-                  amplitude_v: float = 4.0) -> np.ndarray:
+def rail_line_emf(schedule: Sequence[Tuple[float, Sequence[int]]], head_m: float, seconds: float,
+                  fs_hz: float = 12000.0, amplitude_v: float = 4.0) -> np.ndarray:
     """The coil EMF (V, per sample) of a train standing with its first wheelset at ``head_m`` on
     the high-speed line (harness/tvm_line.py's rail line core), every section k sending
-    ``words[k]`` on its line-file carrier at the coder's amplitude (the coder's modulation;
-    the line's own block rules are bypassed, as a coder's ``send`` does)."""
+    ``words[k]`` of the schedule's latest (start s, words) on its line-file carrier at the
+    coder's amplitude (the coder's modulation; the line's own block rules are bypassed, as a
+    coder's ``send`` does)."""
     from harness.tvm_line import tvm_rail_line
 
     core = tvm_rail_line(fs_hz=fs_hz)
@@ -105,9 +106,11 @@ def rail_line_emf(words: Sequence[int], head_m: float, seconds: float, fs_hz: fl
     n = core.frame
     core.start(np.array([head_m]))
     frames = []
+    starts = [start for start, _ in schedule]
     for first in range(0, int(round(seconds * fs_hz / n)) * n, n):
         t = (first + np.arange(n)) / fs_hz
         terms = tvm430.modulation_phase_terms(t)
+        words = schedule[int(np.searchsorted(starts, t[0], side="right")) - 1][1]
         u = np.array([fm_carrier(int(w), t, c, amplitude_v, terms) for w, c in zip(words, carriers)])
         frames.append(core.step(first / fs_hz, u, np.array([head_m]), np.zeros(1), np.zeros(1)).e_coil[0].copy())
     return np.concatenate(frames)

@@ -212,11 +212,28 @@ def test_through_the_rail_line_where_the_code_is_weakest(section):
     line = load_line(HSL_LINE)
     words = [GREEN] * len(line.sections)
     words[section] = YELLOW
-    emf = rail_line_emf(words, line.sections[section].start_m + 10.0, 3.0)
+    emf = rail_line_emf([(0.0, words)], line.sections[section].start_m + 10.0, 3.0)
     assert np.abs(emf).max() < 0.5                       # the weak end indeed
     shown = _decode(emf)
     assert {code for code, _ in shown} == {0, YELLOW}
     assert shown[-1] == (YELLOW, float(line.sections[section].carrier_hz))
+
+
+def test_every_speed_pair_through_the_rail_line_on_one_running_receiver():
+    """The 15 speed pairs of the tables in turn, 2.5 s each, on the 2300 Hz section 10 m in:
+    each shown by the end of its slot (benchmarks/tvm430_decode.py adds every distance and
+    gradient code and the 1700 Hz section), nothing else ever."""
+    from fmus.data.loader import load_line
+    from harness.tvm_line import HSL_LINE
+    from harness.tvm430_receiver import rail_line_emf
+
+    line = load_line(HSL_LINE)
+    sent = [word(*pair, distance_m=2000.0) for pair in TVM.table.speed_codes.values()]
+    schedule = [(2.5 * k, [GREEN] + [w] + [GREEN] * (len(line.sections) - 2)) for k, w in enumerate(sent)]
+    shown = np.array([code for code, _ in _decode(rail_line_emf(schedule, line.sections[1].start_m + 10.0,
+                                                                2.5 * len(sent)))])
+    assert set(shown.tolist()) <= set(sent) | {0}
+    assert [shown[250 * (k + 1) - 1] for k in range(len(sent))] == sent
 
 
 @pytest.mark.parametrize("own, neighbour", [(1700.0, 2300.0), (2300.0, 1700.0)])
