@@ -40,10 +40,11 @@ def _high_speed_line(folder: Path, end_station_block: int = BLOCKS - 1) -> Path:
     limit 300 km/h for high-speed trains; stations A (400 m) and Z at the entry of block
     ``end_station_block`` (the block beyond the stop point is its buffer section)."""
     blocks = [{"name": f"B{k}", "start_m": k * BLOCK_M, "end_m": (k + 1) * BLOCK_M, "signal": f"R{k}",
-               "transmitter": "KPT-5", "carrier_hz": CARRIERS_HZ[k % 2], "ballast_ohm_km": 2.0}
+               "transmitter": "UM71", "carrier_hz": CARRIERS_HZ[k % 2], "ballast_ohm_km": 2.0}
               for k in range(BLOCKS)]
     line = {"name": "synthetic high-speed line", "length_m": BLOCKS * BLOCK_M,
             "electrification": {"system": "AC25000"}, "block_sections": blocks,
+            "separation_zones": [{"position_m": k * BLOCK_M} for k in range(1, BLOCKS)],
             "stations": [{"name": "A", "stop_m": 400.0}, {"name": "Z", "stop_m": end_station_block * BLOCK_M}],
             "gradients": [{"start_m": 0.0, "permille": 0.0}, {"start_m": 24000.0, "permille": FALLING_PERMILLE}],
             "curves": [],
