@@ -14,8 +14,9 @@ docs/loco_receiver.md#tvm-430 and docs/performance.md#tvm-430-receiver.
    the share of decisions that read the word, valid words other than the one sent (must be 0),
    the smallest fitted amplitude of a present tone and the largest of an absent one (units of
    the deviation per tone; decided above 0.65, below 0.35);
-3. every used field value through the high-speed line's rail line at 12 kHz (each of the 15
-   speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one running receiver),
+3. every used field value, coder core → the high-speed line's rail line at 12 kHz → receiver
+   (each of the 15 speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one
+   running receiver),
    a train standing 10 m into a 1700 Hz and a 2300 Hz section (where its code is weakest), the
    neighbour sections sending a more permissive word: each word shown by the end of its slot,
    nothing else ever shown, and the slowest decode;
@@ -163,7 +164,7 @@ def main() -> None:
         share, other, present, absent = noise_margins(noise, seconds=10.0 if args.quick else 30.0)
         snr_db = 10 * np.log10(EMF_V ** 2 / 2 / noise ** 2)
         print(f"| {noise:g} | {snr_db:.1f} dB | {100 * share:.0f} % | {other} | {present:.2f} | {absent:.2f} |")
-    print("every used field value through the rail line, 12 kHz, 10 m into the section:")
+    print("every used field value, coder → rail line → receiver, 12 kHz, 10 m into the section:")
     for section, name in ((0, "1700 Hz"), (1, "2300 Hz")):
         count, shown, strangers, slowest, peak = every_field_value(section)
         print(f"  {name}: {shown}/{count} words shown, {strangers} words shown that were not sent, "

@@ -93,26 +93,31 @@ def run(plan: Plan, duration_s: float, fs_hz: float = 12000.0, frame: int = 40, 
 
 
 def rail_line_emf(schedule: Sequence[Tuple[float, Sequence[int]]], head_m: float, seconds: float,
-                  fs_hz: float = 12000.0, amplitude_v: float = 4.0) -> np.ndarray:
+                  fs_hz: float = 12000.0) -> np.ndarray:
     """The coil EMF (V, per sample) of a train standing with its first wheelset at ``head_m`` on
-    the high-speed line (harness/tvm_line.py's rail line core), every section k sending
-    ``words[k]`` of the schedule's latest (start s, words) on its line-file carrier at the
-    coder's amplitude (the coder's modulation; the line's own block rules are bypassed, as a
-    coder's ``send`` does)."""
+    the high-speed line: the TVM-430 coder core (its default 4 V) → harness/tvm_line.py's rail
+    line core, every section k sending ``words[k]`` of the schedule's latest (start s, words)
+    on its line-file carrier (the coder's ``send``: the block rules bypassed, each change
+    phase-continuous as in service)."""
+    from fmus.wayside_coder.core import CoderSettings
+    from fmus.wayside_coder.tvm430 import Tvm430CoderCore
     from harness.tvm_line import tvm_rail_line
 
-    core = tvm_rail_line(fs_hz=fs_hz)
-    carriers = np.array([float(section.carrier_hz) for section in core.line.sections])
-    n = core.frame
-    core.start(np.array([head_m]))
+    rail = tvm_rail_line(fs_hz=fs_hz)
+    count, n = len(rail.line.sections), rail.frame
+    coder = Tvm430CoderCore(rail.line, count, n, CoderSettings(fs_hz=fs_hz))
+    clear = np.zeros(count, dtype=bool)
+    rail.start(np.array([head_m]))
     frames = []
     starts = [start for start, _ in schedule]
+    sending = None
     for first in range(0, int(round(seconds * fs_hz / n)) * n, n):
-        t = (first + np.arange(n)) / fs_hz
-        terms = tvm430.modulation_phase_terms(t)
-        words = schedule[int(np.searchsorted(starts, t[0], side="right")) - 1][1]
-        u = np.array([fm_carrier(int(w), t, c, amplitude_v, terms) for w, c in zip(words, carriers)])
-        frames.append(core.step(first / fs_hz, u, np.array([head_m]), np.zeros(1), np.zeros(1)).e_coil[0].copy())
+        entry = int(np.searchsorted(starts, first / fs_hz, side="right")) - 1
+        if entry != sending:
+            coder.send(np.asarray(schedule[entry][1]))
+            sending = entry
+        u = coder.step(first / fs_hz, clear).u_tx[:count]
+        frames.append(rail.step(first / fs_hz, u, np.array([head_m]), np.zeros(1), np.zeros(1)).e_coil[0].copy())
     return np.concatenate(frames)
 
 

@@ -202,9 +202,9 @@ def _decode(emf, fs=12000.0, frame=120):
 
 @pytest.mark.parametrize("section", [0, 1], ids=["1700Hz", "2300Hz"])
 def test_through_the_rail_line_where_the_code_is_weakest(section):
-    """The high-speed line's rail line at 12 kHz, every section sending at the coder's 4 V, the
-    section under test YELLOW and every other a more permissive GREEN; a train standing with its
-    first wheelset 10 m into the section (its weakest code, 0.1–0.2 V): YELLOW with its carrier."""
+    """Coder core → the high-speed line's rail line at 12 kHz → receiver: the section under test
+    sends YELLOW and every other a more permissive GREEN; a train standing with its first
+    wheelset 10 m into the section (its weakest code, 0.1–0.2 V): YELLOW with its carrier."""
     from fmus.data.loader import load_line
     from harness.tvm_line import HSL_LINE
     from harness.tvm430_receiver import rail_line_emf
