@@ -18,7 +18,8 @@ docs/loco_receiver.md#tvm-430 and docs/performance.md#tvm-430-receiver.
    (each of the 15 speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one
    running receiver),
    a train standing 10 m into a 1700 Hz and a 2300 Hz section (where its code is weakest), the
-   neighbour sections sending a more permissive word: each word shown by the end of its slot,
+   neighbour sections sending a more permissive word, at the line's ballast (its minimum, 1 and
+   1.5 Ω·km there) and at 50 Ω·km (the line's maximum): each word shown by the end of its slot,
    nothing else ever shown, and the slowest decode;
 4. cost: the receiver core's CPU time per simulated second at 8 and 12 kHz, frames of 40
    samples (the build's default) and at 12 kHz frames of 120 (the TVM chain's 10 ms), the
@@ -87,9 +88,10 @@ def noise_margins(noise_v: float, seconds: float = 30.0, fs_hz: float = 12000.0,
     return right / decisions, other, present, absent
 
 
-def every_field_value(section: int, slot_s: float = 2.5):
+def every_field_value(section: int, ballast_ohm_km: float = 0.0, slot_s: float = 2.5):
     """(words sent, shown by the end of their slot, words shown that were not sent, slowest
-    decode s, the coil EMF's peak V) for every used field value on ``section`` of the line."""
+    decode s, the coil EMF's peak V) for every used field value on ``section`` of the line, at
+    the line's ballast (0: its sections' own, their minimum) or ``ballast_ohm_km``."""
     from fmus.data.loader import load_line
     from harness.tvm_line import HSL_LINE
     from harness.tvm430_receiver import rail_line_emf
@@ -109,7 +111,7 @@ def every_field_value(section: int, slot_s: float = 2.5):
         words[section] = w
         schedule.append((k * slot_s, words))
     seconds = len(sent) * slot_s
-    emf = rail_line_emf(schedule, line.sections[section].start_m + 10.0, seconds)
+    emf = rail_line_emf(schedule, line.sections[section].start_m + 10.0, seconds, ballast_ohm_km=ballast_ohm_km)
     core = Tvm430ReceiverCore(120, Tvm430ReceiverSettings(fs_hz=12000.0))
     shown = []
     for first in range(0, emf.size, 120):
@@ -165,10 +167,12 @@ def main() -> None:
         snr_db = 10 * np.log10(EMF_V ** 2 / 2 / noise ** 2)
         print(f"| {noise:g} | {snr_db:.1f} dB | {100 * share:.0f} % | {other} | {present:.2f} | {absent:.2f} |")
     print("every used field value, coder → rail line → receiver, 12 kHz, 10 m into the section:")
-    for section, name in ((0, "1700 Hz"), (1, "2300 Hz")):
-        count, shown, strangers, slowest, peak = every_field_value(section)
-        print(f"  {name}: {shown}/{count} words shown, {strangers} words shown that were not sent, "
-              f"slowest {slowest:.2f} s, EMF peak {peak:.3f} V")
+    for ballast in (0.0, 50.0):
+        for section, name in ((0, "1700 Hz"), (1, "2300 Hz")):
+            count, shown, strangers, slowest, peak = every_field_value(section, ballast)
+            where = f"{ballast:g} Ω·km" if ballast else "the line's ballast (1-1.5 Ω·km)"
+            print(f"  {name}, {where}: {shown}/{count} words shown, {strangers} words shown that were not "
+                  f"sent, slowest {slowest:.2f} s, EMF peak {peak:.3f} V")
     print("receiver core cost:")
     for fs, frame in ((8000.0, 40), (12000.0, 40), (12000.0, 120)):
         cost = cost_per_simulated_second(fs, seconds=5.0 if args.quick else 20.0, frame=frame)
