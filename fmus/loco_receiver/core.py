@@ -132,6 +132,11 @@ class ReceiverOutputs:
     # track discarded; an ALSN receiver has neither and reports zeros
     channel_codes: np.ndarray = field(default_factory=lambda: np.zeros(CHANNELS, dtype=np.int64))
     foreign: int = 0
+    # TVM430's word shown: its target distance (m from the entry of the word's block), gradient
+    # (‰, + uphill) and the carrier it came from (Hz); 0 for every other system and no word
+    target_distance_m: float = 0.0
+    gradient_permille: float = 0.0
+    word_carrier_hz: float = 0.0
 
 
 class LocoReceiverCore:

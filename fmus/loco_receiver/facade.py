@@ -1,8 +1,10 @@
-"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN), AlsuReceiverCore (ALSU) or
-DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, digital_receiver.py)."""
+"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN), AlsuReceiverCore (ALSU),
+Tvm430ReceiverCore (TVM430) or DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see
+core.py, alsu.py, tvm430.py, digital_receiver.py)."""
 from fmus.errors import FmuInputError
-from fmus.signalling import alsu, cab_systems
+from fmus.signalling import alsu, cab_systems, tvm430
 from fmus.loco_receiver.alsu import AlsuReceiverCore
+from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore, Tvm430ReceiverSettings
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
@@ -11,20 +13,22 @@ from fmus.loco_receiver.parameters import receiver_settings
 
 class LocoReceiver(FrameFacadeSlave):
     description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
-                   "decoder), ALSU (six tone channels, exactly two tones) or ALS-EN / FIRE_DQPSK (correlation "
+                   "decoder), ALSU (six tone channels, exactly two tones), TVM430 (the track's two carriers, FM "
+                   "discriminator, 27 tones by least squares, word check) or ALS-EN / FIRE_DQPSK (correlation "
                    "demodulator, code check, 2-out-of-3 channels)")
 
     @classmethod
     def declare_ports(cls, build):
         n = build.frame
         s, d = ReceiverSettings(), DigitalReceiverSettings()     # ALSN and digital-only defaults
+        tvm = Tvm430ReceiverSettings()
         return [
             cab_system_port(),
             Port("codes_file", "parameter", "String", start="",
-                 description="ALSU: the code table (tone pairs, readings); empty: the bundled one"),
+                 description="ALSU: the code table (tone pairs, readings); TVM430: the word tables; empty: the bundled one"),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz; "
-                             "ALSU: its six tones, 0 only"),
+                             "ALSU and TVM430 (its track's carriers): 0 only"),
             sample_rate_port(s.fs_hz, n),
             Port("train_category", "parameter", "String", start=s.train_category,
                  description="passenger | freight | high_speed"),
@@ -44,18 +48,21 @@ class LocoReceiver(FrameFacadeSlave):
                  description="relay drop-out (input-referred envelope); below pick_up"),
             Port("inertia", "parameter", unit="s", start=s.inertia_s, min=0.0,
                  description="longest loss of code the display bridges, from the last code supporting it; "
-                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; digital: none)"),
+                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; TVM430 2.5 s; digital: none)"),
             Port("track_parity", "parameter", "Integer", start=d.track_parity, min=0, max=1,
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
             Port("min_level", "parameter", unit="V", start=d.min_level_v, min=0.0,
                  description="digital: squelch, carrier amplitude below which nothing is decided"),
+            Port("track", "parameter", "Integer", start=tvm.track, min=1, max=2,
+                 description="TVM430: the track whose carriers are decoded (1: 1700 / 2300 Hz, 2: 2000 / 2600 Hz)"),
             Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,), min=0, max=3,
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
             Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code", "output", "Integer", start=0,
-                 description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, 0 none"),
+                 description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, "
+                             "TVM430: the 27-bit word shown; 0 none"),
             Port("code_valid", "output", "Boolean", start=False,
                  description="the indication shown is a received code (held ones included); false: the no-code indication"),
             Port("v_permitted", "output", unit="m/s",
@@ -74,6 +81,12 @@ class LocoReceiver(FrameFacadeSlave):
             Port("channel_code", "output", "Integer", start=0, shape=(CHANNELS,),
                  description="digital: each channel's command (raw id), 0 none"),
             Port("foreign", "output", "Integer", start=0, description="digital: messages of the other track discarded"),
+            Port("target_distance", "output", unit="m",
+                 description="TVM430: distance to the target point from the entry of the block whose word is shown; 0 no word"),
+            Port("gradient", "output", unit="1",
+                 description="TVM430: the word's gradient in ‰ (+ uphill), the most falling up to the target; 0 no word"),
+            Port("word_carrier", "output", unit="Hz",
+                 description="TVM430: the carrier the word shown came from; 0 none"),
         ]
 
     def make_default_experiment(self):
@@ -81,7 +94,15 @@ class LocoReceiver(FrameFacadeSlave):
 
     def create_core(self):
         if cab_systems.is_tvm430(self.param("system")):
-            raise FmuInputError("parameter system: TVM430 has no receiver in this build (only its wayside coder)")
+            tvm = tvm430.Tvm430System(tvm430.load_codes(self.resource_path(self.param("codes_file")
+                                                                           or str(tvm430.CODES_FILE))))
+            settings = receiver_settings(tvm, self.scalar_parameters())
+            if self.param("carrier"):
+                raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but TVM430 listens to its "
+                                    f"track's carriers (leave carrier 0, set track)")
+            core = Tvm430ReceiverCore(self.build.frame, settings, tvm)
+            self.require_frame_step(settings.fs_hz)
+            return core
         if cab_systems.is_alsu(self.param("system")):
             table = alsu.load_codes(self.resource_path(self.param("codes_file") or str(alsu.CODES_FILE)))
             settings = receiver_settings(alsu.AlsuSystem(table), self.scalar_parameters())
@@ -113,5 +134,6 @@ _OUTPUT_FIELDS = (
     ("aspect", "aspect"), ("code", "code"), ("code_valid", "code_valid"), ("v_permitted", "v_permitted_mps"),
     ("v_target", "v_target_mps"), ("free_blocks", "free_blocks"), ("level", "level_v"), ("errors", "errors"),
     ("decoded_codes", "decoded_codes"), ("transmitter", "transmitter"), ("joints", "joints"), ("relay", "relay"),
-    ("channel_code", "channel_codes"), ("foreign", "foreign"),
+    ("channel_code", "channel_codes"), ("foreign", "foreign"), ("target_distance", "target_distance_m"),
+    ("gradient", "gradient_permille"), ("word_carrier", "word_carrier_hz"),
 )
