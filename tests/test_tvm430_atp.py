@@ -35,7 +35,8 @@ NO_TARGET_M = 9450.0            # what a 300/300 word carries as its distance: "
 FALLING_PERMILLE = -8.0
 
 
-def _high_speed_line(folder: Path, end_station_block: int = BLOCKS - 1) -> Path:
+def _high_speed_line(folder: Path, end_station_block: int = BLOCKS - 1,
+                     falling_permille: float = FALLING_PERMILLE, limit_kmh: float = 300.0) -> Path:
     """30 blocks of 1500 m, carriers alternating, level then a −8 ‰ fall from 24 km, the line
     limit 300 km/h for high-speed trains; stations A (400 m) and Z at the entry of block
     ``end_station_block`` (the block beyond the stop point is its buffer section)."""
@@ -46,9 +47,9 @@ def _high_speed_line(folder: Path, end_station_block: int = BLOCKS - 1) -> Path:
             "electrification": {"system": "AC25000"}, "block_sections": blocks,
             "separation_zones": [{"position_m": k * BLOCK_M} for k in range(1, BLOCKS)],
             "stations": [{"name": "A", "stop_m": 400.0}, {"name": "Z", "stop_m": end_station_block * BLOCK_M}],
-            "gradients": [{"start_m": 0.0, "permille": 0.0}, {"start_m": 24000.0, "permille": FALLING_PERMILLE}],
+            "gradients": [{"start_m": 0.0, "permille": 0.0}, {"start_m": 24000.0, "permille": falling_permille}],
             "curves": [],
-            "speed_limits": [{"start_m": 0.0, "passenger_kmh": 160, "freight_kmh": 100, "high_speed_kmh": 300}]}
+            "speed_limits": [{"start_m": 0.0, "passenger_kmh": 160, "freight_kmh": 100, "high_speed_kmh": limit_kmh}]}
     path = folder / "high_speed_line.json"
     path.write_text(json.dumps(line))
     return path
@@ -310,6 +311,23 @@ def test_a_train_at_300_closing_on_an_occupied_block_slows_by_the_steps_and_stop
     for k in range(occupied - 5, occupied - 1):
         entering = v[np.searchsorted(x, k * BLOCK_M)]
         assert entering <= STEPS_KMH[occupied - k - 1][0] * MPS_PER_KMH + 1e-6, k
+
+
+def test_closing_down_a_25_permille_fall_the_ato_keeps_under_the_atp_curves(tmp_path):
+    """The same approach at 230 km/h down a 25 ‰ fall: the ATP's curves lose g·25/1000 = 0.25
+    m/s² of their 0.7 m/s² to the transmitted gradient; the ATO's planned curve (0.6 m/s²) gives
+    up as much, so it brakes early enough and the ATP never intervenes (a curve planned for level
+    track crosses the ATP's and the service brake is applied again and again). At 300 km/h no
+    ATO could: 4 blocks from the target the ATP's curve on such a fall is already below it."""
+    line_file = _high_speed_line(tmp_path, falling_permille=-25.0, limit_kmh=230.0)
+    occupied = 24
+    words = BlockWords(line_file, occupied=occupied)
+    loop = run_closed_loop(900.0, 0.5, AtoSettings(cab_signal="TVM430", strategy="flat_out"),
+                           line_file=line_file, stock_file=TGV, timetable_file=_timetable(tmp_path, 1000.0),
+                           cab_signal=words)
+    x, v, mode = loop.column("x"), loop.column("v"), loop.column("mode")
+    assert x[-1] < (occupied - 1) * BLOCK_M and v[-1] == 0.0
+    assert not np.any(np.isin(mode, (MODE_ATP_SERVICE, MODE_ATP_EMERGENCY)))
 
 
 def test_when_the_block_ahead_clears_the_standing_train_moves_on_to_the_end_station(tmp_path):

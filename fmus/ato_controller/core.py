@@ -28,7 +28,7 @@ from fmus.ato_controller.stopping import StopApproach
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.traction.brake_pipeline import brake_lead_s
 from fmus.traction.core import MAX_SPEED_MPS  # noqa: F401  (the facade's declared bound of speed_margin)
-from fmus.units import MPS_PER_KMH
+from fmus.units import MPS_PER_KMH, STANDARD_GRAVITY_MPS2
 
 _INF = math.inf
 
@@ -270,15 +270,26 @@ class AtoCore:
             if target.signal and self.settings.cab_signal == "TVM430" \
                     and target.position_m >= stop_point.position_m - s.stop_window_m:
                 continue        # a TVM stop at the station's stop point (or beyond): the stop point itself
+            share = target.braking_share * self._gradient_share(target)
             if target.signal:
-                targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0))
+                targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0, braking_share=share))
             else:
                 targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0),
-                                             braking_share=target.braking_share))
+                                             braking_share=share))
         if atp_result.stop_now:
             targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + STOP_NOW_SLACK_M, 0.0))
         targets.extend(self._aspect_driving(x, atp_result)[1])
         return targets
+
+    def _gradient_share(self, target) -> float:
+        """TVM430: the ATP's curves take a falling transmitted gradient's pull off the braking
+        (atp.py); the ATO's planned curve for the same target gives up as much, so it stays under
+        them on a falling grade (else its curve, braking on the level, crosses theirs and the ATP
+        intervenes). 1 for every other target."""
+        if target.trip_speed_mps is None or target.gradient_permille >= 0.0:
+            return 1.0
+        pull = STANDARD_GRAVITY_MPS2 * -target.gradient_permille / 1000.0
+        return max(self.a_plan - pull, 0.1 * self.a_plan) / self.a_plan
 
     def _aspect_driving(self, x: float, atp_result) -> Tuple[float, List[BrakingTarget]]:
         """How the ATO itself drives under the ALSN aspect the ATP acts upon (the book's МИИТ
