@@ -122,6 +122,23 @@ def test_at_a_block_boundary_the_display_goes_from_the_old_word_to_the_new_carri
     assert (record.word_carrier_hz[record.code == GREEN] == 1700.0).all()
 
 
+@pytest.mark.parametrize("before_s", [0.1, 0.5, 1.0, 1.6])
+@pytest.mark.parametrize("first, second", [(YELLOW, GREEN), (GREEN, YELLOW)])
+def test_a_word_change_just_before_a_block_boundary_leaves_no_gap(before_s, first, second):
+    """The word of the block the coils are leaving changes (a train ahead moved on) shortly
+    before they cross into the next block: the windows straddling the change read no word,
+    then the new block's carrier needs a whole window of its own. The hold bridges both, so
+    the ATP, which trips on a lost word, sees the old word until the new block's shows (found
+    in the shipped tvm430_following, where the follower was tripped 0.3 s short)."""
+    third = word(270, 230, 4500.0, -12.0)
+    plan = [(0.0, {1700.0: (first, EMF_V)}), (4.0 - before_s, {1700.0: (second, EMF_V)}),
+            (4.0, {2300.0: (third, EMF_V)})]
+    record, _ = run(plan, 9.0, noise_v=0.03)
+    after = record.t >= 2.0
+    assert record.valid[after].all()
+    assert record.first(4.0, record.code == third) <= rx.WINDOW_S + 2 * rx.HOP_S + 0.01
+
+
 def test_the_same_word_on_the_other_carrier_is_a_new_block_and_waits_for_confirmation():
     plan = [(0.0, {1700.0: (YELLOW, EMF_V)}), (3.0, {2300.0: (YELLOW, EMF_V)})]
     record, _ = run(plan, 6.0)

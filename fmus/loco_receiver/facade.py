@@ -48,7 +48,7 @@ class LocoReceiver(FrameFacadeSlave):
                  description="relay drop-out (input-referred envelope); below pick_up"),
             Port("inertia", "parameter", unit="s", start=s.inertia_s, min=0.0,
                  description="longest loss of code the display bridges, from the last code supporting it; "
-                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; TVM430 2.5 s; digital: none)"),
+                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; TVM430 3.5 s; digital: none)"),
             Port("track_parity", "parameter", "Integer", start=d.track_parity, min=0, max=1,
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),

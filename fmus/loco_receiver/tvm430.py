@@ -63,7 +63,11 @@ PRESENT_FRACTION = 0.65           # a tone's fitted amplitude / DEVIATION_HZ_PER
 ABSENT_FRACTION = 0.35            # below: absent; between: no word
 DOMINANCE_DB = 10.0               # the decoded carrier is this far above every other of the track
 CONFIRMATIONS = 2                 # consecutive decisions a non-restrictive change needs
-HOLD_S = 2.5                      # `inertia` 0: how long the word shown outlives its last support
+#: `inertia` 0: how long the word shown outlives its last support. It bridges a block boundary
+#: at the worst moment: the word of the block being left changes just before it (the windows
+#: straddling the change read nothing, up to a window and a hop), then the new block's carrier
+#: needs a window and two hops of its own; the ATP trips on a lost word (docs/ato.md#tvm-430)
+HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
 #: a carrier below this (coil EMF, peak, V) is not decoded: a third of the weakest carrier the
 #: rail line gives a train, 0.1 V 10 m into a 2300 Hz circuit at 1 Ω·km from the coder's 4 V
 #: (docs/rail_line.md#tvm-430-track-circuits, "Levels"); a carrier that stops falls below it
@@ -74,8 +78,8 @@ SQUELCH_V = 0.03
 IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
 #: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
 #: to the restrictive display (s): a window that still holds part of the old word may read it
-#: (a whole window at most), then the hold, then the next decision. Measured: a lost carrier
-#: 2.5 s, every single- and double-bit corruption 3.4 s at worst
+#: (a whole window at most), then the hold, then the next decision (5.19 s). Measured: a lost
+#: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
 #: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
 STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
 
