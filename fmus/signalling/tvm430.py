@@ -383,3 +383,8 @@ class BlockWords:
         for k, (block, free, ok) in enumerate(zip(self.block_of.tolist(), free_blocks.tolist(), coded.tolist())):
             out[k] = self.word(block, free if ok else 0)
         return out
+
+    def codes(self, rules) -> np.ndarray:
+        """The word of every track circuit under block_rules.BlockCodes ``rules`` (the verdicts'
+        call, as alsu.BlockCoding.codes)."""
+        return self.words(rules.free_blocks, rules.coded)

@@ -17,7 +17,8 @@ from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT
                               load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
-from fmus.signalling import alsn, alsu, cab_systems
+from fmus.loco_receiver import tvm430 as tvm430_receiver
+from fmus.signalling import alsn, alsu, cab_systems, tvm430
 from fmus.signalling import digital_messages as digital
 from fmus.signalling import aspects as sig
 from fmus.signalling.aspects import ASPECT_NAMES
@@ -366,7 +367,9 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 # ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
 RECEIVER_MODEL = "LocoReceiver"
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
+TVM430_OUTPUTS = ("target_distance", "gradient")
 SPEED_TOLERANCE_KMH = 0.5
+DISTANCE_TOLERANCE_M = 1.0
 HOLD_DECAY_S = 0.2
 
 
@@ -440,17 +443,20 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
             continue
         params = node.parameters
         try:
-            if cab_systems.is_tvm430(str(params.get("system", "ALSN"))):
-                continue              # no TVM-430 receiver yet: the receiver refuses the system itself
             system = cab_systems.digital_system(str(params.get("system", "ALSN")))
             if cab_systems.is_alsu(str(params.get("system", "ALSN"))):
                 table = params.get("codes_file")
                 system = alsu.system(str(_data_file(table, alsu.CODES_FILE)) if table else None)
+            if cab_systems.is_tvm430(str(params.get("system", "ALSN"))):
+                table = params.get("codes_file")
+                system = tvm430.system(str(_data_file(table, tvm430.CODES_FILE)) if table else None)
         except FmuInputError:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
         if isinstance(system, alsu.AlsuSystem):
             latency = alsu.STATED_LATENCY_S
+        elif isinstance(system, tvm430.Tvm430System):
+            latency = tvm430_receiver.STATED_LATENCY_S
         elif system is None:
             latency = alsn.STATED_LATENCY_S
         else:
@@ -492,16 +498,20 @@ class ReceiverVerdict(_OutputJudge):
             track = self.tracks.get(r.rail)
             if track is not None:
                 r.unsafe = _Episodes(r.latency_s + track.detection_s)
-                if isinstance(r.system, alsu.AlsuSystem):
-                    try:
+                try:
+                    if isinstance(r.system, alsu.AlsuSystem):
                         r.coding = alsu.BlockCoding(track.line, track.block_aspects, r.system)
-                    except FmuInputError:
-                        r.unsafe = None    # a route the code table cannot send: the coder reports it
+                    elif isinstance(r.system, tvm430.Tvm430System):
+                        r.coding = tvm430.BlockWords(track.line, r.system)
+                except FmuInputError:
+                    r.unsafe = None    # a route or limit the code table cannot send: the coder reports it
 
     def outputs_needed(self) -> Dict[str, List[str]]:
         needed: Dict[str, List[str]] = {}
         for r in self.receivers:
             needed.setdefault(r.name, []).extend(RECEIVER_OUTPUTS)
+            if isinstance(r.system, tvm430.Tvm430System):
+                needed[r.name].extend(TVM430_OUTPUTS)
             needed.setdefault(r.rail, []).append(f"coil_section[{r.slot}]")
             codes = [v for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx[")]
             needed.setdefault(r.coder, []).extend(codes)
@@ -588,9 +598,15 @@ class ReceiverVerdict(_OutputJudge):
             return False                           # white / red: the no-code rules, never permissive
         if meant is None:                          # nothing sent: any valid code is more than that
             return True
-        return (shown[0] > sig.restrictiveness(meant.aspect) or shown[1] > meant.free_blocks
+        if (shown[0] > sig.restrictiveness(meant.aspect) or shown[1] > meant.free_blocks
                 or shown[2] > meant.target_kmh + SPEED_TOLERANCE_KMH
-                or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH)
+                or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH):
+            return True
+        if isinstance(r.system, tvm430.Tvm430System):   # a target farther or a gradient less falling
+            read = r.system.reading(meant.code)
+            return (float(self._value(r.name, "target_distance")) > read.target_distance_m + DISTANCE_TOLERANCE_M
+                    or float(self._value(r.name, "gradient")) > read.gradient_permille + 1e-6)
+        return False
 
     def summary_section(self) -> Dict[str, list]:
         judged = {r.name for r in self.receivers}
