@@ -195,6 +195,11 @@ def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
     if system == "ALSN":
         return {}, {}, {}, {"cab_signal": "ALSN"}
+    if system == "TVM430":
+        from fmus.loco_receiver import tvm430 as receiver
+
+        return ({"system": system}, {}, {"system": system},
+                {"cab_signal": "TVM430", "decoding_latency": round(receiver.STATED_LATENCY_S, 3)})
     if system == "ALSU":
         from fmus.signalling import alsu
 
@@ -244,6 +249,98 @@ def write_alsu(root: Path = SSP_ROOT, name: str = "alsu") -> Path:
     folder = root / name
     path = write_ssd(folder, name, chain + components, connections + links, stop_time=1100.0)
     _write_json(folder / "resources" / "alsu_line.json", alsu_line(_shipped_json("default_line.json")))
+    return path
+
+
+# TVM-430 on the high-speed line: 28 block sections of 1500 m at 12 kHz (docs/rail_line.md,
+# sample rate of the TVM chain), so the signal FMUs are a build of 32 sections and 10 ms frames
+# of 120 samples (docs/architecture.md#build-sizes)
+TVM430_FS_HZ = 12000.0
+TVM430_BUILD = BuildConfig(sections=32, trains=2, frame=120)
+TVM430_LINE, TVM430_STOCK = "hsl_tvm430_line.json", "high_speed_tgv.json"
+TVM430_ARRIVAL_S, TVM430_STOP_TIME_S = 735.0, 860.0
+TVM430_TIMETABLE = {"train": "TGV 9001", "stops": [{"station": "Origine", "departure_s": 30},
+                                                   {"station": "Terminus", "arrival_s": TVM430_ARRIVAL_S}]}
+
+
+def tvm430_chain(trains: Sequence[Tuple[str, str]], files: Dict[str, str]):
+    coder, rail, receiver, ato = cab_settings("TVM430")
+    chain, links = signal_chain(trains, sections=TVM430_BUILD.sections, frame=TVM430_BUILD.frame,
+                                fmu_folder=f"resources/{TVM430_BUILD.folder_name}", fs_hz=TVM430_FS_HZ,
+                                coder={**coder, **files}, rail={**rail, **files},
+                                receiver={**receiver, "train_category": "high_speed"},
+                                stocks=[TVM430_STOCK] * len(trains))
+    return chain, links, ato
+
+
+def write_tvm430(root: Path = SSP_ROOT, name: str = "tvm430") -> Path:
+    line = _shipped_json(TVM430_LINE)
+    check_placements(line, [("train", _stop_m(line, "Origine"), stock_length_m(TVM430_STOCK))])
+    files = {"line_file": TVM430_LINE}
+    stock = {"rolling_stock_file": TVM430_STOCK}
+    chain, links, ato = tvm430_chain((("train", "ato"),), files)
+    components, connections = train_and_ato(
+        train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "tvm430_timetable.json"})
+    folder = root / name
+    path = write_ssd(folder, name, chain + components, connections + links, stop_time=TVM430_STOP_TIME_S)
+    _write_json(folder / "resources" / TVM430_LINE, line)
+    _write_json(folder / "resources" / TVM430_STOCK, _shipped_json(TVM430_STOCK))
+    _write_json(folder / "resources" / "tvm430_timetable.json", TVM430_TIMETABLE)
+    return path
+
+
+# tvm430_following: the leader, standing at "Origine est" ahead of the follower, departs at 30 s;
+# the follower departs 3 min later (TVM-430's headway on LGV Nord, docs/sources.md#tvm-430). The
+# leader is held by a full service brake from 445 s (≈ 25.5 km, 250 km/h) until 685 s: it stands
+# at 27.7 km (block 19); the follower, at 300 km/h, closes in under the steps 300 → 270 → 230 →
+# 170 → 0, stands before the buffer section (block 18, from 25.5 km), then follows it on to its
+# stop at "Milieu" (33.75 km) while the leader runs to Terminus
+TVM430_LEADER_ORIGIN = ("Origine est", 1200.0)
+TVM430_MIDDLE = ("Milieu", 33750.0)
+TVM430_LEADER_HALT_S = (445.0, 685.0)
+TVM430_LEADER_TIMETABLE = {"train": "TGV 9003 (leader)", "stops": [
+    {"station": TVM430_LEADER_ORIGIN[0], "departure_s": 30}, {"station": "Terminus", "arrival_s": 740}]}
+TVM430_FOLLOWER_TIMETABLE = {"train": "TGV 9005 (3 min behind)", "stops": [
+    {"station": "Origine", "departure_s": 210}, {"station": TVM430_MIDDLE[0], "arrival_s": 830}]}
+TVM430_FOLLOWING_STOP_TIME_S = 1100.0
+
+
+def write_tvm430_following(root: Path = SSP_ROOT, name: str = "tvm430_following") -> Path:
+    line = _with_station(_shipped_json(TVM430_LINE), *TVM430_LEADER_ORIGIN,
+                         "Origine est: where the leader of tvm430_following stands, ahead of the follower")
+    line = _with_station(line, *TVM430_MIDDLE, "Milieu: the follower's stop in tvm430_following")
+    length_m = stock_length_m(TVM430_STOCK)
+    check_placements(line, [("leader", TVM430_LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "Origine"), length_m)])
+    files = {"line_file": "tvm430_following_line.json"}
+    stock = {"rolling_stock_file": TVM430_STOCK}
+    trains = (("leader", "leader_ato"), ("follower", "follower_ato"))
+    chain, links, ato = tvm430_chain(trains, files)
+    leader, leader_links = train_and_ato(
+        "leader", "leader_ato", train_parameters={**files, **stock, "x0": TVM430_LEADER_ORIGIN[1]},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "leader_timetable.json"})
+    follower, follower_links = train_and_ato(
+        "follower", "follower_ato", train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "follower_timetable.json"})
+    folder = root / name
+    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
+                     stop_time=TVM430_FOLLOWING_STOP_TIME_S)
+    resources = folder / "resources"
+    _write_json(resources / "tvm430_following_line.json", line)
+    _write_json(resources / TVM430_STOCK, _shipped_json(TVM430_STOCK))
+    _write_json(resources / "leader_timetable.json", TVM430_LEADER_TIMETABLE)
+    _write_json(resources / "follower_timetable.json", TVM430_FOLLOWER_TIMETABLE)
+    halt, release = TVM430_LEADER_HALT_S
+    _write_json(folder / "scenario.json", {
+        "description": "TVM-430 at 3 min headway: the leader, held by a full service brake from 445 s at about "
+                       "25.5 km until 685 s, stands in block 19 (27.7 km); the follower, 3 min behind at 300 km/h, "
+                       "closes in under the steps 300, 270, 230, 170 and 0 km/h, stands before the buffer section "
+                       "(25.5 km), follows when the blocks clear and stops at Milieu (33.75 km) while the leader "
+                       "runs to Terminus.",
+        "events": [
+            {"time": halt, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
+            {"time": release, "model": "leader", "variable": "command", "action": "reset"},
+        ]})
     return path
 
 
@@ -481,6 +578,8 @@ for _system, _prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
     SHIPPED[_prefix] = partial(write_free_run, system=_system, name=_prefix)
     SHIPPED[f"{_prefix}_following"] = partial(write_following, system=_system, name=f"{_prefix}_following")
 SHIPPED["alsu"] = write_alsu
+SHIPPED["tvm430"] = write_tvm430
+SHIPPED["tvm430_following"] = write_tvm430_following
 SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
 
 

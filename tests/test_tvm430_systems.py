@@ -1,0 +1,103 @@
+"""TVM-430 through the whole chain under the orchestrator (coder → rail line → receiver → ATP/ATO,
+docs/scenarios.md): the run's verdicts judge a TVM430 receiver against the words sent and against
+the block rules on the real occupancy; the shipped tvm430 system runs on its own build sizes
+(32 sections, 10 ms frames at 12 kHz). The full tvm430 and tvm430_following runs are in
+docs/scenarios.md's table (benchmarks/run_tvm430.py)."""
+import json
+
+import pytest
+
+from orchestrator.analysis.systems import signal_chain, train_and_ato
+from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
+from orchestrator.run import RunOptions, run_system
+from orchestrator.sspgen import write_ssd
+
+BLOCK_M, BLOCKS = 1500.0, 8
+FS_HZ, FRAME = 16000.0, 40          # the default build's 40-sample frame: 2.5 ms at 16 kHz
+BROKEN_RAIL_M = 3500.0              # in block 3, ahead of the train standing at 400 m in block 1
+
+
+def _line(folder):
+    blocks = [{"name": str(k + 1), "start_m": k * BLOCK_M, "end_m": (k + 1) * BLOCK_M, "signal": f"R{k + 1}",
+               "transmitter": "UM71", "carrier_hz": (1700, 2300)[k % 2], "ballast_ohm_km": 2.0}
+              for k in range(BLOCKS)]
+    doc = {"name": "TVM test line", "length_m": BLOCKS * BLOCK_M, "max_ballast_ohm_km": 50,
+           "electrification": {"system": "AC25000"}, "block_sections": blocks,
+           "separation_zones": [{"position_m": k * BLOCK_M} for k in range(1, BLOCKS)],
+           "stations": [{"name": "A", "stop_m": 400.0}, {"name": "Z", "stop_m": 11500.0}],
+           "gradients": [{"start_m": 0.0, "permille": 0.0}], "curves": [],
+           "speed_limits": [{"start_m": 0.0, "passenger_kmh": 160, "freight_kmh": 100, "high_speed_kmh": 300}]}
+    path = folder / "tvm_line.json"
+    path.write_text(json.dumps(doc))
+    timetable = folder / "tvm_timetable.json"
+    timetable.write_text(json.dumps({"train": "TGV", "stops": [{"station": "A", "departure_s": 5.0},
+                                                               {"station": "Z", "arrival_s": 400.0}]}))
+    return path, timetable
+
+
+def _run(tmp_path, product_fmus, occupancy_sent: bool, stop_time: float = 16.0):
+    from fmus.loco_receiver import tvm430 as receiver
+
+    folder = str(product_fmus)
+    line, timetable = _line(tmp_path)
+    files = {"line_file": str(line)}
+    from fmus.data.loader import DATA
+
+    stock = {"rolling_stock_file": str(DATA / "high_speed_tgv.json")}
+    components, connections = train_and_ato(
+        fmu_folder=folder, train_parameters={**files, **stock},
+        ato_parameters={"cab_signal": "TVM430", "decoding_latency": receiver.STATED_LATENCY_S,
+                        "timetable_file": str(timetable), **files, **stock})
+    chain, links = signal_chain(fmu_folder=folder, fs_hz=FS_HZ, frame=FRAME, coder={"system": "TVM430", **files},
+                                rail=files, receiver={"system": "TVM430", "train_category": "high_speed"},
+                                stocks=[stock["rolling_stock_file"]])
+    if not occupancy_sent:              # the coder never learns the occupancy: clear-line words everywhere
+        links = [c for c in links if not c.start.startswith("rail.occupied")]
+    system = write_ssd(tmp_path / "sys", "sys", chain + components, connections + links, stop_time=stop_time)
+    scenario = tmp_path / "scenario.json"
+    scenario.write_text(json.dumps({"description": "broken rail ahead", "events": [
+        {"time": 1.0, "model": "rail", "variable": "broken_rail_at", "action": "set", "value": BROKEN_RAIL_M}]}))
+    result = run_system(system.parent if system.is_file() else system,
+                        RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out", in_process=True,
+                                   fmu_dirs=[product_fmus], scenario=scenario, record=[]))
+    (rx,) = result.summary["receivers"]
+    return result.summary, rx
+
+
+def test_a_tvm_coder_that_never_hears_the_occupancy_is_caught_against_the_track(tmp_path, product_fmus):
+    summary, rx = _run(tmp_path, product_fmus, occupancy_sent=False)
+    assert rx["system"] == "TVM430" and rx["decoded_codes"] > 0, rx
+    assert rx["wrong_side_failures"] == 0, rx          # the receiver shows the word sent …
+    assert rx["unsafe_indications"] == 1, rx           # … which the broken rail two blocks ahead forbids
+    (event,) = rx["unsafe_events"]
+    assert event["section"] == 1 and event["free_blocks_allowed"] == 1
+    safe, line = safety_verdict(summary)
+    assert not safe and "unsafe indications 1" in line
+
+
+def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus):
+    summary, rx = _run(tmp_path, product_fmus, occupancy_sent=True)
+    assert rx["decoded_codes"] > 0 and rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
+    assert rx["latency_s"] == pytest.approx(5.1875)
+    assert safety_verdict(summary)[0]
+    (train,) = summary["trains"]
+    assert train["signals_passed_at_danger"] == 0 and train["atp_interventions"] == 0
+
+
+def test_the_shipped_tvm430_runs_on_its_build_sizes_and_departs_under_its_words(tmp_path, product_fmus):
+    from orchestrator.analysis.systems import SSP_ROOT
+
+    result = run_system(SSP_ROOT / "tvm430", RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out",
+                                                        in_process=True, fmu_dirs=[product_fmus], stop_time=130.0,
+                                                        record=["train.x", "train.v", "rx.v_permitted",
+                                                                "rx.word_carrier"]))
+    summary = result.summary
+    (rx,) = summary["receivers"]
+    assert rx["system"] == "TVM430" and rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
+    assert safety_verdict(summary)[0]
+    header, *rows = (line.split(",") for line in (tmp_path / "out" / "results.csv").read_text().splitlines())
+    column = {name: k for k, name in enumerate(header)}
+    last = rows[-1]
+    assert float(last[column["train.x"]]) > 2000.0          # out of the first block, on its 300 km/h word
+    assert float(last[column["rx.v_permitted"]]) == pytest.approx(300 / 3.6)
+    assert {float(r[column["rx.word_carrier"]]) for r in rows} >= {1700.0, 2300.0}
