@@ -25,10 +25,10 @@ FRAME_S = 0.01
 
 def tvm_line(blocks: int) -> Path:
     sections = [{"name": f"B{b}", "start_m": 1500.0 * b, "end_m": 1500.0 * (b + 1), "signal": f"M{b}",
-                 "transmitter": "KPT-5", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0}
+                 "transmitter": "UM71", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0}
                 for b in range(blocks)]
     doc = {"name": f"{blocks} TVM blocks", "length_m": 1500.0 * blocks, "electrification": {"system": "AC25000"},
-           "block_sections": sections, "stations": [{"name": "end", "stop_m": 1500.0 * blocks - 200.0}],
+           "block_sections": sections, "separation_zones": [{"position_m": 1500.0 * b} for b in range(1, blocks)], "stations": [{"name": "end", "stop_m": 1500.0 * blocks - 200.0}],
            "gradients": [{"start_m": 0, "permille": 0}], "curves": [],
            "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90, "high_speed_kmh": 300}]}
     path = Path(tempfile.mkdtemp()) / "tvm_line.json"

@@ -1,5 +1,5 @@
 """TVM-430's sample rate: accuracy and cost of the rail line at 8, 10.4, 12 and 16 kHz on the
-high-speed line (fmus/data/shipped/hsl_tvm430_line.json; docs/rail_line.md#sample-rate-of-the-tvm-chain,
+high-speed line (fmus/data/shipped/hsl_tvm430_line.json; docs/rail_line.md#tvm-430-track-circuits, "Sample rate",
 docs/performance.md).
 
 Accuracy, per sample rate, for a 1700 Hz and a 2300 Hz circuit with a train standing near the

@@ -39,6 +39,10 @@ SYSTEM_DESCRIPTIONS: Dict[str, str] = {
     "alsu": "the free run with ALSU (two of six tones) on a 4-aspect block, a diverging route into B "
             "and a permanent restriction",
     "alsu_following": "following with ALSU cab signalling",
+    "tvm430": "a TGV set at 300 km/h on a 42 km high-speed line with TVM-430 (27-bit words on "
+              "1700 / 2300 Hz track circuits), stopping at the end",
+    "tvm430_following": "two TGV sets 3 min apart under TVM-430: the follower closes in on the halted "
+                        "leader under the steps 300-270-230-170-0",
 }
 
 #: one line per role (the unit an FMU in that role replaces)
