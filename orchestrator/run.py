@@ -22,7 +22,7 @@ from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
 from orchestrator.errors import UserError, print_warning, shown_paths
-from orchestrator.fmu import make_slave, new_workdir, remove_workdir
+from orchestrator.fmu import extractions_kept, make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.dcp.pdu import OpMode
@@ -128,7 +128,8 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     workdir: Optional[Path] = None
     try:
         out.claim()                       # from here on the folder holds this run's files
-        workdir = new_workdir()
+        # the FMUs' extractions: in a folder of the run's, unless the process keeps them
+        workdir = None if extractions_kept() else new_workdir()
         setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
                        ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
                        judges, plan.hil, plan.targets)
@@ -446,7 +447,7 @@ class _Setup:
 
     graph: SystemGraph
     options: RunOptions
-    workdir: Path
+    workdir: Optional[Path]             # None: the process keeps the extractions (a study's worker)
     out: Path
     recorded: List[tuple]
     interval_ticks: int
@@ -496,6 +497,12 @@ def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slav
 #: freeze and turn off Python's garbage collector while the master steps (a module constant so
 #: that benchmarks/bench_deadline.py can compare without)
 FREEZE_GC_WHILE_STEPPING = True
+#: set by a process that froze what it holds for good and then makes run after run (a study's
+#: run process, orchestrator/study/runner.py): its runs turn the collector off while stepping
+#: and freeze nothing — what a run froze would stay frozen after it, its cyclic garbage never
+#: collected — nor count what is frozen (gc.get_freeze_count walks every frozen object:
+#: 5–20 ms in a study's worker)
+HOST_KEEPS_FROZEN = False
 
 
 @contextlib.contextmanager
@@ -507,19 +514,22 @@ def collector_off_while_stepping():
     docs/performance.md#one-sample-per-frame-as-a-deadline), four deadlines of a 4 kHz sample.
     Frozen, what exists before the first step is left out of every collection; off, none runs
     while stepping. Stepping makes no cyclic garbage (tests/test_run_gc.py), so nothing
-    accumulates meanwhile; reference counting frees everything else as before."""
+    accumulates meanwhile; reference counting frees everything else as before. In a process
+    that keeps its own objects frozen (HOST_KEEPS_FROZEN) the collector is only turned off."""
     if not FREEZE_GC_WHILE_STEPPING:
         yield
         return
-    was_enabled, frozen_before = gc.isenabled(), gc.get_freeze_count()
-    gc.freeze()
+    was_enabled = gc.isenabled()
+    freeze = not HOST_KEEPS_FROZEN and gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
     gc.disable()
     try:
         yield
     finally:
         if was_enabled:
             gc.enable()
-        if not frozen_before:       # what a caller froze (a study's worker) stays frozen
+        if freeze:                  # what a caller froze stays frozen
             gc.unfreeze()
 
 
