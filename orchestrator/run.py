@@ -87,7 +87,10 @@ class RunResult:
 
 
 def run_system(system_path, options: RunOptions) -> RunResult:
-    """Load a system, run it and write its results.
+    """Load a system, run it and write its results. ``system_path`` is a system folder or
+    .ssp, or a system already opened (a :class:`SystemDescription` of a folder: a study's run
+    process reads its system once, orchestrator/study/runner.py), which the run may change
+    (a parameter set's units) and does not close.
 
     While it runs, SIGINT, SIGTERM and SIGHUP only set a flag (orchestrator/interrupts.py);
     the run stops at the next safe point and raises :class:`Interrupted` once its files are
@@ -104,11 +107,14 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     out = OutputFolder(Path(options.output_dir))
     try:
         flag.check("before the run started")
-        system = open_system(Path(system_path), list(options.fmu_dirs))
+        system = (system_path if isinstance(system_path, SystemDescription)
+                  else open_system(Path(system_path), list(options.fmu_dirs)))
     except Interrupted as stop:
-        _interrupted_before_start(out, Path(system_path).stem, stop)
+        _interrupted_before_start(out, system_path.name if isinstance(system_path, SystemDescription)
+                                  else Path(system_path).stem, stop)
     except OSError as error:            # a .ssp extracted into a full temp folder
         raise os_error(error) from None
+    close_system = (lambda: None) if system is system_path else system.close
     try:
         flag.check("before the run started")
         plan = plan_run(system, options)
@@ -116,10 +122,10 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         warn_rounded_stop(options, plan)
         flag.check("before the run started")
     except Interrupted as stop:
-        system.close()
+        close_system()
         _interrupted_before_start(out, system.name, stop)
     except BaseException:
-        system.close()
+        close_system()
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
     start_ticks = plan.start_ticks
@@ -152,7 +158,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     finally:
         if workdir is not None:
             remove_workdir(workdir)
-        system.close()
+        close_system()
         out.release()
 
 

@@ -121,7 +121,33 @@ def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
         description.close()
 
 
-def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
+#: in a run process, each system folder's description as read for its first run (pickled):
+#: every run gets a copy of its own (0.03 ms for ato_only, 0.6 ms for free_run, where reading
+#: the SSD takes 0.5-1 ms and 6 ms); its FMUs are looked for anew for each run
+_OPENED_SYSTEMS: Dict[tuple, bytes] = {}
+
+
+def _opened_system(system: str, fmu_dirs: Sequence[str]):
+    """A system folder's description, read once per process; a .ssp stays a path (it is
+    unpacked for each run)."""
+    import pickle
+
+    from orchestrator.ssp import _resolve_fmu, open_system
+
+    if not Path(system).is_dir():
+        return system
+    key = (system, tuple(fmu_dirs))
+    if key not in _OPENED_SYSTEMS:
+        _OPENED_SYSTEMS[key] = pickle.dumps(open_system(Path(system), [Path(p) for p in fmu_dirs]))
+    description = pickle.loads(_OPENED_SYSTEMS[key])
+    for component in description.components.values():      # an FMU put in place meanwhile
+        component.fmu_path = _resolve_fmu(description.folder, component.source, [Path(p) for p in fmu_dirs])
+    return description
+
+
+def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool = False) -> dict:
+    """The job's system run here; ``opened``: the system read once per process
+    (:func:`_opened_system`)."""
     from functools import partial
 
     from orchestrator.analysis.verdict import railway_verdicts
@@ -141,7 +167,8 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str]) -> dict:
         fmu_dirs=[Path(p) for p in job["fmu_dirs"]], scenario=Path(scenario) if scenario else None,
         default_scenario=not opts.get("no_scenario", False), progress=False, warn=warnings.append)
     options.summaries = partial(railway_verdicts, warn=options.warn)
-    return run_system(job["system"], options).summary
+    system = _opened_system(job["system"], job["fmu_dirs"]) if opened else job["system"]
+    return run_system(system, options).summary
 
 
 def import_function(name: str, python_path: Sequence[str], where: str):
@@ -179,16 +206,16 @@ def _run_function_here(job: dict, run_dir: Path) -> dict:
     return summary
 
 
-def _outcome_of(job: dict, caught=BaseException) -> dict:
+def _outcome_of(job: dict, caught=BaseException, opened: bool = False) -> dict:
     """Run ``job`` here: its outcome (status, error, warnings); any failure of the ``caught``
-    kinds is the run's."""
+    kinds is the run's. ``opened``: a system read once per process."""
     outcome = {"status": "ok", "error": None, "warnings": []}
     run_dir = Path(job["output"]) / "runs" / job["id"]
     try:
         if job.get("function"):
             _run_function_here(job, run_dir)
         else:
-            _run_system_here(job, run_dir, outcome["warnings"])
+            _run_system_here(job, run_dir, outcome["warnings"], opened)
     except UserError as error:
         outcome.update(status="failed", error=" ".join(str(error).split()))
     except caught as error:                            # noqa: B902 — any failure is the run's
@@ -215,7 +242,7 @@ def _serve(job_fd: int, outcome_fd: int, one_shot: bool) -> None:
         orchestrator.run.HOST_KEEPS_FROZEN = True
         with os.fdopen(job_fd, "rb") as jobs:
             for line in jobs:
-                outcome = _outcome_of(json.loads(line))
+                outcome = _outcome_of(json.loads(line), opened=not one_shot)
                 data = (json.dumps(outcome, default=str)[:60000] + "\n").encode()
                 while data:
                     data = data[os.write(outcome_fd, data):]
