@@ -132,7 +132,7 @@ def _opened_system(system: str, fmu_dirs: Sequence[str]):
     unpacked for each run)."""
     import pickle
 
-    from orchestrator.ssp import _resolve_fmu, open_system
+    from orchestrator.ssp import resolve_fmu, open_system
 
     if not Path(system).is_dir():
         return system
@@ -141,7 +141,7 @@ def _opened_system(system: str, fmu_dirs: Sequence[str]):
         _OPENED_SYSTEMS[key] = pickle.dumps(open_system(Path(system), [Path(p) for p in fmu_dirs]))
     description = pickle.loads(_OPENED_SYSTEMS[key])
     for component in description.components.values():      # an FMU put in place meanwhile
-        component.fmu_path = _resolve_fmu(description.folder, component.source, [Path(p) for p in fmu_dirs])
+        component.fmu_path = resolve_fmu(description.folder, component.source, [Path(p) for p in fmu_dirs])
     return description
 
 
