@@ -31,14 +31,14 @@ means to the cab, and the block rules' word of every block.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.errors import FmuInputError, non_finite_number
+from fmus.data.loader import read_json_file
+from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
 from fmus.signalling.digital_messages import Indication
 
@@ -171,17 +171,7 @@ class CodeTable:
 def load_codes(path=CODES_FILE) -> CodeTable:
     """The word tables, every error one FmuInputError naming the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise FmuInputError(f"{path}: file not found")
-    try:
-        doc = json.loads(path.read_bytes().decode("utf-8-sig"))
-    except UnicodeDecodeError as error:
-        raise FmuInputError(f"{path}: not UTF-8 text (offset {error.start}); save the file as UTF-8") from None
-    except (json.JSONDecodeError, RecursionError):
-        raise FmuInputError(f"{path}: not valid JSON") from None
-    bad = non_finite_number(doc)
-    if bad is not None:
-        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    doc = read_json_file(path)
 
     def fail(name: str, message: str):
         raise FmuInputError(f"{path}: field {name}: {message}")
