@@ -662,12 +662,14 @@ TVM_FS_HZ = 8000.0          # the 4 kHz of the other vectors cannot hold a 2300 
 
 
 def _tvm_line() -> dict:
-    """8 blocks of 1500 m on track 1 (carriers 1700 / 2300 Hz alternating), a 10 ‰ fall from
-    4 km, the station stop near the end: every TVM-430 speed pair within 8 sections."""
+    """8 blocks of 1500 m on track 1 (UM71 circuits, carriers 1700 / 2300 Hz alternating, a
+    separation zone at every boundary), a 10 ‰ fall from 4 km, the station stop near the end:
+    every TVM-430 speed pair within 8 sections."""
     blocks = [{"name": f"B{b + 1}", "start_m": 1500.0 * b, "end_m": 1500.0 * (b + 1), "signal": f"M{b + 1}",
-               "transmitter": "KPT-5", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0} for b in range(8)]
+               "transmitter": "UM71", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0} for b in range(8)]
     return {"name": "TVM-430 coder vectors", "length_m": 12000.0, "electrification": {"system": "AC25000"},
-            "block_sections": blocks, "stations": [{"name": "end", "stop_m": 11800.0}],
+            "block_sections": blocks, "separation_zones": [{"position_m": 1500.0 * b} for b in range(1, 8)],
+            "stations": [{"name": "end", "stop_m": 11800.0}],
             "gradients": [{"start_m": 0, "permille": 0.0}, {"start_m": 4000, "permille": -10.0}], "curves": [],
             "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90, "high_speed_kmh": 300}]}
 
