@@ -82,6 +82,11 @@ IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
 #: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
 #: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
 STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
+#: a word is shown within this of the instant it starts at the coils (from cold, on a new
+#: carrier, a change of word): the window must fill with it, then a decision boundary and one
+#: more to confirm (1.81 s; a restrictive change needs no confirmation). Measured: cold start
+#: 1.75 s, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
+STATED_DECODE_S = WINDOW_S + 2 * HOP_S
 
 
 @dataclass
