@@ -273,15 +273,21 @@ class Tvm430System:
                 return m
         return FREE_BLOCKS_OPEN - 1
 
-    def rank(self, word: int) -> Tuple[float, float, float]:
-        """Order of permissiveness (higher: more permissive); no word or a failed one lowest."""
-        read = self.reading(word)
-        if read is None:
-            return (-1.0, -1.0, -1.0)
-        return (read.step_kmh, read.next_kmh, read.target_distance_m)
-
-    def more_restrictive(self, a: int, b: int) -> int:
-        return a if self.rank(a) <= self.rank(b) else b
+    def at_most(self, a: int, b: int) -> bool:
+        """Whether word ``a`` (of the same block as ``b``) permits nothing that ``b`` does not: no
+        field more permissive — step, next step, target distance, and the gradient (a less
+        falling one lengthens no braking curve). A partial order: a nearer target on a less falling
+        gradient can give a higher braking curve than a farther one on a steeper fall, so such
+        words are not comparable (neither is at most the other). A word that is not read is at
+        most anything."""
+        read_a, read_b = self.reading(a), self.reading(b)
+        if read_a is None:
+            return True
+        if read_b is None:
+            return False
+        return (read_a.step_kmh <= read_b.step_kmh and read_a.next_kmh <= read_b.next_kmh
+                and read_a.target_distance_m <= read_b.target_distance_m
+                and read_a.gradient_permille <= read_b.gradient_permille)
 
 
 SYSTEM = None      # the shipped table's system, made on first use (system())
