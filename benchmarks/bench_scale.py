@@ -1,6 +1,6 @@
 """How the rail line core's cost grows with the line (docs/performance.md#cost-against-the-size-of-the-line).
 
-    python benchmarks/bench_scale.py [--frames 300] [--warm 200] [--repeats 3]
+    python benchmarks/bench_scale.py [--frames 300] [--warm 200] [--repeats 3] [--tvm]
 
 Synthetic lines of 20, 40 and 80 km cut into block sections of 1.25 km (16, 32 and 64
 sections, the most a build allows: the default line's first section's circuit, carrier and
@@ -12,6 +12,10 @@ model caches, as the cost per simulated second (100 frames), the median of --rep
 memory the core holds after the run (tracemalloc, a separate pass). Then the least-squares fit
 of log cost = c + α·log sections + β·log trains, and the same for memory: α, β ≤ 1.1 is the
 target (no term worse than linear).
+
+``--tvm``: the same grid for TVM-430's chain, at its 12 kHz (10 ms frames of 120 samples):
+jointless UM71 circuits of 1.25 km with tuned separation zones, carriers 1700 / 2300 Hz
+alternating, a sine at each section's carrier (docs/rail_line.md#tvm-430-track-circuits).
 
 The rail line is the component whose work depends on both; the coder's cost is per section,
 the receiver's, traction's and the ATO's per train.
@@ -35,14 +39,16 @@ from fmus.data.loader import DEFAULT_LINE, load_line  # noqa: E402
 from fmus.rail_line.core import RailLineCore, RailSettings  # noqa: E402
 
 FS, N = 4000.0, 40
+TVM_FS, TVM_N = 12000.0, 120
 SECTION_M = 1250.0
 LENGTHS_KM = (20, 40, 80)
 TRAINS = (1, 4, 8, 16)
 
 
-def synthetic_line(folder: Path, length_km: int) -> Path:
+def synthetic_line(folder: Path, length_km: int, tvm: bool = False) -> Path:
     """The default line's data stretched to ``length_km``: sections of SECTION_M, joints at
-    each boundary, level and straight, one limit, stations at both ends."""
+    each boundary, level and straight, one limit, stations at both ends; ``tvm``: UM71 circuits
+    at 1700 / 2300 Hz with a separation zone at each inner boundary instead of the joints."""
     base = json.loads(Path(DEFAULT_LINE).read_text())
     length_m = length_km * 1000.0
     count = round(length_m / SECTION_M)
@@ -58,22 +64,33 @@ def synthetic_line(folder: Path, length_km: int) -> Path:
             "speed_limits": [{"start_m": 0, "passenger_kmh": 120, "freight_kmh": 90}]}
     for key in ("temporary_restrictions",):
         line.pop(key, None)
-    path = folder / f"line_{length_km}km.json"
+    if tvm:
+        for k, section in enumerate(sections):
+            section.update(transmitter="UM71", carrier_hz=(1700, 2300)[k % 2])
+        line.pop("insulated_joints")
+        line["separation_zones"] = [{"position_m": k * SECTION_M} for k in range(1, count)]
+    path = folder / f"line_{length_km}km{'_tvm' if tvm else ''}.json"
     path.write_text(json.dumps(line))
     return path
 
 
 def drive(core: RailLineCore, frames: int, t0: float, length_m: float, record=None) -> None:
     trains, count = core.trains, core.count
+    fs, n = core.settings.fs_hz, core.frame
     speeds = np.linspace(60.0, 100.0, trains) / 3.6
     start = (np.arange(trains) + 0.5) * length_m / trains * 0.9
     traction = np.full(trains, 600.0)
-    samples = np.arange(N) / FS
+    samples = np.arange(n) / fs
+    carriers = np.array([section.carrier_hz for section in core.line.sections], dtype=float)
+    tvm = carriers.min() > 1000.0
     for k in range(frames):
-        t = t0 + k * N / FS
+        t = t0 + k * n / fs
         times = t + samples
-        key = (np.sin(2 * np.pi * times / 1.6) > 0.3).astype(float)
-        u = np.outer(np.full(count, 4.0), key * np.sin(2 * np.pi * 50 * times))
+        if tvm:                # each section's carrier, always on (it detects the trains)
+            u = 4.0 * np.sin(2 * np.pi * np.outer(carriers, times))
+        else:
+            key = (np.sin(2 * np.pi * times / 1.6) > 0.3).astype(float)
+            u = np.outer(np.full(count, 4.0), key * np.sin(2 * np.pi * 50 * times))
         x = np.minimum(start + speeds * np.floor(t / 0.5) * 0.5, length_m - 1.0)
         began = time.perf_counter()
         core.step(t, u, x, speeds, traction)
@@ -81,18 +98,19 @@ def drive(core: RailLineCore, frames: int, t0: float, length_m: float, record=No
             record.append(time.perf_counter() - began)
 
 
-def measure(line_path: Path, trains: int, frames: int, warm: int, repeats: int):
+def measure(line_path: Path, trains: int, frames: int, warm: int, repeats: int, tvm: bool = False):
     line = load_line(line_path)
-    settings = RailSettings(train_length_m=(120.0,) * trains)
+    fs, n = (TVM_FS, TVM_N) if tvm else (FS, N)
+    settings = RailSettings(fs_hz=fs, train_length_m=(120.0,) * trains)
     per_second = []
     for _ in range(repeats):
-        core = RailLineCore(line, len(line.sections), trains, N, settings)
+        core = RailLineCore(line, len(line.sections), trains, n, settings)
         drive(core, warm, 0.0, line.length_m)
         timed: list = []
-        drive(core, frames, warm * N / FS, line.length_m, timed)
-        per_second.append(statistics.median(timed) * FS / N)
+        drive(core, frames, warm * n / fs, line.length_m, timed)
+        per_second.append(statistics.median(timed) * fs / n)
     tracemalloc.start()
-    core = RailLineCore(line, len(line.sections), trains, N, settings)
+    core = RailLineCore(line, len(line.sections), trains, n, settings)
     drive(core, warm, 0.0, line.length_m)
     memory = tracemalloc.get_traced_memory()[0]
     tracemalloc.stop()
@@ -111,14 +129,15 @@ def main(argv=None) -> None:
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--warm", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--tvm", action="store_true", help="TVM-430's UM71 circuits at 12 kHz")
     args = parser.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         for length_km in LENGTHS_KM:
-            path = synthetic_line(Path(folder), length_km)
+            path = synthetic_line(Path(folder), length_km, args.tvm)
             sections = round(length_km * 1000 / SECTION_M)
             for trains in TRAINS:
-                cost, memory = measure(path, trains, args.frames, args.warm, args.repeats)
+                cost, memory = measure(path, trains, args.frames, args.warm, args.repeats, args.tvm)
                 rows.append((sections, trains, cost, memory))
                 print(f"{length_km} km, {sections} sections, {trains} trains: {cost * 1e3:.1f} ms per simulated "
                       f"second ({cost * 1e6 / 100:.0f} us per 10 ms frame), {memory / 1e6:.1f} MB", flush=True)
