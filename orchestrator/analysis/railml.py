@@ -778,7 +778,7 @@ def _detectors(doc: _Doc, fi, locate: _Locator, extras, notes):
         kind = element.get("type") or element.get("detectionType") or "trackCircuit"
         position = _clean(spots[0][0])
         zone = None
-        if element.get(RC + "separationZone") == "true" or element.get("id") in zone_extras:
+        if element.get(RC + "separationZone") in ("true", "1") or element.get("id") in zone_extras:
             if kind == "insulatedRailJoint":
                 doc.fail(element, "an insulated rail joint marked a separation zone: a UM71 separation zone "
                                   "is a jointless track-circuit border (type trackCircuit)")
