@@ -10,6 +10,7 @@ import pytest
 
 from helpers import REPO, railcosim
 from orchestrator.analysis.railml import export_railml, import_railml, validate_railml
+from orchestrator.errors import UserError
 
 DATA = REPO / "tests" / "data" / "railml"
 FIXTURE_31, FIXTURE_32 = DATA / "double_track_3.1.xml", DATA / "double_track_3.2.xml"
@@ -115,6 +116,63 @@ def test_export_writes_a_systems_line_that_imports_back(tmp_path):
     original = json.loads((REPO / "ssp" / "freight_ac" / "resources" / "default_line_ac.json").read_text())
     assert import_railml(tmp_path / "ac.xml").document == original
     assert b"https://www.railml.org/schemas/3.2" in (tmp_path / "ac.xml").read_bytes()
+
+
+TVM_LINE = REPO / "ssp" / "tvm430" / "resources" / "hsl_tvm430_line.json"
+
+
+def test_the_tvm430_system_exports_its_um71_sections_and_zones_and_imports_back(tmp_path):
+    code, stdout, stderr = railcosim("export", "railml", "tvm430", "-o", tmp_path / "hsl.xml", cwd=tmp_path)
+    assert code == 0, stderr
+    original = json.loads(TVM_LINE.read_text())
+    assert import_railml(tmp_path / "hsl.xml").document == original
+    # jointless: every inner border a trackCircuit detector marked as the zone, no insulated joint
+    text = (tmp_path / "hsl.xml").read_text()
+    assert 'type="insulatedRailJoint"' not in text
+    assert text.count('rcs:separationZone="true"') == len(original["separation_zones"]) == 27
+    assert 'frequency="1700"' in text and 'rcs:transmitter="UM71"' in text
+
+
+def _without_zones(tmp_path) -> Path:
+    """The high-speed line as a file from elsewhere might give it: the sections' carriers, but
+    neither our zones nor our transmitter."""
+    text = export_railml(json.loads(TVM_LINE.read_text())).decode()
+    for attribute in (' rcs:separationZone="true"', ' rcs:separationZoneLengthM="26"', ' rcs:transmitter="UM71"'):
+        assert attribute in text
+        text = text.replace(attribute, "")
+    path = tmp_path / "lgv.xml"
+    path.write_text(text)
+    return path
+
+
+def test_a_tvm_file_without_its_separation_zones_is_refused_naming_the_border(tmp_path):
+    stderr = _refused(tmp_path, _without_zones(tmp_path))
+    assert "trainDetectionElement 'tde_border_2'" in stderr and "1500 m" in stderr
+    assert "'tvd_1' and 'tvd_2'" in stderr and "missing the tuned separation zone" in stderr
+
+
+def test_the_sidecar_gives_the_zones_a_file_lacks(tmp_path):
+    original = json.loads(TVM_LINE.read_text())
+    sidecar = tmp_path / "zones.json"
+    # the border detectors between sections: tde_border_2 … tde_border_28 (1500 … 40500 m)
+    sidecar.write_text(json.dumps({"zones": {f"tde_border_{k}": {"length_m": 26} for k in range(2, 29)}}))
+    line = import_railml(_without_zones(tmp_path), sidecar=sidecar).document
+    assert line["separation_zones"] == original["separation_zones"]
+    # a TVM carrier is a UM71 circuit's
+    assert [(s["transmitter"], s["carrier_hz"]) for s in line["block_sections"]] == [
+        (s["transmitter"], s["carrier_hz"]) for s in original["block_sections"]]
+
+
+def test_a_separation_zone_between_tvm_and_alsn_sections_is_refused(tmp_path):
+    text = export_railml(json.loads(TVM_LINE.read_text())).decode()
+    old = '<tvdSection id="tvd_28" residualRouteCancellationDelay="PT0S" partialRouteReleaseDelay="PT0S" ' \
+          'technology="trackCircuit" frequency="2300" rcs:transmitter="UM71"'
+    assert old in text
+    path = tmp_path / "mixed.xml"
+    path.write_text(text.replace(old, old.replace('"2300"', '"50"').replace('"UM71"', '"KPT-5"')))
+    with pytest.raises(UserError, match=r"trainDetectionElement 'tde_border_28' .*a separation zone at 40500 m, "
+                                        r"where no two TVM \(UM71\) sections meet"):
+        import_railml(path)
 
 
 def _variant(tmp_path, source: Path, old: str, new: str) -> Path:

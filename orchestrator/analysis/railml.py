@@ -69,6 +69,11 @@ DEFAULTS = {
     "speed_kmh": 80.0,                               # where no speed section and no line maxSpeed
     "freight_speed_kmh": None,                       # None: the passenger speed, at most 200
 }
+#: the carriers of coded ALSN track circuits and of audio-frequency TVM (UM71) ones, Hz, and the
+#: transmitter of the latter (docs/interfaces.md#line-file-tvm-430-sections)
+ALSN_CARRIERS_HZ = (25, 50, 75)
+TVM_CARRIERS_HZ = (1700, 2000, 2300, 2600)
+TVM_TRANSMITTER = "UM71"
 SIGNAL_FUNCTIONS_CLOSING_A_BLOCK = {"main", "block", "exit", "entry", "intermediate", "intermediateStop",
                                     "junction", "combined"}
 STATION_TYPES = {"station", "stoppingPoint", "halt"}
@@ -628,6 +633,8 @@ class _Detector:
     id: str
     kind: str            # insulatedRailJoint, trackCircuit, axleCounter, … or bufferStop / pathEnd
     element: object
+    #: a tuned separation zone between two UM71 circuits: its line-file entry (position_m, length_m)
+    zone: Optional[dict] = None
 
 
 def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlImport:
@@ -685,9 +692,11 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
     signals = _block_signals(doc, fi, locate, notes)
     document["block_sections"] = _sections(doc, locate, detectors, signals, document["electrification"]["system"],
                                            extras, notes)
-    document["insulated_joints"] = joints
-    if not joints and not ours:
-        del document["insulated_joints"]
+    if joints:           # none and an empty list are the same to the loader; a TVM line lists none
+        document["insulated_joints"] = joints
+    zones = [d.zone for d in detectors if d.zone is not None]
+    if zones:
+        document["separation_zones"] = zones
     document["stations"] = _stations(doc, fi, locate, path_, notes)
     document["gradients"] = _gradients(doc, locate, notes)
     document["curves"] = _curves(doc, locate, notes)
@@ -752,11 +761,14 @@ def _electrification(doc: _Doc, fi, locate: _Locator, extras, notes) -> dict:
 
 
 def _detectors(doc: _Doc, fi, locate: _Locator, extras, notes):
-    """Train detection elements on the path (sorted) and the insulated joints of the line file."""
+    """Train detection elements on the path (sorted) and the insulated joints of the line file.
+    A border marked ``rcs:separationZone`` (or named in the sidecar's zones) is a UM71
+    separation zone: its :attr:`_Detector.zone` is the line file's entry."""
     found: List[_Detector] = []
     joints = []
     off_path = 0
     joint_extras = extras.get("joints", {})
+    zone_extras = extras.get("zones", {})
     defaults = extras.get("defaults", {})
     for element in doc.findall(fi, "trainDetectionElements", "trainDetectionElement"):
         spots = locate.spots(element)
@@ -765,7 +777,18 @@ def _detectors(doc: _Doc, fi, locate: _Locator, extras, notes):
             continue
         kind = element.get("type") or element.get("detectionType") or "trackCircuit"
         position = _clean(spots[0][0])
-        found.append(_Detector(position, element.get("id"), kind, element))
+        zone = None
+        if element.get(RC + "separationZone") in ("true", "1") or element.get("id") in zone_extras:
+            if kind == "insulatedRailJoint":
+                doc.fail(element, "an insulated rail joint marked a separation zone: a UM71 separation zone "
+                                  "is a jointless track-circuit border (type trackCircuit)")
+            zone = {"position_m": position}
+            length = zone_extras.get(element.get("id"), {}).get("length_m")
+            if length is None and element.get(RC + "separationZoneLengthM") is not None:
+                length = doc.float_attr(element, RC + "separationZoneLengthM")
+            if length is not None:
+                zone["length_m"] = length
+        found.append(_Detector(position, element.get("id"), kind, element, zone))
         if kind == "insulatedRailJoint":
             joint = {"position_m": position}
             for attribute, key, convert in (("impedanceBond", "impedance_bond", lambda v: v == "true"),
@@ -778,7 +801,7 @@ def _detectors(doc: _Doc, fi, locate: _Locator, extras, notes):
                 if value is not None and (key not in joint or key in joint_extras.get(element.get("id"), {})):
                     joint[key] = value
             joints.append(joint)
-    kinds = sorted({d.kind for d in found} - {"insulatedRailJoint"})
+    kinds = sorted({d.kind for d in found if d.zone is None} - {"insulatedRailJoint"})
     if kinds:
         notes.append(f"train detection of type {', '.join(kinds)} modelled as coded track-circuit borders "
                      "(ALSN codes run in the rails of track circuits); only insulatedRailJoint elements are "
@@ -903,7 +926,8 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
             ident = f"S{len(sections) + 1}"
             name = str(len(sections) + 1)
             derived.append(ident)
-        sections.append({"_tvd": tvd, "_id": ident, "name": name, "start_m": a.position, "end_m": b.position})
+        sections.append({"_tvd": tvd, "_id": ident, "_end": b, "name": name, "start_m": a.position,
+                         "end_m": b.position})
     made = {id(s["_tvd"]) for s in sections if s["_tvd"] is not None}
     for a, b in open_ends:
         detector, end = (b, a) if a.kind == "pathEnd" else (a, b)
@@ -925,10 +949,12 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
                                                      else DEFAULTS["carrier_hz_dc"])
     transmitter_default = defaults.get("transmitter", DEFAULTS["transmitter"])
     assumed = {"carrier": 0, "transmitter": 0, "ballast": 0}
-    result = []
+    result, idents, ends = [], [], []
     for k, section in enumerate(sections):
         tvd = section.pop("_tvd")
         ident = section.pop("_id")
+        ends.append(section.pop("_end"))
+        idents.append(ident)
         end = section["end_m"]
         exits = exit_signals.get(ident, set())
         candidates = [s for s in signals if s.id not in used and end - SIGNAL_TO_JOINT_M - 1e-6 <= s.position <= end + 1e-6]
@@ -939,28 +965,32 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
         entry = {"name": section["name"], "start_m": section["start_m"], "end_m": end,
                  "signal": signal.name if signal is not None else ""}
         own = section_extras.get(ident, {})
+        carrier = own.get("carrier_hz") or (doc.float_attr(tvd, "frequency") if tvd is not None else None)
+        if carrier is None:
+            carrier = carrier_default
+            assumed["carrier"] += 1
         transmitter = own.get("transmitter") or (tvd.get(RC + "transmitter") if tvd is not None else None)
+        if transmitter is None and carrier in TVM_CARRIERS_HZ:
+            transmitter = TVM_TRANSMITTER      # only a UM71 circuit carries an audio frequency
         if transmitter is None:
             transmitter = transmitter_default
             assumed["transmitter"] += 1
         if transmitter == "alternate":     # the other type than the section before (docs/wayside_coder.md)
             transmitter = "KPT-7" if result and result[-1]["transmitter"] == "KPT-5" else "KPT-5"
-        carrier = own.get("carrier_hz") or (doc.float_attr(tvd, "frequency") if tvd is not None else None)
-        if carrier is None:
-            carrier = carrier_default
-            assumed["carrier"] += 1
         ballast = own.get("ballast_ohm_km") or (_number(tvd.get(RC + "ballastOhmKm")) if tvd is not None and
                                                 tvd.get(RC + "ballastOhmKm") is not None else None)
         if ballast is None:
             ballast = defaults.get("ballast_ohm_km", DEFAULTS["ballast_ohm_km"])
             assumed["ballast"] += 1
-        if carrier not in (25, 50, 75):
+        if carrier not in ALSN_CARRIERS_HZ + TVM_CARRIERS_HZ:
             where = f"tvdSection {ident!r}" if tvd is not None else f"block section {ident}"
-            raise UserError(f"{doc.path}: {where}: frequency {carrier:g} Hz is no ALSN carrier (25, 50 or 75 Hz)")
+            raise UserError(f"{doc.path}: {where}: frequency {carrier:g} Hz is no ALSN carrier (25, 50 or 75 Hz) "
+                            "nor a TVM one (1700, 2000, 2300 or 2600 Hz)")
         if "name" in own:
             entry["name"] = own["name"]
         entry.update({"transmitter": transmitter, "carrier_hz": int(carrier), "ballast_ohm_km": ballast})
         result.append(entry)
+    _check_separation_zones(doc, result, idents, ends, detectors)
     result = _split_long(result, notes)
     unused = [s.name for s in signals if s.id not in used]
     if unused:
@@ -972,6 +1002,30 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
                      "ballast": f"{defaults.get('ballast_ohm_km', DEFAULTS['ballast_ohm_km'])} Ω·km"}[what]
             notes.append(f"{what} of {count} block section(s) not in the file: {value} assumed (docs/railml.md#defaults)")
     return result
+
+
+def _check_separation_zones(doc: _Doc, sections: List[dict], idents: List[str], ends: List[_Detector],
+                            detectors: List[_Detector]) -> None:
+    """Two UM71 circuits meet at a tuned separation zone, and a zone stands nowhere else: a file
+    that lacks one is refused naming the border (railML itself has no word for a zone: docs/
+    railml.md#our-extension)."""
+    between_tvm = set()
+    for k in range(1, len(sections)):
+        before, after, border = sections[k - 1], sections[k], ends[k - 1]
+        if after["start_m"] != before["end_m"] or not before["transmitter"] == after["transmitter"] == TVM_TRANSMITTER:
+            continue
+        between_tvm.add(id(border))
+        if border.zone is None:
+            what = "an insulated rail joint" if border.kind == "insulatedRailJoint" else f"a {border.kind} border"
+            doc.fail(border.element if border.element is not None else border.id,
+                     f"{what} at {border.position:g} m between the TVM (UM71) sections {idents[k - 1]!r} and "
+                     f"{idents[k]!r}: missing the tuned separation zone that goes there (UM71 circuits have no "
+                     "insulated joints); mark a jointless border rcs:separationZone=\"true\" or name it in the "
+                     "sidecar's zones")
+    for detector in detectors:
+        if detector.zone is not None and id(detector) not in between_tvm:
+            doc.fail(detector.element, f"a separation zone at {detector.position:g} m, where no two TVM (UM71) "
+                                       "sections meet: a zone goes only between two UM71 circuits")
 
 
 def _stations(doc: _Doc, fi, locate: _Locator, path_: _Path, notes) -> List[dict]:
@@ -1186,7 +1240,9 @@ def _split_long(sections: List[dict], notes) -> List[dict]:
     for section in sections:
         length = section["end_m"] - section["start_m"]
         pieces = math.ceil(length / MAX_TRACK_CIRCUIT_M - 1e-9)
-        if pieces <= 1:
+        # a UM71 circuit is not cut: its neighbours would need a zone and the other carrier (the
+        # rail line says at initialisation whether it calibrates)
+        if pieces <= 1 or section["transmitter"] == TVM_TRANSMITTER:
             result.append(section)
             continue
         bounds = [_clean(section["start_m"] + length * k / pieces) for k in range(pieces)] + [section["end_m"]]
@@ -1368,7 +1424,9 @@ def export_railml(document: dict, version: str = "3.2") -> bytes:
         for category in restriction.get("categories", []):
             el(entity, "validForSpeedProfile", ref=f"sp_{category}")
     # train detection: the insulated joints, and a track-circuit border at every section end
-    # that has no joint (a jointless border)
+    # that has no joint (a jointless border); a border between two UM71 circuits is their tuned
+    # separation zone, which railML has no word for (our extension marks it)
+    zones = {float(z["position_m"]): z for z in document.get("separation_zones", [])}
     detection = el(fi, "trainDetectionElements")
     detector_at: Dict[float, str] = {}
     for k, joint in enumerate(document.get("insulated_joints", []), 1):
@@ -1384,6 +1442,10 @@ def export_railml(document: dict, version: str = "3.2") -> bytes:
             entity = el(detection, "trainDetectionElement", id=f"tde_border_{k}", type="trackCircuit")
             value = next(p for s in sections for p in (s["start_m"], s["end_m"]) if float(p) == position)
             spot(entity, f"tde_border_{k}_loc", value)
+            if position in zones:
+                entity.set(RC + "separationZone", "true")
+                if "length_m" in zones[position]:
+                    entity.set(RC + "separationZoneLengthM", _text(zones[position]["length_m"]))
             detector_at[position] = entity.get("id")
 
     interlocking = el(root, "interlocking")
