@@ -4,10 +4,13 @@ docs/performance.md).
 1. One fixed study (ato_only, 60 s of simulated time, through FMI as `railcosim run` runs it,
    --runs runs) on a LocalCluster of 1 worker, then of 2 workers, back to back: runs per minute
    over the study's whole wall time (cluster start included) and from the moment the cluster is
-   up (the study's first progress line) to its end, and the speed-ups.
+   up (the study's first progress line) to its end, and over the last three quarters of the
+   runs (from the moment a quarter of them are done: every worker past its one-off
+   preparation, the rate a long study keeps), and the speed-ups.
 2. Per-run cost: a run inside the study (the task on the worker: fork, run, record) against
    the run's own wall time (summary.json wall_time_s: instantiation, initialisation and
-   stepping), median of the per-run ratios over the 1-worker study's runs, and against the
+   stepping), median of the per-run ratios over the 1-worker study's runs (the first run,
+   which also plans the ATO's stages, included), and against the
    median of plain `railcosim run` commands of the same run (a fresh process each, as a user
    starts them).
 
@@ -44,21 +47,27 @@ def study_file(folder: Path, runs: int, stop_s: float) -> Path:
     return path
 
 
-class _FirstLine:
+class _Times:
     """A progress stream that notes when the study writes its first line (the cluster is up and
-    the runs are being submitted) and shows nothing."""
+    the runs are being submitted) and then each run's line (as to a terminal: one per run done),
+    and shows nothing."""
 
-    at = None
+    def __init__(self):
+        self.at = None
+        self.done = []
 
     def write(self, text: str) -> None:
+        now = time.perf_counter()
         if self.at is None:
-            self.at = time.perf_counter()
+            self.at = now
+        else:
+            self.done.append(now)
 
     def flush(self) -> None:
         pass
 
     def isatty(self) -> bool:
-        return False
+        return True
 
 
 def main(argv=None) -> None:
@@ -73,23 +82,26 @@ def main(argv=None) -> None:
         folder = Path(tmp)
         spec = load_study(study_file(folder, args.runs, args.stop_time))
         check_against_system(spec, SYSTEM, [fmus])
-        throughput, steady, inside, own = {}, {}, [], []
+        throughput, steady, kept, inside, own = {}, {}, {}, [], []
         for workers in (1, 2):
-            up = _FirstLine()
+            up = _Times()
             began = time.perf_counter()
             result = run_study(spec, folder / f"w{workers}", SYSTEM, [fmus], workers=workers, progress=up)
             ended = time.perf_counter()
             assert result.counts["ok"] == args.runs, result.counts
             throughput[workers] = args.runs / (ended - began) * 60.0
             steady[workers] = args.runs / (ended - up.at) * 60.0
+            quarter = args.runs // 4
+            kept[workers] = (args.runs - quarter) / (up.done[-1] - up.done[quarter - 1]) * 60.0
             print(f"{workers} worker(s): {args.runs} runs in {ended - began:.1f} s = {throughput[workers]:.1f} runs/min; "
-                  f"cluster up after {up.at - began:.1f} s, then {steady[workers]:.1f} runs/min", flush=True)
+                  f"cluster up after {up.at - began:.1f} s, then {steady[workers]:.1f} runs/min; "
+                  f"the last {args.runs - quarter} runs {kept[workers]:.1f} runs/min", flush=True)
             if workers == 1:
                 inside = [r["wall_time_s"] for r in result.records]
                 own = [json.loads((folder / "w1" / "runs" / r["id"] / "summary.json").read_text())["wall_time_s"]
                        for r in result.records]
         print(f"speed-up 2 workers / 1 worker: {throughput[2] / throughput[1]:.2f}x "
-              f"(cluster up: {steady[2] / steady[1]:.2f}x)")
+              f"(cluster up: {steady[2] / steady[1]:.2f}x; the last three quarters: {kept[2] / kept[1]:.2f}x)")
         plain = []
         env = {**os.environ, "PYTHONPATH": str(REPO)}
         for k in range(args.plain):
@@ -104,7 +116,8 @@ def main(argv=None) -> None:
               f"the simulation alone {med_own:.2f} s")
         ratio = statistics.median(a / b for a, b in zip(inside, own))
         print(f"a run in the study / the simulation alone: {ratio:.2f}x (median over {len(own)} runs); "
-              f"study machinery over a plain run: {100 * (med_inside / med_plain - 1):+.1f} %")
+              f"study machinery over a plain run: {100 * (med_inside / med_plain - 1):+.1f} %; "
+              f"load average {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

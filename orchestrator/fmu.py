@@ -172,7 +172,13 @@ def keep_extractions(folder: Optional[Path]) -> None:
     _KEPT_EXTRACTIONS = Path(folder) if folder is not None else None
 
 
-def _extract_once(fmu_path: Path, workdir: Path) -> Path:
+def extractions_kept() -> bool:
+    """Whether this process keeps extractions (keep_extractions): a run then needs no work
+    folder of its own."""
+    return _KEPT_EXTRACTIONS is not None
+
+
+def _extract_once(fmu_path: Path, workdir: Optional[Path]) -> Path:
     """One extraction (and so one loaded library) per FMU file, shared by its instances."""
     if _KEPT_EXTRACTIONS is not None:
         return _kept_extraction(Path(fmu_path), _KEPT_EXTRACTIONS)

@@ -22,7 +22,7 @@ from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
 from orchestrator.errors import UserError, print_warning, shown_paths
-from orchestrator.fmu import make_slave, new_workdir, remove_workdir
+from orchestrator.fmu import extractions_kept, make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.dcp.pdu import OpMode
@@ -87,7 +87,10 @@ class RunResult:
 
 
 def run_system(system_path, options: RunOptions) -> RunResult:
-    """Load a system, run it and write its results.
+    """Load a system, run it and write its results. ``system_path`` is a system folder or
+    .ssp, or a system already opened (a :class:`SystemDescription` of a folder: a study's run
+    process reads its system once, orchestrator/study/runner.py), which the run may change
+    (a parameter set's units) and does not close.
 
     While it runs, SIGINT, SIGTERM and SIGHUP only set a flag (orchestrator/interrupts.py);
     the run stops at the next safe point and raises :class:`Interrupted` once its files are
@@ -104,11 +107,14 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     out = OutputFolder(Path(options.output_dir))
     try:
         flag.check("before the run started")
-        system = open_system(Path(system_path), list(options.fmu_dirs))
+        system = (system_path if isinstance(system_path, SystemDescription)
+                  else open_system(Path(system_path), list(options.fmu_dirs)))
     except Interrupted as stop:
-        _interrupted_before_start(out, Path(system_path).stem, stop)
+        _interrupted_before_start(out, system_path.name if isinstance(system_path, SystemDescription)
+                                  else Path(system_path).stem, stop)
     except OSError as error:            # a .ssp extracted into a full temp folder
         raise os_error(error) from None
+    close_system = (lambda: None) if system is system_path else system.close
     try:
         flag.check("before the run started")
         plan = plan_run(system, options)
@@ -116,10 +122,10 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         warn_rounded_stop(options, plan)
         flag.check("before the run started")
     except Interrupted as stop:
-        system.close()
+        close_system()
         _interrupted_before_start(out, system.name, stop)
     except BaseException:
-        system.close()
+        close_system()
         raise
     graph, scenario, stop_s, judges = plan.graph, plan.scenario, plan.stop_s, plan.judges
     start_ticks = plan.start_ticks
@@ -128,7 +134,8 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     workdir: Optional[Path] = None
     try:
         out.claim()                       # from here on the folder holds this run's files
-        workdir = new_workdir()
+        # the FMUs' extractions: in a folder of the run's, unless the process keeps them
+        workdir = None if extractions_kept() else new_workdir()
         setup = _Setup(graph, options, workdir, out.path, recorded, interval_ticks, captures,
                        ProgressBar(stop_ticks, start_ticks) if options.progress else None, scenario, flag,
                        judges, plan.hil, plan.targets)
@@ -151,7 +158,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     finally:
         if workdir is not None:
             remove_workdir(workdir)
-        system.close()
+        close_system()
         out.release()
 
 
@@ -374,8 +381,11 @@ class OutputFolder:
                             + "; choose another --output or wait for it to end") from None
         self._lock_fd = fd
         try:
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            # written, then cut to its length: a truncation to zero would have ext4 flush the
+            # file when it is closed (its auto_da_alloc), up to 0.2 s on a busy disk
+            pid = f"{os.getpid()}\n".encode()
+            os.pwrite(fd, pid, 0)
+            os.ftruncate(fd, len(pid))
         except OSError:
             pass                          # the pid only makes the message above nicer
         try:
@@ -443,7 +453,7 @@ class _Setup:
 
     graph: SystemGraph
     options: RunOptions
-    workdir: Path
+    workdir: Optional[Path]             # None: the process keeps the extractions (a study's worker)
     out: Path
     recorded: List[tuple]
     interval_ticks: int
@@ -493,6 +503,12 @@ def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slav
 #: freeze and turn off Python's garbage collector while the master steps (a module constant so
 #: that benchmarks/bench_deadline.py can compare without)
 FREEZE_GC_WHILE_STEPPING = True
+#: set by a process that froze what it holds for good and then makes run after run (a study's
+#: run process, orchestrator/study/runner.py): its runs turn the collector off while stepping
+#: and freeze nothing — what a run froze would stay frozen after it, its cyclic garbage never
+#: collected — nor count what is frozen (gc.get_freeze_count walks every frozen object:
+#: 5–20 ms in a study's worker)
+HOST_KEEPS_FROZEN = False
 
 
 @contextlib.contextmanager
@@ -504,19 +520,22 @@ def collector_off_while_stepping():
     docs/performance.md#one-sample-per-frame-as-a-deadline), four deadlines of a 4 kHz sample.
     Frozen, what exists before the first step is left out of every collection; off, none runs
     while stepping. Stepping makes no cyclic garbage (tests/test_run_gc.py), so nothing
-    accumulates meanwhile; reference counting frees everything else as before."""
+    accumulates meanwhile; reference counting frees everything else as before. In a process
+    that keeps its own objects frozen (HOST_KEEPS_FROZEN) the collector is only turned off."""
     if not FREEZE_GC_WHILE_STEPPING:
         yield
         return
-    was_enabled, frozen_before = gc.isenabled(), gc.get_freeze_count()
-    gc.freeze()
+    was_enabled = gc.isenabled()
+    freeze = not HOST_KEEPS_FROZEN and gc.get_freeze_count() == 0
+    if freeze:
+        gc.freeze()
     gc.disable()
     try:
         yield
     finally:
         if was_enabled:
             gc.enable()
-        if not frozen_before:       # what a caller froze (a study's worker) stays frozen
+        if freeze:                  # what a caller froze stays frozen
             gc.unfreeze()
 
 

@@ -437,7 +437,7 @@ def read_ssd(ssd_path: Path, folder: Path, fmu_dirs: List[Path] = ()) -> SystemD
         step, step_origin = _step_size(element, ssd_path)
         source = element.get("source")
         components[name] = Component(
-            name=name, source=source, fmu_path=_resolve_fmu(folder, source, fmu_dirs),
+            name=name, source=source, fmu_path=resolve_fmu(folder, source, fmu_dirs),
             step_size_s=step, step_origin=step_origin, connectors=connectors,
             parameters=_read_bindings(element.find("ssd:ParameterBindings", NS), folder, ssd_path, units),
             origin=origin, dcp_slave=dcp)
@@ -484,7 +484,7 @@ def _check_unique_component(components: Dict[str, Component], name: str, origin:
                         f"{components[name].origin}); component names must be unique")
 
 
-def _resolve_fmu(folder: Path, source: str, fmu_dirs) -> Optional[Path]:
+def resolve_fmu(folder: Path, source: str, fmu_dirs) -> Optional[Path]:
     """The FMU a component names: in the system folder first, then in the build folders."""
     if not source:
         return None

@@ -23,7 +23,7 @@ def broken_fmus(tmp_path_factory):
     dest = REPO / "build" / "test_fmus" / "broken"
     return {identifier: build_unit(UnitSpec(identifier.lower(), "rcs_testfmus.broken", identifier), dest,
                                    extra_packages=[FIXTURE_PACKAGE]).path
-            for identifier in ("StuckReceiver", "NoFailoverCoder", "BlindAto")}
+            for identifier in ("StuckReceiver", "UncheckedTvmReceiver", "NoFailoverCoder", "BlindAto")}
 
 
 @pytest.mark.parametrize("role", sorted(PRODUCT))
@@ -51,11 +51,22 @@ def test_a_receiver_that_shows_the_last_code_forever_fails(broken_fmus):
     failed = set(report["failed_vectors"])
     # every loss of code and every restrictive change catches it; acquisition alone does not
     assert {"acquire_loss_Z_KPT-5_phase0.0", "acquire_loss_KZh_KPT-7_phase0.0", "restrictive_Z_to_KZh_KPT-5",
-            "fire_dqpsk_clear_to_block1", "als_en_clear_to_block1"} <= failed
+            "fire_dqpsk_clear_to_block1", "als_en_clear_to_block1", "tvm430_300_then_230_then_loss"} <= failed
     assert "acquire_Z_KPT-5_phase0.5" not in failed
     loss = [c for c in report["checks"] if c["vector"] == "acquire_loss_Z_KPT-5_phase0.0"
             and c["check"].startswith("loss")]
     assert loss[0]["measured"] is None and not loss[0]["passed"]          # never shows the no-code indication
+
+
+def test_a_tvm430_receiver_that_ignores_the_check_bits_fails_the_corrupted_word(broken_fmus):
+    """Two bits flipped in the speed field read 230/230 without the check: the receiver that
+    skips the check shows it, and only that vector catches it."""
+    code, out, _ = railcosim("conform", "--role", "loco_receiver", broken_fmus["UncheckedTvmReceiver"],
+                             "--format", "json")
+    report = json.loads(out)
+    assert code == 1 and report["failed_vectors"] == ["tvm430_double_bit_error"]
+    failed = {c["check"] for c in report["checks"] if not c["passed"]}
+    assert "the corrupted word never shown: any word shown reads 230/170" in failed
 
 
 def test_a_coder_without_its_two_out_of_two_fails_and_the_table_names_it(broken_fmus):

@@ -237,6 +237,16 @@ def test_per_section_ballast_and_line_maximum_are_used(tmp_path):
     assert core.bank.calibration.table[5].ballast_max_ohm_km == 20.0
 
 
+def test_a_circuit_whose_minimum_ballast_is_the_lines_maximum_calibrates_and_detects(tmp_path):
+    """A section with one ballast only (its minimum the line's maximum): the two design regimes
+    are read at the same ballast (an exception escaped the calibration before)."""
+    def one_ballast(sections):
+        sections[5]["ballast_ohm_km"] = 20.0
+    core = _core(load_line(_line_file(tmp_path, sections=one_ballast, max_ballast_ohm_km=20.0)))
+    row = core.bank.calibration.table[5]
+    assert row.ballast_min_ohm_km == row.ballast_max_ohm_km == 20.0 and row.shunt_margin > 0.0
+
+
 # ---- initial state and overlapping trains ----------------------------------------------------
 def test_trains_on_the_line_occupy_their_circuits_at_t_0():
     core = _core()

@@ -163,6 +163,88 @@ def test_a_worker_extracts_each_fmu_once_and_removes_its_folder_at_exit(product_
     assert not Path(seen["folder"]).exists()           # removed when the worker exited
 
 
+RUN_PROCESS_WORKER = """
+import json, os, signal, sys, threading, time
+from pathlib import Path
+import orchestrator.study.runner as runner
+from orchestrator.study.spec import load_study
+
+study, system, fmus, out = map(Path, sys.argv[1:5])
+jobs = runner.jobs_of(load_study(study), out, system, [fmus])
+seen = []
+
+def run(job):
+    record = runner.execute_run(job)
+    process = getattr(runner._RUN_PROCESSES, "process", None)
+    seen.append({"id": job["id"], "status": record["status"], "error": record["error"],
+                 "pid": process.pid if process is not None else None})
+
+def kill_when_running(pid, results):
+    while not results.is_file():
+        time.sleep(0.01)
+    os.kill(pid, signal.SIGKILL)
+
+run(jobs[0])
+run(jobs[1])                                                         # the same run process
+run({**jobs[2], "values": {"train.mass_scale": 20.0}})               # refused: the process ends
+run(jobs[3])                                                         # a new one
+run({**jobs[4], "stop_time": 100000.0, "timeout_s": 2})              # stopped at its timeout
+run(jobs[5])                       # the process killed below is this run's, kept for the next
+killer = threading.Thread(target=kill_when_running, args=(
+    runner._RUN_PROCESSES.process.pid, out / "runs" / jobs[6]["id"] / "results.csv"))
+killer.start()
+run({**jobs[6], "stop_time": 100000.0})                              # its process killed mid-run
+killer.join()
+run(jobs[7])
+print(json.dumps(seen))
+"""
+
+
+def test_a_run_process_serves_ok_runs_and_is_forked_afresh_after_any_other(product_fmus, tmp_path):
+    """A worker's runs of one system go to one run process in turn while they end ok; a refused
+    value, a timeout or the run process killed mid-run fails that run only, and the next run
+    gets a process forked afresh. Every ok run's results.csv is byte for byte, and its summary
+    key for key, the run made alone in a fresh process state."""
+    study = _write(tmp_path, "eight.toml", """
+        system = "ato_only"
+        stop_time = 20
+        collect = ["final.train.x"]
+        [options]
+        output_interval = 1.0
+        [grid]
+        "train.v0" = [3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0]
+        """)
+    script = _write(tmp_path, "run_process_worker.py", RUN_PROCESS_WORKER)
+    env = {key: value for key, value in os.environ.items() if key != "RAILCOSIM_PLAN_CACHE"}
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, str(script), str(study), str(REPO / "ssp" / "ato_only"),
+                           str(product_fmus), str(out)], capture_output=True, text=True,
+                          env={**env, "PYTHONPATH": str(REPO)}, timeout=600)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout.splitlines()[-1])
+    assert [run["status"] for run in seen] == ["ok", "ok", "failed", "ok", "timeout", "ok", "failed", "ok"]
+    assert "mass_scale = 20 is above its maximum 10" in seen[2]["error"]
+    assert "2 s" in seen[4]["error"]
+    assert seen[6]["error"] == "the run's process ended by signal 9 without a result"
+    pids = [run["pid"] for run in seen]
+    assert pids[0] == pids[1] is not None                              # kept while its runs end ok
+    assert pids[2] is None and pids[4] is None and pids[6] is None     # ended after any other
+    assert len({pids[0], pids[3], pids[5], pids[7]}) == 4              # forked afresh each time
+    stopped = json.loads((out / "runs" / seen[4]["id"] / "summary.json").read_text())
+    assert stopped["interrupted"] == "SIGTERM" and stopped["sim_time_s"] > 20.0
+    for run in seen:
+        if run["status"] != "ok":
+            continue
+        record = json.loads((out / "runs" / run["id"] / "study_run.json").read_text())
+        alone = tmp_path / "alone" / run["id"]
+        run_system(REPO / "ssp" / "ato_only", RunOptions(
+            stop_time=20, output_interval=1.0, fmu_dirs=[product_fmus], output_dir=alone,
+            overrides={"train.v0": str(record["values"]["train.v0"])}, summaries=railway_verdicts))
+        mine = out / "runs" / run["id"]
+        assert (mine / "results.csv").read_bytes() == (alone / "results.csv").read_bytes(), run["id"]
+        assert _without_wall_clock(mine / "summary.json") == _without_wall_clock(alone / "summary.json")
+
+
 def test_resume_reruns_nothing_of_a_finished_study(grid_study):
     study, out, _ = grid_study
     records = sorted((out / "runs").glob("*/study_run.json"))

@@ -1,14 +1,11 @@
 """The verdict against the track (docs/scenarios.md, "Results: summary.json"): a
 receiver showing more than the real occupancy allows by the block rules is an unsafe
 indication, even when it shows exactly what the coder sent (then it is no wrong-side failure)."""
-import json
-
 import pytest
 
+from harness.broken_rail import run_with_broken_rail
 from orchestrator.analysis.systems import signal_chain, train_and_ato
 from orchestrator.analysis.verdict import safety_verdict
-from orchestrator.analysis.verdict import railway_verdicts
-from orchestrator.run import RunOptions, run_system
 from orchestrator.sspgen import write_ssd
 
 BROKEN_RAIL_M = 3000.0          # in section 2 (2.6-5.2 km), ahead of the train standing at A (400 m)
@@ -18,17 +15,9 @@ def _run(tmp_path, product_fmus, occupancy_sent: bool, stop_time=14.0):
     folder = str(product_fmus)
     components, connections = train_and_ato(fmu_folder=folder, ato_parameters={"cab_signal": "ALSN"})
     chain, links = signal_chain(fmu_folder=folder)
-    if not occupancy_sent:              # the coder never learns the occupancy: it sends З everywhere
-        links = [c for c in links if not c.start.startswith("rail.occupied")]
-    system = write_ssd(tmp_path / "sys", "sys", chain + components, connections + links, stop_time=stop_time)
-    scenario = tmp_path / "scenario.json"
-    scenario.write_text(json.dumps({"description": "broken rail ahead", "events": [
-        {"time": 1.0, "model": "rail", "variable": "broken_rail_at", "action": "set", "value": BROKEN_RAIL_M}]}))
-    result = run_system(system.parent if system.is_file() else system,
-                        RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out", in_process=True,
-                                   fmu_dirs=[product_fmus], scenario=scenario, record=[]))
-    (receiver,) = result.summary["receivers"]
-    return result.summary, receiver
+    # occupancy not sent: the coder never learns it and sends З everywhere
+    return run_with_broken_rail(tmp_path, product_fmus, chain + components, connections + links, BROKEN_RAIL_M,
+                                occupancy_sent, stop_time)
 
 
 def test_a_coder_that_never_hears_the_occupancy_is_caught_against_the_track_not_against_its_code(tmp_path, product_fmus):

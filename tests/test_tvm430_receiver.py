@@ -139,6 +139,52 @@ def test_a_word_change_just_before_a_block_boundary_leaves_no_gap(before_s, firs
     assert record.first(4.0, record.code == third) <= rx.WINDOW_S + 2 * rx.HOP_S + 0.01
 
 
+class ScriptedReceiver(Tvm430ReceiverCore):
+    """The display logic on scripted decisions: ``script(t)`` gives the word each decision reads
+    on 1700 Hz (the signal processing is tested above)."""
+
+    def __init__(self, script):
+        super().__init__(120, Tvm430ReceiverSettings(fs_hz=12000.0))
+        self.script = script
+
+    def read_window(self, time_s):
+        word_read = self.script(time_s)
+        return rx.Decision(time_s, 1700.0 if word_read else 0.0, None, word_read)
+
+
+def _displayed(script, seconds):
+    core = ScriptedReceiver(script)
+    shown = []
+    for first in range(0, int(seconds * 12000), 120):
+        out = core.step(first / 12000.0, np.zeros(120))
+        shown.append(((first + 120) / 12000.0, out.code))
+    return np.array(shown)
+
+
+def test_a_word_permissive_in_one_field_never_keeps_a_shown_word_alive():
+    """The stop word shown (0/0 at 0 m, but +15 ‰) and then, under noise, only single reads of a
+    270/230 word at 4500 m on a level (0 ‰): neither permits everything the other does (the
+    stop word's gradient is less falling), so the reads do not hold the stop word past its
+    hold, and the display goes to no word (found by the TVM-430 noise study: the stop word held
+    7 s, its gradient more permissive than the word sent)."""
+    stop, new = word(0, 0, 0.0, 15.0), word(270, 230, 4500.0, 0.0)
+    every_other = lambda t: new if round(t / rx.HOP_S) % 2 else tvm430.NO_WORD      # never two in a row
+    shown = _displayed(lambda t: stop if t < 3.0 else every_other(t), 12.0)
+    held = shown[shown[:, 1] == stop, 0]
+    assert held.max() <= 3.0 + rx.HOLD_S + rx.HOP_S
+    assert (shown[shown[:, 0] > 3.0 + rx.HOLD_S + rx.HOP_S, 1] == tvm430.NO_WORD).all()
+
+
+def test_a_word_permissive_in_every_field_keeps_the_shown_word_alive():
+    """230/170 at 2750 m falling 6 ‰ shown, then single reads of 270/230 at 4500 m on a level:
+    the shown word permits nothing the new one does not, so it stays (safe) until the new word
+    is confirmed."""
+    new = word(270, 230, 4500.0, 0.0)
+    every_other = lambda t: new if round(t / rx.HOP_S) % 2 else tvm430.NO_WORD
+    shown = _displayed(lambda t: YELLOW if t < 3.0 else every_other(t), 12.0)
+    assert (shown[shown[:, 0] > 2.0, 1] == YELLOW).all()
+
+
 def test_the_same_word_on_the_other_carrier_is_a_new_block_and_waits_for_confirmation():
     plan = [(0.0, {1700.0: (YELLOW, EMF_V)}), (3.0, {2300.0: (YELLOW, EMF_V)})]
     record, _ = run(plan, 6.0)

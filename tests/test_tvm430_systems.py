@@ -7,10 +7,10 @@ import json
 
 import pytest
 
+from harness.broken_rail import run_with_broken_rail
 from orchestrator.analysis.systems import signal_chain, train_and_ato
 from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
 from orchestrator.run import RunOptions, run_system
-from orchestrator.sspgen import write_ssd
 
 BLOCK_M, BLOCKS = 1500.0, 8
 FS_HZ, FRAME = 16000.0, 40          # the default build's 40-sample frame: 2.5 ms at 16 kHz
@@ -51,17 +51,9 @@ def _run(tmp_path, product_fmus, occupancy_sent: bool, stop_time: float = 16.0):
     chain, links = signal_chain(fmu_folder=folder, fs_hz=FS_HZ, frame=FRAME, coder={"system": "TVM430", **files},
                                 rail=files, receiver={"system": "TVM430", "train_category": "high_speed"},
                                 stocks=[stock["rolling_stock_file"]])
-    if not occupancy_sent:              # the coder never learns the occupancy: clear-line words everywhere
-        links = [c for c in links if not c.start.startswith("rail.occupied")]
-    system = write_ssd(tmp_path / "sys", "sys", chain + components, connections + links, stop_time=stop_time)
-    scenario = tmp_path / "scenario.json"
-    scenario.write_text(json.dumps({"description": "broken rail ahead", "events": [
-        {"time": 1.0, "model": "rail", "variable": "broken_rail_at", "action": "set", "value": BROKEN_RAIL_M}]}))
-    result = run_system(system.parent if system.is_file() else system,
-                        RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out", in_process=True,
-                                   fmu_dirs=[product_fmus], scenario=scenario, record=[]))
-    (rx,) = result.summary["receivers"]
-    return result.summary, rx
+    # occupancy not sent: the coder never learns it and sends a clear line's words everywhere
+    return run_with_broken_rail(tmp_path, product_fmus, chain + components, connections + links, BROKEN_RAIL_M,
+                                occupancy_sent, stop_time)
 
 
 def test_a_tvm_coder_that_never_hears_the_occupancy_is_caught_against_the_track(tmp_path, product_fmus):

@@ -58,12 +58,19 @@ def read_json_file(path) -> object:
     unreadable, not UTF-8 text, nested deeper than MAX_JSON_DEPTH, not valid JSON, a number that
     is not finite (NaN, Infinity, 1e400: Python's json reads them; named by its field)."""
     path = Path(path)
+    return _parse_json(path, _read_bytes(path))
+
+
+def _read_bytes(path: Path) -> bytes:
     if not path.is_file():
         raise FmuInputError(f"{path}: file not found")
     try:
-        raw = path.read_bytes()
+        return path.read_bytes()
     except OSError as error:
         raise FmuInputError(f"{path}: cannot be read ({error.strerror or error})") from None
+
+
+def _parse_json(path: Path, raw: bytes) -> object:
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as error:
@@ -102,19 +109,21 @@ def json_nesting_depth(text: str) -> int:
     return deepest
 
 
-#: (schema, digest of a document) found valid in this process: a run reads its line and rolling
-#: stock once per component and once for the verdicts, and the schema check costs more than
-#: reading (a document is checked once, whatever file it comes from)
+#: (schema, digest of a file's bytes) found valid in this process: a run reads its line and
+#: rolling stock once per component and once for the verdicts, and checking a file (its nesting,
+#: its numbers, the schema) costs more than parsing it; bytes checked once are only parsed again,
+#: whatever file they come from
 _VALID_DOCUMENTS: set = set()
 _VALID_DOCUMENTS_KEPT = 1024
 
 
 def load_json(path, schema: str) -> dict:
     path = Path(path)
-    document = read_json_file(path)
-    known = (schema, hashlib.sha256(json.dumps(document, sort_keys=True).encode()).digest())
+    raw = _read_bytes(path)
+    known = (schema, hashlib.sha256(raw).digest())
     if known in _VALID_DOCUMENTS:
-        return document
+        return json.loads(raw.decode("utf-8-sig"))
+    document = _parse_json(path, raw)
     errors = sorted(_validator(schema).iter_errors(document), key=lambda e: list(e.absolute_path))
     if not errors:
         if len(_VALID_DOCUMENTS) >= _VALID_DOCUMENTS_KEPT:

@@ -27,11 +27,12 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
   any tone between (a window straddling a change, noise) gives no word. The word must pass
   its check and mean something (tvm430.Tvm430System.reading: address accepted, speed and
   distance codes used).
-* **Display** (fail-safe, ours [U]): a word more restrictive than the one shown (rank: step,
-  next step, target distance) is shown at once; any other — more permissive, equal in rank but
-  another gradient, the same word on the other carrier (a new block: its distance counts from
-  another entry) — only once CONFIRMATIONS consecutive decisions gave it. The word shown holds
-  while decisions give it or a more permissive valid word; when none has for the hold
+* **Display** (fail-safe, ours [U]): a word of the same block (carrier) that permits nothing
+  more than the one shown (no field more permissive: step, next step, target distance,
+  gradient; tvm430.Tvm430System.at_most) is shown at once; any other — more permissive in some
+  field, or on the other carrier (a new block: its distance counts from another entry) — only
+  once CONFIRMATIONS consecutive decisions gave it. The word shown holds while decisions give
+  it or a word of its block that permits everything it does; when none has for the hold
   (``inertia``, 0: HOLD_S — it bridges a separation zone, where the new carrier's window
   still holds the old block's carrier), the display shows no word: step 0, aspect red,
   ``code`` 0, ``code_valid`` false. STATED_LATENCY_S bounds a loss of every valid word (lost
@@ -82,6 +83,11 @@ IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
 #: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
 #: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
 STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
+#: a word is shown within this of the instant it starts at the coils (from cold, on a new
+#: carrier, a change of word): the window must fill with it, then a decision boundary and one
+#: more to confirm (1.81 s; a restrictive change needs no confirmation). Measured: cold start
+#: 1.75 s, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
+STATED_DECODE_S = WINDOW_S + 2 * HOP_S
 
 
 @dataclass
@@ -243,9 +249,11 @@ class Tvm430ReceiverCore:
             word = tvm430.NO_WORD
         return Decision(time_s, carrier, amplitudes, word)
 
-    def _key_rank(self, word: int):
-        read = self.tvm.reading(word)
-        return (read.step_kmh, read.next_kmh, read.target_distance_m)
+    def _at_most(self, key: Tuple[int, float], other: Tuple[int, float]) -> bool:
+        """(word, carrier) ``key`` permits nothing ``other`` does not (tvm430's partial order);
+        words on different carriers are of different blocks, whose distances count from
+        different entries: never comparable."""
+        return key[1] == other[1] and self.tvm.at_most(key[0], other[0])
 
     def _decide(self, time_s: float) -> None:
         decision = self.read_window(time_s)
@@ -261,11 +269,11 @@ class Tvm430ReceiverCore:
             if key == self._shown:
                 self._supported_s = time_s
                 self._pending, self._pending_count = None, 0
-            elif self._shown is not None and self._key_rank(key[0]) < self._key_rank(self._shown[0]):
-                self._show(key, time_s)                          # more restrictive: at once
+            elif self._shown is not None and self._at_most(key, self._shown):
+                self._show(key, time_s)                          # permits nothing more: at once
             else:
-                if self._shown is not None and self._key_rank(key[0]) > self._key_rank(self._shown[0]):
-                    self._supported_s = time_s                   # a more permissive word keeps the shown alive
+                if self._shown is not None and self._at_most(self._shown, key):
+                    self._supported_s = time_s                   # the shown permits nothing more: it stays
                 self._pending_count = self._pending_count + 1 if key == self._pending else 1
                 self._pending = key
                 if self._pending_count >= CONFIRMATIONS:

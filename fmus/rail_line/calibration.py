@@ -48,18 +48,15 @@ class RelayCalibration:
         (at each segment's middle) at either ballast)."""
         worst_control = 0.0
         middles = 0.5 * (circuit.nodes_m[:-1] + circuit.nodes_m[1:])
-        for ballast in (ballast_min, ballast_max):
+        for ballast in sorted({ballast_min, ballast_max}):     # one, when a circuit's minimum is the line's maximum
             for broken in middles:
                 chain = SectionChain(circuit, Faults(ballast, float(broken)), frequency_hz, 1.0)
                 worst_control = max(worst_control, chain.solve(())[2])
-            chain = SectionChain(circuit, Faults(ballast), frequency_hz, 1.0)
-            if ballast == ballast_min:
-                normal = chain.solve(())[2]
-            else:
-                shunted = [chain.solve(chain.shunts_at((float(x),)))[2] for x in circuit.nodes_m]
-                worst_node = int(np.argmax(shunted))
-                worst_shunt = float(shunted[worst_node])
-        return normal, worst_shunt, worst_node, worst_control
+        normal = SectionChain(circuit, Faults(ballast_min), frequency_hz, 1.0).solve(())[2]
+        chain = SectionChain(circuit, Faults(ballast_max), frequency_hz, 1.0)
+        shunted = [chain.solve(chain.shunts_at((float(x),)))[2] for x in circuit.nodes_m]
+        worst_node = int(np.argmax(shunted))
+        return normal, float(shunted[worst_node]), worst_node, worst_control
 
     def _levels(self, circuit: TrackCircuit, carrier_hz: float) -> Tuple[Calibration, float]:
         """Calibrate one circuit (docs/rail_line.md, relay calibration): the reference is set so that

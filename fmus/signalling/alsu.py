@@ -25,14 +25,14 @@ rules' ALSU code of every track circuit.
 from __future__ import annotations
 
 import itertools
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from fmus.errors import FmuInputError, non_finite_number
+from fmus.data.loader import read_json_file
+from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
 from fmus.signalling.block_rules import SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, BlockCodes
 from fmus.signalling.digital_messages import Indication
@@ -102,17 +102,7 @@ class CodeTable:
 def load_codes(path=CODES_FILE) -> CodeTable:
     """The code table, every error one FmuInputError naming the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise FmuInputError(f"{path}: file not found")
-    try:
-        doc = json.loads(path.read_bytes().decode("utf-8-sig"))
-    except UnicodeDecodeError as error:
-        raise FmuInputError(f"{path}: not UTF-8 text (offset {error.start}); save the file as UTF-8") from None
-    except (json.JSONDecodeError, RecursionError):
-        raise FmuInputError(f"{path}: not valid JSON") from None
-    bad = non_finite_number(doc)
-    if bad is not None:
-        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    doc = read_json_file(path)
 
     def fail(field: str, message: str):
         raise FmuInputError(f"{path}: field {field}: {message}")

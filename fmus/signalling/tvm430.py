@@ -31,14 +31,14 @@ means to the cab, and the block rules' word of every block.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.errors import FmuInputError, non_finite_number
+from fmus.data.loader import read_json_file
+from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
 from fmus.signalling.digital_messages import Indication
 
@@ -171,17 +171,7 @@ class CodeTable:
 def load_codes(path=CODES_FILE) -> CodeTable:
     """The word tables, every error one FmuInputError naming the file and the field."""
     path = Path(path)
-    if not path.is_file():
-        raise FmuInputError(f"{path}: file not found")
-    try:
-        doc = json.loads(path.read_bytes().decode("utf-8-sig"))
-    except UnicodeDecodeError as error:
-        raise FmuInputError(f"{path}: not UTF-8 text (offset {error.start}); save the file as UTF-8") from None
-    except (json.JSONDecodeError, RecursionError):
-        raise FmuInputError(f"{path}: not valid JSON") from None
-    bad = non_finite_number(doc)
-    if bad is not None:
-        raise FmuInputError(f"{path}: field {bad[0]}: {bad[1]} is not a finite number")
+    doc = read_json_file(path)
 
     def fail(name: str, message: str):
         raise FmuInputError(f"{path}: field {name}: {message}")
@@ -283,15 +273,21 @@ class Tvm430System:
                 return m
         return FREE_BLOCKS_OPEN - 1
 
-    def rank(self, word: int) -> Tuple[float, float, float]:
-        """Order of permissiveness (higher: more permissive); no word or a failed one lowest."""
-        read = self.reading(word)
-        if read is None:
-            return (-1.0, -1.0, -1.0)
-        return (read.step_kmh, read.next_kmh, read.target_distance_m)
-
-    def more_restrictive(self, a: int, b: int) -> int:
-        return a if self.rank(a) <= self.rank(b) else b
+    def at_most(self, a: int, b: int) -> bool:
+        """Whether word ``a`` (of the same block as ``b``) permits nothing that ``b`` does not: no
+        field more permissive — step, next step, target distance, and the gradient (a less
+        falling one lengthens no braking curve). A partial order: a nearer target on a less falling
+        gradient can give a higher braking curve than a farther one on a steeper fall, so such
+        words are not comparable (neither is at most the other). A word that is not read is at
+        most anything."""
+        read_a, read_b = self.reading(a), self.reading(b)
+        if read_a is None:
+            return True
+        if read_b is None:
+            return False
+        return (read_a.step_kmh <= read_b.step_kmh and read_a.next_kmh <= read_b.next_kmh
+                and read_a.target_distance_m <= read_b.target_distance_m
+                and read_a.gradient_permille <= read_b.gradient_permille)
 
 
 SYSTEM = None      # the shipped table's system, made on first use (system())

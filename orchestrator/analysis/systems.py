@@ -330,17 +330,11 @@ def write_tvm430_following(root: Path = SSP_ROOT, name: str = "tvm430_following"
     _write_json(resources / TVM430_STOCK, _shipped_json(TVM430_STOCK))
     _write_json(resources / "leader_timetable.json", TVM430_LEADER_TIMETABLE)
     _write_json(resources / "follower_timetable.json", TVM430_FOLLOWER_TIMETABLE)
-    halt, release = TVM430_LEADER_HALT_S
-    _write_json(folder / "scenario.json", {
-        "description": "TVM-430 at 3 min headway: the leader, held by a full service brake from 445 s at about "
-                       "25.5 km until 685 s, stands in block 19 (27.7 km); the follower, 3 min behind at 300 km/h, "
-                       "closes in under the steps 300, 270, 230, 170 and 0 km/h, stands before the buffer section "
-                       "(25.5 km), follows when the blocks clear and stops at Milieu (33.75 km) while the leader "
-                       "runs to Terminus.",
-        "events": [
-            {"time": halt, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
-            {"time": release, "model": "leader", "variable": "command", "action": "reset"},
-        ]})
+    _write_json(folder / "scenario.json", leader_halt_scenario(
+        "TVM-430 at 3 min headway: the leader, held by a full service brake from 445 s at about 25.5 km until "
+        "685 s, stands in block 19 (27.7 km); the follower, 3 min behind at 300 km/h, closes in under the steps "
+        "300, 270, 230, 170 and 0 km/h, stands before the buffer section (25.5 km), follows when the blocks clear "
+        "and stops at Milieu (33.75 km) while the leader runs to Terminus.", *TVM430_LEADER_HALT_S))
     return path
 
 
@@ -403,19 +397,22 @@ def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "fo
     _write_json(resources / "following_line.json", line)
     _write_json(resources / "leader_timetable.json", LEADER_TIMETABLE)
     _write_json(resources / "follower_timetable.json", FOLLOWER_TIMETABLE)
-    halt, release = LEADER_HALT_S
-    scenario = {
-        "description": "The leader stops in block section 7 (15.2-17.6 km) for three minutes: its ATO's command is "
-                       "overridden by a full service brake, then released; it then runs through C to the sidings "
-                       "beyond the last block signal (20.5 km), clearing the line. The follower, six minutes behind "
-                       "and not stopping at B, receives green, yellow, red-yellow, stops before the red signal at "
-                       "15.2 km, resumes when the line clears and arrives at C.",
-        "events": [
-            {"time": halt, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
-            {"time": release, "model": "leader", "variable": "command", "action": "reset"},
-        ]}
-    _write_json(folder / "scenario.json", scenario)
+    _write_json(folder / "scenario.json", leader_halt_scenario(
+        "The leader stops in block section 7 (15.2-17.6 km) for three minutes: its ATO's command is overridden by "
+        "a full service brake, then released; it then runs through C to the sidings beyond the last block signal "
+        "(20.5 km), clearing the line. The follower, six minutes behind and not stopping at B, receives green, "
+        "yellow, red-yellow, stops before the red signal at 15.2 km, resumes when the line clears and arrives at C.",
+        *LEADER_HALT_S))
     return path
+
+
+def leader_halt_scenario(description: str, halt_s: float, release_s: float) -> dict:
+    """A following system's scenario: the leader's ATO command overridden by a full service brake
+    from ``halt_s`` and given back at ``release_s``."""
+    return {"description": description, "events": [
+        {"time": halt_s, "model": "leader", "variable": "command", "action": "set", "value": -1.0},
+        {"time": release_s, "model": "leader", "variable": "command", "action": "reset"},
+    ]}
 
 
 def _write_json(path: Path, document: dict) -> None:

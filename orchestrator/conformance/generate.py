@@ -135,7 +135,9 @@ def _shows(code: int) -> list:
 
 
 def receiver_vectors() -> RoleFile:
-    role = RoleFile("loco_receiver", ["system", "fs", "e_coil", "aspect", "code_valid", "free_blocks"])
+    role = RoleFile("loco_receiver", ["system", "fs", "e_coil", "aspect", "code_valid", "free_blocks",
+                                      # TVM430's reading of the word shown
+                                      "v_permitted", "v_target", "target_distance", "gradient", "word_carrier"])
     alsn_params = {"system": "ALSN", "fs": FS_HZ}
     loss_at_s, loss_bound_s = 6.0, alsn.EQUIPMENT_INERTIA_S + 0.2
     for kpt in ("KPT-5", "KPT-7"):
@@ -228,6 +230,7 @@ def receiver_vectors() -> RoleFile:
     for system_name in ("FIRE_DQPSK", "ALS-EN"):
         role.vectors.extend(_digital_receiver_vectors(role, system_name))
     role.vectors.extend(_alsu_receiver_vectors(role))
+    role.vectors.extend(_tvm430_receiver_vectors(role))
     return role
 
 
@@ -312,6 +315,149 @@ def _alsu_receiver_vectors(role: RoleFile) -> List[dict]:
             {"kind": "latency", "label": "code 1 shown within the stated latency", "from_s": 0.0, "until": shows(1),
              "bound_s": latency},
             {"kind": "holds", "label": "never more permissive than code 1", "conditions": at_most(1), "bound_s": 0.0}]})
+    return vectors
+
+
+def _tvm_emf(seconds: float, plan: List[tuple], noise_v: float = 0.0, seed: int = 0) -> np.ndarray:
+    """Coil EMF from the TVM-430 coder core on the coder vectors' line (section 1: 1700 Hz,
+    section 2: 2300 Hz) at TVM_FS_HZ: ``plan`` is (from s, {section index: (word, peak V)}) in
+    time order, sent through the core's test generator (each change phase-continuous, as in
+    service); a section not listed is silent; plus white noise of ``noise_v`` rms."""
+    from fmus.wayside_coder.tvm430 import Tvm430CoderCore
+
+    coder = Tvm430CoderCore(_tvm_line_loaded(), 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
+    amplitude = coder.settings.amplitude_v
+    words = np.zeros(8, dtype=np.int64)
+    frames, current = [], None
+    for k in range(int(round(seconds * TVM_FS_HZ / FRAME))):
+        t = k * FRAME / TVM_FS_HZ
+        entry = [what for start, what in plan if start <= t + 1e-9][-1]
+        if entry is not current:
+            current = entry
+            for section, (word, _) in entry.items():
+                words[section] = word
+            coder.send(words)
+            gains = np.zeros(8)
+            for section, (_, level_v) in entry.items():
+                gains[section] = level_v / amplitude
+        frames.append(gains @ coder.step(t, np.zeros(8, dtype=bool)).u_tx)
+    emf = np.concatenate(frames)
+    if noise_v:
+        emf += noise_v * np.random.default_rng(seed).standard_normal(emf.size)
+    return emf
+
+
+def _tvm430_receiver_vectors(role: RoleFile) -> List[dict]:
+    """TVM-430 (docs/loco_receiver.md#tvm-430): a word from cold and a restrictive change within
+    the stated decode time (a window and two decisions, 1.81 s), a lost carrier → the
+    restrictive display within the stated latency (5.19 s) and not before the hold less one
+    decision; a neighbour's more permissive word 20 dB down and a word with two bits flipped
+    never shown. The coil EMF is our coder core's output at 8 kHz; the readings are the shipped
+    word tables'."""
+    from fmus.loco_receiver.tvm430 import HOLD_S, HOP_S, STATED_DECODE_S, STATED_LATENCY_S
+    from fmus.signalling import tvm430
+
+    tvm = tvm430.system()
+    table = tvm.table
+    params = {"system": "TVM430", "fs": TVM_FS_HZ}
+    step = {"fs_hz": TVM_FS_HZ}
+    decode_s, latency_s = round(STATED_DECODE_S, 4), round(STATED_LATENCY_S, 4)
+
+    def word(step_kmh: float, next_kmh: float, distance_m: float, gradient_permille: float) -> int:
+        return tvm430.assemble(table.addresses[0], table.speed_code(step_kmh, next_kmh),
+                               table.distance_code(distance_m), table.gradient_code(gradient_permille))
+
+    def near(port: str, value: float, tolerance: float) -> dict:
+        return _rng(port, round(value - tolerance, 6), round(value + tolerance, 6))
+
+    def meaning(w: int, carrier_hz: float) -> list:
+        """The outputs of word ``w`` shown from ``carrier_hz`` (speeds to 0.01 m/s, distance to
+        0.5 m, gradient to 0.05 ‰, carrier to 0.5 Hz)."""
+        read = tvm.reading(w)
+        return [_cond("aspect", [read.aspect]), near("v_permitted", read.step_kmh / 3.6, 0.01),
+                near("v_target", read.next_kmh / 3.6, 0.01), near("target_distance", read.target_distance_m, 0.5),
+                near("gradient", read.gradient_permille, 0.05), near("word_carrier", carrier_hz, 0.5)]
+
+    def shows(w: int, carrier_hz: float) -> list:
+        return [*meaning(w, carrier_hz), _cond("code_valid", [1])]
+
+    def at_most(w: int) -> list:
+        """Nothing more permissive than ``w``: its aspect or a more restrictive one, its step, next
+        step and target distance or less (no word: all 0)."""
+        read = tvm.reading(w)
+        return [_cond("aspect", not_more_permissive(read.aspect)),
+                _rng("v_permitted", None, round(read.step_kmh / 3.6 + 0.01, 6)),
+                _rng("v_target", None, round(read.next_kmh / 3.6 + 0.01, 6)),
+                _rng("target_distance", None, read.target_distance_m + 0.5)]
+
+    no_word = [_cond("code_valid", [0]), _rng("v_permitted", None, 0.01), _cond("aspect", not_more_permissive(sig.RED))]
+    own, neighbour = 0, 1                                     # sections: 1700 Hz, 2300 Hz
+    own_hz = float(_tvm_line()["block_sections"][own]["carrier_hz"])
+    level_v = 0.3                                             # a carrier at the coils (peak)
+    clear = word(300, 300, 7000.0, 0.0)                       # no target in range
+    yellow = word(230, 170, 2750.0, -6.0)                     # two blocks before the target, falling 6 ‰
+    vectors = []
+
+    change_s, loss_s = 4.0, 7.5
+    seconds = round(loss_s + STATED_LATENCY_S + 0.5, 1)
+    hold_to_s = round(loss_s + HOLD_S - HOP_S, 4)
+    name = "tvm430_300_then_230_then_loss"
+    vectors.append({
+        "name": name, "what": f"TVM-430 on the {own_hz:g} Hz carrier at {level_v:g} V: 300/300 (no target) from "
+                              f"cold, 230/170 (target 2750 m, −6 ‰) from {change_s:g} s, no carrier from {loss_s:g} s",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", _tvm_emf(
+            seconds, [(0.0, {own: (clear, level_v)}), (change_s, {own: (yellow, level_v)}), (loss_s, {})]))},
+        "checks": [
+            {"kind": "latency", "label": "300/300 shown with its reading within the stated decode time",
+             "from_s": 0.0, "until": shows(clear, own_hz), "bound_s": decode_s},
+            {"kind": "latency", "label": "restrictive change to 230/170 within the stated decode time",
+             "from_s": change_s, "until": shows(yellow, own_hz), "bound_s": decode_s},
+            {"kind": "holds", "label": "never more permissive than 230/170 after the stated decode time",
+             "from_s": round(change_s + decode_s, 4), "conditions": at_most(yellow), "bound_s": 0.0},
+            {"kind": "holds", "label": "lost carrier: the word held for the hold less one decision (it bridges a "
+                                       "separation zone)", "from_s": loss_s, "to_s": hold_to_s,
+             "conditions": [_cond("code_valid", [1])], "bound_s": 0.0},
+            {"kind": "latency", "label": "lost carrier: no word (step 0, code_valid false) within the stated latency",
+             "from_s": loss_s, "until": no_word, "bound_s": latency_s}]})
+
+    seconds, leak, noise_v = 5.0, 0.1, 0.03
+    name = "tvm430_neighbour_20dB_permissive"
+    vectors.append({
+        "name": name, "what": f"230/170 on the {own_hz:g} Hz carrier at {level_v:g} V, the next block's 2300 Hz "
+                              f"carrier 20 dB down with 300/300, white noise {noise_v:g} V rms",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", _tvm_emf(
+            seconds, [(0.0, {own: (yellow, level_v), neighbour: (clear, leak * level_v)})], noise_v, seed=43))},
+        "checks": [
+            {"kind": "latency", "label": "230/170 shown from its own carrier within the stated decode time",
+             "from_s": 0.0, "until": shows(yellow, own_hz), "bound_s": decode_s},
+            {"kind": "holds", "label": "the neighbour's 300/300 never shown (nothing more permissive, never its carrier)",
+             "conditions": [*at_most(yellow), _rng("word_carrier", None, own_hz + 0.5)], "bound_s": 0.0}]})
+
+    # two bits of the speed field flipped: without the check the word would read 230/230
+    speed_low = tvm430.FIELDS["speed"][0]
+    flips = (1 << speed_low) | (1 << (speed_low + 4))
+    corrupted = yellow ^ flips
+    assert not tvm430.check_passes(corrupted)
+    assert table.speed_codes[tvm430.field(corrupted, "speed")] == (230.0, 230.0)
+    corrupt_s = 3.0
+    seconds = round(corrupt_s + STATED_LATENCY_S + 0.5, 1)
+    name = "tvm430_double_bit_error"
+    vectors.append({
+        "name": name, "what": f"230/170 on the {own_hz:g} Hz carrier at {level_v:g} V, from {corrupt_s:g} s with "
+                              f"word bits {speed_low} and {speed_low + 4} flipped (its speed field reads 230/230; "
+                              f"the check fails)",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"e_coil": role.samples(name, "e_coil", _tvm_emf(
+            seconds, [(0.0, {own: (yellow, level_v)}), (corrupt_s, {own: (corrupted, level_v)})]))},
+        "checks": [
+            {"kind": "latency", "label": "230/170 shown within the stated decode time", "from_s": 0.0,
+             "until": shows(yellow, own_hz), "bound_s": decode_s},
+            {"kind": "holds", "label": "the corrupted word never shown: any word shown reads 230/170",
+             "where": [_cond("code_valid", [1])], "conditions": meaning(yellow, own_hz), "bound_s": 0.0},
+            {"kind": "latency", "label": "corrupted word: no word (step 0, code_valid false) within the stated latency",
+             "from_s": corrupt_s, "until": no_word, "bound_s": latency_s}]})
     return vectors
 
 
@@ -658,33 +804,44 @@ def _alsu_coder_vectors() -> List[dict]:
 
 
 TVM_LINE_FILE = "wayside_coder_tvm430_line.json"
-TVM_FS_HZ = 8000.0          # the 4 kHz of the other vectors cannot hold a 2300 Hz carrier
+#: the 4 kHz of the other vectors cannot hold a 2300 Hz carrier. 8 kHz, not the TVM chain's 12
+#: kHz: a sample is 125 µs, so a target's step N/fs is a whole number of nanoseconds for any
+#: frame N (at 12 kHz only for N a multiple of 3, and the default N is 40); the receiver works
+#: at any fs ≥ 5.1 kHz on track 1 (docs/loco_receiver.md#tvm-430)
+TVM_FS_HZ = 8000.0
 
 
 def _tvm_line() -> dict:
-    """8 blocks of 1500 m on track 1 (carriers 1700 / 2300 Hz alternating), a 10 ‰ fall from
-    4 km, the station stop near the end: every TVM-430 speed pair within 8 sections."""
+    """8 blocks of 1500 m on track 1 (UM71 circuits, carriers 1700 / 2300 Hz alternating, a
+    separation zone at every boundary), a 10 ‰ fall from 4 km, the station stop near the end:
+    every TVM-430 speed pair within 8 sections."""
     blocks = [{"name": f"B{b + 1}", "start_m": 1500.0 * b, "end_m": 1500.0 * (b + 1), "signal": f"M{b + 1}",
-               "transmitter": "KPT-5", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0} for b in range(8)]
+               "transmitter": "UM71", "carrier_hz": (1700, 2300)[b % 2], "ballast_ohm_km": 2.0} for b in range(8)]
     return {"name": "TVM-430 coder vectors", "length_m": 12000.0, "electrification": {"system": "AC25000"},
-            "block_sections": blocks, "stations": [{"name": "end", "stop_m": 11800.0}],
+            "block_sections": blocks, "separation_zones": [{"position_m": 1500.0 * b} for b in range(1, 8)],
+            "stations": [{"name": "end", "stop_m": 11800.0}],
             "gradients": [{"start_m": 0, "permille": 0.0}, {"start_m": 4000, "permille": -10.0}], "curves": [],
             "speed_limits": [{"start_m": 0, "passenger_kmh": 160, "freight_kmh": 90, "high_speed_kmh": 300}]}
+
+
+def _tvm_line_loaded():
+    """_tvm_line() as the loader reads it."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / TVM_LINE_FILE
+        path.write_text(json.dumps(_tvm_line()), encoding="utf-8")
+        return load_line(str(path))
 
 
 def _tvm430_coder_vectors() -> List[dict]:
     """TVM-430: the block rules' word of every section for a train in each block, and the word's
     tones on section 1's carrier before and after a change, with no phase step at the change
     (docs/wayside_coder.md#tvm-430)."""
-    import tempfile
-
     from fmus.signalling import tvm430
     from fmus.wayside_coder.tvm430 import PEAK_DEVIATION_HZ, Tvm430CoderCore
 
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / TVM_LINE_FILE
-        path.write_text(json.dumps(_tvm_line()), encoding="utf-8")
-        line = load_line(str(path))
+    line = _tvm_line_loaded()
     params = {"system": "TVM430", "fs": TVM_FS_HZ, "line_file": TVM_LINE_FILE}
     step = {"fs_hz": TVM_FS_HZ, "frame_port": "u_tx"}
     core = Tvm430CoderCore(line, 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))

@@ -3,6 +3,8 @@ the conformance tests (tests/test_conform.py): `railcosim conform` must fail the
 vectors that catch the fault."""
 from fmus.ato_controller.facade import AtoController
 from fmus.loco_receiver.facade import LocoReceiver
+from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore
+from fmus.signalling import tvm430
 from fmus.wayside_coder.facade import WaysideCoder
 
 _LATCHED = ("aspect", "code_valid", "free_blocks", "v_permitted", "v_target")
@@ -21,6 +23,26 @@ class StuckReceiver(LocoReceiver):
         if self._latched is not None:
             for name, value in self._latched.items():
                 io[name][...] = value
+
+
+class _UncheckedTvm430(tvm430.Tvm430System):
+    """TVM-430 word tables read without the check: any 27 bits with a known address, speed and
+    distance mean something."""
+
+    def reading(self, word):
+        data = word >> tvm430.FIELDS["check"][1]
+        return super().reading((data << tvm430.FIELDS["check"][1]) | tvm430.check_bits(data))
+
+
+class UncheckedTvmReceiver(LocoReceiver):
+    """A TVM-430 receiver that ignores the word's check bits: a corrupted word whose fields
+    still mean something is shown."""
+
+    def create_core(self):
+        core = super().create_core()
+        if isinstance(core, Tvm430ReceiverCore):
+            core.tvm = _UncheckedTvm430(core.tvm.table)
+        return core
 
 
 class NoFailoverCoder(WaysideCoder):
