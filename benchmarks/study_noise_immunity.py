@@ -1,4 +1,4 @@
-"""Noise immunity of ALSN, ALSU, ALS-EN and FIRE_DQPSK side by side. A study, not a speed
+"""Noise immunity of ALSN, ALSU, ALS-EN, FIRE_DQPSK and TVM-430 side by side. A study, not a speed
 benchmark: its tables and plots are in docs/noise_immunity.md.
 
 1. **Bit error rate vs Eb/N0** of the two modems (ideal symbol timing, integrate-and-dump,
@@ -27,14 +27,19 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
    receiver core; besides white and impulse noise, DC joint pulse pairs (the rail line's own
    at 40, 80 and 160 km/h with the coil pair 5 % mismatched: the joints paper's 5 V at
    80 km/h) at 0.5 per second.
+   TVM430: a message is 13 decisions (1.625 s) of a 27-bit word on the 1700 Hz carrier at 0.1 V,
+   decoded by the TVM-430 receiver core; white and impulse noise, a traction harmonic sweeping
+   the carrier ±50 Hz (inband: its level against the carrier in dB), and the neighbour's
+   2300 Hz carrier at its worst separation-zone leak with white noise (leak: the SNR in dB).
 3. **A steady unmodulated tone at the carrier and the adjacent track's signal alone** (the other
    track parity) must never give a command.
 
-    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--systems ALSN,ALSU,ALS-EN,FIRE_DQPSK]
+    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--tvm430-messages 2000] [--systems ALSN,ALSU,ALS-EN,FIRE_DQPSK,TVM430]
 
-Part 2 is the studies orchestrator/study/studies/noise_immunity.toml and noise_immunity_alsu.toml
-run on Dask (a local cluster, or --scheduler): ``railcosim study noise_immunity`` (and
-``noise_immunity_alsu``) run the same conditions on their own.
+Part 2 is the studies orchestrator/study/studies/noise_immunity.toml, noise_immunity_alsu.toml
+and noise_immunity_tvm430.toml run on Dask (a local cluster, or --scheduler): ``railcosim study
+noise_immunity`` (and ``noise_immunity_alsu``, ``noise_immunity_tvm430``) run the same conditions
+on their own.
 """
 from __future__ import annotations
 
@@ -53,19 +58,26 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 STUDIES = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "studies"
 STUDY = STUDIES / "noise_immunity.toml"
 ALSU_STUDY = STUDIES / "noise_immunity_alsu.toml"
+TVM430_STUDY = STUDIES / "noise_immunity_tvm430.toml"
+SYSTEMS = ("ALSN", "ALSU", "ALS-EN", "FIRE_DQPSK", "TVM430")
+NOISE_KINDS = ("white", "impulse", "joint", "inband", "leak")
 
 
 # ---- main ------------------------------------------------------------------------------------------
-def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, workers=None, scheduler=None) -> dict:
+def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, workers=None, scheduler=None,
+                   tvm430_messages: int = 2000) -> dict:
     """The white- and impulse-noise tables through ``railcosim study`` (the study file with
-    these message counts and systems): {"white": {snr: {system: result}}, "impulse": …}."""
+    these message counts and systems): {"white": {snr: {system: result}}, "impulse": …} for
+    every kind of NOISE_KINDS."""
     from orchestrator.study.runner import run_study
     from orchestrator.study.spec import load_study
 
-    tables = {"white": {}, "impulse": {}, "joint": {}}
-    for study, folder in ((STUDY, output), (ALSU_STUDY, output.with_name(output.name + "_alsu"))):
+    tables = {kind: {} for kind in NOISE_KINDS}
+    for study, folder in ((STUDY, output), (ALSU_STUDY, output.with_name(output.name + "_alsu")),
+                          (TVM430_STUDY, output.with_name(output.name + "_tvm430"))):
         spec = load_study(study)
-        spec.data["arguments"].update(messages=messages, **({"alsn_cycles": alsn_cycles} if study == STUDY else {}))
+        spec.data["arguments"].update(messages=tvm430_messages if study == TVM430_STUDY else messages,
+                                      **({"alsn_cycles": alsn_cycles} if study == STUDY else {}))
         spec.runs = [r for r in spec.runs if r.values["system"] in systems]
         if not spec.runs:
             continue
@@ -85,8 +97,10 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--messages", type=int, default=100000, help="digital messages per condition")
     parser.add_argument("--alsn-cycles", type=int, default=2000, help="ALSN code cycles per condition")
+    parser.add_argument("--tvm430-messages", type=int, default=2000,
+                        help="TVM-430 messages (1.625 s, 13 decisions each) per condition")
     parser.add_argument("--ber-symbols", type=int, default=200000)
-    parser.add_argument("--systems", default="ALSN,ALSU,ALS-EN,FIRE_DQPSK",
+    parser.add_argument("--systems", default=",".join(SYSTEMS),
                         help="which systems to (re)compute; the others are kept from an existing --output")
     parser.add_argument("--output", default=str(DOCS / "figures" / "noise_immunity.json"))
     parser.add_argument("--runs", default="results/noise_immunity",
@@ -95,18 +109,22 @@ def main():
     parser.add_argument("--scheduler", help="an existing Dask scheduler instead of a local cluster")
     args = parser.parse_args()
     chosen = set(args.systems.split(","))
+    unknown = sorted(chosen - set(SYSTEMS))
+    if unknown:
+        parser.exit(2, f"--systems: unknown {', '.join(unknown)}; choose among {','.join(SYSTEMS)}\n")
     digital = [name for name in ("FIRE_DQPSK", "ALS-EN") if name in chosen]
     output = Path(args.output)
     results = json.loads(output.read_text()) if output.is_file() else {}
-    for key in ("ber", "white", "impulse", "joint", "tone", "adjacent"):
+    for key in ("ber", "tone", "adjacent", *NOISE_KINDS):
         results.setdefault(key, {})
     began = time.perf_counter()
     for name in digital:
         results["ber"][name] = {str(e): ber(name, e, args.ber_symbols, 11 + int(e)) for e in (2, 4, 6, 8, 10)}
     results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
     print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
-    tables = run_conditions(args.messages, args.alsn_cycles, chosen, Path(args.runs), args.workers, args.scheduler)
-    for kind in ("white", "impulse", "joint"):
+    tables = run_conditions(args.messages, args.alsn_cycles, chosen, Path(args.runs), args.workers, args.scheduler,
+                            args.tvm430_messages)
+    for kind in NOISE_KINDS:
         for level, row in tables[kind].items():
             results[kind].setdefault(level, {}).update(row)
     print(f"white and impulse noise: {time.perf_counter() - began:.0f} s", flush=True)

@@ -1,8 +1,9 @@
 """The noise-immunity study's channel (docs/noise_immunity.md): each cab-signalling system's
-wayside generator and receiver core under white noise, impulse noise or (ALSU) DC joint pulses,
+wayside generator and receiver core under white noise, impulse noise, (ALSU) DC joint pulses or
+(TVM430) in-band interference and the neighbour's carrier leaking through a separation zone,
 counted as message errors, undetected errors, wrong-side failures and availability; and the two
-modems' bit error rate. ``condition`` is one run of the shipped studies noise_immunity and
-noise_immunity_alsu (``railcosim study``); benchmarks/study_noise_immunity.py runs them all and
+modems' bit error rate. ``condition`` is one run of the shipped studies noise_immunity,
+noise_immunity_alsu and noise_immunity_tvm430 (``railcosim study``); benchmarks/study_noise_immunity.py runs them all and
 writes the docs' figures, and tests/test_study.py checks the study against it."""
 from __future__ import annotations
 
@@ -72,20 +73,25 @@ class Transmission:
         return self.scale * shaped
 
 
-def impulses(rate_per_s: float, rng):
+def impulses(rate_per_s: float, rng, fs_hz: float = FS):
+    """Damped oscillations (5–40 V, 100–400 Hz, 2–10 ms decay, each cut after 0.1 s) at random
+    times, Poisson at ``rate_per_s``, sampled at ``fs_hz``."""
+    cut = int(round(0.1 * fs_hz))
+
     def add(first: int, count: int) -> np.ndarray:
         e = np.zeros(count)
-        for start in np.flatnonzero(rng.random(count) < rate_per_s / FS):
-            length = min(count - start, 400)
-            t = np.arange(length) / FS
+        for start in np.flatnonzero(rng.random(count) < rate_per_s / fs_hz):
+            length = min(count - start, cut)
+            t = np.arange(length) / fs_hz
             e[start:start + length] += rng.choice([-1, 1]) * rng.uniform(5.0, 40.0) * \
                 np.exp(-t / rng.uniform(0.002, 0.01)) * np.sin(2 * np.pi * rng.uniform(100, 400) * t + rng.uniform(0, 6.3))
         return e
     return add
 
 
-def white(snr_db: float, rng):
-    sigma = np.sqrt(AMPLITUDE_V ** 2 / 2 / 10 ** (snr_db / 10))
+def white(snr_db: float, rng, amplitude_v: float = AMPLITUDE_V):
+    """White noise at ``snr_db`` below a carrier of ``amplitude_v`` (peak): A²/2 against σ²."""
+    sigma = np.sqrt(amplitude_v ** 2 / 2 / 10 ** (snr_db / 10))
     return lambda first, count: sigma * rng.standard_normal(count)
 
 
@@ -315,6 +321,192 @@ def alsu_chain(count: int, noise, seed: int) -> dict:
             "wrong_side_s": float(wrong.sum() * step_s), "availability": float(available[settled].mean())}
 
 
+# ---- 2d. TVM-430 -----------------------------------------------------------------------------------
+TVM_FS = 12000.0               # the TVM chain's sample rate (docs/rail_line.md#tvm-430-track-circuits)
+#: the own carrier at the coil, peak: the weakest the rail line gives a train, 10 m into a circuit
+#: at 1 Ω·km (0.025–0.034 V per volt of the coder's 4 V, docs/rail_line.md#tvm-430-track-circuits,
+#: "Levels"; the line's own sections at their minimum ballast give 0.135–0.176 V); the
+#: receiver's squelch (0.03 V) is a third of it
+TVM_CARRIER_V = 0.1
+TVM_OWN_HZ, TVM_NEIGHBOUR_HZ = 1700.0, 2300.0      # track 1: the line's first section and the next
+#: a message: 13 decisions (1.625 s), the fewest whole decisions (0.125 s) that hold a whole
+#: decision window (1.5625 s); the message's last decision reads a window lying wholly in it
+#: (60 ms after its start: the baseband low-pass has settled), so the messages' decisions read
+#: disjoint stretches of signal and noise. The 12 decisions between overlap it by 92 % and are
+#: not counted as messages (counted apart: ``decisions_other_word``)
+TVM_HOPS_PER_MESSAGE = 13
+#: the in-band interferer: one traction-converter harmonic sweeping the own carrier ± SWEEP_HZ
+#: (a triangle, SWEEP_S period: 2 Hz/s, as a harmonic moving with a converter's frequency while
+#: the train accelerates), so that every offset from the carrier — the tones' 0.88–17.52 Hz
+#: among them — is met
+SWEEP_HZ = 50.0
+SWEEP_S = 100.0
+_TVM_LEAK = {}
+
+
+def swept_harmonic(ratio_db: float, rng, carrier_hz: float = TVM_OWN_HZ, amplitude_v: float = TVM_CARRIER_V,
+                   fs_hz: float = TVM_FS):
+    """A sinusoid ``ratio_db`` against the carrier (peak to peak), its frequency a triangle
+    between carrier − SWEEP_HZ and carrier + SWEEP_HZ (period SWEEP_S), its phase the
+    frequency's closed-form integral (any chunking gives the same samples); a random start
+    phase and a random point of the sweep."""
+    amplitude = amplitude_v * 10 ** (ratio_db / 20)
+    start_phase, sweep_start_s = rng.uniform(0.0, 2 * np.pi), rng.uniform(0.0, SWEEP_S)
+
+    def add(first: int, count: int) -> np.ndarray:
+        n = first + np.arange(count, dtype=float)
+        u = np.mod(n / fs_hz + sweep_start_s, SWEEP_S) / SWEEP_S
+        # ∫ of the triangle 1 − 4|u − ½| (−1 … +1 … −1) from the period's start, per period
+        integral = np.where(u <= 0.5, 2 * u * u - u, 3 * u - 2 * u * u - 1.0)
+        cycles = np.fmod(carrier_hz * n, fs_hz) / fs_hz + SWEEP_HZ * SWEEP_S * integral
+        return amplitude * np.cos(2 * np.pi * cycles + start_phase)
+    return add
+
+
+def tvm_leak_ratio() -> float:
+    """The neighbour carrier's coil EMF against the own one where it leaks most through a
+    separation zone on the high-speed line: the line's first section (1700 Hz, at its minimum or
+    the line's maximum ballast, whichever leaks more), the next (2300 Hz) at the line's maximum,
+    the train's head 2.7 m before the zone (fmus/rail_line/separation_leak.py, its worst place;
+    docs/rail_line.md#tvm-430-track-circuits)."""
+    if "ratio" not in _TVM_LEAK:
+        from fmus.rail_line.core import default_wheelsets
+        from fmus.rail_line.separation_leak import NEAREST_HEAD_BEFORE_ZONE_M, leak_at
+        from harness.tvm_line import HSL_LINE, TRAIN_M
+
+        line = load_line(HSL_LINE)
+        own, ahead = line.sections[0], line.sections[1]
+        _TVM_LEAK["ratio"] = max(
+            leak_at(NEAREST_HEAD_BEFORE_ZONE_M, float(own.carrier_hz), float(ahead.carrier_hz), ballast,
+                    line.max_ballast_ohm_km, default_wheelsets(TRAIN_M), length_m=own.end_m - own.start_m,
+                    neighbour_length_m=ahead.end_m - ahead.start_m).emf_ratio
+            for ballast in (float(own.ballast_ohm_km), line.max_ballast_ohm_km))
+    return _TVM_LEAK["ratio"]
+
+
+def tvm_words(tvm):
+    """The words a wayside of the high-speed line sends (every block, every number of free
+    blocks ahead), less the most permissive word there is (300/300, no target, the least falling
+    gradient), which is the leaking neighbour's: more permissive than every word sent."""
+    from fmus.signalling import tvm430
+    from harness.tvm_line import HSL_LINE
+
+    table = tvm.table
+    most = tvm430.assemble(table.addresses[0], table.speed_code(table.steps_kmh[0], table.steps_kmh[0]),
+                           table.distance_codes - 1, len(table.gradient_permille) - 1)
+    blocks = tvm430.BlockWords(load_line(HSL_LINE), tvm)
+    words = sorted({blocks.word(b, free) for b in range(len(blocks.block_starts)) for free in range(8)} - {most})
+    return np.array(words, dtype=np.int64), most
+
+
+def tvm_first_sections(count: int = 2):
+    """The high-speed line cut after its first ``count`` sections (its lists cut there too): the
+    coder core computes every section's carrier each frame, and the chain needs two."""
+    import json
+
+    from fmus.data.loader import Line
+    from harness.tvm_line import HSL_LINE
+
+    document = json.loads(HSL_LINE.read_text())
+    end = float(document["block_sections"][count - 1]["end_m"])
+    document.update(block_sections=document["block_sections"][:count], length_m=end,
+                    separation_zones=[z for z in document["separation_zones"] if z["position_m"] < end],
+                    stations=[s for s in document["stations"] if s["stop_m"] < end])
+    for key in ("gradients", "speed_limits", "curves"):
+        document[key] = [dict(x, **({"end_m": min(x["end_m"], end)} if "end_m" in x else {}))
+                         for x in document.get(key, []) if x["start_m"] < end]
+    return Line(document, HSL_LINE)
+
+
+def tvm430_chain(count: int, noise, seed: int, leak_ratio: float = 0.0) -> dict:
+    """TVM-430 through its coder core (the high-speed line's words, sent on the line's first
+    section, 1700 Hz, scaled to TVM_CARRIER_V at the coil) into its receiver core (track 1);
+    ``leak_ratio`` > 0: the next section's 2300 Hz carrier added at that ratio of it (the study:
+    tvm_leak_ratio()), sending the most permissive word. A message is TVM_HOPS_PER_MESSAGE decisions (1.625 s), each word held
+    for HOLD messages (random words of those the line's wayside sends). A message is correct when
+    its last decision (the one whose window lies wholly in it) reads the word sent on the own
+    carrier; detected: no word; undetected: another valid word (or the neighbour's carrier).
+    Wrong-side: a word shown that is more permissive in any field (step, next step, target
+    distance, gradient: the run verdicts' rule) than every word sent within the receiver's stated
+    latency (5.19 s) before."""
+    from fmus.loco_receiver.tvm430 import HOP_S, STATED_LATENCY_S, Tvm430ReceiverCore, Tvm430ReceiverSettings
+    from fmus.signalling import tvm430
+    from fmus.wayside_coder.tvm430 import Tvm430CoderCore
+
+    tvm = tvm430.system()
+    words, most = tvm_words(tvm)
+    rng = np.random.default_rng(seed)
+    schedule = words[rng.integers(0, words.size, (count + HOLD - 1) // HOLD)]
+    sent = np.repeat(schedule, HOLD)[:count]
+    frame = int(round(HOP_S * TVM_FS))                     # one decision per frame
+    line = tvm_first_sections(2)
+    coder = Tvm430CoderCore(line, len(line.sections), frame, CoderSettings(fs_hz=TVM_FS, seed=seed))
+    receiver = Tvm430ReceiverCore(frame, Tvm430ReceiverSettings(fs_hz=TVM_FS, track=1))
+    own_gain = TVM_CARRIER_V / coder.settings.amplitude_v
+    leak_gain = own_gain * leak_ratio
+    forced = np.zeros(coder.count, dtype=np.int64)
+    forced[1] = most
+    occupied = np.zeros(coder.count, dtype=bool)
+    frames = count * TVM_HOPS_PER_MESSAGE
+    shown = np.zeros(frames, dtype=np.int64)               # the word shown after each frame (0: none)
+    shown_carrier = np.zeros(frames)
+    read = np.zeros(frames, dtype=np.int64)                # the word each frame's decision read
+    read_carrier = np.zeros(frames)
+    decided = np.zeros(frames, dtype=bool)
+    for j in range(frames):
+        m = j // TVM_HOPS_PER_MESSAGE
+        if j % (TVM_HOPS_PER_MESSAGE * HOLD) == 0:
+            forced[0] = sent[m]
+            coder.send(forced)
+        first = j * frame
+        u = coder.step(first / TVM_FS, occupied).u_tx
+        e = own_gain * u[0] + leak_gain * u[1] if leak_ratio else own_gain * u[0]
+        if noise is not None:
+            e = e + noise(first, frame)
+        out = receiver.step(first / TVM_FS, e)
+        shown[j], shown_carrier[j] = (out.code, out.word_carrier_hz) if out.code_valid else (0, 0.0)
+        decision = receiver.last_decision
+        if decision is not None:
+            read[j], read_carrier[j], decided[j] = decision.word, decision.carrier_hz, True
+    last = np.arange(count) * TVM_HOPS_PER_MESSAGE + TVM_HOPS_PER_MESSAGE - 1
+    on_own = read_carrier[last] == TVM_OWN_HZ
+    correct = int(np.sum((read[last] == sent) & on_own))
+    detected = int(np.sum(read[last] == tvm430.NO_WORD))
+    undetected = count - correct - detected
+    # every decision: a valid word neither of the messages its window reaches into sent
+    message_of = np.arange(frames) // TVM_HOPS_PER_MESSAGE
+    valid = read != tvm430.NO_WORD
+    this, before = sent[message_of], sent[np.maximum(message_of - 1, 0)]
+    other = valid & ((read_carrier != TVM_OWN_HZ) | ((read != this) & (read != before)))
+    # the display against the words sent within the stated latency before (at most two: a word
+    # is held for HOLD messages, longer than the latency)
+    fields = {}
+    for w in {int(x) for x in np.unique(np.concatenate([sent, shown[shown != 0]]))}:
+        r = tvm.reading(w)
+        fields[w] = (r.step_kmh, r.next_kmh, r.target_distance_m, r.gradient_permille)
+
+    def table(ws):
+        return np.array([fields[int(w)] for w in ws]).reshape(-1, 4)
+    t_end = (np.arange(frames) + 1) * HOP_S
+    message_s = TVM_HOPS_PER_MESSAGE * HOP_S
+    hi = np.minimum((t_end / message_s - 1e-9).astype(np.int64), count - 1)
+    lo = np.maximum(np.floor((t_end - STATED_LATENCY_S) / message_s).astype(np.int64), 0)
+    is_shown = shown != 0
+    shown_fields = np.zeros((frames, 4))
+    shown_fields[is_shown] = table(shown[is_shown])
+    tol = np.array([1e-6, 1e-6, 1e-6, 1e-6])
+    exceeds_lo = (shown_fields > table(sent[lo]) + tol).any(axis=1)
+    exceeds_hi = (shown_fields > table(sent[hi]) + tol).any(axis=1)
+    wrong = is_shown & ((shown_carrier != TVM_OWN_HZ) | (exceeds_lo & exceeds_hi))
+    settled = t_end > min(4 * message_s * HOLD, t_end[-1] / 2)
+    available = is_shown & (shown_carrier == TVM_OWN_HZ) & ((shown == sent[lo]) | (shown == sent[hi]))
+    return {"messages": count, "seconds": count * message_s, "correct": correct, "mer": 1.0 - correct / count,
+            "undetected": undetected, "detected": detected, "decisions": int(decided.sum()),
+            "decisions_other_word": int(other.sum()),
+            "wrong_side_events": int(np.sum(wrong[1:] & ~wrong[:-1]) + wrong[0]),
+            "wrong_side_s": float(wrong.sum() * HOP_S), "availability": float(available[settled].mean())}
+
+
 # ---- one condition: a run of the study -------------------------------------------------------------
 SNRS_DB = (0.0, -6.0, -10.0, -13.0, -16.0, -20.0)
 IMPULSE_RATES = (0.5, 2.0, 5.0)
@@ -323,18 +515,28 @@ JOINT_SPEEDS_KMH = (40.0, 80.0, 160.0)
 #: schedule always from seed 5. Replication ``seed`` k adds 1000·k to both (0: the figures below).
 SEEDS = {("white", "FIRE_DQPSK"): (100, 7), ("white", "ALS-EN"): (101, 8), ("white", "ALSN"): (99, 5),
          ("impulse", "FIRE_DQPSK"): (200, 17), ("impulse", "ALS-EN"): (201, 18), ("impulse", "ALSN"): (199, 5),
-         ("white", "ALSU"): (98, 6), ("impulse", "ALSU"): (198, 16), ("joint", "ALSU"): (298, 26)}
+         ("white", "ALSU"): (98, 6), ("impulse", "ALSU"): (198, 16), ("joint", "ALSU"): (298, 26),
+         ("white", "TVM430"): (97, 9), ("impulse", "TVM430"): (197, 19), ("inband", "TVM430"): (397, 29),
+         ("leak", "TVM430"): (497, 39)}
 
 
 def condition(system: str, noise: str, level: float, seed: int = 0, messages: int = 100000,
               alsn_cycles: int = 2000) -> dict:
     """One system under one noise condition (white: SNR in dB; impulse: impulses per second;
-    joint, ALSU only: DC joint pulse pairs at this speed in km/h): a run of the study
-    orchestrator/study/studies/noise_immunity.toml or noise_immunity_alsu.toml (``railcosim study``)."""
+    joint, ALSU only: DC joint pulse pairs at this speed in km/h; TVM430 only: inband, a
+    harmonic sweeping the carrier ± 50 Hz at this level against the carrier in dB, and leak,
+    the neighbour's carrier at its worst leak with white noise at this SNR in dB): a run of the
+    study orchestrator/study/studies/noise_immunity.toml, noise_immunity_alsu.toml or
+    noise_immunity_tvm430.toml (``railcosim study``)."""
     if (noise, system) not in SEEDS:
-        raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALSU, ALS-EN "
-                         f"or FIRE_DQPSK; or joint and ALSU")
+        raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALSU, ALS-EN, "
+                         f"FIRE_DQPSK or TVM430; or joint and ALSU; or inband or leak and TVM430")
     noise_seed, message_seed = (s + 1000 * seed for s in SEEDS[(noise, system)])
+    if system == "TVM430":
+        rng = np.random.default_rng(noise_seed)
+        source = {"white": lambda: white(level, rng, TVM_CARRIER_V), "leak": lambda: white(level, rng, TVM_CARRIER_V),
+                  "impulse": lambda: impulses(level, rng, TVM_FS), "inband": lambda: swept_harmonic(level, rng)}[noise]()
+        return tvm430_chain(messages, source, message_seed, tvm_leak_ratio() if noise == "leak" else 0.0)
     noise_of = {"white": white, "impulse": impulses, "joint": joints}[noise]
     if system == "ALSU" and noise == "white":
         # SNR of the code's power, both tones (A² against σ²), over the whole band

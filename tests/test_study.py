@@ -421,6 +421,34 @@ def test_alsu_noise_study_gives_the_counts_of_the_benchmarks_chain(tmp_path):
         assert record["collected"]["wrong_side_events"] == 0
 
 
+def test_tvm430_noise_study_is_never_wrong_side_and_errs_more_in_more_noise(tmp_path):
+    """The shipped TVM-430 noise study, every condition (reduced: 200 messages): no word shown
+    more permissive than every word sent within the stated latency, in white, impulse and
+    in-band noise and with the neighbour's carrier leaking; the message error rate in white
+    noise rises as the SNR falls; and a run's counts are the chain's with the study's seeds."""
+    import harness.noise_immunity as noise
+
+    shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity_tvm430.toml")
+    data = {**shipped.data, "arguments": {"messages": 200}}
+    study = _write(tmp_path, "noise_tvm430.json", json.dumps(data))
+    result = run_study(load_study(study), tmp_path / "out", None, [], workers=2, python_path=[str(REPO)])
+    assert result.counts["ok"] == len(shipped.runs) == 10
+    for record in result.records:
+        assert record["collected"]["messages"] == 200
+        assert record["collected"]["wrong_side_events"] == 0, record["values"]
+        assert record["collected"]["wrong_side_s"] == 0.0, record["values"]
+    white = sorted((r["values"]["level"], r["collected"]["mer"]) for r in result.records
+                   if r["values"]["noise"] == "white")
+    assert [level for level, _ in white] == [-6.0, -3.0, 0.0, 3.0]
+    mers = [mer for _, mer in white]                        # lowest SNR first
+    assert all(a > b for a, b in zip(mers, mers[1:])), white
+    # white noise at -3 dB: noise seed 97, message seed 9
+    want = noise.tvm430_chain(200, noise.white(-3.0, np.random.default_rng(97), noise.TVM_CARRIER_V), 9)
+    record = next(r for r in result.records if r["values"] == {"noise": "white", "level": -3.0, "system": "TVM430"})
+    for key in ("correct", "undetected", "detected", "decisions_other_word", "wrong_side_events"):
+        assert record["collected"][key] == want[key], key
+
+
 @pytest.mark.parametrize("text, message", [
     ('system = "ato_only"\n[grid]\n"train.mass_scal" = [1.0]\n',
      "field grid.train.mass_scal: component 'train' of ato_only has no variable 'mass_scal'"),
