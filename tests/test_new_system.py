@@ -76,16 +76,22 @@ def _sources(folder):
     return {c.get("name"): c.get("source") for c in root.iter("{*}Component")}
 
 
-def _um71_line(tmp_path, sections: int, block_m: float = 1000.0):
+def _um71_line(tmp_path, sections: int, block_m: float = 1000.0, alsn_after: int = 0):
     """A line of ``sections`` UM71 track circuits (track 1's carriers, a separation zone at every
-    boundary) with stations at both ends, and a timetable between them."""
+    boundary), then ``alsn_after`` ALSN ones (KPT-5, 25 Hz under AC, insulated joints), with stations at
+    both ends, and a timetable between them."""
     blocks = [{"name": str(k + 1), "start_m": k * block_m, "end_m": (k + 1) * block_m, "signal": f"R{k + 1}",
                "transmitter": "UM71", "carrier_hz": (1700, 2300)[k % 2], "ballast_ohm_km": 2.0}
               for k in range(sections)]
-    length_m = sections * block_m
+    blocks += [{"name": str(k + 1), "start_m": k * block_m, "end_m": (k + 1) * block_m, "signal": f"R{k + 1}",
+                "transmitter": "KPT-5", "carrier_hz": 25, "ballast_ohm_km": 2.0}
+               for k in range(sections, sections + alsn_after)]
+    length_m = len(blocks) * block_m
     line = {"name": f"{sections} UM71 sections", "length_m": length_m, "max_ballast_ohm_km": 50,
             "electrification": {"system": "AC25000"}, "block_sections": blocks,
             "separation_zones": [{"position_m": k * block_m} for k in range(1, sections)],
+            "insulated_joints": [{"position_m": k * block_m} for k in range(sections, len(blocks) + 1)
+                                 if alsn_after],
             "stations": [{"name": "A", "stop_m": 400.0}, {"name": "Z", "stop_m": length_m - 500.0}],
             "gradients": [{"start_m": 0.0, "permille": 0.0}], "curves": [],
             "speed_limits": [{"start_m": 0.0, "passenger_kmh": 160, "freight_kmh": 100, "high_speed_kmh": 300}]}
@@ -162,6 +168,9 @@ def test_tvm430_and_the_other_systems_are_refused_on_each_others_track_circuits(
         stderr = refused("--line", TVM_LINE, "--timetable", TVM_TIMETABLE, "--system", system)
         assert f"--system {system}" in stderr and "block_sections[0].transmitter is 'UM71'" in stderr
         assert "give --system TVM430" in stderr
+    line, timetable = _um71_line(tmp_path, 3, alsn_after=2)         # UM71 then ALSN: TVM codes three
+    stderr = refused("--line", line, "--timetable", timetable, "--system", "TVM430")
+    assert "field block_sections[3].transmitter is 'KPT-5'" in stderr and "UM71 track circuits only" in stderr
     line, timetable = _um71_line(tmp_path, 65, block_m=500.0)
     stderr = refused("--line", line, "--timetable", timetable, "--system", "TVM430")
     assert "65 block sections" in stderr and "at most 64" in stderr
