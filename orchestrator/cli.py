@@ -394,8 +394,9 @@ def add_new_command(sub) -> None:
                           "--railml optional (one is made)")
     new.add_argument("--rolling-stock", metavar="FILE",
                      help="rolling-stock file for every train (default: the bundled passenger train; "
-                          "freight_vl80 for --traction ac)")
-    new.add_argument("--system", default="ALSN", help="cab signalling: ALSN (default), ALS-EN or FIRE_DQPSK")
+                          "freight_vl80 for --traction ac; high_speed_tgv for --system TVM430)")
+    new.add_argument("--system", default="ALSN", help="cab signalling: ALSN (default), ALS-EN, FIRE_DQPSK, or "
+                                                      "TVM430 on a line of UM71 track circuits")
     new.add_argument("--trains", type=int, help="number of trains (default: one per --timetable)")
     new.add_argument("--traction", help="dc, ac or none (default: the line's electrification; must agree)")
     new.set_defaults(func=cmd_new)

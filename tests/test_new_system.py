@@ -3,6 +3,8 @@ runs, with one line file shared by every component through one parameter set."""
 import json
 import shutil
 
+import pytest
+
 from helpers import REPO, railcosim
 
 EXAMPLES = REPO / "docs" / "examples"
@@ -59,3 +61,116 @@ def test_new_refuses_bad_input_in_one_line(tmp_path):
     code, _, stderr = _new(tmp_path, name="taken")
     assert code == 2 and "already exists" in stderr
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1
+
+
+# ---- TVM-430: a line of UM71 track circuits -------------------------------------------------------
+SHIPPED_DATA = REPO / "fmus" / "data" / "shipped"
+TVM_LINE = SHIPPED_DATA / "hsl_tvm430_line.json"
+TVM_TIMETABLE = EXAMPLES / "lgv_timetable.json"     # Origine at 10 s, Terminus at 760 s
+
+
+def _sources(folder):
+    from lxml import etree
+
+    root = etree.parse(str(folder / "SystemStructure.ssd")).getroot()
+    return {c.get("name"): c.get("source") for c in root.iter("{*}Component")}
+
+
+def _um71_line(tmp_path, sections: int, block_m: float = 1000.0, alsn_after: int = 0):
+    """A line of ``sections`` UM71 track circuits (track 1's carriers, a separation zone at every
+    boundary), then ``alsn_after`` ALSN ones (KPT-5, 25 Hz under AC, insulated joints), with stations at
+    both ends, and a timetable between them."""
+    blocks = [{"name": str(k + 1), "start_m": k * block_m, "end_m": (k + 1) * block_m, "signal": f"R{k + 1}",
+               "transmitter": "UM71", "carrier_hz": (1700, 2300)[k % 2], "ballast_ohm_km": 2.0}
+              for k in range(sections)]
+    blocks += [{"name": str(k + 1), "start_m": k * block_m, "end_m": (k + 1) * block_m, "signal": f"R{k + 1}",
+                "transmitter": "KPT-5", "carrier_hz": 25, "ballast_ohm_km": 2.0}
+               for k in range(sections, sections + alsn_after)]
+    length_m = len(blocks) * block_m
+    line = {"name": f"{sections} UM71 sections", "length_m": length_m, "max_ballast_ohm_km": 50,
+            "electrification": {"system": "AC25000"}, "block_sections": blocks,
+            "separation_zones": [{"position_m": k * block_m} for k in range(1, sections)],
+            "insulated_joints": [{"position_m": k * block_m} for k in range(sections, len(blocks) + 1)
+                                 if alsn_after],
+            "stations": [{"name": "A", "stop_m": 400.0}, {"name": "Z", "stop_m": length_m - 500.0}],
+            "gradients": [{"start_m": 0.0, "permille": 0.0}], "curves": [],
+            "speed_limits": [{"start_m": 0.0, "passenger_kmh": 160, "freight_kmh": 100, "high_speed_kmh": 300}]}
+    path, timetable = tmp_path / f"um71_{sections}.json", tmp_path / f"um71_{sections}_timetable.json"
+    path.write_text(json.dumps(line))
+    timetable.write_text(json.dumps({"train": "TGV", "stops": [{"station": "A", "departure_s": 10},
+                                                               {"station": "Z", "arrival_s": 60 * sections}]}))
+    return path, timetable
+
+
+def test_a_tvm430_system_on_the_high_speed_line_runs_its_chain_at_12_khz_and_is_safe(tmp_path, product_fmus):
+    code, stdout, stderr = railcosim("new", "lgv", "--line", TVM_LINE, "--timetable", TVM_TIMETABLE,
+                                     "--system", "TVM430", cwd=tmp_path)
+    assert code == 0, stderr
+    folder = tmp_path / "lgv"
+    # 28 sections: the standard build of 32, 10 ms frames of 120 samples, as the shipped tvm430's
+    sources = _sources(folder)
+    assert {sources[name] for name in ("coder", "rail", "rx")} == {
+        f"resources/k32m2n120/{fmu}.fmu" for fmu in ("WaysideCoder", "RailLine", "LocoReceiver")}
+    assert sources["train"] == "resources/Traction.fmu"
+    assert {p.name for p in (folder / "resources").iterdir()} == {"hsl_tvm430_line.json", "lgv_timetable.json",
+                                                                  "high_speed_tgv.json"}
+    code, stdout, stderr = railcosim("run", "lgv", "--no-build", "--in-process", "--stop-time", "60",
+                                     "--record", "train.x", "--record", "rx.v_permitted",
+                                     "--output", tmp_path / "out", cwd=tmp_path)
+    assert code == 0, stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    (rx,) = summary["receivers"]
+    assert rx["system"] == "TVM430" and rx["decoded_codes"] > 0, rx
+    assert rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
+    (train,) = summary["trains"]
+    assert train["signals_passed_at_danger"] == 0
+    assert "safety: safe" in stdout
+    header, *rows = (line.split(",") for line in (tmp_path / "out" / "results.csv").read_text().splitlines())
+    column = {name: k for k, name in enumerate(header)}
+    # departed (10 s) on its words: over 500 m run, under block 1's word of 170 km/h (the line's limit there)
+    assert float(rows[-1][column["train.x"]]) > 900.0
+    assert float(rows[-1][column["rx.v_permitted"]]) == pytest.approx(170 / 3.6)
+
+
+def test_a_tvm430_system_takes_the_smallest_standard_section_count_that_holds_the_line(tmp_path):
+    line, timetable = _um71_line(tmp_path, 10)
+    code, _, stderr = railcosim("new", "ten", "--line", line, "--timetable", timetable, "--system", "TVM430",
+                                cwd=tmp_path)
+    assert code == 0, stderr
+    assert _sources(tmp_path / "ten")["rail"] == "resources/k16m2n120/RailLine.fmu"
+    ssd = (tmp_path / "ten" / "SystemStructure.ssd").read_text()
+    assert '"u_tx[16,120]"' in ssd and '"u_tx[17,1]"' not in ssd
+
+
+def test_a_tvm430_system_from_railml_gets_the_high_speed_set_and_its_timetable(tmp_path):
+    from orchestrator.analysis.railml import export_railml
+
+    railml = tmp_path / "lgv.xml"
+    railml.write_bytes(export_railml(json.loads(TVM_LINE.read_text())))
+    code, _, stderr = railcosim("new", "lgv", "--railml", railml, "--system", "TVM430", cwd=tmp_path)
+    assert code == 0, stderr
+    resources = {p.name for p in (tmp_path / "lgv" / "resources").iterdir()}
+    assert resources == {"lgv.json", "lgv_timetable.json", "high_speed_tgv.json"}
+    assert _sources(tmp_path / "lgv")["rx"] == "resources/k32m2n120/LocoReceiver.fmu"
+
+
+def test_tvm430_and_the_other_systems_are_refused_on_each_others_track_circuits(tmp_path):
+    def refused(*args):
+        code, _, stderr = railcosim("new", "x", *args, cwd=tmp_path)
+        assert code == 2 and "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1, stderr
+        assert not (tmp_path / "x").exists()
+        return stderr
+
+    stderr = refused("--line", EXAMPLES / "short_line.json", "--timetable", EXAMPLES / "short_timetable.json",
+                     "--system", "TVM430")
+    assert "--system TVM430" in stderr and "short_line.json has no UM71 sections" in stderr
+    for system in ("ALSN", "ALS-EN"):
+        stderr = refused("--line", TVM_LINE, "--timetable", TVM_TIMETABLE, "--system", system)
+        assert f"--system {system}" in stderr and "block_sections[0].transmitter is 'UM71'" in stderr
+        assert "give --system TVM430" in stderr
+    line, timetable = _um71_line(tmp_path, 3, alsn_after=2)         # UM71 then ALSN: TVM codes three
+    stderr = refused("--line", line, "--timetable", timetable, "--system", "TVM430")
+    assert "field block_sections[3].transmitter is 'KPT-5'" in stderr and "UM71 track circuits only" in stderr
+    line, timetable = _um71_line(tmp_path, 65, block_m=500.0)
+    stderr = refused("--line", line, "--timetable", timetable, "--system", "TVM430")
+    assert "65 block sections" in stderr and "at most 64" in stderr

@@ -14,6 +14,12 @@ Each train starts standing at its timetable's first station (its head at the sto
 the rail line's train lengths come from the rolling-stock file; the receivers are tuned to the
 line's ALSN carrier and to the stock's category. Everything a run would refuse is refused here
 first, in one line naming the file and the field.
+
+``--system TVM430`` (a line of UM71 track circuits, docs/rail_line.md#tvm-430-track-circuits)
+writes the chain the shipped tvm430 system has (orchestrator/analysis/systems.py): 12 kHz, 10 ms
+frames of 120 samples, its signal FMUs named in a sized folder of the sources
+(``resources/k32m2n120/RailLine.fmu``, docs/architecture.md#build-sizes) that ``railcosim run``
+builds; the high-speed set is its default stock.
 """
 from __future__ import annotations
 
@@ -22,21 +28,30 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Sequence
 
-from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock,
-                              load_timetable)
+from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, TVM_TRANSMITTER, Line, RollingStock, load_line,
+                              load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.signalling.cab_systems import DIGITAL
+from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.analysis.system_checks import check_sections_contiguous, load_data_file
-from orchestrator.analysis.systems import (cab_settings, check_placements, committed_ports, signal_chain,
-                                           train_and_ato)
+from orchestrator.analysis.systems import (TVM430_BUILD, TVM430_FS_HZ, TVM430_STOCK, cab_settings,
+                                           check_placements, committed_ports, signal_chain, train_and_ato)
 from orchestrator.errors import UserError
 from orchestrator.sspgen import fmu_ports, write_ssd, write_ssv
 
-CAB_SYSTEMS = ("ALSN", *sorted(DIGITAL))
+TVM430 = "TVM430"
+CAB_SYSTEMS = ("ALSN", *sorted(DIGITAL), TVM430)
 TRACTION = {"dc": "DC3000", "ac": "AC25000", "none": "none"}
 #: the stock a train gets without --rolling-stock, by traction (bundled files)
 DEFAULT_STOCK = {"dc": Path(DEFAULT_ROLLING_STOCK), "ac": DATA / "freight_vl80.json",
                  "none": Path(DEFAULT_ROLLING_STOCK)}
+#: a TVM430 system's stock without --rolling-stock, whatever the traction: the high-speed set
+TVM430_DEFAULT_STOCK = DATA / TVM430_STOCK
+#: the block-section counts a TVM430 system's signal FMUs are built for: a line gets the smallest
+#: that holds it, so every line of 17 to 32 sections shares one build with the shipped tvm430
+#: (k32m2n120) and a few builds serve every line, at the cost of idle sections (above 8, fewer
+#: than the line uses)
+TVM430_SECTION_SIZES = (8, 16, 32, 64)
 LINE_PARAMETER_SET = "line.ssv"
 #: seconds the run goes on after the last scheduled arrival
 STOP_MARGIN_S = 120.0
@@ -58,6 +73,39 @@ def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
     return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
 
 
+def tvm430_sizes(sections: int, trains: int) -> BuildConfig:
+    """The build sizes of a TVM430 system's signal FMUs: the smallest of TVM430_SECTION_SIZES
+    holding the line's ``sections``, room for ``trains`` (at least TVM430_BUILD's), and
+    TVM430_BUILD's frame (120 samples: 10 ms at 12 kHz)."""
+    if sections > TVM430_SECTION_SIZES[-1]:
+        raise UserError(f"the line has {sections} block sections; a TVM430 system holds at most "
+                        f"{TVM430_SECTION_SIZES[-1]}")
+    return BuildConfig(sections=next(k for k in TVM430_SECTION_SIZES if k >= sections),
+                       trains=max(TVM430_BUILD.trains, trains), frame=TVM430_BUILD.frame)
+
+
+def default_stock(system: str, traction: str) -> Path:
+    """The rolling-stock file a train gets without --rolling-stock."""
+    return TVM430_DEFAULT_STOCK if system == TVM430 else DEFAULT_STOCK[traction]
+
+
+def check_track_circuits(line: Line, system: str) -> None:
+    """TVM-430 codes UM71 track circuits only, and the other systems code none of them: the TVM
+    coder refuses any other carrier, the others' coders know KPT transmitters only."""
+    um71 = [s.transmitter == TVM_TRANSMITTER for s in line.sections]
+    if system == TVM430 and not any(um71):
+        raise UserError(f"--system {TVM430}: {line.path} has no {TVM_TRANSMITTER} sections (field "
+                        f"block_sections[].transmitter); TVM-430 codes {TVM_TRANSMITTER} track circuits")
+    if system == TVM430 and not all(um71):
+        k = um71.index(False)
+        raise UserError(f"--system {TVM430}: {line.path} field block_sections[{k}].transmitter is "
+                        f"{line.sections[k].transmitter!r}; TVM-430 codes {TVM_TRANSMITTER} track circuits only")
+    if system != TVM430 and any(um71):
+        k = um71.index(True)
+        raise UserError(f"--system {system}: {line.path} field block_sections[{k}].transmitter is "
+                        f"{TVM_TRANSMITTER!r}, a TVM-430 track circuit; give --system {TVM430}")
+
+
 def _load(loader, path: Path, option: str):
     return load_data_file(loader, path, lambda problem: f"{option}: {problem}")
 
@@ -76,7 +124,8 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
     if count != len(timetable_files):
         raise UserError(f"--trains {count}: give one --timetable per train ({len(timetable_files)} given); "
                         "each train starts at its own timetable's first station")
-    sizes = built_sizes(fmu_dir)
+    # a TVM430 system's FMUs are sized for its line and trains below; the others are the build's
+    sizes = built_sizes(fmu_dir) if system != TVM430 else BuildConfig(trains=max(count, 1))
     if not 1 <= count <= sizes.trains:
         raise UserError(f"--trains {count}: the FMUs are built for 1 to {sizes.trains} trains "
                         f"(railcosim build --trains {count})")
@@ -85,6 +134,12 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
         check_sections_contiguous(line)
     except UserError as error:
         raise UserError(f"--line: {error}") from None
+    check_track_circuits(line, system)
+    if system == TVM430:   # its own build sizes, named in the sources and built by railcosim run
+        try:
+            sizes = tvm430_sizes(len(line.sections), count)
+        except UserError as error:
+            raise UserError(f"--line: {line.path}: {error}") from None
     if len(line.sections) > sizes.sections:
         raise UserError(f"--line: {line.path} has {len(line.sections)} block sections; the FMUs are built for "
                         f"{sizes.sections} (railcosim build --sections {len(line.sections)})")
@@ -94,7 +149,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
     if TRACTION[traction] != line.electrification:
         raise UserError(f"--traction {traction}: {line.path} field electrification.system is "
                         f"{line.electrification!r}; the traction must be the line's")
-    stock_path = Path(rolling_stock_file) if rolling_stock_file else DEFAULT_STOCK[traction]
+    stock_path = Path(rolling_stock_file) if rolling_stock_file else default_stock(system, traction)
     stock: RollingStock = _load(load_rolling_stock, stock_path, "--rolling-stock")
     if stock.electrical_system not in ("none", line.electrification) and line.electrification != "none":
         raise UserError(f"--rolling-stock: {stock_path} (field electrical.system {stock.electrical_system!r}) "
@@ -129,8 +184,10 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
             part.parameter_file = LINE_PARAMETER_SET
         components += parts
         connections += links
+    tvm = {"fmu_folder": f"resources/{sizes.folder_name}", "fs_hz": TVM430_FS_HZ} if system == TVM430 else {}
     chain, links = signal_chain(names, sections=sizes.sections, frame=sizes.frame, coder=coder, rail=rail,
-                                receiver=receiver, stocks=[stock_path] * count, parameter_file=LINE_PARAMETER_SET)
+                                receiver=receiver, stocks=[stock_path] * count, parameter_file=LINE_PARAMETER_SET,
+                                **tvm)
     stop_time = max(stop.arrival_s or stop.departure_s or 0.0 for timetable in timetables for stop in timetable)
     folder.mkdir(parents=True, exist_ok=True)
     resources = folder / "resources"
@@ -147,8 +204,9 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
 
 
 def built_ports(fmu_dir: Optional[Path], source: str):
-    """An FMU's ports from the build folder when it is built there, else its committed contract."""
-    if fmu_dir is not None and (Path(fmu_dir) / Path(source).name).is_file():
+    """An FMU's ports from the build folder when it is built there, else its committed contract;
+    an FMU of other sizes (in a sized folder, fmus/sizes.py): its contract at those sizes."""
+    if sizes_of_source(source) is None and fmu_dir is not None and (Path(fmu_dir) / Path(source).name).is_file():
         return fmu_ports(Path(fmu_dir), Path(source).name)
     return committed_ports(Path("."), source)
 
@@ -230,8 +288,8 @@ def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Seq
         except FmuInputError as error:
             raise UserError(f"{railml_file}: the imported line is refused: {str(error).split(': ', 1)[1]}") from None
         if not timetable_files:
-            stock = Path(rolling_stock_file) if rolling_stock_file else DEFAULT_STOCK[
-                traction or next(k for k, v in TRACTION.items() if v == imported.document["electrification"]["system"])]
+            stock = Path(rolling_stock_file) if rolling_stock_file else default_stock(system, (
+                traction or next(k for k, v in TRACTION.items() if v == imported.document["electrification"]["system"])))
             generated = Path(work) / f"{railml_file.stem}_timetable.json"
             generated.write_text(json.dumps(timetable_for(line_path, stock), indent=1, ensure_ascii=False) + "\n",
                                  encoding="utf-8")
