@@ -92,26 +92,26 @@ class LocoReceiver(FrameFacadeSlave):
     def make_default_experiment(self):
         return self.frame_experiment(ReceiverSettings.fs_hz)
 
+    def _tone_core(self, system, own_carriers: str, make):
+        """The core of a system that listens to carriers or tones of its own (ALSU, TVM430): the
+        ``carrier`` parameter must stay 0."""
+        settings = receiver_settings(system, self.scalar_parameters())
+        if self.param("carrier"):
+            raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but {own_carriers}")
+        core = make(settings)
+        self.require_frame_step(settings.fs_hz)
+        return core
+
     def create_core(self):
         if cab_systems.is_tvm430(self.param("system")):
             tvm = tvm430.Tvm430System(tvm430.load_codes(self.resource_path(self.param("codes_file")
                                                                            or str(tvm430.CODES_FILE))))
-            settings = receiver_settings(tvm, self.scalar_parameters())
-            if self.param("carrier"):
-                raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but TVM430 listens to its "
-                                    f"track's carriers (leave carrier 0, set track)")
-            core = Tvm430ReceiverCore(self.build.frame, settings, tvm)
-            self.require_frame_step(settings.fs_hz)
-            return core
+            return self._tone_core(tvm, "TVM430 listens to its track's carriers (leave carrier 0, set track)",
+                                   lambda settings: Tvm430ReceiverCore(self.build.frame, settings, tvm))
         if cab_systems.is_alsu(self.param("system")):
             table = alsu.load_codes(self.resource_path(self.param("codes_file") or str(alsu.CODES_FILE)))
-            settings = receiver_settings(alsu.AlsuSystem(table), self.scalar_parameters())
-            if self.param("carrier"):
-                raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but ALSU listens to its own "
-                                    f"six tones (leave carrier 0)")
-            core = AlsuReceiverCore(self.build.frame, settings, table)
-            self.require_frame_step(settings.fs_hz)
-            return core
+            return self._tone_core(alsu.AlsuSystem(table), "ALSU listens to its own six tones (leave carrier 0)",
+                                   lambda settings: AlsuReceiverCore(self.build.frame, settings, table))
         system = cab_systems.digital_system(self.param("system"))
         settings = receiver_settings(system, self.scalar_parameters())
         if system is None:
