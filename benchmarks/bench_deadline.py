@@ -139,6 +139,25 @@ class Events:
             row[clock.index - 1] += time.perf_counter_ns() - began
         master_module.Master.step = step
         self._undo.append((master_module.Master, "step", original))
+        run_until = master_module.Master.run_until
+
+        def observed_run_until(master, stop_ticks):
+            for observer in master.observers:           # each observer's after_tick per tick
+                self._time_observer(observer)
+            return run_until(master, stop_ticks)
+        master_module.Master.run_until = observed_run_until
+        self._undo.append((master_module.Master, "run_until", run_until))
+
+    def _time_observer(self, observer) -> None:
+        original, clock = observer.after_tick, self.clock
+        row = self.component_ns.setdefault(f"observer {type(observer).__name__}",
+                                           np.zeros(clock.stamps.size, dtype=np.int64))
+
+        def after_tick(master, step):
+            began = time.perf_counter_ns()
+            original(master, step)
+            row[clock.index - 1] += time.perf_counter_ns() - began
+        observer.after_tick = after_tick
 
     def __enter__(self) -> "Events":
         self.component_ns: Dict[str, np.ndarray] = {}
@@ -248,7 +267,7 @@ def report(label: str, result: dict, stop_time: float) -> None:
     worst = result["worst_cpu"]
     parts = {name: row[worst] for name, row in result["components_us"].items()}
     rest = result["durations_us"][worst] - sum(parts.values())
-    print(f"  in the worst {worst.size} by CPU time, median wall time of each component's step: " + "; ".join(
+    print(f"  in the worst {worst.size} by CPU time, median wall time of each component's step and observer: " + "; ".join(
         f"{name} {np.median(values):.0f} us (max {values.max():.0f})" for name, values in
         sorted(parts.items(), key=lambda kv: -np.median(kv[1])))
         + f"; the master, exchange and observers {np.median(rest):.0f} us")

@@ -14,7 +14,7 @@ docs/performance.md).
    median of plain `railcosim run` commands of the same run (a fresh process each, as a user
    starts them).
 
-    PYTHONPATH=. python benchmarks/bench_study.py [--runs 32] [--plain 4] [--stop-time 60]
+    PYTHONPATH=. python benchmarks/bench_study.py [--runs 32] [--plain 4] [--stop-time 60] [--runs-per-task N]
 """
 from __future__ import annotations
 
@@ -39,7 +39,10 @@ SYSTEM = REPO / "ssp" / "ato_only"
 
 
 def study_file(folder: Path, runs: int, stop_s: float) -> Path:
-    values = ", ".join(f"{4.0 + k:.1f}" for k in range(runs))          # one point per run
+    # one point per run: initial speeds 4, 5, ... m/s, closer together past 32 runs so every
+    # start stays within the line's limit
+    step_mps = 1.0 if runs <= 32 else 31.0 / runs
+    values = ", ".join(f"{4.0 + k * step_mps:.4f}" for k in range(runs))
     path = folder / "bench.toml"
     path.write_text(f'name = "bench"\nsystem = "ato_only"\nstop_time = {stop_s}\n'
                     f'collect = ["final.train.x", "verdict"]\n[options]\noutput_interval = 1.0\n'
@@ -75,6 +78,8 @@ def main(argv=None) -> None:
     parser.add_argument("--runs", type=int, default=32)
     parser.add_argument("--plain", type=int, default=4, help="plain `railcosim run` commands for the overhead")
     parser.add_argument("--stop-time", type=float, default=60.0)
+    parser.add_argument("--runs-per-task", type=int, default=None,
+                        help="runs a Dask task takes (default: the study's own choice)")
     args = parser.parse_args(argv)
     fmus = default_build_dir(REPO)
     build_all(fmus)
@@ -86,7 +91,8 @@ def main(argv=None) -> None:
         for workers in (1, 2):
             up = _Times()
             began = time.perf_counter()
-            result = run_study(spec, folder / f"w{workers}", SYSTEM, [fmus], workers=workers, progress=up)
+            result = run_study(spec, folder / f"w{workers}", SYSTEM, [fmus], workers=workers, progress=up,
+                               runs_per_task=args.runs_per_task)
             ended = time.perf_counter()
             assert result.counts["ok"] == args.runs, result.counts
             throughput[workers] = args.runs / (ended - began) * 60.0
@@ -111,13 +117,16 @@ def main(argv=None) -> None:
                             "--set", f"train.v0={4.0 + k:.1f}", "--output", str(folder / f"plain{k}")],
                            env=env, check=True, capture_output=True)
             plain.append(time.perf_counter() - began)
-        med_inside, med_plain, med_own = (statistics.median(x) for x in (inside, plain, own))
-        print(f"median per run: in the study {med_inside:.2f} s, plain `railcosim run` {med_plain:.2f} s, "
-              f"the simulation alone {med_own:.2f} s")
+        med_inside, med_own = statistics.median(inside), statistics.median(own)
+        print(f"median per run: in the study {med_inside:.3f} s, the simulation alone {med_own:.3f} s"
+              + (f", plain `railcosim run` {statistics.median(plain):.2f} s "
+                 f"(study machinery over a plain run: {100 * (med_inside / statistics.median(plain) - 1):+.1f} %)"
+                 if plain else ""))
         ratio = statistics.median(a / b for a, b in zip(inside, own))
+        per_run_kept = 60.0 / kept[1]
         print(f"a run in the study / the simulation alone: {ratio:.2f}x (median over {len(own)} runs); "
-              f"study machinery over a plain run: {100 * (med_inside / med_plain - 1):+.1f} %; "
-              f"load average {os.getloadavg()[0]:.1f}")
+              f"the 1-worker study's wall time per run over its last three quarters {per_run_kept:.3f} s "
+              f"= {per_run_kept / med_own:.2f}x the median simulation; load average {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

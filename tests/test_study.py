@@ -302,6 +302,28 @@ def test_failing_and_timed_out_runs_are_recorded_and_the_rest_complete(tmp_path)
     assert again.skipped == 4 and again.counts["ok"] == 4
 
 
+def test_runs_taken_several_per_task_are_each_recorded_in_order(tmp_path):
+    """A task of several runs: a failing run in it fails alone, the runs after it in the same
+    task still run, and the records come back in the study's order."""
+    _write(tmp_path, "worker_module_of_test.py", WORKER_MODULE)
+    study = _write(tmp_path, "f.json", json.dumps({
+        "function": "worker_module_of_test:work", "grid": {"x": [1, 2, 4, 5, 6, 7, 8]}, "seeds": [0], "collect": ["y"]}))
+    result = run_study(load_study(study), tmp_path / "out", None, [], workers=1, runs_per_task=3)
+    assert [(r["values"]["x"], r["status"], r["collected"]["y"]) for r in result.records] == [
+        (1, "ok", 1), (2, "failed", None), (4, "ok", 16), (5, "ok", 25), (6, "ok", 36), (7, "ok", 49), (8, "ok", 64)]
+
+
+def test_many_short_runs_go_several_to_a_task_and_every_worker_keeps_tasks():
+    from orchestrator.study.runner import MAX_RUNS_PER_TASK, TASKS_PER_WORKER, default_runs_per_task
+
+    assert default_runs_per_task(16, 2) == 1                 # a small study: a task per run
+    assert default_runs_per_task(64, 2) == 4
+    assert default_runs_per_task(100_000, 2) == MAX_RUNS_PER_TASK
+    for runs, workers in ((16, 2), (64, 2), (512, 2), (512, 64), (7, 1)):
+        tasks = -(-runs // default_runs_per_task(runs, workers))
+        assert tasks >= min(runs, workers * TASKS_PER_WORKER)
+
+
 def test_a_bad_parameter_value_fails_its_run_only(product_fmus, tmp_path):
     study = _write(tmp_path, "bad.toml", """
         system = "ato_only"

@@ -1,8 +1,9 @@
 """Running a study's runs on Dask distributed (docs/studies.md).
 
-The submitting side (:func:`run_study`) sends one task per run to a Dask cluster: a
-``LocalCluster`` of process workers with one thread each, or the scheduler the user names.
-Each task (:func:`execute_run`, on a worker) hands its run to the worker's run process
+The submitting side (:func:`run_study`) sends the runs to a Dask cluster, one task per run or,
+in a study of many runs, per few runs (:func:`default_runs_per_task`): a ``LocalCluster`` of process
+workers with one thread each, or the scheduler the user names. A task (:func:`execute_runs`, on
+a worker) hands each of its runs (:func:`execute_run`) to the worker's run process
 (:class:`RunProcess`), forked from the worker once for the runs of a system and kept while its
 runs end ``ok``: pythonfmu FMUs share the interpreter of the process that loads them, the run
 process can be stopped at the study's per-run timeout without losing the worker, and a crash
@@ -436,7 +437,33 @@ def execute_run(job: dict) -> dict:
     return record
 
 
+def execute_runs(jobs: List[dict]) -> List[dict]:
+    """Several runs in one task, one after the other, their records in order. A short run
+    costs the scheduler and the submitting side about as much per task as it costs the worker
+    (docs/studies.md#runs-per-task)."""
+    return [execute_run(job) for job in jobs]
+
+
 # ---- the submitting side -------------------------------------------------------------------------
+#: a task takes at most this many runs, and each worker gets at least this many tasks (so
+#: the last tasks of a study still spread over the workers)
+MAX_RUNS_PER_TASK = 8
+TASKS_PER_WORKER = 8
+
+
+def default_runs_per_task(runs: int, workers: int) -> int:
+    """How many runs a task takes: one until every worker has TASKS_PER_WORKER tasks, then
+    more, up to MAX_RUNS_PER_TASK."""
+    return max(1, min(MAX_RUNS_PER_TASK, runs // (max(workers, 1) * TASKS_PER_WORKER)))
+
+
+def _lost(job: dict, error: BaseException) -> dict:
+    return {"id": job["id"], "spec_hash": job["spec_hash"], "point": job["point"],
+            "values": job["label"], "seed": job["seed"], "status": "lost",
+            "error": " ".join(f"{type(error).__name__}: {error}".split()),
+            "warnings": [], "wall_time_s": None, "collected": {k: None for k in job["collect"]}}
+
+
 @dataclass
 class StudyResult:
     output: Path
@@ -548,9 +575,11 @@ def _client(workers: Optional[int], scheduler: Optional[str]):
 
 def run_study(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: Sequence[Path],
               workers: Optional[int] = None, scheduler: Optional[str] = None, resume: bool = False,
-              progress: Optional[TextIO] = None, python_path: Sequence[str] = ()) -> StudyResult:
+              progress: Optional[TextIO] = None, python_path: Sequence[str] = (),
+              runs_per_task: Optional[int] = None) -> StudyResult:
     """Run every run of ``spec`` not already done (``resume``) and write DIR/study.csv and
-    DIR/study.json."""
+    DIR/study.json. ``runs_per_task`` fixes how many runs a task takes (default: chosen by
+    :func:`default_runs_per_task` from the number of runs and workers)."""
     output = Path(output).resolve()
     (output / "runs").mkdir(parents=True, exist_ok=True)
     jobs = jobs_of(spec, output, system, fmu_dirs, python_path)
@@ -577,21 +606,20 @@ def run_study(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: S
             progress.flush()
         bar = _Progress(len(todo), worker_count, progress)
         token = uuid.uuid4().hex[:8]
+        size = runs_per_task if runs_per_task else default_runs_per_task(len(todo), worker_count)
         try:
-            futures = {client.submit(execute_run, job, key=f"{spec.name}-{job['id']}-{token}",
-                                     retries=0): job for job in todo}
+            futures = {client.submit(execute_runs, batch, key=f"{spec.name}-{batch[0]['id']}-{token}",
+                                     retries=0): batch
+                       for batch in (todo[i:i + size] for i in range(0, len(todo), size))}
             for future in as_completed(futures):
-                job = futures[future]
+                batch = futures[future]
                 try:
-                    record = future.result()
+                    done = future.result()
                 except Exception as error:        # noqa: BLE001 — the task itself was lost
-                    record = {"id": job["id"], "spec_hash": job["spec_hash"], "point": job["point"],
-                              "values": job["label"], "seed": job["seed"], "status": "lost",
-                              "error": " ".join(f"{type(error).__name__}: {error}".split()),
-                              "warnings": [], "wall_time_s": None,
-                              "collected": {k: None for k in job["collect"]}}
-                records[job["id"]] = record
-                bar.update(record)
+                    done = [_lost(job, error) for job in batch]
+                for record in done:
+                    records[record["id"]] = record
+                    bar.update(record)
         finally:
             client.close()
             if cluster is not None:
