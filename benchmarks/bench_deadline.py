@@ -18,7 +18,10 @@ train's wheelsets reaching the next node), a new network model generated, a sect
 wheelset chain solved again, a parked section woken (caught up), sections parked, a relay
 picking up or dropping out, the train and ATO stepping (every 0.5 s), a row of results.csv
 (every 0.1 s). The rail line's events are seen by wrapping its methods in this process, which
-pythonfmu FMUs share (so they are seen through FMI too).
+pythonfmu FMUs share (so they are seen through FMI too). Each component's step and each
+observer's work are timed per tick, and their medians printed for the ticks of the two
+periodic causes (the slow components' step; a results row with the verdicts' checks) and for
+the rest.
 
 --gc-frozen-off runs without what `railcosim run` does around stepping (orchestrator/run.py:
 the garbage collector frozen and off while the master steps), to compare. --real-time S
@@ -232,7 +235,22 @@ def measure(system: Path, fmus: Path, stop_time: float, in_process: bool) -> dic
             "gc_count": len(inside), "gc_max_us": max((ns for _, ns, _ in inside), default=0) / 1e3,
             "gc_collected": sum(n for _, _, n in inside), "summary": summary,
             "components_us": components,
-            "cpu_by_cause": _median_by_cause(cpu_us, events.causes(every, stamps, np.zeros_like(waited_us)))}
+            "cpu_by_cause": _median_by_cause(cpu_us, events.causes(every, stamps, np.zeros_like(waited_us))),
+            "parts_of_periodic": _parts_of_periodic(durations_us, components)}
+
+
+def _parts_of_periodic(durations_us: np.ndarray, components: Dict[str, np.ndarray]) -> Dict[str, Dict[str, float]]:
+    """The median wall time of each component's step and observer in the ticks of the two
+    periodic causes: the slow components' step, and a results row without it."""
+    index = np.arange(durations_us.size)
+    slow = index % round(SLOW_STEP_S / TICK_S) == 0
+    row = ((index + 1) % round(OUTPUT_INTERVAL_S / TICK_S) == 0) & ~slow
+    parts = {}
+    for label, mask in (("train and ATO step", slow), ("results.csv row", row), ("neither", ~slow & ~row)):
+        medians = {name: float(np.median(values[mask])) for name, values in components.items()}
+        medians["tick"] = float(np.median(durations_us[mask]))
+        parts[label] = medians
+    return parts
 
 
 def _median_by_cause(cpu_us: np.ndarray, causes: List[set]) -> Dict[str, float]:
@@ -271,6 +289,10 @@ def report(label: str, result: dict, stop_time: float) -> None:
         f"{name} {np.median(values):.0f} us (max {values.max():.0f})" for name, values in
         sorted(parts.items(), key=lambda kv: -np.median(kv[1])))
         + f"; the master, exchange and observers {np.median(rest):.0f} us")
+    for label, medians in result["parts_of_periodic"].items():
+        tick = medians.pop("tick")
+        print(f"  ticks of {label}: median {tick:.0f} us; of it (medians) " + "; ".join(
+            f"{name} {value:.1f} us" for name, value in sorted(medians.items(), key=lambda kv: -kv[1])))
     print("  median CPU time of the ticks with each: " + "; ".join(
         f"{cause} {value:.0f} us" for cause, value in sorted(result["cpu_by_cause"].items(), key=lambda kv: -kv[1])))
 

@@ -8,8 +8,9 @@ scheduled arrival) and every change of the aspect the ATP acted upon.
 """
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -265,7 +266,7 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
 class _Track:
     """One rail line: its track circuits and blocks (the line file it reads), the trains on it
     (the Traction components feeding its ``x_head[j]``, with their lengths) and the broken rail
-    the scenario sets (its ``broken_rail_at`` input). :meth:`occupied` is the real occupancy,
+    the scenario sets (its ``broken_rail_at`` input). :meth:`rules` reads the real occupancy,
     not the rail line's relays: a circuit is occupied when a train overlaps it or its rail is
     broken."""
 
@@ -285,7 +286,7 @@ class _Track:
         self.broken_rail_start_m = float(_parameter(graph, rail, "broken_rail_at", -1.0))
         self._broken_rail = None
         self._cache = (None, None)
-        self._codes = (None, None)          # (occupancy bytes, its block rules)
+        self._codes = (None, None)          # (the circuits the trains overlap, their block rules)
 
     def bind(self, master: MasterView, slots: Dict[tuple, tuple]) -> None:
 
@@ -294,12 +295,18 @@ class _Track:
         buffer = master.slaves[self.rail].inputs.get(var.type) if var is not None else None
         if buffer is not None and np.any(buffer.vr_array == var.vr):       # bound: a scenario drives it
             self._broken_rail = (buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0]))
+        # the checks below use plain lists: they run every 0.1 s between thousands of signal
+        # ticks, where numpy's calls on a few elements cost 5-20 us each, cold, against 1-2 us
+        # for the same comparisons in Python (docs/performance.md#one-sample-per-frame-as-a-deadline)
+        self._starts, self._ends = self.starts_m.tolist(), self.ends_m.tolist()
+        self._lengths = self.lengths_m.tolist()
+        self._block_end = [float(self.block_ends_m[b]) for b in self.block_of.tolist()]
 
-    def heads_m(self, master: MasterView):
+    def heads_m(self, master: MasterView) -> List[float]:
 
         for train in self.trains:
             master.fresh(train)
-        return np.array([float(buffer.values[index]) for buffer, index in self._x])
+        return [float(buffer.values[index]) for buffer, index in self._x]
 
     def broken_rail_m(self) -> float:
         if self._broken_rail is None:
@@ -307,45 +314,52 @@ class _Track:
         buffer, index = self._broken_rail
         return float(buffer.values[index])
 
-    def occupied(self, heads_m):
-        """Occupancy of every track circuit from the trains' extents and the broken rail."""
+    def _circuits_over(self, tail_m: float, head_m: float) -> Tuple[int, int]:
+        """(first, last + 1) of the circuits with start <= head and tail < end (the line file's
+        sections are in order and do not overlap: fmus/data/loader.py)."""
+        return bisect.bisect_right(self._ends, tail_m), bisect.bisect_right(self._starts, head_m)
 
-        tails = heads_m - self.lengths_m
-        occ = ((heads_m[:, None] >= self.starts_m) & (tails[:, None] < self.ends_m)).any(axis=0)
+    def _spans(self, heads_m: Sequence[float]) -> tuple:
+        """The circuits each train overlaps and the broken rail's circuit, as (first, last + 1)."""
+        spans = [self._circuits_over(head - length, head) for head, length in zip(heads_m, self._lengths)]
         broken = self.broken_rail_m()
         if broken >= 0:                 # a broken rail drops its circuit's relay (control mode)
-            occ |= (self.starts_m <= broken) & (broken < self.ends_m)
-        return occ
+            spans.append(self._circuits_over(broken, broken))
+        return tuple(spans)
+
+    def _occupancy(self, spans: tuple) -> np.ndarray:
+        occupied = np.zeros(len(self._starts), dtype=bool)
+        for first, end in spans:
+            occupied[first:end] = True
+        return occupied
 
     def rules(self, master: MasterView, tick: int):
         """(trains' heads, block rules of the real occupancy), once per tick."""
 
         if self._cache[0] != tick:
             heads = self.heads_m(master)
-            occupied = self.occupied(heads)
-            key = occupied.tobytes()
-            if key != self._codes[0]:        # the rules change only with the occupancy
-                self._codes = (key, block_codes(occupied, self.block_of, self.block_aspects))
+            spans = self._spans(heads)
+            if spans != self._codes[0]:        # the rules change only with the occupancy
+                self._codes = (spans, block_codes(self._occupancy(spans), self.block_of, self.block_aspects))
             self._cache = (tick, (heads, self._codes[1]))
         return self._cache[1]
 
-    def occupied_ahead_in_block(self, heads_m, train: int, coil_m: float, circuit: int) -> bool:
+    def occupied_ahead_in_block(self, heads_m: Sequence[float], train: int, coil_m: float, circuit: int) -> bool:
         """Whether another train or the broken rail lies between the coil of train ``train`` and
         the exit signal of its block: the block rules applied to the track ahead of the coil
         inside its own circuit too (a train ahead in the same circuit)."""
 
-        end_m = self.block_ends_m[self.block_of[circuit]]
-        tails = heads_m - self.lengths_m
-        others = (heads_m > coil_m) & (tails < end_m)
-        others[train] = False
-        broken = self.broken_rail_m()
-        return bool(others.any()) or coil_m < broken < end_m
+        end_m = self._block_end[circuit]
+        for other, (head, length) in enumerate(zip(heads_m, self._lengths)):
+            if other != train and head > coil_m and head - length < end_m:
+                return True
+        return coil_m < self.broken_rail_m() < end_m
 
     def circuit_at(self, x_m: float) -> int:
         """0-based track circuit containing ``x_m``, -1 outside every circuit."""
 
-        k = int(np.searchsorted(self.starts_m, x_m, side="right")) - 1
-        return k if k >= 0 and x_m < self.ends_m[k] else -1
+        k = bisect.bisect_right(self._starts, x_m) - 1
+        return k if k >= 0 and x_m < self._ends[k] else -1
 
 
 def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
