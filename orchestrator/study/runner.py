@@ -1,19 +1,19 @@
 """Running a study's runs on Dask distributed (docs/studies.md).
 
 The submitting side (:func:`run_study`) sends the runs to a Dask cluster, one task per run or,
-in a study of many runs, per few runs (:func:`default_runs_per_task`): a ``LocalCluster`` of process
-workers with one thread each, or the scheduler the user names. A task (:func:`execute_runs`, on
-a worker) hands each of its runs (:func:`execute_run`) to the worker's run process
-(:class:`RunProcess`), forked from the worker once for the runs of a system and kept while its
-runs end ``ok``: pythonfmu FMUs share the interpreter of the process that loads them, the run
-process can be stopped at the study's per-run timeout without losing the worker, and a crash
-in an FMU ends the run process only; after a run that did not end ``ok`` the next run gets a
-run process forked afresh. The run writes its usual folder DIR/runs/<id>/ plus study_run.json
-(the run's record); the task returns the record, and the submitting side writes DIR/study.csv
-and DIR/study.json.
+in a study of many runs, per few runs (:func:`default_runs_per_task`): a ``LocalCluster`` of
+process workers with one thread each, or the scheduler the user names. A task
+(:func:`execute_runs`, on a worker) hands each of its runs (:func:`execute_run`) to the
+worker's run process (:class:`RunProcess`), forked from the worker once for the runs of a
+system and kept while its runs end ``ok``: pythonfmu FMUs share the interpreter of the process
+that loads them, the run process can be stopped at the study's per-run timeout without losing
+the worker, and a crash in an FMU ends the run process only; after a run that did not end
+``ok`` the next run gets a run process forked afresh. The run writes its usual folder
+DIR/runs/<id>/ plus study_run.json (the run's record); the task returns its runs' records, and
+the submitting side writes DIR/study.csv and DIR/study.json.
 
-A worker lost mid-run has its task re-run elsewhere by Dask; the run's folder is written
-afresh and its record replaces nothing but itself, so nothing is counted twice.
+A worker lost mid-task has its task (all its runs) re-run elsewhere by Dask; each run's folder
+is written afresh and its record replaces nothing but itself, so nothing is counted twice.
 """
 from __future__ import annotations
 
