@@ -257,9 +257,12 @@ def test_a_signal_while_the_process_exits_changes_nothing(tmp_path, test_fmus, p
 # ---- one run per folder ------------------------------------------------------------------------------
 def test_a_second_run_into_a_folder_in_use_fails_at_once(tmp_path, product_fmus, private_tmp):
     out = tmp_path / "out"
-    # the first run goes on to 6000 s (the train stands at its last station): ~6 s of stepping
+    # the first run goes on to 6000 s (the train stands at its last station), paced at 500x so
+    # that it holds the folder for 12 s however fast the machine steps ato_only (unpaced, a
+    # faster ATO step once let it end before the second run had started)
     first = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", "ato_only", "--no-build",
-                              "--stop-time", "6000", "--output", str(out)], env=cli_environment(),
+                              "--stop-time", "6000", "--real-time", "500", "--output", str(out)],
+                             env=cli_environment(),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         _wait_for(first, lambda: (out / ".railcosim.lock").exists(), "lock file")
