@@ -59,6 +59,16 @@ DEADLINE_US = 250.0
 SLOW_STEP_S, OUTPUT_INTERVAL_S, TICK_S = 0.5, 0.1, 0.00025
 
 
+def slow_step_tick(index):
+    """Whether tick ``index`` (an int or an array of them) steps the train and the ATO."""
+    return index % round(SLOW_STEP_S / TICK_S) == 0
+
+
+def results_row_tick(index):
+    """Whether tick ``index`` ends with a row of results.csv (and the verdicts' checks)."""
+    return (index + 1) % round(OUTPUT_INTERVAL_S / TICK_S) == 0
+
+
 class TickClock:
     """A manipulator that changes nothing: the wall clock at the start of every tick."""
 
@@ -188,15 +198,14 @@ class Events:
         core (another process ran: preempted)."""
         starts = np.asarray(self.gc_starts, dtype=np.int64)
         gc_ticks = Counter((np.searchsorted(stamps, starts, side="right") - 1).tolist()) if starts.size else {}
-        slow_every, row_every = round(SLOW_STEP_S / TICK_S), round(OUTPUT_INTERVAL_S / TICK_S)
         found = []
         for i in ticks.tolist():
             causes = set(self.by_tick.get(i, ()))
             if i in gc_ticks:
                 causes.add("garbage collection")
-            if i % slow_every == 0:
+            if slow_step_tick(i):
                 causes.add("train and ATO step")
-            if (i + 1) % row_every == 0:
+            if results_row_tick(i):
                 causes.add("results.csv row")
             if waited_us[i] > DEADLINE_US:
                 causes.add("preempted (wall exceeds CPU time by > 250 us)")
@@ -243,8 +252,8 @@ def _parts_of_periodic(durations_us: np.ndarray, components: Dict[str, np.ndarra
     """The median wall time of each component's step and observer in the ticks of the two
     periodic causes: the slow components' step, and a results row without it."""
     index = np.arange(durations_us.size)
-    slow = index % round(SLOW_STEP_S / TICK_S) == 0
-    row = ((index + 1) % round(OUTPUT_INTERVAL_S / TICK_S) == 0) & ~slow
+    slow = slow_step_tick(index)
+    row = results_row_tick(index) & ~slow
     parts = {}
     for label, mask in (("train and ATO step", slow), ("results.csv row", row), ("neither", ~slow & ~row)):
         medians = {name: float(np.median(values[mask])) for name, values in components.items()}

@@ -144,49 +144,40 @@ def measure(line_path: Path, trains: int, frames: int, warm: int, repeats: int, 
 
 class FmiRailLine:
     """The RailLine FMU of a build of (sections, trains), stepped frame by frame through FMI as
-    `railcosim run` steps it."""
+    `railcosim run` steps it (its ports bound by name as `railcosim conform` binds them)."""
 
-    def __init__(self, fmus: Path, line_path: Path, sections: int, trains: int, fs: float, n: int):
-        from orchestrator.fmu import make_slave, new_workdir, read_interface
+    PORTS_IN, PORTS_OUT = ("u_tx", "x_head", "v", "i_traction"), ("e_coil", "occupied")
 
-        fmu_path = fmus / "RailLine.fmu"
-        interface = read_interface(fmu_path)
-        self.workdir = new_workdir()
-        self.slave = make_slave("rail", fmu_path, interface, self.workdir, in_process=False)
+    def __init__(self, fmus: Path, line_path: Path, length_m: float, trains: int, fs: float):
+        from orchestrator.conformance.port_io import PortIO
+        from orchestrator.conformance.target import open_target
+
+        self.target = open_target(str(fmus / "RailLine.fmu"), "rail line", list(self.PORTS_IN + self.PORTS_OUT))
+        self.slave = self.target.make_slave("rail")
         self.slave.instantiate()
+        self.elements = {port: self.target.elements(port) for port in self.PORTS_IN + self.PORTS_OUT}
+        self.io = PortIO(self.target, self.slave, [n for p in self.PORTS_IN for n in self.elements[p]],
+                         [n for p in self.PORTS_OUT for n in self.elements[p]])
         self.slave.setup_experiment(0.0, None)
         values = {"line_file": str(line_path), "fs": fs}
         values.update({f"train_length[{j + 1}]": train_length_m() for j in range(trains)})
-        values.update({f"x_head[{j + 1}]": x for j, x in enumerate(train_starts_m(trains, load_line(line_path).length_m))})
+        values.update({f"x_head[{j + 1}]": x for j, x in enumerate(train_starts_m(trains, length_m))})
         self.slave.set_values(values)
         self.slave.enter_initialization()
         self.slave.exit_initialization()
-        names = ([f"u_tx[{k + 1},{i + 1}]" for k in range(sections) for i in range(n)]
-                 + [f"{port}[{j + 1}]" for port in ("x_head", "v", "i_traction") for j in range(trains)])
-        outputs = [f"e_coil[{j + 1},{i + 1}]" for j in range(trains) for i in range(n)] + \
-            [f"{port}[{k + 1}]" for port in ("occupied",) for k in range(sections)]
-        table_in: dict = {}
-        for name in names:
-            table_in.setdefault(interface.variables[name].type, []).append(interface.variables[name].vr)
-        table_out: dict = {}
-        for name in outputs:
-            table_out.setdefault(interface.variables[name].type, []).append(interface.variables[name].vr)
-        self.slave.bind(table_in, table_out)
-        self.inputs = self.slave.inputs["Real"].values
-        self.step_s = n / fs
+        self.step_s = len(self.elements["u_tx"]) / len(self.elements["occupied"]) / fs
 
     def step(self, t, u, x, v, i_traction) -> None:
-        self.inputs[:] = np.concatenate([u.ravel(), x, v, i_traction])
+        for port, values in zip(self.PORTS_IN, (u, x, v, i_traction)):
+            self.io.set(self.elements[port], values)
         self.slave.write_inputs()
         self.slave.do_step(t, self.step_s)
         self.slave.read_outputs()
 
     def close(self) -> None:
-        from orchestrator.fmu import remove_workdir
-
         self.slave.terminate()
         self.slave.free()
-        remove_workdir(self.workdir)
+        self.target.close()
 
 
 def measure_fmi(line_path: Path, sections: int, trains: int, frames: int, warm: int, repeats: int,
@@ -202,7 +193,7 @@ def measure_fmi(line_path: Path, sections: int, trains: int, frames: int, warm: 
     carriers = [section.carrier_hz for section in line.sections]
     per_second = []
     for _ in range(repeats):
-        rail = FmiRailLine(fmus, line_path, sections, trains, fs, n)
+        rail = FmiRailLine(fmus, line_path, line.length_m, trains, fs)
         try:
             drive_step(rail.step, trains, sections, fs, n, carriers, warm, 0.0, line.length_m)
             timed: list = []

@@ -114,14 +114,13 @@ class AtoController(FacadeSlave):
         ]
 
     _fault_logged = None      # the input whose fault was last logged
-    _restriction_slots = None  # the tsr_* inputs the restrictions were last made from
 
     def make_default_experiment(self):
         return DefaultExperiment(start_time=0.0, stop_time=1200.0, step_size=0.5)
 
     def create_core(self):
         p = self.param
-        self._restriction_slots = None          # a new core has none of the last one's
+        self._restriction_slots = None          # the tsr_* inputs the core's restrictions came from
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         stock = load_rolling_stock(self.resource_path(p("rolling_stock_file") or str(DEFAULT_ROLLING_STOCK)))
         timetable_path = self.resource_path(p("timetable_file") or str(DEFAULT_TIMETABLE))

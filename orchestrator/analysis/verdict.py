@@ -273,13 +273,16 @@ class _Track:
     def __init__(self, graph: SystemGraph, rail: str, line, lengths: Dict[str, float], block_aspects: int):
 
         self.rail, self.line, self.block_aspects = rail, line, block_aspects
-        self.starts_m = np.array([s.start_m for s in line.sections])
-        self.ends_m = np.array([s.end_m for s in line.sections])
         self.block_of = np.array(line.block_of_section)
-        self.block_ends_m = np.array([end for _, end in line.block_bounds])
         self.trains = [e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("x_head[")
                        and graph.nodes[e.source].interface.model_identifier == TRAIN_MODEL]
-        self.lengths_m = np.array([lengths.get(t, 0.0) for t in self.trains])
+        # plain lists: the checks run every 0.1 s between thousands of signal ticks, where
+        # numpy's calls on a few elements cost 5-20 us each, cold, against 1-2 us for the same
+        # comparisons in Python (docs/performance.md#one-sample-per-frame-as-a-deadline)
+        self._starts = [float(s.start_m) for s in line.sections]
+        self._ends = [float(s.end_m) for s in line.sections]
+        self._lengths = [float(lengths.get(t, 0.0)) for t in self.trains]
+        self._block_end = [float(line.block_bounds[b][1]) for b in line.block_of_section]
         self.coil_offset_m = float(_parameter(graph, rail, "coil_offset", 0.0))
         # the time the track takes to detect a change: the relay's drop-out delay
         self.detection_s = float(_parameter(graph, rail, "relay_drop_out_delay", 0.0))
@@ -295,12 +298,6 @@ class _Track:
         buffer = master.slaves[self.rail].inputs.get(var.type) if var is not None else None
         if buffer is not None and np.any(buffer.vr_array == var.vr):       # bound: a scenario drives it
             self._broken_rail = (buffer, int(np.flatnonzero(buffer.vr_array == var.vr)[0]))
-        # the checks below use plain lists: they run every 0.1 s between thousands of signal
-        # ticks, where numpy's calls on a few elements cost 5-20 us each, cold, against 1-2 us
-        # for the same comparisons in Python (docs/performance.md#one-sample-per-frame-as-a-deadline)
-        self._starts, self._ends = self.starts_m.tolist(), self.ends_m.tolist()
-        self._lengths = self.lengths_m.tolist()
-        self._block_end = [float(self.block_ends_m[b]) for b in self.block_of.tolist()]
 
     def heads_m(self, master: MasterView) -> List[float]:
 
