@@ -200,3 +200,26 @@ def test_the_engine_imports_no_dcp_analysis_study_or_conformance():
     above = ("orchestrator.dcp", "orchestrator.analysis", "orchestrator.study", "orchestrator.conformance")
     offending = {module: sorted(name for name in graph[module] if _within(name, above)) for module in ENGINE}
     assert {m: names for m, names in offending.items() if names} == {}
+
+
+def test_a_run_without_filters_imports_no_filter_design_library():
+    """python-control (with matplotlib) and scipy.signal/scipy.stats take about a second to
+    import: a run whose components design no filter (ato_only) and the verdicts it is judged
+    by load them not at all (fmus/dsp/filter_design.py; docs/performance.md#start-up-of-a-run)."""
+    script = textwrap.dedent("""
+        import sys, tempfile
+        from pathlib import Path
+        from orchestrator.analysis.verdict import railway_verdicts
+        from orchestrator.packaging.builder import default_build_dir
+        from orchestrator.run import RunOptions, run_system
+        with tempfile.TemporaryDirectory() as folder:
+            summary = run_system(Path('ssp/ato_only'), RunOptions(
+                summaries=railway_verdicts, stop_time=2.0, output_dir=Path(folder), in_process=True,
+                fmu_dirs=[default_build_dir()])).summary
+        assert summary['completed'] and summary['sim_time_s'] == 2.0, summary
+        heavy = ('control', 'matplotlib', 'scipy.signal', 'scipy.stats')
+        print(sorted(m for m in heavy if m in sys.modules))
+    """)
+    done = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"

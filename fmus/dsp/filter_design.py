@@ -16,14 +16,19 @@ response at the carrier, 85 % at half of it (tests/test_filter_sections.py). As 
 is exact to about 10⁻¹² of a long-double evaluation of the same prototype. The digital
 generator's band-pass (fmus/wayside_coder/digital_generator.py) is a transmitter's, of order four, and
 keeps the transfer-function form.
+
+**Imported at the first design.** python-control (which loads matplotlib) and scipy.signal
+take about a second to import together. They are imported when a filter is first designed,
+so a process that designs none does not pay for them: the run verdicts, which read the
+receivers' settings, and a run whose components have no filters (ato_only). See
+docs/performance.md#start-up-of-a-run.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import control
 import numpy as np
-from scipy import signal
+import scipy        # scipy.signal loads at its first use (SciPy loads submodules lazily)
 
 from fmus.library_shortcuts import linear_filter, sections_filter
 
@@ -70,7 +75,7 @@ class SosFilter:
 
     def response(self, frequencies_hz) -> np.ndarray:
         """The discrete cascade's frequency response at these frequencies (float64)."""
-        return signal.sosfreqz(self.sos, worN=np.asarray(frequencies_hz, dtype=float), fs=self.fs_hz)[1]
+        return scipy.signal.sosfreqz(self.sos, worN=np.asarray(frequencies_hz, dtype=float), fs=self.fs_hz)[1]
 
     def exact_response(self, frequencies_hz) -> np.ndarray:
         """The same response from the analog prototype in long double: the pre-warped Tustin map
@@ -110,6 +115,7 @@ def sections(prototype_zpk, scale_rad_s: float, fs_hz: float, prewarp_hz: float)
     gain is a python-control transfer function of order ≤ 2, discretised by
     ``control.sample_system(..., 'tustin', prewarp_frequency)`` in normalised frequency (as
     :func:`discretise`); the cascade is the whole filter (module docstring)."""
+    import control              # at the first design, not on import (module docstring)
     zeros, poles, gain = (np.asarray(prototype_zpk[0], dtype=complex), np.asarray(prototype_zpk[1], dtype=complex),
                           float(np.real(prototype_zpk[2])))
     groups = _pole_pairs(poles)
@@ -172,6 +178,7 @@ def discretise(normalised: control.TransferFunction, scale_rad_s: float, fs_hz: 
     frequency (coefficients of order one; a 6th-order band-pass in rad/s has coefficients up
     to 1e16 and an ill-conditioned state-space form), and Tustin commutes with frequency
     scaling: sample Hn at Ts·scale with the pre-warp frequency divided by scale."""
+    import control
     discrete = control.sample_system(normalised, scale_rad_s / fs_hz, method="tustin",
                                      prewarp_frequency=2 * np.pi * prewarp_hz / scale_rad_s)
     num = np.asarray(discrete.num[0][0], dtype=float)
@@ -199,13 +206,14 @@ def chebyshev_band_pass(centre_hz: float, bandwidth_hz: float, prototype_order: 
                         fs_hz: float) -> DiscreteFilter:
     """Chebyshev type I band-pass of order 2·prototype_order, ripple band centre ± bandwidth/2
     (geometric centre), pre-warped at the centre."""
-    zeros, poles, gain = signal.cheb1ap(prototype_order, ripple_db)
-    b, a = signal.zpk2tf(zeros, poles, gain)
-    b, a = signal.lp2bp(b, a, wo=1.0, bw=bandwidth_hz / centre_hz)
+    import control
+    zeros, poles, gain = scipy.signal.cheb1ap(prototype_order, ripple_db)
+    b, a = scipy.signal.zpk2tf(zeros, poles, gain)
+    b, a = scipy.signal.lp2bp(b, a, wo=1.0, bw=bandwidth_hz / centre_hz)
     return discretise(control.tf(b, a), 2 * np.pi * centre_hz, fs_hz, centre_hz)
 
 
 def chebyshev_low_pass(corner_hz: float, order: int, ripple_db: float, fs_hz: float) -> SosFilter:
     """Chebyshev type I low-pass (ripple band up to the corner), pre-warped at the corner, as
     second-order sections (a receiver's anti-alias filter)."""
-    return sections(signal.cheb1ap(order, ripple_db), 2 * np.pi * corner_hz, fs_hz, corner_hz)
+    return sections(scipy.signal.cheb1ap(order, ripple_db), 2 * np.pi * corner_hz, fs_hz, corner_hz)

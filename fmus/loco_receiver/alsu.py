@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
 import numpy as np
-from scipy import signal
+import scipy        # scipy.signal loads at its first use, a design (SciPy loads submodules lazily)
 
 from fmus.dsp.filter_design import SampleSosFilter, SosFilter, sections, sos_frame
 from fmus.errors import FmuInputError
@@ -84,7 +84,7 @@ def channel_design(tone_hz: float, fs_hz: float, bandwidth_hz: float = CHANNEL_B
     pre-warped Tustin map takes back at the tone)."""
     theta = 2.0 * math.pi * tone_hz / fs_hz
     analog_width = bandwidth_hz * theta / math.sin(theta)
-    zeros, poles, gain = signal.lp2bp_zpk(*signal.buttap(order), wo=1.0, bw=analog_width / tone_hz)
+    zeros, poles, gain = scipy.signal.lp2bp_zpk(*scipy.signal.buttap(order), wo=1.0, bw=analog_width / tone_hz)
     return sections((zeros, poles, gain), 2.0 * math.pi * tone_hz, fs_hz, tone_hz)
 
 
@@ -92,7 +92,7 @@ def envelope_design(bandwidth_hz: float, fs_hz: float) -> SosFilter:
     """2nd-order Butterworth low-pass at half the channel width: what a channel passes of a
     tone's amplitude changes, no more."""
     corner = bandwidth_hz / 2.0
-    return sections(signal.buttap(2), 2.0 * math.pi * corner, fs_hz, corner)
+    return sections(scipy.signal.buttap(2), 2.0 * math.pi * corner, fs_hz, corner)
 
 
 def resolve_inertia_s(inertia_s: float) -> float:

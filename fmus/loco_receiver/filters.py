@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy import signal
+import scipy        # scipy.signal loads at its first use, a design (SciPy loads submodules lazily)
 
 from fmus.dsp.filter_design import SosFilter, sections
 
@@ -35,12 +35,12 @@ DIGITAL_BANDWIDTH_PER_BAUD = 10.0 / 3.0
 def band_pass(carrier_hz: float, bandwidth_hz: float, order: int, fs_hz: float) -> SosFilter:
     """Butterworth band-pass of order 2·``order``, −3 dB width ``bandwidth_hz`` around the
     carrier (geometric centre), as ``order`` second-order sections."""
-    zeros, poles, gain = signal.lp2bp_zpk(*signal.buttap(order), wo=1.0, bw=bandwidth_hz / carrier_hz)
+    zeros, poles, gain = scipy.signal.lp2bp_zpk(*scipy.signal.buttap(order), wo=1.0, bw=bandwidth_hz / carrier_hz)
     return sections((zeros, poles, gain), 2 * np.pi * carrier_hz, fs_hz, carrier_hz)
 
 
 def envelope_low_pass(corner_hz: float, fs_hz: float, order: int = 2) -> SosFilter:
-    return sections(signal.buttap(order), 2 * np.pi * corner_hz, fs_hz, corner_hz)
+    return sections(scipy.signal.buttap(order), 2 * np.pi * corner_hz, fs_hz, corner_hz)
 
 
 def default_bandwidth(carrier_hz: float) -> float:

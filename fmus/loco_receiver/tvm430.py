@@ -46,7 +46,7 @@ from functools import lru_cache
 from typing import Optional, Tuple
 
 import numpy as np
-from scipy import signal
+import scipy        # scipy.signal loads at its first use, a design (SciPy loads submodules lazily)
 
 from fmus.dsp.filter_design import SosFilter, sections, sos_frame
 from fmus.errors import FmuInputError
@@ -106,7 +106,7 @@ def resolve_inertia_s(inertia_s: float) -> float:
 @lru_cache(maxsize=8)
 def low_pass_design(fs_hz: float) -> SosFilter:
     """The baseband low-pass of every carrier: Butterworth, LOW_PASS_ORDER, LOW_PASS_CORNER_HZ."""
-    return sections(signal.buttap(LOW_PASS_ORDER), 2.0 * math.pi * LOW_PASS_CORNER_HZ, fs_hz, LOW_PASS_CORNER_HZ)
+    return sections(scipy.signal.buttap(LOW_PASS_ORDER), 2.0 * math.pi * LOW_PASS_CORNER_HZ, fs_hz, LOW_PASS_CORNER_HZ)
 
 
 @lru_cache(maxsize=8)
