@@ -2,6 +2,7 @@
 4 kHz sample period (docs/performance.md#one-sample-per-frame-as-a-deadline).
 
     python benchmarks/bench_deadline.py [--stop-time 30] [--fmi] [--gc-frozen-off] [--real-time 60]
+                                        [--floor 60]
 
 free_run built with one sample per frame (`railcosim build --frame 1`, into build/fmus_n1, as
 benchmarks/bench_sample_by_sample.py builds it): coder, rail line and receiver step every tick,
@@ -26,7 +27,10 @@ the rest.
 --gc-frozen-off runs without what `railcosim run` does around stepping (orchestrator/run.py:
 the garbage collector frozen and off while the master steps), to compare. --real-time S
 also runs S simulated seconds paced at real time (`railcosim run --real-time`) in process and
-prints the pacer's count of late ticks per minute and the worst lateness.
+prints the pacer's count of late ticks per minute and the worst lateness. --floor S paces S
+seconds of ticks that do nothing but a fixed busy wait as long as the median tick (no
+simulation): the late ticks of that loop are the machine's own, a floor under any paced run's
+figure.
 """
 from __future__ import annotations
 
@@ -38,6 +42,7 @@ import tempfile
 import time
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Dict, List
 
 import numpy as np
@@ -51,6 +56,8 @@ from fmus.sizes import BuildConfig  # noqa: E402
 from orchestrator import master as master_module  # noqa: E402
 from orchestrator import run as run_module  # noqa: E402
 from orchestrator.analysis.verdict import railway_verdicts  # noqa: E402
+from orchestrator.graph import TICKS_PER_SECOND  # noqa: E402
+from orchestrator.pacing import Pacer  # noqa: E402
 from orchestrator.packaging.builder import build_all  # noqa: E402
 from orchestrator.run import RunOptions, run_system  # noqa: E402
 
@@ -317,6 +324,27 @@ def paced(system: Path, fmus: Path, stop_time: float) -> None:
           f"mean {pace['mean_lateness_ms'] * 1e3:.0f} us; kept pace: {pace['kept_pace']}", flush=True)
 
 
+def floor(seconds: float, work_us: float) -> None:
+    """The pacer of `railcosim run --real-time` over ticks of a fixed busy wait of ``work_us``
+    and nothing else, the collector off as in a run: what the machine alone makes late."""
+    pacer = Pacer(1.0)
+    step_ticks = round(TICK_S * TICKS_PER_SECOND)
+    pacer.bound(SimpleNamespace(graph=SimpleNamespace(base_ticks=step_ticks)))
+    clock, work_s = time.perf_counter, work_us * 1e-6
+    gc.disable()
+    try:
+        for tick in range(0, round(seconds / TICK_S) * step_ticks, step_ticks):
+            pacer.before_tick(None, tick)
+            done = clock() + work_s
+            while clock() < done:
+                pass
+    finally:
+        gc.enable()
+    print(f"the machine's floor: {seconds:g} s of ticks of a {work_us:.0f} us busy wait, paced at real time: "
+          f"{pacer.overruns} of {pacer.steps} ticks late = {pacer.overruns / (seconds / 60):.0f} per minute, "
+          f"worst by {pacer.worst_lateness_s * 1e6:.0f} us; kept pace: {pacer.kept_pace}", flush=True)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--stop-time", type=float, default=30.0, help="simulated seconds per measured run")
@@ -325,11 +353,14 @@ def main(argv=None) -> None:
                         help="also without the collector frozen and off while stepping, alternating")
     parser.add_argument("--real-time", type=float, default=0.0, metavar="S",
                         help="also S simulated seconds paced at real time, in process")
+    parser.add_argument("--floor", type=float, default=0.0, metavar="S",
+                        help="also S seconds of paced ticks of a fixed busy wait as long as the median tick (no simulation)")
     args = parser.parse_args(argv)
     fmus = REPO / "build" / "fmus_n1"
     build_all(fmus, BuildConfig(frame=1))
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())} on {os.cpu_count()} cores", flush=True)
     variants = [True, False] if args.gc_frozen_off else [True]
+    median_tick_us = None
     with tempfile.TemporaryDirectory() as folder:
         system = sample_by_sample_system(Path(folder), fmus)
         for in_process in ([True, False] if args.fmi else [True]):
@@ -341,8 +372,12 @@ def main(argv=None) -> None:
                     _set_gc_frozen(True)
                 where = "in process" if in_process else "through FMI"
                 report(f"{where}{'' if frozen else ', collector not frozen'}", result, args.stop_time)
+                if median_tick_us is None:
+                    median_tick_us = float(np.median(result["durations_us"]))
         if args.real_time:
             paced(system, fmus, args.real_time)
+    if args.floor:
+        floor(args.floor, median_tick_us)
     print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
