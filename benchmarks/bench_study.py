@@ -13,6 +13,9 @@ docs/performance.md).
    which also plans the ATO's stages, included), and against the
    median of plain `railcosim run` commands of the same run (a fresh process each, as a user
    starts them).
+3. The simulations' own time (summary.json) on 1 and on 2 workers, median over the last three
+   quarters: a run's simulation takes longer while the other core is busy too, and twice one
+   worker's rate scaled by that is the most two workers could reach (the ceiling printed).
 
     PYTHONPATH=. python benchmarks/bench_study.py [--runs 32] [--plain 4] [--stop-time 60] [--runs-per-task N]
 """
@@ -87,7 +90,7 @@ def main(argv=None) -> None:
         folder = Path(tmp)
         spec = load_study(study_file(folder, args.runs, args.stop_time))
         check_against_system(spec, SYSTEM, [fmus])
-        throughput, steady, kept, inside, own = {}, {}, {}, [], []
+        throughput, steady, kept, inside, own, simulated = {}, {}, {}, [], [], {}
         for workers in (1, 2):
             up = _Times()
             began = time.perf_counter()
@@ -102,12 +105,18 @@ def main(argv=None) -> None:
             print(f"{workers} worker(s): {args.runs} runs in {ended - began:.1f} s = {throughput[workers]:.1f} runs/min; "
                   f"cluster up after {up.at - began:.1f} s, then {steady[workers]:.1f} runs/min; "
                   f"the last {args.runs - quarter} runs {kept[workers]:.1f} runs/min", flush=True)
+            simulations = [json.loads((folder / f"w{workers}" / "runs" / r["id"] / "summary.json").read_text())
+                           ["wall_time_s"] for r in result.records]
+            simulated[workers] = statistics.median(simulations[quarter:])
             if workers == 1:
                 inside = [r["wall_time_s"] for r in result.records]
-                own = [json.loads((folder / "w1" / "runs" / r["id"] / "summary.json").read_text())["wall_time_s"]
-                       for r in result.records]
+                own = simulations
         print(f"speed-up 2 workers / 1 worker: {throughput[2] / throughput[1]:.2f}x "
               f"(cluster up: {steady[2] / steady[1]:.2f}x; the last three quarters: {kept[2] / kept[1]:.2f}x)")
+        # the simulations alone slow down when both cores are busy (caches, memory, the host):
+        # twice one worker's rate scaled by that is as far as two workers could go
+        print(f"the simulation of a run (median of the last three quarters): {1e3 * simulated[1]:.1f} ms on 1 worker, "
+              f"{1e3 * simulated[2]:.1f} ms on 2: two workers' ceiling {2 * simulated[1] / simulated[2]:.2f}x")
         plain = []
         env = {**os.environ, "PYTHONPATH": str(REPO)}
         for k in range(args.plain):
