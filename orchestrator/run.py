@@ -500,6 +500,30 @@ def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slav
     return master
 
 
+#: the BLAS libraries' own variables for their number of threads, read when a library loads
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def blas_threads_limited(threads: int):
+    """At most ``threads`` BLAS threads for the run: threadpoolctl limits the libraries loaded
+    already, and the libraries' own environment variables, set for the run's duration, hold
+    for those loaded during it. An FMU's module loads scipy.linalg (and with it scipy's own
+    OpenBLAS) when the component is made, after the limit was entered: threadpoolctl does not
+    see it, and two threads summing in another order change results in their last digit."""
+    saved = {name: os.environ.get(name) for name in BLAS_THREAD_VARIABLES}
+    os.environ.update({name: str(threads) for name in BLAS_THREAD_VARIABLES})
+    try:
+        with threadpool_limits(limits=threads, user_api="blas"):
+            yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
 #: freeze and turn off Python's garbage collector while the master steps (a module constant so
 #: that benchmarks/bench_deadline.py can compare without)
 FREEZE_GC_WHILE_STEPPING = True
@@ -566,7 +590,7 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
     try:
         # the cores' matrices are small (≤ 60 states): a second BLAS thread only spins and
         # takes the other core from the process (measured 1.8× slower model generation)
-        with threadpool_limits(limits=blas_threads, user_api="blas"):
+        with blas_threads_limited(blas_threads):
             observers = _observers(setup.out, setup.recorded, setup.interval_ticks, setup.captures,
                                    setup.progress, judges)
             master = start_master(graph, options, slaves, make, observers, setup.scenario, flag, start_s, stop_s,

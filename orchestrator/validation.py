@@ -13,16 +13,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Dict, List, Set
 
-from threadpoolctl import threadpool_limits
-
 from orchestrator import interrupts
 from orchestrator.dcp.master import OfflineRemoteDcpSlave
 from orchestrator.errors import RefusedComponents, UserError
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.master import shutdown_slaves
 from orchestrator.protocols import Slave
-from orchestrator.run import (RunOptions, RunPlan, check_options, os_error, plan_run, start_master,
-                              warn_beyond_stop, warn_rounded_stop)
+from orchestrator.run import (RunOptions, RunPlan, blas_threads_limited, check_options, os_error, plan_run,
+                              start_master, warn_beyond_stop, warn_rounded_stop)
 from orchestrator.ssp import SystemDescription, open_system
 
 
@@ -155,7 +153,7 @@ def _initialise_only(plan: RunPlan, system: SystemDescription, options: RunOptio
             return slave
 
         try:
-            with threadpool_limits(limits=options.blas_threads, user_api="blas"):
+            with blas_threads_limited(options.blas_threads):
                 start_master(plan.graph, options, slaves, make, list(plan.judges), plan.scenario, interrupts.NEVER,
                        system.start_time, plan.stop_s, ready=lambda: not any(s.failed for s in slaves.values()))
         except Exception as error:
