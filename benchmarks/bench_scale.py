@@ -148,7 +148,7 @@ class FmiRailLine:
 
     PORTS_IN, PORTS_OUT = ("u_tx", "x_head", "v", "i_traction"), ("e_coil", "occupied")
 
-    def __init__(self, fmus: Path, line_path: Path, length_m: float, trains: int, fs: float):
+    def __init__(self, fmus: Path, line_path: Path, length_m: float, trains: int, fs: float, n: int):
         from orchestrator.conformance.port_io import PortIO
         from orchestrator.conformance.target import open_target
 
@@ -165,7 +165,7 @@ class FmiRailLine:
         self.slave.set_values(values)
         self.slave.enter_initialization()
         self.slave.exit_initialization()
-        self.step_s = len(self.elements["u_tx"]) / len(self.elements["occupied"]) / fs
+        self.step_s = n / fs                 # one frame of n samples, the build's
 
     def step(self, t, u, x, v, i_traction) -> None:
         for port, values in zip(self.PORTS_IN, (u, x, v, i_traction)):
@@ -193,7 +193,7 @@ def measure_fmi(line_path: Path, sections: int, trains: int, frames: int, warm: 
     carriers = [section.carrier_hz for section in line.sections]
     per_second = []
     for _ in range(repeats):
-        rail = FmiRailLine(fmus, line_path, line.length_m, trains, fs)
+        rail = FmiRailLine(fmus, line_path, line.length_m, trains, fs, n)
         try:
             drive_step(rail.step, trains, sections, fs, n, carriers, warm, 0.0, line.length_m)
             timed: list = []
