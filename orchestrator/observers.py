@@ -12,7 +12,8 @@ read from the slaves on demand).
 
 A results file that cannot be written (no space left, no permission, a read-only file system,
 a name too long, a folder in its place) stops the run with :class:`ResultsWriteError`: one line
-naming the file and the reason (docs/reliability.md, "Full disks and write errors").
+naming the file and the reason (docs/reliability.md, "Full disks and write errors"). A symbolic
+link at its name is never followed: one line naming the link (orchestrator/folders.py).
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ from typing import Dict, List, Sequence, Tuple
 import numpy as np
 
 from orchestrator.errors import UserError
+from orchestrator.folders import create_file
 from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND
 from orchestrator.protocols import MasterView, Observer, StepRecord
 
@@ -44,8 +46,10 @@ def cannot_write(path: Path, error: OSError) -> ResultsWriteError:
 
 
 def open_for_writing(path: Path):
+    """From empty, never through a symbolic link at ``path`` (orchestrator/folders.py: one line
+    naming the link)."""
     try:
-        return open(path, "w", newline="")
+        return create_file(path)
     except OSError as error:
         raise cannot_write(path, error) from None
 

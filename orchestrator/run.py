@@ -8,11 +8,11 @@ The output folder is locked for the run and holds one run only (docs/reliability
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import gc
 import json
 import math
 import os
+import stat
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +22,7 @@ from threadpoolctl import threadpool_limits
 
 from orchestrator import interrupts
 from orchestrator.errors import UserError, print_warning, shown_paths
+from orchestrator.folders import FolderLock, refuse_link, replace_file
 from orchestrator.fmu import extractions_kept, make_slave, new_workdir, remove_workdir
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
@@ -153,6 +154,10 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
             problems = _write_results(out.path, summary, None) + problems
         if outcome.pacer is not None and outcome.pacer.verdict_line():
             options.warn(outcome.pacer.verdict_line())
+        # the folder (or a file streamed into it) removed or replaced meanwhile: never "results in"
+        lost = out.lost(outcome.streamed if outcome.failure is None else ())
+        if lost is not None:
+            problems = [lost]          # what could not be written there follows from it
         _raise_failure(outcome, problems, out.path)
         return RunResult(graph, summary, dict(outcome.steps_taken), end_s, out.path)
     finally:
@@ -347,71 +352,67 @@ def warn_rounded_stop(options: RunOptions, plan: RunPlan) -> None:
 RUN_FILES = ("results.csv", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
 REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
-LOCK_FILE = ".railcosim.lock"
 
 
 class OutputFolder:
-    """A run's results folder: locked while the run uses it (``flock`` on ``.railcosim.lock``,
-    so a second run into it fails at once) and cleared of an earlier run's files before this
-    run writes (docs/reliability.md, "One run per folder"). The run writes in place, so
-    ``tail -f results.csv`` follows it live."""
+    """A run's results folder: locked while the run uses it (:class:`FolderLock`, so a second
+    run into it fails at once) and cleared of an earlier run's files before this run writes
+    (docs/reliability.md, "One run per folder"). The run writes in place, so ``tail -f
+    results.csv`` follows it live; no file is written through a symbolic link (orchestrator/
+    folders.py)."""
 
     def __init__(self, path: Path):
         self.path = Path(path)
-        self._lock_fd: Optional[int] = None
+        self._lock = FolderLock(self.path, f"--output {self.path}", "another run")
 
     def claim(self) -> None:
-        if self._lock_fd is not None:
+        if self._lock.held:
             return
-        label = f"--output {self.path}"
-        try:
-            self.path.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-        except OSError as error:
-            made = error.filename is not None and Path(error.filename).name == LOCK_FILE
-            what = f"its lock file {LOCK_FILE}" if made else "the results folder"
-            raise UserError(f"{label}: cannot create {what} ({error.strerror or error})") from None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.read(fd, 32).decode(errors="replace").strip()
-            os.close(fd)
-            raise UserError(f"{label}: in use by another run"
-                            + (f" (process {holder})" if holder.isdigit() else "")
-                            + "; choose another --output or wait for it to end") from None
-        self._lock_fd = fd
-        try:
-            # written, then cut to its length: a truncation to zero would have ext4 flush the
-            # file when it is closed (its auto_da_alloc), up to 0.2 s on a busy disk
-            pid = f"{os.getpid()}\n".encode()
-            os.pwrite(fd, pid, 0)
-            os.ftruncate(fd, len(pid))
-        except OSError:
-            pass                          # the pid only makes the message above nicer
+        self._lock.acquire()
         try:
             self._clear()
+        except UserError:
+            self.release()
+            raise
         except OSError as error:
             self.release()
-            raise UserError(f"{label}: cannot remove an earlier run's "
+            raise UserError(f"--output {self.path}: cannot remove an earlier run's "
                             f"{Path(error.filename or '?').name} ({error.strerror or error})") from None
 
     def _clear(self) -> None:
-        """Remove the files an earlier run (or its report) wrote: regular files only — a
-        results.csv that is a symlink or a named pipe was put there on purpose and is
-        written through."""
+        """Remove the files an earlier run (or its report) wrote: regular files only (a named
+        pipe at results.csv was put there on purpose and is written through); a symbolic link at
+        one of these names is refused, before anything is removed."""
         names = list(RUN_FILES) + list(REPORT_FILES)
         for pattern in RUN_PATTERNS:
             names.extend(p.name for p in self.path.glob(pattern))
         for name in names:
+            refuse_link(self.path / name)
+        for name in names:
             path = self.path / name
-            if path.is_file() and not path.is_symlink():
+            if path.is_file():
                 path.unlink()
+
+    def lost(self, streamed: Sequence[Path] = ()) -> Optional[str]:
+        """None while the folder claimed is still there (:meth:`FolderLock.lost`) and each of
+        the ``streamed`` files (results.csv, the captures) is still a file at its name; else the
+        one line saying what is gone (a file written to after its name went is lost with it)."""
+        lost = self._lock.lost()
+        if lost is not None:
+            return lost
+        for path in streamed:
+            try:
+                mode = os.lstat(path).st_mode
+            except OSError:
+                mode = 0
+            if stat.S_ISREG(mode) or stat.S_ISFIFO(mode) or stat.S_ISCHR(mode):   # not a link put there
+                continue
+            return f"{path}: removed or replaced while the run wrote it; what it held is lost"
+        return None
 
     def release(self) -> None:
         """Unlock (the lock file stays: removing it could let two runs lock different files)."""
-        fd, self._lock_fd = self._lock_fd, None
-        if fd is not None:
-            os.close(fd)
+        self._lock.release()
 
 
 def _interrupted_before_start(out: OutputFolder, system_name: str, stop: Interrupted) -> None:
@@ -476,6 +477,7 @@ class _Outcome:
     judges: Sequence[SummaryObserver] = ()
     pacer: Optional[Pacer] = None
     hil: Dict[str, RemoteDcpSlave] = field(default_factory=dict)
+    streamed: List[Path] = field(default_factory=list)   # results.csv and the captures
 
 
 def start_master(graph: SystemGraph, options: RunOptions, slaves: Dict[str, Slave],
@@ -611,7 +613,8 @@ def _run(setup: _Setup, start_s: float, stop_s: float, stop_ticks: int, blas_thr
                 problems.append(str(error))
     problems.extend(shutdown_slaves(graph.order, slaves))
     steps = dict(master.steps_taken) if master is not None else {name: 0 for name in graph.nodes}
-    return _Outcome(wall, failure, problems, master, steps, judges, pacer, swapped)
+    streamed = [observer.path for observer in observers if isinstance(observer, (Recorder, WaveformCapture))]
+    return _Outcome(wall, failure, problems, master, steps, judges, pacer, swapped, streamed)
 
 
 def _summary(graph: SystemGraph, sim_time: float, outcome: _Outcome,
@@ -680,6 +683,8 @@ def _write_results(out: Path, summary: dict, metadata: Optional[dict]) -> List[s
             _write_json(out / name, data)
         except OSError as error:
             problems.append(str(cannot_write(out / name, error)))
+        except UserError as error:      # a link planted at its temporary file's name
+            problems.append(str(error))
     return problems
 
 
@@ -706,18 +711,7 @@ def os_error(error: OSError) -> UserError:
 
 
 def _write_json(path: Path, data: dict) -> None:
-    """Write beside, then rename: a reader sees the old file or the new one, never half of one.
-    Paths inside an unpacked .ssp are written ``<archive>!<member>`` (the extraction folder is
-    gone once the run ends)."""
-    text = shown_paths(json.dumps(data, indent=2, default=str)) + "\n"
-    temp = path.with_name(f".{path.name}.tmp")
-    try:
-        with open(temp, "w") as handle:
-            handle.write(text)
-        os.replace(temp, path)
-    except BaseException:
-        try:
-            temp.unlink()
-        except OSError:
-            pass
-        raise
+    """Written beside, then renamed (orchestrator/folders.py, replace_file). Paths inside an
+    unpacked .ssp are written ``<archive>!<member>`` (the extraction folder is gone once the
+    run ends)."""
+    replace_file(path, shown_paths(json.dumps(data, indent=2, default=str)) + "\n")

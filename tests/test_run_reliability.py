@@ -6,7 +6,9 @@ import csv
 import json
 import os
 import resource
+import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -302,18 +304,152 @@ def test_a_run_failing_at_initialisation_leaves_no_earlier_results(tmp_path, pro
     _no_leftovers(private_tmp, out)
 
 
-# ---- full disks and write errors ------------------------------------------------------------------
-def test_results_csv_on_a_full_disk(tmp_path, test_fmus, private_tmp):
+# ---- files the run writes: never through a link planted in the folder -----------------------------
+USERS_OWN = "the user's own file\n"
+
+
+def _victim(tmp_path, kind):
+    """What a planted link points at: a file of the user's (it must keep its content), or a
+    name where nothing is (nothing may be made there)."""
+    victim = tmp_path / "elsewhere" / "victim.txt"
+    victim.parent.mkdir(exist_ok=True)
+    if kind == "file":
+        victim.write_text(USERS_OWN)
+    return victim
+
+
+def _victim_untouched(victim, kind):
+    if kind == "file":
+        assert victim.read_text() == USERS_OWN
+    else:
+        assert not victim.exists()
+    assert os.listdir(victim.parent) == ([victim.name] if kind == "file" else [])
+
+
+@pytest.mark.parametrize("kind", ["file", "dangling"])
+@pytest.mark.parametrize("name", [".railcosim.lock", "results.csv", "summary.json", "metadata.json",
+                                  "capture_src_y.csv", "energy.png", "report.html"])
+def test_a_link_planted_in_the_output_folder_is_refused_never_followed(tmp_path, test_fmus, private_tmp,
+                                                                      name, kind):
+    """A symbolic link at a name the run writes (planted by someone else in a shared folder):
+    one line naming it, exit 2, before any FMU is loaded; the link and what it points at stay."""
+    victim = _victim(tmp_path, kind)
     out = tmp_path / "out"
     out.mkdir()
-    (out / "results.csv").symlink_to("/dev/full")           # a symlink is written through, not removed
+    (out / name).symlink_to(victim)
+    code, stdout, stderr = railcosim("run", _pair(tmp_path, test_fmus), "--no-build", "--output", out)
+    _one_error_line(code, stderr, str(out / name), "is a symbolic link", str(victim))
+    assert "results in" not in stdout
+    _victim_untouched(victim, kind)
+    assert os.readlink(out / name) == str(victim)
+    _no_leftovers(private_tmp, out)
+
+
+@pytest.mark.parametrize("kind", ["file", "dangling"])
+def test_links_at_the_temporary_files_are_replaced_never_followed(tmp_path, test_fmus, private_tmp, kind):
+    """summary.json and metadata.json are written beside (``.NAME.tmp``) and renamed: a link
+    planted at a temporary name, before the run or while it steps, is removed, not written
+    through, and so is a link planted at summary.json while the run steps."""
+    victim = _victim(tmp_path, kind)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / ".summary.json.tmp").symlink_to(victim)
+
+    class PlantLinks(Manipulator):
+        def before_tick(self, master, tick):
+            if tick == 10**9:
+                for name in (".metadata.json.tmp", "summary.json", "metadata.json"):
+                    (out / name).symlink_to(victim)
+
+    run_system(_pair(tmp_path, test_fmus), RunOptions(output_dir=out, manipulators=[PlantLinks()]))
+    _victim_untouched(victim, kind)
+    for name in ("summary.json", "metadata.json"):
+        assert not (out / name).is_symlink() and json.loads((out / name).read_text())["system"] == "pair"
+    assert json.loads((out / "summary.json").read_text())["completed"] is True
+    assert sorted(os.listdir(out)) == [".railcosim.lock", "metadata.json", "results.csv", "summary.json"]
+
+
+def test_an_output_folder_that_is_a_link_is_refused(tmp_path, test_fmus, private_tmp):
+    """--output naming a symbolic link to a folder: one line naming the link and where it points;
+    nothing is written into (or removed from) the folder it points at."""
+    real = tmp_path / "real"
+    real.mkdir()
+    (real / "summary.json").write_text(USERS_OWN)
+    (tmp_path / "out").symlink_to(real)
+    code, _, stderr = railcosim("run", _pair(tmp_path, test_fmus), "--no-build", "--output", tmp_path / "out")
+    _one_error_line(code, stderr, f"--output {tmp_path / 'out'}", "is a symbolic link", str(real))
+    assert os.listdir(real) == ["summary.json"] and (real / "summary.json").read_text() == USERS_OWN
+    _no_leftovers(private_tmp)
+
+
+def test_report_writes_no_file_through_a_link(tmp_path, test_fmus, private_tmp):
+    out = tmp_path / "out"
+    code, _, stderr = railcosim("run", _pair(tmp_path, test_fmus), "--no-build", "--output", out)
+    assert code == 0, stderr
+    victim = _victim(tmp_path, "file")
+    (out / "report.html").symlink_to(victim)
+    code, _, stderr = railcosim("report", out)
+    _one_error_line(code, stderr, str(out / "report.html"), "is a symbolic link")
+    _victim_untouched(victim, "file")
+
+
+# ---- the output folder removed while the run writes it ---------------------------------------------
+@pytest.mark.parametrize("then", ["removed", "made again"])
+def test_an_output_folder_removed_during_a_run_is_an_error_not_results(tmp_path, product_fmus, private_tmp, then):
+    """rm -rf of the folder while `railcosim run` steps (and a new empty folder made at its name):
+    one line saying the folder went, exit 2, never "results in"."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "run", "ato_only", "--no-build",
+                             "--stop-time", "2000", "--real-time", "500", "--output", str(out)],
+                            env=cli_environment(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(proc, lambda: (out / "results.csv").is_file() and (out / "results.csv").stat().st_size > 0,
+                  "results.csv")
+        shutil.rmtree(out)
+        if then == "made again":
+            out.mkdir()
+        stdout, stderr = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    what = "removed" if then == "removed" else "replaced by another folder"
+    errors = "\n".join(line for line in stderr.splitlines()   # not the pace warning of a loaded machine
+                       if not line.startswith("railcosim: warning: --real-time"))
+    _one_error_line(proc.returncode, errors, f"--output {out}", f"the folder was {what}")
+    assert "results in" not in stdout
+    _no_leftovers(private_tmp)
+
+
+def test_results_csv_replaced_by_a_link_during_a_run_is_an_error(tmp_path, test_fmus, private_tmp):
+    out = tmp_path / "out"
+    victim = _victim(tmp_path, "file")
+
+    class SwapResults(Manipulator):
+        def before_tick(self, master, tick):
+            if tick == 10**9:
+                (out / "results.csv").unlink()
+                (out / "results.csv").symlink_to(victim)
+
+    with pytest.raises(UserError, match="results.csv: removed or replaced while the run wrote it"):
+        run_system(_pair(tmp_path, test_fmus), RunOptions(output_dir=out, manipulators=[SwapResults()]))
+    _victim_untouched(victim, "file")
+
+
+# ---- full disks and write errors ------------------------------------------------------------------
+@pytest.mark.skipif(os.geteuid() != 0, reason="a character device in tmp_path needs root (mknod)")
+def test_results_csv_on_a_full_disk(tmp_path, test_fmus, private_tmp):
+    """results.csv is the full device (1, 7: /dev/full) itself, made in the folder: every write
+    fails with ENOSPC (a link to /dev/full is refused, above)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    os.mknod(out / "results.csv", 0o666 | stat.S_IFCHR, os.makedev(1, 7))
     code, _, stderr = railcosim("run", _pair(tmp_path, test_fmus, stop_time=30.0), "--no-build",
                                 "--output", out)
     _one_error_line(code, stderr, "results.csv", "No space left on device")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is False and "No space left on device" in summary["error"]
     assert json.loads((out / "metadata.json").read_text())["components"]["a"]["steps_taken"] > 0
-    assert os.readlink(out / "results.csv") == "/dev/full"
+    assert stat.S_ISCHR(os.lstat(out / "results.csv").st_mode)      # a device is written to, not removed
     _no_leftovers(private_tmp, out)
 
 

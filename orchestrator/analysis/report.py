@@ -28,6 +28,7 @@ import numpy as np
 
 from orchestrator.analysis.verdict import safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
+from orchestrator.folders import create_file
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
@@ -340,7 +341,8 @@ def _save(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    with create_file(path, binary=True) as handle:     # never through a link planted at its name
+        fig.savefig(handle, format="png", dpi=100)
     plt.close(fig)
     return path
 
@@ -457,7 +459,8 @@ figure {{ margin: 1.5em 0; }} img {{ max-width: 100%; }}
 {figures}
 </body></html>
 """
-    path.write_text(text, encoding="utf-8")
+    with create_file(path) as handle:
+        handle.write(text)
     return path
 
 
