@@ -20,7 +20,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from orchestrator.archives import safe_extract
+from orchestrator.archives import MAX_UNPACKED_VARIABLE, max_unpacked_bytes, safe_extract, shown_size
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.protocols import Causality, Slave, UnitDef
 
@@ -83,6 +83,11 @@ def _read_interface(fmu_path: Path) -> Interface:
         with zipfile.ZipFile(fmu_path) as archive:
             if "modelDescription.xml" not in archive.namelist():
                 raise UserError(f"{fmu_path}: not an FMU (no modelDescription.xml)")
+            # read whole into memory by fmpy and lxml: held to the bound an extraction is held to
+            size, bound = archive.getinfo("modelDescription.xml").file_size, max_unpacked_bytes()
+            if size > bound:
+                raise UserError(f"{fmu_path}!modelDescription.xml: {shown_size(size)}, more than the "
+                                f"{shown_size(bound)} allowed (set {MAX_UNPACKED_VARIABLE} to raise the bound)")
     except zipfile.BadZipFile:
         raise UserError(f"{fmu_path}: not an FMU (not a zip archive)") from None
     try:

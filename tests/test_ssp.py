@@ -1,5 +1,7 @@
 """SSP loading: parameter bindings (external, inline, prefix), SSM mappings, LinearTransformation,
 connector units, named parameter sets and command-line overrides — values checked after a run."""
+import os
+
 import pytest
 from lxml import etree
 
@@ -222,3 +224,160 @@ def test_shipped_systems_declare_what_libcosim_and_fmpy_need():
         steps = [round(float(h.get("value")) * 1e9) for h in root.iterfind(".//osp:StepSizeHint", SSD_NS)]
         fixed = root.findall("ssd:DefaultExperiment//osp:Algorithm/osp:FixedStepAlgorithm", SSD_NS)
         assert len(fixed) == 1 and round(float(fixed[0].get("baseStepSize")) * 1e9) == math.gcd(*steps), ssd
+
+
+# ---- archives: bounded, and every error naming <archive>!<member> -------------------------------------
+def _private_tmp(tmp_path, monkeypatch):
+    import tempfile
+
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+    return folder
+
+
+def _one_line(code, stderr, *fragments):
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in stderr, stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+    return lines[0]
+
+
+def _zip_of_zeros(path, member, size_bytes, declared_bytes=None):
+    """A .ssp whose ``member`` unpacks to ``size_bytes`` zeros (deflate: a thousandth of that),
+    its headers declaring ``declared_bytes`` instead when given (a crafted archive)."""
+    import struct
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("SystemStructure.ssd", "<not read/>")
+        with archive.open(member, "w", force_zip64=False) as sink:
+            for _ in range(size_bytes >> 20):
+                sink.write(bytes(1 << 20))
+    if declared_bytes is not None:
+        data = bytearray(path.read_bytes())
+        name = member.encode()
+        for signature, offset in ((b"PK\x03\x04", 22), (b"PK\x01\x02", 24)):   # uncompressed size fields
+            at = 0
+            while (at := data.find(signature, at)) >= 0:
+                header_name_at = 30 if signature == b"PK\x03\x04" else 46
+                if data[at + header_name_at: at + header_name_at + len(name)] == name:
+                    struct.pack_into("<I", data, at + offset, declared_bytes)
+                at += 4
+        path.write_bytes(bytes(data))
+    return path
+
+
+def test_an_archive_over_the_bound_is_refused_before_anything_is_extracted(tmp_path, monkeypatch):
+    """A zip bomb (40 MB of zeros in 40 kB) under a 10 MB bound, and a member declaring 4 GB under
+    the default bound: one line naming the archive, its largest member and the variable that
+    raises the bound, and nothing written to the temp folder."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    bomb = _zip_of_zeros(tmp_path / "bomb.ssp", "resources/zeros.bin", 40 << 20)
+    assert bomb.stat().st_size < 200_000
+    code, _, stderr = railcosim("run", bomb, "--no-build", "--output", tmp_path / "out",
+                                env={"TMPDIR": tmp, "RAILCOSIM_MAX_UNPACKED_MB": "10"})
+    _one_line(code, stderr, f"{bomb}: unpacks to 41.9 MB", f"{bomb}!resources/zeros.bin", "10.0 MB allowed",
+              "RAILCOSIM_MAX_UNPACKED_MB")
+    crafted = _zip_of_zeros(tmp_path / "crafted.ssp", "resources/zeros.bin", 1 << 20, declared_bytes=4_000_000_000)
+    code, _, stderr = railcosim("run", crafted, "--no-build", "--output", tmp_path / "out", env={"TMPDIR": tmp})
+    _one_line(code, stderr, f"{crafted}: unpacks to 4000.0 MB", "512.0 MB allowed")
+    assert os.listdir(tmp) == [] and not (tmp_path / "out").exists()
+
+
+def test_the_bound_can_be_raised_and_a_bad_bound_is_one_line(tmp_path, test_fmus, monkeypatch):
+    from orchestrator.archives import max_unpacked_bytes, safe_extract
+    from orchestrator.errors import UserError
+
+    archive = _zip_of_zeros(tmp_path / "three.ssp", "resources/zeros.bin", 3 << 20)
+    monkeypatch.setenv("RAILCOSIM_MAX_UNPACKED_MB", "2")
+    with pytest.raises(UserError, match="more than the 2.0 MB allowed"):
+        safe_extract(archive, tmp_path / "a")
+    monkeypatch.setenv("RAILCOSIM_MAX_UNPACKED_MB", "4")
+    safe_extract(archive, tmp_path / "b")
+    assert (tmp_path / "b" / "resources" / "zeros.bin").stat().st_size == 3 << 20
+    for bad in ("nan", "-1", "0", "lots"):
+        monkeypatch.setenv("RAILCOSIM_MAX_UNPACKED_MB", bad)
+        with pytest.raises(UserError, match=f"RAILCOSIM_MAX_UNPACKED_MB='{bad}': must be a positive number"):
+            max_unpacked_bytes()
+    monkeypatch.delenv("RAILCOSIM_MAX_UNPACKED_MB")
+    assert max_unpacked_bytes() == 512_000_000
+    # an FMU is held to the same bound: its extraction and its modelDescription, read whole
+    monkeypatch.setenv("RAILCOSIM_MAX_UNPACKED_MB", "0.001")
+    code, _, stderr = railcosim("inspect", test_fmus / "TestCounter.fmu", env={"RAILCOSIM_MAX_UNPACKED_MB": "0.001"})
+    _one_line(code, stderr, f"{test_fmus / 'TestCounter.fmu'}!modelDescription.xml", "2292 bytes, more than the 1000 bytes allowed")
+    with pytest.raises(UserError, match="TestCounter.fmu: unpacks to 1.4 MB .* more than the 1000 bytes allowed"):
+        safe_extract(test_fmus / "TestCounter.fmu", tmp_path / "c")
+
+
+def test_a_member_larger_than_it_declares_stops_at_its_declared_size(tmp_path, monkeypatch):
+    """A member whose headers declare 1000 bytes but that holds 8 MB: the extraction stops at
+    1000 bytes, one line naming <archive>!<member>, and the extraction folder goes."""
+    tmp = _private_tmp(tmp_path, monkeypatch)
+    from orchestrator.errors import UserError
+    from orchestrator.ssp import open_system
+
+    liar = _zip_of_zeros(tmp_path / "liar.ssp", "resources/zeros.bin", 8 << 20, declared_bytes=1000)
+    with pytest.raises(UserError) as refused:
+        open_system(liar)
+    assert str(refused.value).startswith(f"{liar}!resources/zeros.bin: ")
+    assert os.listdir(tmp) == []
+
+
+def test_extraction_errors_name_the_archive_member(tmp_path, test_fmus):
+    """A member the temp folder cannot take (a file-size limit: the same path as a full disk) and
+    a member with a 300-character name: named <archive>!<member>, never by a temporary path."""
+    import resource
+    import zipfile
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    archive = tmp_path / "pair.ssp"
+    long_name = "resources/" + "n" * 300 + ".json"
+    with zipfile.ZipFile(archive, "w", zipfile.ZIP_STORED) as handle:
+        handle.writestr("SystemStructure.ssd", "<not read/>")
+        handle.write(test_fmus / "TestCounter.fmu", "resources/TestCounter.fmu")
+    code, _, stderr = railcosim("run", archive, "--no-build", "--output", tmp_path / "out", env={"TMPDIR": tmp},
+                                preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (500_000, 500_000)))
+    line = _one_line(code, stderr, f"{archive}!resources/TestCounter.fmu: cannot be extracted", "File too large")
+    assert "railcosim_ssp_" not in line and os.listdir(tmp) == []
+    with zipfile.ZipFile(archive, "w") as handle:
+        handle.writestr("SystemStructure.ssd", "<not read/>")
+        handle.writestr(long_name, "{}")
+    code, _, stderr = railcosim("run", archive, "--no-build", "--output", tmp_path / "out", env={"TMPDIR": tmp})
+    line = _one_line(code, stderr, f"{archive}!{long_name}: cannot be extracted", "File name too long")
+    assert "railcosim_ssp_" not in line and os.listdir(tmp) == []
+
+
+def test_no_room_for_an_archive_is_one_line_before_extraction(tmp_path, monkeypatch):
+    import shutil as shutil_module
+    from collections import namedtuple
+
+    from orchestrator.archives import safe_extract
+    from orchestrator.errors import UserError
+
+    archive = _zip_of_zeros(tmp_path / "three.ssp", "resources/zeros.bin", 3 << 20)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil_module, "disk_usage", lambda path: usage(10**9, 10**9 - 1_000_000, 1_000_000))
+    with pytest.raises(UserError, match=r"three.ssp: unpacks to 3.1 MB, but .* has 1.0 MB free"):
+        safe_extract(archive, tmp_path / "dest")
+    assert not (tmp_path / "dest").exists() or os.listdir(tmp_path / "dest") == []
+
+
+def test_a_name_held_twice_in_an_archive_is_refused(tmp_path):
+    import warnings
+    import zipfile
+
+    from orchestrator.archives import safe_extract
+    from orchestrator.errors import UserError
+
+    archive = tmp_path / "twice.ssp"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # zipfile warns of the duplicate name
+        with zipfile.ZipFile(archive, "w") as handle:
+            handle.writestr("resources/line.json", "{}")
+            handle.writestr("resources/line.json", "[]")
+    with pytest.raises(UserError, match=r"twice.ssp!resources/line.json: its path is taken by another member"):
+        safe_extract(archive, tmp_path / "dest")
