@@ -1,6 +1,7 @@
 """`railcosim new`: a system folder of one's own (docs/your_own_system.md) that `railcosim run`
 runs, with one line file shared by every component through one parameter set."""
 import json
+import os
 import shutil
 
 import pytest
@@ -61,6 +62,83 @@ def test_new_refuses_bad_input_in_one_line(tmp_path):
     code, _, stderr = _new(tmp_path, name="taken")
     assert code == 2 and "already exists" in stderr
     assert "Traceback" not in stderr and len(stderr.strip().splitlines()) == 1
+
+
+# ---- one `new` per folder ----------------------------------------------------------------------------
+def _timetables(tmp_path, count):
+    """``count`` copies of the example timetable under different names: which one a folder
+    holds tells which `new` wrote it."""
+    paths = []
+    for k in range(count):
+        path = tmp_path / f"timetable_{k}.json"
+        shutil.copyfile(EXAMPLES / "short_timetable.json", path)
+        paths.append(path)
+    return paths
+
+
+def test_two_concurrent_news_into_one_folder_give_one_system_and_one_refusal(tmp_path):
+    """Two `railcosim new SAME` at once, three times: one writes the folder, the other is refused
+    in one line, and the folder holds one system, never a mix of both."""
+    import subprocess
+    import sys
+
+    from helpers import cli_environment
+
+    for trial in range(3):
+        name = f"same{trial}"
+        (tmp_path / name).mkdir()
+        timetables = _timetables(tmp_path / name, 2)
+        procs = [subprocess.Popen([sys.executable, "-m", "orchestrator", "new", f"out/{name}", "--line",
+                                   str(EXAMPLES / "short_line.json"), "--timetable", str(timetable)],
+                                  cwd=tmp_path, env=cli_environment(), stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True) for timetable in timetables]
+        outcomes = [(proc.wait(timeout=300), *proc.communicate()) for proc in procs]
+        codes = sorted(code for code, _, _ in outcomes)
+        assert codes == [0, 2], outcomes
+        code, _, stderr = next(outcome for outcome in outcomes if outcome[0] == 2)
+        assert stderr.count("\n") == 1 and "already exists" in stderr and "Traceback" not in stderr, stderr
+        winner = timetables[[code for code, _, _ in outcomes].index(0)]
+        folder = tmp_path / "out" / name
+        assert sorted(p.name for p in (folder / "resources").iterdir()) == \
+            sorted(["short_line.json", "passenger_chs7.json", winner.name])
+        assert winner.name in (folder / "SystemStructure.ssd").read_text()
+        assert sorted(os.listdir(tmp_path / "out")) == [f"same{k}" for k in range(trial + 1)]   # no staging left
+
+
+def test_a_folder_made_while_new_writes_is_not_written_into(tmp_path, monkeypatch):
+    """The folder appears (another `new`, a user) after the first check: this `new` is refused in
+    one line, leaves the other's files as they are and no half-written folder of its own."""
+    from orchestrator.analysis import new_system as module
+    from orchestrator.errors import UserError
+
+    folder = tmp_path / "branch"
+    write_ssd = module.write_ssd
+
+    def someone_else_first(*args, **kwargs):
+        folder.mkdir()
+        (folder / "SystemStructure.ssd").write_text("the other's system")
+        return write_ssd(*args, **kwargs)
+
+    monkeypatch.setattr(module, "write_ssd", someone_else_first)
+    with pytest.raises(UserError, match="branch: already exists"):
+        module.new_system(folder, EXAMPLES / "short_line.json", [EXAMPLES / "short_timetable.json"])
+    assert os.listdir(folder) == ["SystemStructure.ssd"]
+    assert (folder / "SystemStructure.ssd").read_text() == "the other's system"
+    assert os.listdir(tmp_path) == ["branch"]
+
+
+def test_new_into_an_empty_folder_or_a_link_to_one(tmp_path):
+    """An empty folder is taken (as before); a symbolic link, even to an empty folder, is a name
+    that exists: refused, nothing written where it points."""
+    (tmp_path / "empty").mkdir()
+    code, _, stderr = _new(tmp_path, name="empty")
+    assert code == 0, stderr
+    assert (tmp_path / "empty" / "SystemStructure.ssd").is_file()
+    (tmp_path / "target").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "target")
+    code, _, stderr = _new(tmp_path, name="link")
+    assert code == 2 and "already exists" in stderr and len(stderr.strip().splitlines()) == 1, stderr
+    assert os.listdir(tmp_path / "target") == []
 
 
 # ---- TVM-430: a line of UM71 track circuits -------------------------------------------------------

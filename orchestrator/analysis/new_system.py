@@ -23,6 +23,10 @@ builds; the high-speed set is its default stock.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
+import os
+import secrets
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -115,8 +119,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
                traction: Optional[str] = None, fmu_dir: Optional[Path] = None) -> Path:
     """Write the system folder (module docstring); its SSD path. Bad input is a UserError."""
     folder = Path(folder)
-    if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
-        raise UserError(f"{folder}: already exists; give a new name (railcosim new never overwrites)")
+    _refuse_existing(folder)
     if system not in CAB_SYSTEMS:
         raise UserError(f"--system {system}: choose one of {', '.join(CAB_SYSTEMS)}")
     timetable_files = [Path(p) for p in timetable_files]
@@ -189,18 +192,49 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
                                 receiver=receiver, stocks=[stock_path] * count, parameter_file=LINE_PARAMETER_SET,
                                 **tvm)
     stop_time = max(stop.arrival_s or stop.departure_s or 0.0 for timetable in timetables for stop in timetable)
-    folder.mkdir(parents=True, exist_ok=True)
-    resources = folder / "resources"
-    resources.mkdir(exist_ok=True)
-    for source in [Path(line_file), stock_path, *timetable_files]:
-        shutil.copyfile(source, resources / source.name)
-    write_ssv(folder / LINE_PARAMETER_SET, "line", {"line_file": Path(line_file).name})
 
     def ports(_, source: str):
         return built_ports(fmu_dir, source)
 
-    return write_ssd(folder, folder.name, chain + components, connections + links,
-                     stop_time=float(stop_time) + STOP_MARGIN_S, ports=ports)
+    with _new_folder(folder) as staging:
+        resources = staging / "resources"
+        resources.mkdir()
+        for source in [Path(line_file), stock_path, *timetable_files]:
+            shutil.copyfile(source, resources / source.name)
+        write_ssv(staging / LINE_PARAMETER_SET, "line", {"line_file": Path(line_file).name})
+        write_ssd(staging, folder.name, chain + components, connections + links,
+                  stop_time=float(stop_time) + STOP_MARGIN_S, ports=ports)
+    return folder / "SystemStructure.ssd"
+
+
+def _refuse_existing(folder: Path) -> None:
+    if os.path.lexists(folder) and (not folder.is_dir() or folder.is_symlink() or any(folder.iterdir())):
+        raise UserError(f"{folder}: already exists; give a new name (railcosim new never overwrites)")
+
+
+@contextlib.contextmanager
+def _new_folder(folder: Path):
+    """A folder beside ``folder``, written by the caller, then renamed to ``folder`` in one
+    step: of two ``railcosim new`` into one name, one gets the folder and the other is refused
+    in one line (``rename`` replaces nothing but an empty folder), and a ``new`` that fails or
+    is interrupted leaves no half-written system."""
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        staging = folder.parent / f".{folder.name}.{os.getpid()}.{secrets.token_hex(4)}.new"
+        staging.mkdir()
+    except OSError as error:
+        raise UserError(f"{folder}: cannot create the folder ({error.strerror or error})") from None
+    try:
+        yield staging
+        try:
+            os.rename(staging, folder)
+        except OSError as error:
+            if error.errno in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR):
+                raise UserError(f"{folder}: already exists (made while this system was written); "
+                                "give a new name (railcosim new never overwrites)") from None
+            raise UserError(f"{folder}: cannot create the folder ({error.strerror or error})") from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def built_ports(fmu_dir: Optional[Path], source: str):
@@ -272,8 +306,7 @@ def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Seq
     from orchestrator.analysis.railml import import_railml, validate_railml
 
     folder, railml_file = Path(folder), Path(railml_file)
-    if folder.exists() and (not folder.is_dir() or any(folder.iterdir())):
-        raise UserError(f"{folder}: already exists; give a new name (railcosim new never overwrites)")
+    _refuse_existing(folder)
     if schema_dir is not None:
         valid, errors = validate_railml(railml_file, schema_dir)
         if not valid:
