@@ -701,7 +701,8 @@ def make_parser() -> argparse.ArgumentParser:
     dcp = sub.add_parser("dcp-slave", help="serve an FMI 2.0 co-simulation FMU as a DCP 1.0 slave over UDP "
                                             "(docs/hil.md)")
     dcp.add_argument("fmu", help="the .fmu to serve")
-    dcp.add_argument("--host", default="127.0.0.1", help="IPv4 address to listen on (default 127.0.0.1)")
+    dcp.add_argument("--host", default="127.0.0.1",
+                     help="IPv4 address to listen on (default 127.0.0.1; another than loopback is warned about)")
     dcp.add_argument("--port", type=int, default=0,
                      help="UDP port for control and data PDUs (default 0: a free port, printed at start)")
     dcp.add_argument("--real-time", action="store_true",

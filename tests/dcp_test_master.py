@@ -15,11 +15,11 @@ from orchestrator.dcp.pdu import (OpMode, PduType, State, decode, next_seq, Pdu)
 REPO = Path(__file__).resolve().parent.parent
 
 
-def start_slave(fmu: Path, *extra: str, timeout_s: float = 60.0):
+def start_slave(fmu: Path, *extra: str, timeout_s: float = 60.0, quiet: bool = True):
     """``railcosim dcp-slave FMU --port 0`` in a subprocess; returns (process, (host, port))."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator", "dcp-slave", str(fmu), "--port", "0",
-                             "--quiet", *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             *(["--quiet"] if quiet else []), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env, cwd=str(REPO))
     line = proc.stdout.readline()
     if not line.startswith("LISTENING "):
@@ -106,9 +106,10 @@ class TestMaster:
         if then is not None:
             self.wait_state(then)
 
-    def configure(self, inputs, outputs, steps: int, resolution=(1, 1_000_000_000), parameters=()):
+    def configure(self, inputs, outputs, steps: int, resolution=(1, 1_000_000_000), parameters=(), target=None):
         """inputs/outputs: lists of (vr, DataType) on data_id 1 (in) and 2 (out); the slave
-        receives on its control port and sends to this master."""
+        receives on its control port and sends to this master (or to ``target``, (host, port))."""
+        target = target or self.address
         sid = self.slave_id
         self.request(lambda s: Pdu(PduType.CFG_time_res, pdu_seq_id=s, receiver=sid, numerator=resolution[0], denominator=resolution[1]))
         for pos, (vr, data_type) in enumerate(inputs):
@@ -118,7 +119,7 @@ class TestMaster:
         self.request(lambda s: Pdu(PduType.CFG_steps, pdu_seq_id=s, receiver=sid, steps=steps, data_id=2))
         if inputs:
             self.request(lambda s: Pdu(PduType.CFG_source_network_information, pdu_seq_id=s, receiver=sid, data_id=1, port=self.slave[1], ip_address=self.slave[0]))
-        self.request(lambda s: Pdu(PduType.CFG_target_network_information, pdu_seq_id=s, receiver=sid, data_id=2, port=self.address[1], ip_address=self.address[0]))
+        self.request(lambda s: Pdu(PduType.CFG_target_network_information, pdu_seq_id=s, receiver=sid, data_id=2, port=target[1], ip_address=target[0]))
         for vr, data_type, configuration in parameters:
             self.request(lambda s: Pdu(PduType.CFG_parameter, pdu_seq_id=s, receiver=sid, parameter_vr=vr, source_data_type=data_type, configuration=configuration))
         self.stc(PduType.STC_prepare, State.CONFIGURATION, State.PREPARED)

@@ -322,3 +322,22 @@ def test_our_master_answered_as_dcplib_answered_runs_as_it_did(test_fmus, tmp_pa
     assert result.summary["completed"] and result.summary["hil"]["ex"]["lost"] == 0
     header, rows = read_csv(tmp_path / "out" / "results.csv")
     assert list(rows[:, header.index("ex.y")]) == [math.sin(0.25)] + [math.sin(10 * k - 1 + 0.25) for k in range(1, 11)]
+
+
+def test_dcplib_master_stepped_the_traction_fmu_by_its_own_step():
+    """The recorded session (DCPLib's example master, unchanged, against `railcosim dcp-slave
+    Traction.fmu --real-time`): the master took the first resolution offered, which is the FMU's
+    own 0.5 s step, and the slave stepped and sent its output (to itself, the example's loop)
+    every 0.5 s: no 1 ns steps, no request refused."""
+    captured = datagrams("dcplib_master_railcosim_traction_srt.json")
+    times = [d["t"] for d in load("dcplib_master_railcosim_traction_srt.json")["datagrams"]]
+    pdus = [(sender, to, decode(data)) for sender, to, data in captured]
+    assert not any(p.type_id == PduType.RSP_nack for _, _, p in pdus)
+    res = next(p for _, _, p in pdus if p.type_id == PduType.CFG_time_res)
+    steps = next(p for _, _, p in pdus if p.type_id == PduType.CFG_steps)
+    assert (res.numerator, res.denominator, steps.steps) == (1, 2, 1)
+    looped = [(t, p) for t, (sender, to, p) in zip(times, pdus) if p.type_id == PduType.DAT_input_output]
+    assert all(sender == to == "slave" for sender, to, p in pdus if p.type_id == PduType.DAT_input_output)
+    assert [p.pdu_seq_id for _, p in looped] == list(range(len(looped))) and len(looped) >= 14
+    gaps = [b - a for (a, _), (b, _) in zip(looped[1:], looped[2:])]     # the first is the synchronisation's
+    assert all(0.45 < g < 0.55 for g in gaps), gaps

@@ -49,9 +49,12 @@ class CounterSlave(threading.Thread):
     """A DCP slave (non-real-time) of a step counter: steps += 1, t_end = time after the step,
     u_seen = u. ``drop`` is the share of its output DAT PDUs it does not send."""
 
-    def __init__(self, drop=0.0, answer=True, noise=False):
+    def __init__(self, drop=0.0, answer=True, noise=False, intruder=False):
         super().__init__(daemon=True)
         self.noise = noise          # before each outputs PDU: malformed, truncated, oversized, stale ones
+        # before each outputs PDU, the same PDU with other values from a third socket
+        self.intruder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM) if intruder else None
+        self.spoofed = 0
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.port = self.sock.getsockname()[1]
@@ -138,6 +141,11 @@ class CounterSlave(threading.Thread):
             for junk in (b"\xff\x00", stale[:5], bytes([0xF0]) + bytes(60000), stale, b"", bytes([0xB0, 1])):
                 self.sock.sendto(junk, self.target)
         self.seq = P.next_seq(self.seq)
+        if self.intruder is not None and self.state == P.State.SENDING_D:
+            forged = P.PayloadCodec([(self.types[vr], 1) for vr in order]).encode([999 for _ in order])
+            self.intruder.sendto(P.Pdu(P.PduType.DAT_input_output, pdu_seq_id=self.seq, data_id=2,
+                                       payload=forged).encode(), self.target)
+            self.spoofed += 1
         self.sock.sendto(P.Pdu(P.PduType.DAT_input_output, pdu_seq_id=self.seq, data_id=2, payload=payload).encode(), self.target)
 
 
@@ -193,6 +201,19 @@ def test_malformed_truncated_oversized_and_stale_pdus_never_disturb_the_master(t
     assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
     hil = result.summary["hil"]["dut"]
     assert hil["lost"] == 0 and hil["late"] >= 20           # each stale PDU counted and dropped
+
+
+def test_outputs_from_any_other_address_than_the_slaves_are_ignored_and_counted(tmp_path, test_fmus, counter_slave):
+    """A third socket sends the master each of the slave's outputs PDUs first, with the same
+    sequence id and other values: none is taken, each is counted, the run is the FMU's run."""
+    slave, dcpx = counter_slave(intruder=True)
+    system = _system(tmp_path, test_fmus, stop_time=0.5)
+    run_system(system, RunOptions(output_dir=tmp_path / "fmu"))
+    swap = parse_swap(f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}")
+    result = run_system(system, RunOptions(output_dir=tmp_path / "dcp", swaps={"dut": swap}))
+    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
+    hil = result.summary["hil"]["dut"]
+    assert slave.spoofed == 25 and hil["ignored"] == 25 and hil["late"] == 0 and hil["lost"] == 0
 
 
 def test_lost_outputs_are_counted_and_the_run_goes_on(tmp_path, test_fmus, counter_slave):

@@ -38,8 +38,10 @@ FMI_TO_DCP: Dict[str, DataType] = {"Real": DataType.float64, "Integer": DataType
                                     "String": DataType.string}
 _CAUSALITIES = ("Input", "Output", "Parameter", "StructuralParameter")
 UINT32_MAX = 0xFFFFFFFF
-#: the time resolution of our slave: 1 ns, the orchestrator's own clock (integer nanoseconds)
+#: ticks of 1 ns per second: the orchestrator's own clock counts integer nanoseconds
 NS_PER_SECOND = 1_000_000_000
+#: the step assumed for an FMU that declares none (its DefaultExperiment has no stepSize)
+DEFAULT_STEP_S = 0.01
 
 
 @dataclass
@@ -443,10 +445,12 @@ def _fmu_arrays(interface) -> Dict[str, list]:
 
 def offered_resolutions(step_s: Fraction) -> List[Tuple[int, int, bool, Optional[bool]]]:
     """The time resolutions our slave offers for an FMU of step ``step_s``: those in which the
-    step is a whole number of ticks and that a master is likely to ask for: 1 ns (recommended:
-    the orchestrator's own clock), the step itself, and every decimal fraction of a second
-    (1/10 … 1/10⁸ s) that divides the step. All non-fixed, as the schema wants several."""
-    candidates = [Fraction(1, NS_PER_SECOND), step_s] + [Fraction(1, 10 ** k) for k in range(1, 9)]
+    step is a whole number of ticks and that a master is likely to ask for: the step itself
+    first and recommended (a master that takes the first resolution offered, as DCPLib's
+    example master does, then steps the FMU by its own step), 1 ns (the orchestrator's own
+    clock), and every decimal fraction of a second (1/10 … 1/10⁸ s) that divides the step. All
+    non-fixed, as the schema wants several."""
+    candidates = [step_s, Fraction(1, NS_PER_SECOND)] + [Fraction(1, 10 ** k) for k in range(1, 9)]
     offered: List[Tuple[int, int, bool, Optional[bool]]] = []
     for resolution in candidates:
         entry = (resolution.numerator, resolution.denominator)
@@ -461,7 +465,7 @@ def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int]
     inputs, outputs and parameters with the FMU's value references, arrays grouped, the time
     resolutions in which the FMU's step is a whole number of ticks (:func:`offered_resolutions`),
     non-real-time with any number of steps, soft real-time if asked."""
-    step_ns = round((interface.default_step_s or 0.01) * NS_PER_SECOND)
+    step_ns = round((interface.default_step_s or DEFAULT_STEP_S) * NS_PER_SECOND)
     variables = []
     for base, members in _fmu_arrays(interface).items():
         first = members[0][1]
@@ -487,8 +491,8 @@ def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int]
         var = DcpVariable(name=base, vr=first.vr, causality=first.causality, data_type=data_type, dims=dims,
                           start=starts, variability=variability,
                           fmi_names=tuple(m[1].name for m in members))
-        if first.causality == "output":
-            var.default_steps, var.fixed_steps, var.min_steps, var.max_steps = step_ns, False, 1, UINT32_MAX
+        if first.causality == "output":     # steps in the recommended resolution: one FMU step
+            var.default_steps, var.fixed_steps, var.min_steps, var.max_steps = 1, False, 1, UINT32_MAX
         variables.append(var)
     # FMI value references are unique per type only; DCP's are unique over all variables
     used, taken = {v.vr for v in variables}, set()
@@ -500,7 +504,7 @@ def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int]
     modes = (OpMode.SRT, OpMode.NRT) if real_time else (OpMode.NRT,)
     return SlaveDescription(
         name=interface.model_identifier, uuid=slave_uuid(interface.guid), variables=variables,
-        op_modes=modes, nrt_default_steps=step_ns, nrt_fixed_steps=False, nrt_min_steps=1,
+        op_modes=modes, nrt_default_steps=1, nrt_fixed_steps=False, nrt_min_steps=1,
         nrt_max_steps=UINT32_MAX, resolutions=offered_resolutions(Fraction(step_ns, NS_PER_SECOND)),
         control_host=host, control_port=port, dat_host=host,
         dat_ports=[port] if port is not None else [], dat_port_ranges=[(1024, 65535)],

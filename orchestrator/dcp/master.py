@@ -173,7 +173,7 @@ class HilStats:
 
     def __init__(self, target: DcpTarget, mode: str):
         self.target, self.mode = target, mode
-        self.sent = self.received = self.lost = self.late = self.overruns = 0
+        self.sent = self.received = self.lost = self.late = self.overruns = self.ignored = 0
         self.fail_safe_steps = 0
         self.rtt_s: List[float] = []
         self.error: Optional[str] = None
@@ -186,7 +186,7 @@ class HilStats:
                 "fail_safe_steps": self.fail_safe_steps, "exchanges": int(rtt.size),
                 "rtt_median_ms": pick(50), "rtt_p99_ms": pick(99),
                 "rtt_max_ms": float(rtt.max()) if rtt.size else None,
-                "overruns": self.overruns, "deadline_ms": self.target.deadline_s * 1e3,
+                "overruns": self.overruns, "ignored": self.ignored, "deadline_ms": self.target.deadline_s * 1e3,
                 **({"error": self.error} if self.error else {})}
 
 
@@ -217,6 +217,7 @@ class RemoteDcpSlave(Slave):
         self._sock: Optional[socket.socket] = None
         self._timestamps = False            # the socket gives each datagram's arrival time
         self._address = (target.host, target.port)
+        self._slave_address: Optional[Tuple[str, int]] = None     # resolved: answers come from there
         self._seq = 0
         self._dat_seq = 0
         self._state = State.ALIVE
@@ -265,13 +266,16 @@ class RemoteDcpSlave(Slave):
     def _take_one(self) -> bool:
         try:
             if self._timestamps:
-                data, ancillary, _, _ = self._sock.recvmsg(UDP_MAX_PDU_SIZE, 64)
+                data, ancillary, _, sender = self._sock.recvmsg(UDP_MAX_PDU_SIZE, 64)
             else:
-                data, ancillary = self._sock.recv(UDP_MAX_PDU_SIZE), ()
+                (data, sender), ancillary = self._sock.recvfrom(UDP_MAX_PDU_SIZE), ()
         except (socket.timeout, BlockingIOError):
             return False
         except OSError:               # e.g. ICMP port unreachable reported on the socket
             return False
+        if self._slave_address is not None and sender != self._slave_address:
+            self.stats.ignored += 1   # not the slave's: DCP has no authentication, so nothing else is taken
+            return True
         arrived = time.time()
         for level, kind, value in ancillary:
             if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(value) >= _TIMESPEC.size:
@@ -345,6 +349,10 @@ class RemoteDcpSlave(Slave):
 
     # ---- lifecycle -------------------------------------------------------------------------
     def instantiate(self) -> None:
+        try:
+            self._slave_address = (socket.gethostbyname(self.target.host), self.target.port)
+        except OSError:
+            self._slave_address = None       # the registration below fails and says so
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1" if self.target.host.startswith("127.") else "0.0.0.0", 0))
         if _SO_TIMESTAMPNS is not None:

@@ -21,6 +21,7 @@ is driven through orchestrator/fmu.py's slaves, as in a run.
 """
 from __future__ import annotations
 
+import ipaddress
 import math
 import selectors
 import signal
@@ -42,6 +43,24 @@ from orchestrator.errors import SimulationError, UserError
 
 _RECV_BYTES = 65536          # more than the largest UDP payload: a datagram is never cut
 P = PduType
+_DAT_TYPE_ID = bytes([P.DAT_input_output])
+
+# Bounds of what a master may ask (docs/hil.md#bounds-of-a-session says why each):
+#: a DAT whose sequence id is more than this ahead of (or behind) the last one applied is not
+#: taken as the stream's new position unless the next one follows it within the window
+DAT_SEQ_WINDOW = 1024
+#: one STC_do_step advances the FMU by at most this many of its own steps
+MAX_FMU_STEPS_PER_DO_STEP = 1000
+#: STC_run's start time at most this far ahead of the slave's clock, in seconds
+MAX_START_DELAY_S = 3600
+#: a real-time period at least this long when the FMU declares no step of its own, in seconds
+MIN_RT_PERIOD_S = 0.001
+#: a soft real-time session stops when this many steps in a row, over at least this long, overran
+OVERRUN_STOP_STEPS, OVERRUN_STOP_S = 50, 2.0
+#: overruns are reported as they happen, at most one line per this many seconds
+OVERRUN_REPORT_S = 1.0
+#: addresses other than the master's each named in one line, up to this many (then only counted)
+FOREIGN_ADDRESSES_NAMED = 8
 
 
 def castable(source: DataType, target: DataType) -> bool:
@@ -72,6 +91,7 @@ class _DataId:
     codec: Optional[PayloadCodec] = None
     order: List[int] = field(default_factory=list)      # vrs in pos order
     last_seq: Optional[int] = None
+    jump_seq: Optional[int] = None    # a DAT out of the window, waiting for the next to confirm it
     send_seq: int = 0
 
 
@@ -81,18 +101,24 @@ class Counters:
     dat_missing: int = 0          # gaps in the incoming sequence ids
     dat_stale: int = 0            # older than one already applied: dropped
     dat_rejected: int = 0         # unknown data_id, wrong length, not allowed in this state
+    dat_out_of_window: int = 0    # sequence id too far from the last applied, not confirmed: dropped
     dat_sent: int = 0
     dat_dropped: int = 0          # by --drop-data
     nacks: int = 0
     malformed: int = 0            # datagrams that are no PDU at all (unanswerable)
+    foreign: int = 0              # datagrams from addresses other than the registered master's: ignored
+    foreign_addresses: int = 0    # how many such addresses (counted up to FOREIGN_ADDRESSES_NAMED + 1)
     steps: int = 0
     overruns: int = 0             # SRT: steps started after their deadline
     worst_lateness_s: float = 0.0
 
     def line(self) -> str:
+        addresses = (f"{self.foreign_addresses}" if self.foreign_addresses <= FOREIGN_ADDRESSES_NAMED
+                     else f"more than {FOREIGN_ADDRESSES_NAMED}")
         return (f"{self.steps} steps, DAT in {self.dat_received} (missing {self.dat_missing}, "
-                f"stale {self.dat_stale}, rejected {self.dat_rejected}), DAT out {self.dat_sent} "
-                f"(dropped {self.dat_dropped}), RSP_nack {self.nacks}, malformed {self.malformed}, "
+                f"stale {self.dat_stale}, outside the window {self.dat_out_of_window}, rejected {self.dat_rejected}), "
+                f"DAT out {self.dat_sent} (dropped {self.dat_dropped}), RSP_nack {self.nacks}, "
+                f"malformed {self.malformed}, ignored from other addresses {self.foreign} ({addresses} addresses), "
                 f"overruns {self.overruns} (worst {self.worst_lateness_s * 1e3:.3f} ms late)")
 
 
@@ -101,7 +127,7 @@ class DcpSlaveServer:
     Slave protocol; ``make_fmu`` makes a fresh instance after STC_reset or a failure)."""
 
     def __init__(self, description: SlaveDescription, make_fmu, sock: socket.socket,
-                 drop_data: float = 0.0, seed: Optional[int] = None, log=None):
+                 drop_data: float = 0.0, seed: Optional[int] = None, log=None, warn=None):
         self.desc = description
         self.make_fmu = make_fmu
         self.sock = sock
@@ -110,6 +136,8 @@ class DcpSlaveServer:
         self.drop_data = float(drop_data)
         self.rng = np.random.default_rng(seed)
         self.log = log or (lambda message: None)
+        self.warn = warn or self.log       # what the user must see even with --quiet
+        self.foreign_seen: set = set()
         self.counters = Counters()
         self.state = State.ALIVE
         self.error = ErrorCode.NONE
@@ -207,6 +235,10 @@ class DcpSlaveServer:
                      f"{type(error).__name__}: {error}")
 
     def _handle(self, data: bytes, address: Tuple[str, int]) -> None:
+        own = self.master is not None and address != self.master and self._is_own(address)
+        if self.master is not None and address != self.master and not (own and data[:1] == _DAT_TYPE_ID):
+            self._foreign(address)      # bound to the master that registered it (DCP has no authentication)
+            return
         try:
             pdu = decode(data)
         except PduError as error:
@@ -218,6 +250,24 @@ class DcpSlaveServer:
         if pdu.type_id not in states.REQUESTS:
             return      # tunable parameters are not offered; responses/notifications are not ours
         self._request(pdu, address)
+
+    def _is_own(self, address: Tuple[str, int]) -> bool:
+        """Sent by one of this slave's own sockets: its outputs looped back to its inputs (a
+        CFG_target_network_information naming the slave itself, as DCPLib's example does)."""
+        ports = {self.port} | {s.getsockname()[1] for s in self.data_sockets.values()}
+        return address[1] in ports and (self.host == "0.0.0.0" or address[0] == self.host)
+
+    def _foreign(self, address: Tuple[str, int]) -> None:
+        self.counters.foreign += 1
+        if address in self.foreign_seen or len(self.foreign_seen) > FOREIGN_ADDRESSES_NAMED:
+            return
+        self.foreign_seen.add(address)
+        self.counters.foreign_addresses = len(self.foreign_seen)
+        if len(self.foreign_seen) > FOREIGN_ADDRESSES_NAMED:
+            self.warn(f"datagrams from more than {FOREIGN_ADDRESSES_NAMED} other addresses: ignored, only counted")
+            return
+        self.warn(f"ignored a datagram from {address[0]}:{address[1]}: this slave is registered by "
+                  f"{self.master[0]}:{self.master[1]} and obeys no one else (further ones only counted)")
 
     def _malformed(self, error: PduError, address) -> None:
         if error.type_id == P.DAT_input_output:
@@ -342,6 +392,8 @@ class DcpSlaveServer:
         step_s = self._fmu_step_s()
         if step_s is not None and (step_s / Fraction(num, den)).denominator != 1:
             return ErrorCode.INVALID_TIME_RESOLUTION
+        if any(not self._real_time_period_ok(steps, Fraction(num, den)) for steps in self.steps.values()):
+            return ErrorCode.INVALID_TIME_RESOLUTION     # the outputs' periods already set would not fit
         return ErrorCode.NONE
 
     def _check_steps(self, pdu: Pdu) -> ErrorCode:
@@ -351,7 +403,27 @@ class DcpSlaveServer:
         for vr, _ in (config.positions.values() if config else ()):
             if not self.vars_by_vr[vr].steps_supported(pdu.steps):
                 return ErrorCode.INVALID_STEPS
+        if self.resolution is not None and not self._real_time_period_ok(pdu.steps, Fraction(*self.resolution)):
+            return ErrorCode.INVALID_STEPS
         return ErrorCode.NONE
+
+    def _real_time_period_ok(self, steps: int, resolution: Fraction) -> bool:
+        """In soft real time an output period is stepped on the wall clock: it must be a whole
+        number of the FMU's own steps (the FMU takes no smaller one, and a period of 1 ns cannot
+        be kept), or at least MIN_RT_PERIOD_S for an FMU that declares no step."""
+        if self.op_mode == OpMode.NRT:
+            return True          # outputs go out on STC_send_outputs: the period does not pace anything
+        period_s, own_s = steps * resolution, self._fmu_step_s()
+        if own_s is None:
+            return period_s >= Fraction(MIN_RT_PERIOD_S)
+        return (period_s / own_s).denominator == 1
+
+    def _max_do_step_s(self) -> Fraction:
+        """The longest simulated span one STC_do_step may ask for: the slave answers nothing
+        while it steps, so a step is bounded by the FMU's own step (MAX_FMU_STEPS_PER_DO_STEP of
+        them), not only by the 2³²−1 ticks the PDU can carry."""
+        own_s = self._fmu_step_s() or Fraction(dcpx.DEFAULT_STEP_S)
+        return MAX_FMU_STEPS_PER_DO_STEP * own_s
 
     def _check_input(self, pdu: Pdu) -> ErrorCode:
         var = self.vars_by_vr.get(pdu.target_vr)
@@ -369,12 +441,20 @@ class DcpSlaveServer:
         return ErrorCode.NONE
 
     def _check_network(self, pdu: Pdu) -> ErrorCode:
+        """Inputs are received only on the address this slave serves (0.0.0.0 in the PDU means
+        it); outputs go only to the master's host or back to this slave itself, so a master
+        cannot make the slave listen elsewhere or send its data to a third party."""
         if pdu.transport_protocol != TransportProtocol.UDP_IPv4:
             return ErrorCode.INVALID_TRANSPORT_PROTOCOL
         if not 1 <= pdu.port <= 65535:
             return ErrorCode.INVALID_NETWORK_INFORMATION
-        if pdu.type_id == P.CFG_source_network_information and not self.desc.supports_dat_port(pdu.port) \
-                and pdu.port != self.port:
+        if pdu.type_id == P.CFG_source_network_information:
+            if not self.desc.supports_dat_port(pdu.port) and pdu.port != self.port:
+                return ErrorCode.INVALID_NETWORK_INFORMATION
+            if pdu.ip_address not in ("0.0.0.0", self.host) and not (self.host == "0.0.0.0"
+                                                                     and _is_local(pdu.ip_address)):
+                return ErrorCode.INVALID_NETWORK_INFORMATION
+        elif pdu.ip_address not in (self.master[0], self.host):
             return ErrorCode.INVALID_NETWORK_INFORMATION
         return ErrorCode.NONE
 
@@ -415,17 +495,23 @@ class DcpSlaveServer:
         return ErrorCode.NONE
 
     def _check_do_step(self, pdu: Pdu) -> ErrorCode:
-        return ErrorCode.NONE if self.desc.supports_nrt_steps(pdu.steps) else ErrorCode.INVALID_STEPS
+        if not self.desc.supports_nrt_steps(pdu.steps) \
+                or pdu.steps * Fraction(*self.resolution) > self._max_do_step_s():
+            return ErrorCode.INVALID_STEPS
+        return ErrorCode.NONE
 
     def _check_run(self, pdu: Pdu) -> ErrorCode:
-        if self.op_mode != OpMode.NRT and 0 < pdu.start_time < int(time.time()):
-            return ErrorCode.INVALID_START_TIME
+        """Real time: a start time in the past, or more than MAX_START_DELAY_S ahead, is refused."""
+        if self.op_mode != OpMode.NRT and pdu.start_time > 0:
+            now = int(time.time())
+            if not now <= pdu.start_time <= now + MAX_START_DELAY_S:
+                return ErrorCode.INVALID_START_TIME
         return ErrorCode.NONE
 
     # ---- actions -------------------------------------------------------------------------
     def _fail(self, message: str) -> None:
         """The FMU failed: ERROR_HANDLING, clean up, ERROR_RESOLVED (reset or deregister next)."""
-        self.log(f"error: {message}")
+        self.warn(f"error: {message}")
         self.error = ErrorCode.PROTOCOL_ERROR_GENERIC
         self._set_state(State.ERROR_HANDLING)
         self._free_fmu()
@@ -657,21 +743,38 @@ class DcpSlaveServer:
                 or self.fmu is None:
             self.counters.dat_rejected += 1
             return
-        if config.last_seq is not None:
-            gap = (pdu.pdu_seq_id - config.last_seq) & 0xFFFF
-            if gap == 0 or gap >= 0x8000:      # a repeat or older than what was applied
-                self.counters.dat_stale += 1
-                return
-            self.counters.dat_missing += gap - 1
         try:
             values = config.codec.decode(pdu.payload)
         except PduError:
             self.counters.dat_rejected += 1
             return
-        config.last_seq = pdu.pdu_seq_id
+        if config.last_seq is not None and not self._in_sequence(config, pdu.pdu_seq_id):
+            return
+        config.last_seq, config.jump_seq = pdu.pdu_seq_id, None
         self.counters.dat_received += 1
         for vr, value in zip(config.order, values):
             self._put(self.bindings[vr], value)
+
+    def _in_sequence(self, config: _DataId, seq: int) -> bool:
+        """Sequence ids in DCP's modular arithmetic (uint16): 1 … DAT_SEQ_WINDOW ahead of the last
+        one applied is next (the ids between are missing); 0 or up to the window behind is a
+        repeat or older (stale). Farther either way, a datagram is taken only when it follows the
+        previous such one within the window (the stream really jumped, e.g. after a long loss),
+        so no single datagram can make the later ones of the stream look stale."""
+        gap = (seq - config.last_seq) & 0xFFFF
+        if 1 <= gap <= DAT_SEQ_WINDOW:
+            self.counters.dat_missing += gap - 1
+            return True
+        if gap == 0 or gap >= 0x10000 - DAT_SEQ_WINDOW:
+            self.counters.dat_stale += 1
+            return False
+        if config.jump_seq is not None and 1 <= (seq - config.jump_seq) & 0xFFFF <= DAT_SEQ_WINDOW:
+            self.counters.dat_missing += ((config.jump_seq - config.last_seq) & 0xFFFF) - 1 \
+                + ((seq - config.jump_seq) & 0xFFFF) - 1
+            return True
+        config.jump_seq = seq
+        self.counters.dat_out_of_window += 1
+        return False
 
     def _send_outputs(self, initialization: bool, due=None) -> None:
         wanted = (Scope.Initialization_Run_NonRealTime, Scope.Initialization) if initialization \
@@ -711,16 +814,43 @@ class DcpSlaveServer:
         # the first step at the start time (wall clock), mapped onto the monotonic clock
         self.clock = time.monotonic() + max(0.0, start - time.time())
         self.rt_count = 0
+        self.overrun_run, self.overrun_since, self.overrun_reported = 0, 0.0, -math.inf
+
+    def _overrun(self, now: float, lateness: float) -> bool:
+        """Count and report an overrun as it happens (one line at most every OVERRUN_REPORT_S);
+        stop the session (True) when every step has overrun for OVERRUN_STOP_STEPS steps and
+        OVERRUN_STOP_S seconds: the FMU cannot be stepped at this period in real time."""
+        self.counters.overruns += 1
+        if self.overrun_run == 0:
+            self.overrun_since = now
+        self.overrun_run += 1
+        period_ms = self.rt_period_s * 1e3
+        if self.overrun_run >= OVERRUN_STOP_STEPS and now - self.overrun_since >= OVERRUN_STOP_S:
+            self.clock = None
+            self._fail(f"real time not kept, session stopped: the last {self.overrun_run} real-time steps all started more than a period "
+                       f"({period_ms:g} ms) late, {lateness * 1e3:.1f} ms at the last: the FMU cannot be "
+                       f"stepped at this period in real time")
+            return True
+        if now - self.overrun_reported >= OVERRUN_REPORT_S:
+            self.overrun_reported = now
+            self.warn(f"overrun: real-time step {self.rt_count // self.rt_steps + 1} started "
+                      f"{lateness * 1e3:.1f} ms late (period {period_ms:g} ms); {self.counters.overruns} "
+                      f"overrun(s) so far")
+        return False
 
     def next_deadline(self) -> Optional[float]:
         return self.clock if self.clock is not None and self.state in states.RUN_STATES else None
 
     def tick(self) -> None:
         """One real-time step (called at or after its deadline)."""
-        lateness = time.monotonic() - self.clock
-        if lateness > self.rt_period_s:         # started more than a period late
-            self.counters.overruns += 1
+        now = time.monotonic()
+        lateness = now - self.clock
         self.counters.worst_lateness_s = max(self.counters.worst_lateness_s, lateness)
+        if lateness > self.rt_period_s:         # started more than a period late
+            if self._overrun(now, lateness):
+                return
+        else:
+            self.overrun_run = 0
         try:
             self._step(self.rt_steps)
         except (SimulationError, UserError) as error:
@@ -735,7 +865,30 @@ class DcpSlaveServer:
             self._set_state(State.SYNCHRONIZED)
 
 
+def _is_local(ip: str) -> bool:
+    """Is ``ip`` an address of this machine (one a socket can be bound to)?"""
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.bind((ip, 0))
+        return True
+    except OSError:
+        return False
+    finally:
+        probe.close()
+
+
 # ---- the command ---------------------------------------------------------------------------
+
+def exposure_warning(host: str, port: int) -> Optional[str]:
+    """The one warning line for a control port that is reachable from outside this machine
+    (None on a loopback address)."""
+    if ipaddress.ip_address(host).is_loopback:
+        return None
+    where = "every interface of this machine" if host == "0.0.0.0" else "a network interface"
+    return (f"warning: the control port {host}:{port} is open on {where}: DCP has no authentication, so "
+            f"anyone who reaches it can register this slave and drive the FMU (once registered, it obeys "
+            f"only its master's address)")
+
 
 def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optional[Path],
           drop_data: float, seed: Optional[int], quiet: bool = False, dcpx_in: Optional[Path] = None) -> int:
@@ -745,6 +898,9 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
     from orchestrator.interrupts import FLAG, deferred
 
     fmu_path = Path(fmu_path)
+    if not host.strip():        # an unset variable: the socket would listen on every interface
+        raise UserError(f"dcp-slave: --host {host!r}: an IPv4 address is expected (127.0.0.1 for this machine only, "
+                        "0.0.0.0 for every interface)")
     if not 0.0 <= drop_data < 1.0:
         raise UserError(f"dcp-slave: --drop-data {drop_data:g}: a fraction in [0, 1) is expected")
     interface = read_interface(fmu_path)
@@ -772,9 +928,16 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
             raise UserError(f"dcp-slave: --dcpx-out {dcpx_out}: {error.strerror}") from None
     workdir = new_workdir()
 
+    def warn(message: str) -> None:
+        print(f"railcosim dcp-slave: {message}", file=sys.stderr, flush=True)
+
     def log(message: str) -> None:
         if not quiet:
-            print(f"railcosim dcp-slave: {message}", file=sys.stderr, flush=True)
+            warn(message)
+
+    exposure = exposure_warning(host, port)
+    if exposure:
+        warn(exposure)
 
     if description.logs():
         log("the description offers logging, which this slave does not provide: CFG_logging and INF_log "
@@ -783,7 +946,7 @@ def serve(fmu_path: Path, host: str, port: int, real_time: bool, dcpx_out: Optio
     def make_fmu():
         return make_slave(interface.model_identifier, fmu_path, interface, workdir, in_process=False)
 
-    slave = DcpSlaveServer(description, make_fmu, sock, drop_data=drop_data, seed=seed, log=log)
+    slave = DcpSlaveServer(description, make_fmu, sock, drop_data=drop_data, seed=seed, log=log, warn=warn)
     wake_r, wake_w = socket.socketpair()
     wake_r.setblocking(False)
     wake_w.setblocking(False)
