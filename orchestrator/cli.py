@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import re
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -28,13 +30,63 @@ DEFAULT_SYSTEM = "free_run"
 #: build sizes the CLI accepts (fmus/sizes.py has no limit of its own): a frame of 4096 samples
 #: is 1 s at 4 kHz, and every FMU holds K×M×N-sized arrays, so larger sizes only build for ages
 MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
+#: the largest local Dask cluster `study --workers` makes: each worker is a Python process of its
+#: own with its FMUs loaded (about 0.1 GB), and runs are CPU-bound, so beyond this on one machine
+#: a study only thrashes; a larger cluster is a --scheduler of its own
+MAX_LOCAL_WORKERS = 128
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # argparse reads "-inf", "-nan" and "-1e400" as option names ("expected one argument"):
+        # taken as values, so _Number names what is wrong with them
+        self._negative_number_matcher = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
     def error(self, message):  # one line, exit 2 (argparse prints usage on two)
         # main() says "railcosim: error:" once; a subcommand's parser names the subcommand
         where = self.prog.partition(" ")[2]
         raise UserError(f"{where}: {message}" if where else message)
+
+
+class _Number(argparse.Action):
+    """Every numeric option of every command (tests/test_bad_input.py walks the parser for them):
+    the text read as ``kind`` (int or float), finite, and within the option's own range —
+    ``minimum``/``maximum`` inclusive, ``above`` exclusive — else one line naming the option and
+    the value, exit 2, before the command starts. Ranges that depend on data or on the engine
+    (the line's sections, a capture's span, the master's clock, the pacing factors) are checked
+    where those live."""
+
+    def __init__(self, option_strings, dest, kind=float, minimum=None, maximum=None, above=None, of="", **kwargs):
+        super().__init__(option_strings, dest, **kwargs)
+        self.kind, self.minimum, self.maximum, self.above = kind, minimum, maximum, above
+        self.of = f" of {of}" if of else ""          # the quantity: "of seconds", "of metres"
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        command = parser.prog.partition(" ")[2]        # named as _Parser.error names it
+        option = option_string or self.option_strings[0]
+        setattr(namespace, self.dest, self.parse(values, f"{command}: {option}" if command else option))
+
+    def parse(self, text, option: str):
+        shown = str(text) if len(str(text)) <= 40 else f"{str(text)[:20]}… ({len(str(text))} characters)"
+        try:
+            value = self.kind(text)
+        except (TypeError, ValueError):   # int() also refuses digits beyond Python's 4300
+            wanted = "an integer" if self.kind is int else "a number"
+            raise UserError(f"{option} {shown}: not {wanted}{self.of}") from None
+        if not math.isfinite(value):      # float() reads nan, inf and 1e400 (as inf)
+            raise UserError(f"{option} {shown}: not a finite number{self.of}")
+        low, high = self.minimum, self.maximum
+        if (low is not None and value < low) or (high is not None and value > high) or \
+                (self.above is not None and value <= self.above):
+            if low is not None and high is not None:
+                wanted = f"from {low:g} to {high:g}"
+            elif self.above is not None:
+                wanted = f"more than {self.above:g}" + (f" and at most {high:g}" if high is not None else "")
+            else:
+                wanted = f"at least {low:g}" if low is not None else f"at most {high:g}"
+            raise UserError(f"{option} {shown}: must be {wanted}")
+        return value
 
 
 def _build_dir() -> Path:
@@ -80,10 +132,6 @@ def cmd_build(args) -> int:
     from fmus.sizes import BuildConfig
     from orchestrator.packaging.packing import pack_systems
 
-    for label, value, most in (("--sections", args.sections, MAX_SECTIONS), ("--trains", args.trains, MAX_TRAINS),
-                               ("--frame", args.frame, MAX_FRAME)):
-        if not 1 <= value <= most:
-            raise UserError(f"{label} {value}: must be from 1 to {most}")
     config = BuildConfig(args.sections, args.trains, args.frame)
     dest = Path(args.dest) if args.dest else _build_dir()
     results = build_all(dest, config, force=args.force)
@@ -298,8 +346,6 @@ def cmd_study(args) -> int:
     if args.run_dir is not None:
         raise UserError(f"study: unexpected argument {args.run_dir!r} (railcosim study STUDY, or "
                         "railcosim study report DIR)")
-    if args.workers is not None and args.workers < 1:
-        raise UserError(f"--workers {args.workers}: must be at least 1")
     if args.workers is not None and args.scheduler:
         raise UserError("--workers sizes the local cluster; with --scheduler the cluster's own workers run")
     from orchestrator.study.spec import check_against_system, load_study
@@ -397,7 +443,7 @@ def add_new_command(sub) -> None:
                           "freight_vl80 for --traction ac; high_speed_tgv for --system TVM430)")
     new.add_argument("--system", default="ALSN", help="cab signalling: ALSN (default), ALS-EN, FIRE_DQPSK, or "
                                                       "TVM430 on a line of UM71 track circuits")
-    new.add_argument("--trains", type=int, help="number of trains (default: one per --timetable)")
+    new.add_argument("--trains", action=_Number, kind=int, minimum=1, help="number of trains (default: one per --timetable)")
     new.add_argument("--traction", help="dc, ac or none (default: the line's electrification; must agree)")
     new.set_defaults(func=cmd_new)
 
@@ -500,13 +546,13 @@ def cmd_fmu_env(args) -> int:
 def _add_run_setup_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of `run` that decide what is made before the first step (`validate` takes
     them too, to check a run with them)."""
-    parser.add_argument("--stop-time", type=float,
+    parser.add_argument("--stop-time", action=_Number, of="seconds",
                         help="seconds (default: the scenario's end, else the SSD's stopTime); a time "
                              "between two base steps ends the run at the next one, with a warning")
     parser.add_argument("--set", action="append", metavar="COMP.VAR=VALUE",
                         help="override a parameter (or an input no connection feeds)")
     parser.add_argument("--param-set", action="append", metavar="NAME", help="apply NAME.ssv")
-    parser.add_argument("--output-interval", type=float, default=None,
+    parser.add_argument("--output-interval", action=_Number, above=0.0, of="seconds", default=None,
                         help="seconds (default 0.1, rounded up to a multiple of the base step)")
     parser.add_argument("--capture", action="append", metavar="COMP.PORT@T0:T1",
                         help="full-rate capture of a frame output: a row (rail.e_coil[1]) or a whole port "
@@ -524,8 +570,6 @@ def _add_run_setup_arguments(parser: argparse.ArgumentParser) -> None:
 def cmd_dcp_slave(args) -> int:
     from orchestrator.dcp.slave import serve
 
-    if not 0 <= args.port <= 65535:
-        raise UserError(f"dcp-slave: --port {args.port}: a UDP port 0..65535 is expected")
     return serve(Path(args.fmu), args.host, args.port, args.real_time,
                  Path(args.dcpx_out) if args.dcpx_out else None, args.drop_data, args.seed, args.quiet,
                  dcpx_in=Path(args.dcpx) if args.dcpx else None)
@@ -555,8 +599,6 @@ def cmd_netlist(args) -> int:
 
     if args.time and not args.results:
         raise UserError(f"--time {args.time:g}: the trains' positions then come from a run: add --results RUN_DIR")
-    if not args.segment > 0:
-        raise UserError(f"--segment {args.segment:g}: a positive length in metres")
     setup, system = _rail_setup(args)
     try:
         netlist = section_netlist(setup, setup.section(args.section), args.wheelsets, args.segment, args.frequency,
@@ -565,7 +607,10 @@ def cmd_netlist(args) -> int:
         if system is not None:
             system.close()
     if args.output:
-        Path(args.output).write_text(netlist.text())
+        try:
+            Path(args.output).write_text(netlist.text())
+        except OSError as error:
+            raise UserError(f"netlist: -o {args.output}: cannot be written ({error.strerror or error})") from None
         print(f"wrote {args.output} ({len(netlist.cards)} elements); run it with: ngspice -b {args.output}")
     else:
         sys.stdout.write(netlist.text())
@@ -590,11 +635,11 @@ def cmd_crosscheck(args) -> int:
 
 def _add_section_arguments(parser, required: bool = True) -> None:
     parser.add_argument("--line", metavar="FILE", help="a line file instead of a system")
-    parser.add_argument("--section", type=int, required=required, metavar="K",
+    parser.add_argument("--section", action=_Number, kind=int, minimum=1, required=required, metavar="K",
                         help="the block section, 1-based" + ("" if required else " (default: every design)"))
     parser.add_argument("--train", action="append", metavar="FILE@HEAD",
                         help="a train: its rolling-stock file and its first wheelset's position, m (repeatable)")
-    parser.add_argument("--time", type=float, default=0.0, metavar="T",
+    parser.add_argument("--time", action=_Number, minimum=0.0, of="seconds", default=0.0, metavar="T",
                         help="the instant: the trains where a run's results put them at T s (with --results)")
     parser.add_argument("--results", metavar="RUN_DIR", help="a finished run's folder (its results.csv)")
 
@@ -605,9 +650,12 @@ def make_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
 
     build = sub.add_parser("build", help="build the FMUs into build/fmus and pack the shipped systems")
-    build.add_argument("--sections", type=int, default=8, help="block sections K (default 8)")
-    build.add_argument("--trains", type=int, default=2, help="trains M (default 2)")
-    build.add_argument("--frame", type=int, default=40, help="samples per frame N (default 40)")
+    build.add_argument("--sections", action=_Number, kind=int, minimum=1, maximum=MAX_SECTIONS, default=8,
+                       help=f"block sections K (default 8, at most {MAX_SECTIONS})")
+    build.add_argument("--trains", action=_Number, kind=int, minimum=1, maximum=MAX_TRAINS, default=2,
+                       help=f"trains M (default 2, at most {MAX_TRAINS})")
+    build.add_argument("--frame", action=_Number, kind=int, minimum=1, maximum=MAX_FRAME, default=40,
+                       help=f"samples per frame N (default 40, at most {MAX_FRAME})")
     build.add_argument("--dest", help="output folder (default build/fmus)")
     build.add_argument("--force", action="store_true", help="rebuild even when up to date")
     build.set_defaults(func=cmd_build)
@@ -619,7 +667,7 @@ def make_parser() -> argparse.ArgumentParser:
                           "earlier run's files in it are replaced")
     _add_run_setup_arguments(run)
     run.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
-    run.add_argument("--real-time", type=float, nargs="?", const=1.0, default=None, metavar="FACTOR",
+    run.add_argument("--real-time", action=_Number, nargs="?", const=1.0, default=None, metavar="FACTOR",
                      help="pace the run to the wall clock, FACTOR simulated seconds per second (default 1: "
                           "real time); late steps are counted in summary.json real_time")
     run.add_argument("--swap", action="append", metavar="NAME=dcp://HOST:PORT[?dcpx=FILE]",
@@ -630,7 +678,7 @@ def make_parser() -> argparse.ArgumentParser:
     report = sub.add_parser("report", help="pictures and the verdict table of a finished run")
     report.add_argument("run_dir", help="a run's output folder (results.csv, summary.json, metadata.json)")
     report.add_argument("--output", help="folder for the PNGs (default: the run folder)")
-    report.add_argument("--at", type=float, help="time (s) to centre the coil-EMF picture on")
+    report.add_argument("--at", action=_Number, of="seconds", help="time (s) to centre the coil-EMF picture on")
     report.set_defaults(func=cmd_report)
 
     inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")
@@ -647,7 +695,8 @@ def make_parser() -> argparse.ArgumentParser:
     study.add_argument("study", metavar="STUDY", help="study file (.toml or .json) or shipped study name; "
                                                       "or `report` followed by a study's output folder")
     study.add_argument("run_dir", nargs="?", metavar="DIR", help=argparse.SUPPRESS)
-    study.add_argument("--workers", type=int, help="local cluster size (default: one per core)")
+    study.add_argument("--workers", action=_Number, kind=int, minimum=1, maximum=MAX_LOCAL_WORKERS,
+                       help=f"local cluster size (default: one per core; at most {MAX_LOCAL_WORKERS})")
     study.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler, e.g. tcp://host:8786")
     study.add_argument("--output", help="study folder (default results/NAME)")
     study.add_argument("--resume", action="store_true",
@@ -671,12 +720,12 @@ def make_parser() -> argparse.ArgumentParser:
     netlist.add_argument("--wheelsets", choices=["nodes", "axles"], default="nodes",
                          help="nodes: one shunt per network node a train covers, as the rail line's network; "
                               "axles: every wheelset at its axle (default nodes)")
-    netlist.add_argument("--segment", type=float, default=1.0, metavar="M",
+    netlist.add_argument("--segment", action=_Number, above=0.0, of="metres", default=1.0, metavar="M",
                          help="with --wheelsets axles: the rails' pieces, at most M metres (default 1)")
-    netlist.add_argument("--frequency", type=float, metavar="HZ", help=".ac frequency (default the section's carrier)")
-    netlist.add_argument("--tran", type=float, metavar="SECONDS",
+    netlist.add_argument("--frequency", action=_Number, above=0.0, of="hertz", metavar="HZ", help=".ac frequency (default the section's carrier)")
+    netlist.add_argument("--tran", action=_Number, above=0.0, of="seconds", metavar="SECONDS",
                          help=".tran of the coder's code for the section over SECONDS instead of .ac")
-    netlist.add_argument("--ballast", type=float, default=0.0, metavar="OHM_KM",
+    netlist.add_argument("--ballast", action=_Number, minimum=0.0, of="Ω·km", default=0.0, metavar="OHM_KM",
                          help="the section's ballast resistance (default: the line file's)")
     netlist.add_argument("--output", "-o", metavar="FILE", help="write the netlist here (default: standard output)")
     netlist.set_defaults(func=cmd_netlist)
@@ -703,7 +752,7 @@ def make_parser() -> argparse.ArgumentParser:
     dcp.add_argument("fmu", help="the .fmu to serve")
     dcp.add_argument("--host", default="127.0.0.1",
                      help="IPv4 address to listen on (default 127.0.0.1; another than loopback is warned about)")
-    dcp.add_argument("--port", type=int, default=0,
+    dcp.add_argument("--port", action=_Number, kind=int, minimum=0, maximum=65535, default=0,
                      help="UDP port for control and data PDUs (default 0: a free port, printed at start)")
     dcp.add_argument("--real-time", action="store_true",
                      help="offer soft real-time mode only (the slave's own clock) instead of non-real-time")
@@ -711,9 +760,9 @@ def make_parser() -> argparse.ArgumentParser:
     dcp.add_argument("--dcpx", metavar="FILE",
                      help="serve this description (a bench device's .dcpx: its uuid, modes, time resolutions and "
                           "variables, matched to the FMU's by name) instead of the FMU's own")
-    dcp.add_argument("--drop-data", type=float, default=0.0, metavar="FRACTION",
+    dcp.add_argument("--drop-data", action=_Number, default=0.0, metavar="FRACTION",
                      help="test option: leave this fraction of the DAT PDUs it should send unsent")
-    dcp.add_argument("--seed", type=int, default=None, help="seed of --drop-data's random choice")
+    dcp.add_argument("--seed", action=_Number, kind=int, minimum=0, default=None, help="seed of --drop-data's random choice")
     dcp.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     dcp.set_defaults(func=cmd_dcp_slave)
 

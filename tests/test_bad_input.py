@@ -136,3 +136,81 @@ def test_an_input_outside_its_declared_range_names_the_port(tmp_path, product_fm
     code, _, stderr = railcosim("run", system, "--no-build", "--output", tmp_path / "out", "--set", setting)
     words = "above its maximum 4" if value == "99" else "below its minimum 0"
     _expect_error(code, stderr, "ato", f"input {name.split('.')[1]} = {value} is {words}")
+
+
+# ---- every numeric option of every command (orchestrator/cli.py, _Number) ---------------------------
+def _numeric_options():
+    """(command words, option, its _Number action) for every numeric option the parser has."""
+    import argparse
+
+    from orchestrator.cli import _Number, make_parser
+
+    found = []
+
+    def walk(parser, words):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, words + (name,))
+            elif isinstance(action, _Number):
+                found.append((words, action.option_strings[0], action))
+            else:       # a number read any other way would miss the shared checks
+                assert action.type not in (int, float), (words, action.option_strings)
+
+    walk(make_parser(), ())
+    return found
+
+
+NUMERIC_OPTIONS = _numeric_options()
+NOT_A_NUMBER = {float: ["nan", "inf", "-inf", "1e400", "-1e400", "NaN", "Infinity", "x"],
+                int: ["nan", "inf", "1.5", "1e3", "9" * 5000, "x"]}
+
+
+def _main_error(capsys, monkeypatch, tmp_path, *argv):
+    """The CLI's main in this process (as `railcosim ARGV`): its exit code and its one stderr line."""
+    from orchestrator.cli import main
+
+    monkeypatch.chdir(tmp_path)           # nothing a command might write lands in the checkout
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    line = _expect_error(code, err)
+    assert list(tmp_path.iterdir()) == []     # refused before the command did anything
+    return line
+
+
+def test_every_command_has_its_numeric_options_checked():
+    commands = {words[0] for words, _, _ in NUMERIC_OPTIONS}
+    assert commands >= {"build", "run", "validate", "report", "study", "netlist", "crosscheck", "dcp-slave", "new"}
+
+
+@pytest.mark.parametrize("words, option, action", NUMERIC_OPTIONS,
+                         ids=[f"{' '.join(w)} {o}" for w, o, _ in NUMERIC_OPTIONS])
+def test_a_numeric_option_that_is_not_a_finite_number_is_one_line(capsys, monkeypatch, tmp_path, words, option,
+                                                                   action):
+    """nan, ±inf, a literal beyond the double range (float() reads 1e400 as inf), text, and for
+    an integer option a fraction or 5000 digits (int() refuses more than 4300): one line naming
+    the command, the option and the value, exit 2, before the command starts."""
+    for value in NOT_A_NUMBER[action.kind]:
+        line = _main_error(capsys, monkeypatch, tmp_path, *words, f"{option}={value}")
+        shown = value if len(value) <= 40 else value[:20]
+        assert f"{' '.join(words)}: {option} {shown}" in line
+        assert ("not an integer" if action.kind is int else ("not a finite number" if value != "x" else
+                                                              "not a number")) in line
+    # a negative value as its own argument is the option's value, not an unknown option
+    line = _main_error(capsys, monkeypatch, tmp_path, *words, option, "-inf")
+    assert f"{option} -inf: not" in line
+
+
+@pytest.mark.parametrize("words, option, action", [o for o in NUMERIC_OPTIONS if
+                                                   {o[2].minimum, o[2].maximum, o[2].above} != {None}],
+                         ids=[f"{' '.join(w)} {o}" for w, o, a in NUMERIC_OPTIONS if
+                              {a.minimum, a.maximum, a.above} != {None}])
+def test_a_numeric_option_outside_its_range_is_one_line(capsys, monkeypatch, tmp_path, words, option, action):
+    step = 1 if action.kind is int else 0.5
+    outside = ([action.minimum - step] if action.minimum is not None else []) + \
+        ([action.maximum + step] if action.maximum is not None else []) + \
+        ([action.above] if action.above is not None else [])
+    for value in outside:
+        text = str(action.kind(value))
+        line = _main_error(capsys, monkeypatch, tmp_path, *words, f"{option}={text}")
+        assert f"{option} {text}: must be" in line

@@ -234,6 +234,100 @@ def test_bad_options_and_sidecars_are_refused(tmp_path):
     assert code == 2 and "is a folder" in stderr and "Traceback" not in stderr
 
 
+LONG = "9" * 4001       # int() reads it, float() of it overflows: an OverflowError came out of the import
+BAD_ATTRIBUTES = [      # (old text, new text, what the one line says) in the 3.2 fixture
+    # an id missing where the import names and links the element, or given twice
+    ('<netElement id="ne_t2" length="6000">', '<netElement length="6000">',
+     "netElement (line 30): attribute id missing"),
+    ('<signalIS id="sig_5"', '<signalIS', "signalIS (line 154): attribute id missing"),
+    ('<trainDetectionElement id="ij_1800"', '<trainDetectionElement id=""', "trainDetectionElement (line 237): "
+                                                                            "attribute id empty"),
+    ('<tvdSection id="tvd_2"', '<tvdSection', "tvdSection (line 271): attribute id missing"),
+    ('<netElement id="ne_br" length="1500">', '<netElement id="ne_t1b" length="1500">',     # replaced a track
+     "netElement 'ne_t1b' (line 27): id 'ne_t1b' is also the id of the netElement at line 24"),
+    ('<signalIS id="sig_5"', '<signalIS id="sig_1"',                                       # dropped a signal
+     "signalIS 'sig_1' (line 154): id 'sig_1' is also the id of the signalIS at line 144"),
+    ('<speedSection id="ss_works"', '<speedSection id="tvd_1"', "tvdSection 'tvd_1' (line 265): id 'tvd_1' is "
+                                                                "also the id of the speedSection at line 205"),
+    # a reference naming nothing in the file
+    ('<spotLocation id="op_south_t1" netElementRef="ne_t1b"', '<spotLocation id="op_south_t1" netElementRef="ne_x"',
+     "spotLocation 'op_south_t1' (line 116): attribute netElementRef='ne_x' names no element of the file"),
+    ('<validForSpeedProfile ref="sp_pass"/>', '<validForSpeedProfile ref="sp_x"/>',
+     "speedSection 'ss_t1_pass' (line 180): <validForSpeedProfile ref='sp_x'> at line 185 names no element"),
+    # numbers: not one, not finite, beyond any railway quantity, outside what the attribute means
+    ('<netElement id="ne_t1b" length="3000">', f'<netElement id="ne_t1b" length="{LONG}">',
+     "netElement 'ne_t1b' (line 24): attribute length='99999999999999999999'… (4001 characters) is beyond ±1e+12"),
+    ('<netElement id="ne_t1b" length="3000">', '<netElement id="ne_t1b" length="1e400">',
+     "netElement 'ne_t1b' (line 24): attribute length='1e400' is beyond ±1e+12"),
+    ('<netElement id="ne_t1b" length="3000">', '<netElement id="ne_t1b" length="NaN">',
+     "netElement 'ne_t1b' (line 24): attribute length='NaN' is not a finite number"),
+    ('<netElement id="ne_t1b" length="3000">', '<netElement id="ne_t1b" length="3_000">',
+     "netElement 'ne_t1b' (line 24): attribute length='3_000' is not a number"),
+    ('<netElement id="ne_t1b" length="3000">', '<netElement id="ne_t1b" length="3e6">',
+     "netElement 'ne_t1b' (line 24): length 3e+06 m: longer than the longest line railcosim runs (1000 km)"),
+    ('<intrinsicCoordinate id="ne_t1b_1" intrinsicCoord="1"/>', '<intrinsicCoordinate id="ne_t1b_1" '
+                                                                'intrinsicCoord="5"/>',
+     "intrinsicCoordinate 'ne_t1b_1' (line 25): attribute intrinsicCoord='5': must be from 0 to 1"),
+    ('netElementRef="ne_t1b" applicationDirection="both" pos="2600"/>',
+     'netElementRef="ne_t1b" applicationDirection="both" pos="5000"/>',
+     "spotLocation 'op_south_t1' (line 116): attribute pos=5000 m is off netElement 'ne_t1b', which is 3000 m long"),
+    ('netElementRef="ne_t1b" applicationDirection="both" pos="2600"/>',
+     f'netElementRef="ne_t1b" applicationDirection="both" pos="-{LONG}"/>',
+     "spotLocation 'op_south_t1' (line 116): attribute pos='-9999999999999999999'… (4002 characters) is beyond"),
+    ('frequency="50" rcs:transmitter="KPT-7"', f'frequency="{LONG}" rcs:transmitter="KPT-7"',
+     "tvdSection 'tvd_1' (line 265): attribute frequency="),
+    ('rcs:ballastOhmKm="1.2"', 'rcs:ballastOhmKm="wet"',            # a ValueError came out of the import
+     "tvdSection 'tvd_1' (line 265): attribute rcs:ballastOhmKm='wet' is not a number"),
+    ('rcs:ballastOhmKm="1.2"', 'rcs:ballastOhmKm="INF"', "attribute rcs:ballastOhmKm='INF' is not a finite number"),
+    ('rcs:bondLeadOffsetM="1.5"', 'rcs:bondLeadOffsetM="x"',
+     "trainDetectionElement 'ij_0' (line 234): attribute rcs:bondLeadOffsetM='x' is not a number"),
+    ('<speedSection id="ss_t1_pass" maxSpeed="120"', '<speedSection id="ss_t1_pass" maxSpeed="fast"',
+     "speedSection 'ss_t1_pass' (line 180): attribute maxSpeed='fast' is not a number"),   # was: left out
+    ('<speedSection id="ss_t1_pass" maxSpeed="120"', '<speedSection id="ss_t1_pass" maxSpeed="NaN"',
+     "speedSection 'ss_t1_pass' (line 180): attribute maxSpeed='NaN' is not a finite number"),
+    ('<linePerformance maxSpeed="120"/>', '<linePerformance maxSpeed="1e308"/>',
+     "linePerformance (line 96): attribute maxSpeed='1e308' is beyond ±1e+12"),
+    ('gradient="5"', 'gradient="-INF"', "gradientCurve 'gc_2' (line 60): attribute gradient='-INF' is not a finite"),
+    ('<netRelation id="nr_t1a_t1b" positionOnA="1"', '<netRelation id="nr_t1a_t1b" positionOnA="2"',   # was: no path
+     "netRelation 'nr_t1a_t1b' (line 35): attribute positionOnA='2': must be 0 or 1"),
+    ('<line id="line_main" lineType="mainLine">', '<line id="line_main" lineType="mainLine" rcs:divergingRoutes="'
+                                                  + "[" * 100000 + "]" * 100000 + '">',    # a RecursionError
+     "line 'line_main' (line 89): rcs:divergingRoutes nested more than 64 deep"),
+    ('<netElement id="ne_t1a" length="3000">', '<netElement id="ne_t1a" length="999000">',
+     "the running path ne_t1a → ne_t1b is 1.002e+06 m long: longer than the longest line railcosim runs"),
+]
+
+
+@pytest.mark.parametrize("old, new, message", BAD_ATTRIBUTES, ids=[m[:60] for _, _, m in BAD_ATTRIBUTES])
+def test_an_id_a_reference_or_a_number_the_import_cannot_use_is_one_line_naming_the_element(tmp_path, old, new,
+                                                                                            message):
+    stderr = _refused(tmp_path, _variant(tmp_path, FIXTURE_32, old, new))
+    assert message in stderr, stderr
+
+
+def test_a_schema_folder_whose_xsd_does_not_parse_is_one_line_naming_the_file(tmp_path):
+    """An undefined entity in the user's railml3.xsd (an lxml XMLSyntaxError came out), or in a
+    file it includes; a schema that loads validates the fixture (our extension schema with it)."""
+    head = '<?xml version="1.0"?>\n<xs:schema xmlns:xs="http://www.w3.org/2001/XMLSchema" ' \
+           'targetNamespace="https://www.railml.org/schemas/3.2" elementFormDefault="qualified">\n'
+    broken, including, lax = tmp_path / "broken", tmp_path / "including", tmp_path / "lax"
+    for folder in (broken, including, lax):
+        folder.mkdir()
+    (broken / "railml3.xsd").write_text(head + "<xs:annotation><xs:documentation>&undefined;</xs:documentation>"
+                                               "</xs:annotation>\n</xs:schema>\n")
+    (including / "railml3.xsd").write_text(head + '<xs:include schemaLocation="part.xsd"/>\n</xs:schema>\n')
+    (including / "part.xsd").write_text((broken / "railml3.xsd").read_text())
+    stderr = _refused(tmp_path, FIXTURE_32, "--schema", broken)
+    assert f"{broken / 'railml3.xsd'}:3: not an XML document (Entity 'undefined' not defined" in stderr, stderr
+    stderr = _refused(tmp_path, FIXTURE_32, "--schema", including)
+    assert f"{including / 'part.xsd'}:3: the schema does not load (Entity 'undefined' not defined)" in stderr, stderr
+    (lax / "railml3.xsd").write_text(head + '<xs:element name="railML"><xs:complexType><xs:sequence>'
+                                            '<xs:any processContents="lax" minOccurs="0" maxOccurs="unbounded"/>'
+                                            '</xs:sequence><xs:attribute name="version"/></xs:complexType>'
+                                            '</xs:element>\n</xs:schema>\n')
+    assert validate_railml(FIXTURE_32, lax) == (True, [])
+
+
 @pytest.mark.skipif(not os.environ.get("RAILCOSIM_RAILML_SCHEMA_31"),
                     reason="the railML 3.1 XSD is not redistributable: set RAILCOSIM_RAILML_SCHEMA_31 to its folder")
 def test_exports_and_the_31_fixture_validate_against_the_railml_31_schema(tmp_path):

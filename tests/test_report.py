@@ -120,3 +120,24 @@ def test_report_names_a_folder_that_is_not_a_run(tmp_path):
     (tmp_path / "empty").mkdir()
     code, _, stderr = railcosim("report", tmp_path / "empty")
     assert code == 2 and "no results.csv" in stderr
+
+
+@pytest.mark.parametrize("name, text, message", [
+    ("results.csv", "time,train.x\n0,100\n0.1,abc\n", "results.csv:3: column train.x: 'abc' is not a number"),
+    ("results.csv", "time,train.x\n0,100\n0.1,101,7\n", "results.csv:3: 3 values in a row of 2 columns"),
+    ("results.csv", "train.x,time\n0,1\n", "results.csv: its first column is not time"),
+    ("results.csv", "time,a\n0," + "9" * 200_000 + "\n", "results.csv: not a CSV file a railcosim run wrote"),
+    ("capture_rail.e_coil_1.csv", "time,rail.e_coil[1]\n", "no rows"),
+    ("capture_rail.e_coil_1.csv", "time,rail.e_coil[1]\n0.0,x\n", "column rail.e_coil[1]: 'x' is not a number"),
+], ids=["text", "torn row", "no time column", "beyond the field limit", "capture without rows", "capture text"])
+def test_report_of_a_results_file_no_run_wrote_is_one_line(tmp_path, name, text, message):
+    """Text where a number belongs (a ValueError traceback), a torn row, a line beyond the csv
+    module's field limit, a capture without rows: one line naming the file and line, exit 2."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "results.csv").write_text("time,x\n0,1\n")
+    (run / "summary.json").write_text(json.dumps({"system": "s", "trains": []}))
+    (run / "metadata.json").write_text(json.dumps({"components": {}}))
+    (run / name).write_text(text)
+    code, _, stderr = railcosim("report", run)
+    assert code == 2 and stderr.count("\n") == 1 and message in stderr and "Traceback" not in stderr, stderr

@@ -119,6 +119,52 @@ def test_netlist_command_writes_a_section_and_refuses_bad_input_in_one_line(tmp_
         assert code == 2 and stderr.count("\n") == 1 and message in stderr, stderr
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--ballast", "nan"], "netlist: --ballast nan: not a finite number"),      # was: the section's own
+    (["--ballast", "inf"], "netlist: --ballast inf: not a finite number"),      # was: a netlist ngspice rejects
+    (["--ballast", "5000"], "--ballast 5000: a ballast resistance from 0.1 to 1000 Ω·km"),
+    (["--frequency", "-50"], "netlist: --frequency -50: must be more than 0"),
+    (["--frequency", "nan"], "netlist: --frequency nan: not a finite number"),
+    (["--frequency", "inf"], "netlist: --frequency inf: not a finite number"),
+    (["--train", "passenger_chs7.json@nan"], "the head position 'nan' is not a finite number"),   # was: left out
+    (["--train", "passenger_chs7.json@-inf"], "the head position '-inf' is not a finite number"),
+    (["--time", "nan", "--results", "."], "netlist: --time nan: not a finite number"),          # was: the first row
+    (["--tran", "inf"], "netlist: --tran inf: not a finite number"),
+    (["--wheelsets", "axles", "--segment", "1e-9"], "--segment 1e-09: section 1's 2600 m of rails would be 2.6e+12 "
+                                                    "pieces; at most 100000"),        # was: an 18.9 TiB allocation
+    (["--wheelsets", "axles", "--segment", "0"], "netlist: --segment 0: must be more than 0"),
+    (["-o", "/nonexistent/s1.cir"], "-o /nonexistent/s1.cir: cannot be written"),
+])
+def test_netlist_options_not_finite_or_out_of_range_are_one_line(tmp_path, args, message):
+    code, stdout, stderr = railcosim("netlist", "free_run", "--section", "1", *args, cwd=tmp_path)
+    assert code == 2 and stderr.count("\n") == 1 and message in stderr and "Traceback" not in stderr, stderr
+    assert stdout == "" and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--section", "99"], "--section 99: the line default_line.json has sections 1–8"),      # was: IndexError
+    (["--section", "0"], "crosscheck: --section 0: must be at least 1"),
+    (["--section", "1", "--train", "passenger_chs7.json@nan"], "is not a finite number"),   # was: passed without it
+    (["--time", "inf"], "crosscheck: --time inf: not a finite number"),
+])
+def test_crosscheck_options_out_of_range_are_one_line(args, message):
+    code, _, stderr = railcosim("crosscheck", "spice", "free_run", *args)
+    assert code == 2 and stderr.count("\n") == 1 and message in stderr and "Traceback" not in stderr, stderr
+
+
+@pytest.mark.parametrize("results, args, message", [
+    ("time,train.x\n0,100\n0.1,abc\n", [], "results.csv:3: column train.x: 'abc' is not a number"),
+    ("time,train.x\n0,100\n0.1\n", [], "results.csv:3: 1 values in a row of 2 columns"),
+    ("time,train.x\n0,nan\n", [], "results.csv:2: train.x = nan is not a position"),
+    ("time,train.x\n0,100\n0.1,101\n", ["--time", "900"], "--time 900: "),
+    ("", [], "results.csv: no header line"),
+])
+def test_netlist_from_a_results_folder_that_no_run_wrote_is_one_line(tmp_path, results, args, message):
+    (tmp_path / "results.csv").write_text(results)
+    code, _, stderr = railcosim("netlist", "free_run", "--section", "1", "--results", tmp_path, *args)
+    assert code == 2 and stderr.count("\n") == 1 and message in stderr and "Traceback" not in stderr, stderr
+
+
 # ---- against the real ngspice -------------------------------------------------------------------------
 @needs_ngspice
 def test_ngspice_solves_the_rail_lines_network_as_we_do():

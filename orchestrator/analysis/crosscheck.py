@@ -442,13 +442,13 @@ def crosscheck_system(setup, section: Optional[int], out) -> bool:
     name = line.path.stem
     carriers = sorted({float(settings.carrier_hz or s.carrier_hz) for s in line.sections}
                       | {float(s.carrier_hz) for s in line.sections})
+    only = None if section is None else setup.section(section)     # a section the line has
     passed = True
     out.write(f"## .ac: the rail line's network against ngspice ({name}; largest relative difference, bound {AC_BOUND:g})\n\n")
-    only = None if section is None else section - 1
     rows = ac_rows(line, name, carriers, settings=settings, only=only)
     out.write("\n".join(ac_table(rows)) + "\n\n")
     passed &= all(r.passed() for r in rows)
-    k = (section or 1) - 1
+    k = only or 0
     out.write(f"## .tran: the discretised model against ngspice (of the local amplitude, bound {TRAN_BOUND:g})\n\n")
     tran = [tran_check(line, name, k, settings=settings)]
     out.write("\n".join(tran_table(tran)) + "\n\n")

@@ -32,6 +32,10 @@ from fmus.rail_line.track_circuit import OPEN_OHM, Faults, TrackCircuit, rail_im
 
 # a quantity as a sum of vectors of the output: [(coefficient, vector name), …]
 Probe = List[Tuple[float, str]]
+#: the most rail pieces an axle netlist cuts a track circuit into (four cards each): the longest
+#: circuit in 1 m pieces is about 3000; a shorter segment than this allows would only make a
+#: netlist of gigabytes (`--segment 1e-9`: 10¹² pieces)
+MAX_AXLE_PIECES = 100_000
 
 
 def number(value: float) -> str:
@@ -134,6 +138,8 @@ def axle_netlist(circuit: TrackCircuit, axles_m: Sequence[float], heads_m: Seque
     rail_r, rail_l = rail_impedance(p, frequency_hz)
     ballast = circuit.ballast(faults)
     start, feed, end = float(circuit.start_m), float(circuit.feed_m), float(circuit.end_m)
+    if not (end - start) / segment_m <= MAX_AXLE_PIECES:
+        raise ValueError(f"segment_m {segment_m:g}: {end - start:g} m of rails in more than {MAX_AXLE_PIECES} pieces")
     axles = sorted(float(a) for a in axles_m if start <= a <= end)
     broken = float(faults.broken_rail_m) if start <= faults.broken_rail_m < feed else None
 

@@ -5,8 +5,9 @@ its head at an instant (its Traction's x0 at t = 0, or a finished run's results.
 """
 from __future__ import annotations
 
-import csv
 import inspect
+import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Tuple
@@ -64,24 +65,37 @@ def _load(loader, path, what: str):
 
 
 def _heads_at(results: Path, time_s: float, names: List[str]) -> Dict[str, float]:
-    """Each component's ``x`` in a run's results.csv at the row nearest ``time_s``."""
+    """Each component's ``x`` in a run's results.csv at the row nearest ``time_s``, which must
+    lie within the rows' span (one output interval either side at most)."""
+    from orchestrator.analysis.report import results_rows
+
     if not results.is_file():
         raise UserError(f"--results: {results}: no results.csv there")
-    with results.open(newline="") as handle:
-        reader = csv.reader(handle)
-        header = next(reader)
-        columns = {name: header.index(f"{name}.x") for name in names if f"{name}.x" in header}
-        missing = [name for name in names if name not in columns]
-        if missing:
-            raise UserError(f"--results: {results}: no column {missing[0]}.x")
-        best, best_row = None, None
-        for row in reader:
-            gap = abs(float(row[0]) - time_s)
-            if best is None or gap < best:
-                best, best_row = gap, row
-        if best_row is None:
-            raise UserError(f"--results: {results}: no rows")
-    return {name: float(best_row[index]) for name, index in columns.items()}
+    rows = results_rows(results)
+    _, header = next(rows)
+    columns = {name: header.index(f"{name}.x") for name in names if f"{name}.x" in header}
+    missing = [name for name in names if name not in columns]
+    if missing:
+        raise UserError(f"--results: {results}: no column {missing[0]}.x")
+    best, best_row, first, last, interval = None, None, None, None, 0.0
+    for number, row in rows:
+        if last is not None:
+            interval = row[0] - last
+        first = row[0] if first is None else first
+        last = row[0]
+        gap = abs(row[0] - time_s)
+        if best is None or gap < best:
+            best, best_row = gap, (number, row)
+    if best_row is None:
+        raise UserError(f"--results: {results}: no rows")
+    if not first - interval <= time_s <= last + interval:
+        raise UserError(f"--time {time_s:g}: {results} holds the run from {first:g} to {last:g} s")
+    number, row = best_row
+    heads = {name: row[index] for name, index in columns.items()}
+    for name, head in heads.items():
+        if not math.isfinite(head):
+            raise UserError(f"--results: {results}:{number}: {name}.x = {head} is not a position")
+    return heads
 
 
 def rail_setup(system: SystemDescription, time_s: float = 0.0, results: Optional[Path] = None) -> RailSetup:
@@ -137,10 +151,21 @@ def add_train(setup: RailSetup, spec: str) -> None:
         head_m = float(head)
     except ValueError:
         raise UserError(f"--train {spec}: the head position {head!r} is not a number") from None
+    if not math.isfinite(head_m):      # float() reads nan and inf: such a train would be left out
+        raise UserError(f"--train {spec}: the head position {head!r} is not a finite number of metres")
     from fmus.data.loader import DATA
     path = stock_file if Path(stock_file).is_file() else str(DATA / stock_file)
     stock = _load(load_rolling_stock, path, f"--train {spec}")
     setup.trains.append(TrainOnLine(Path(path).stem, Path(path).name, stock.length_m, stock.wheelset_offsets_m, head_m))
+
+
+def line_ballast_range() -> Tuple[float, float]:
+    """The ballast resistances a line file's block section may have, Ω·km (its schema's)."""
+    from fmus.data.loader import SCHEMAS
+
+    schema = json.loads((SCHEMAS / "line.schema.json").read_text(encoding="utf-8"))
+    ballast = schema["properties"]["block_sections"]["items"]["properties"]["ballast_ohm_km"]
+    return float(ballast["minimum"]), float(ballast["maximum"])
 
 
 def settings_with_trains(setup: RailSetup) -> RailSettings:
@@ -168,7 +193,8 @@ def section_netlist(setup: RailSetup, k: int, wheelsets: str = "nodes", segment_
     from fmus.rail_line.core import RailLineCore
     from fmus.rail_line.track_circuit import Faults
     from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-    from orchestrator.analysis.netlist import ac_source, axle_netlist, lumped_netlist, print_probes, tran_source
+    from orchestrator.analysis.netlist import (MAX_AXLE_PIECES, ac_source, axle_netlist, lumped_netlist,
+                                               print_probes, tran_source)
 
     settings = settings_with_trains(setup)
     core = RailLineCore(setup.line, len(setup.line.sections), len(settings.train_length_m), 40, settings)
@@ -180,8 +206,10 @@ def section_netlist(setup: RailSetup, k: int, wheelsets: str = "nodes", segment_
     described = ", ".join(f"{t.name} ({t.stock_file}) head {t.head_m:g} m" for t in setup.trains
                           if t.head_m >= circuit.start_m and t.head_m - t.length_m <= circuit.end_m) or "no train"
     title = f"railcosim: {setup.line.path.name} section {k + 1} ({setup.line.sections[k].name}), {described}"
-    if ballast_ohm_km < 0:
-        raise UserError(f"--ballast {ballast_ohm_km:g}: a ballast resistance > 0 Ω·km (0: the section's own)")
+    lowest, highest = line_ballast_range()
+    if ballast_ohm_km != 0 and not lowest <= ballast_ohm_km <= highest:   # (NaN too)
+        raise UserError(f"--ballast {ballast_ohm_km:g}: a ballast resistance from {lowest:g} to {highest:g} Ω·km, "
+                        "as a line file's (0: the section's own)")
     faults = Faults(ballast_ohm_km)
     if wheelsets == "nodes":
         configs, rows = core.bank.configuration(heads)
@@ -190,6 +218,11 @@ def section_netlist(setup: RailSetup, k: int, wheelsets: str = "nodes", segment_
         named = {f"head{h}": next(t.name for j, t in enumerate(setup.trains) if rows[k].get(j) == h)
                  for h in range(len(head_nodes))}
     elif wheelsets == "axles":
+        rails_m = float(circuit.end_m - circuit.start_m)
+        if not rails_m / segment_m <= MAX_AXLE_PIECES:        # before any array is made (NaN too)
+            raise UserError(f"--segment {segment_m:g}: section {k + 1}'s {rails_m:g} m of rails would be "
+                            f"{rails_m / segment_m:.3g} pieces; at most {MAX_AXLE_PIECES} "
+                            f"(--segment {rails_m / MAX_AXLE_PIECES:.3g} or more)")
         axles = [t.head_m - float(o) for t in setup.trains for o in t.wheelsets_m]
         netlist = axle_netlist(circuit, axles, [t.head_m for t in inside], faults, frequency,
                                settings.transformer_ratio, segment_m, title)

@@ -29,7 +29,7 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 from lxml import etree
 
-from fmus.data.loader import read_json_file
+from fmus.data.loader import MAX_JSON_DEPTH, SCHEMAS, json_nesting_depth, read_json_file
 from fmus.errors import FmuInputError
 from orchestrator.errors import UserError
 
@@ -58,6 +58,11 @@ MAX_TRACK_CIRCUIT_M = 2600.0
 #: candidate paths enumerated through a topology before the import gives up (a large station
 #: layout without a --line-id)
 MAX_PATHS = 20000
+#: the longest line the import makes (m): a line file's longest (its schema's length_m maximum)
+MAX_LINE_M = float(json.loads((SCHEMAS / "line.schema.json").read_text(encoding="utf-8"))
+                   ["properties"]["length_m"]["maximum"])
+#: intrinsic coordinates: a place along a netElement, 0 at its start, 1 at its end
+INTRINSIC = dict(minimum=0.0, maximum=1.0, what=" (0 at the netElement's start, 1 at its end)")
 #: units of linear positioning systems → metres
 UNIT_M = {"m": 1.0, "km": 1000.0, "mm": 0.001}
 
@@ -89,15 +94,46 @@ class RailmlImport:
 
 
 # ---- small helpers --------------------------------------------------------------------------------
+#: a decimal literal as xs:double writes one (Python's float() also reads "1_000", "١٢" and " 1 ")
+_DECIMAL = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
+_NOT_FINITE = {"inf", "+inf", "-inf", "nan", "infinity", "+infinity", "-infinity"}
+#: no number the import reads comes near this in any unit railML uses (a position on a 10 000 km
+#: line in millimetres is 10¹⁰): larger is a fault in the file, refused before any arithmetic
+MAX_MAGNITUDE = 1e12
+#: the railML elements the import names and links by their id (railML requires one on each)
+IDENTIFIED = {"netElement", "netRelation", "linearPositioningSystem", "electrificationSystem", "speedProfile",
+              "track", "line", "operationalPoint", "platform", "signalIS", "signalIL", "trainDetectionElement",
+              "tvdSection", "bufferStop", "speedSection", "electrificationSection", "gradientCurve",
+              "horizontalCurve"}
+#: attributes that refer to an element by its id besides ``ref`` and those ending in ``Ref``
+#: (xs:IDREF: railML resolves every one within the file)
+REFERENCE_ATTRIBUTES = {"belongsToParent"}
+
+
 def _number(text: Optional[str]):
-    """An int for an integer literal ("2600"), else a float ("2600.0", "1e3"); None for None.
-    Keeping ints as ints lets a line file go through railML and back unchanged."""
+    """An int for an integer literal ("2600"), else a float ("2600.0", "1e3"); None for None;
+    ValueError for anything but a decimal literal. Keeping ints as ints lets a line file go
+    through railML and back unchanged."""
     if text is None:
         return None
     text = text.strip()
-    if re.fullmatch(r"[+-]?\d+", text):
+    if re.fullmatch(r"[+-]?[0-9]+", text) and len(text) <= 4000:     # int() refuses more than 4300 digits
         return int(text)
+    if text.lower() in _NOT_FINITE:
+        return float(text)
+    if not _DECIMAL.fullmatch(text):
+        raise ValueError(text)
     return float(text)
+
+
+def _shown(value: str) -> str:
+    """An attribute's value for a message: a 4000-digit number is not repeated in full."""
+    return repr(value) if len(value) <= 40 else f"{value[:20]!r}… ({len(value)} characters)"
+
+
+def _attribute(name: str) -> str:
+    """An attribute's name as the file writes it (our extension's with its rcs: prefix)."""
+    return "rcs:" + name[len(RC):] if name.startswith(RC) else name
 
 
 def _text(value) -> str:
@@ -120,14 +156,38 @@ def _local(element) -> str:
 
 
 class _Doc:
-    """The parsed file: namespaced look-ups and one-line errors naming the element."""
+    """The parsed file: namespaced look-ups and one-line errors naming the element. Every id is
+    unique, every element the import links has one, and every reference names an element of
+    the file (:meth:`_check_ids`), before anything is read."""
 
     def __init__(self, path: Path, root, ns: str):
         self.path, self.root, self.ns = path, root, ns
         self.by_id: Dict[str, object] = {}
-        for element in root.iter():
-            if isinstance(element.tag, str) and element.get("id") is not None:
-                self.by_id.setdefault(element.get("id"), element)
+        self._check_ids()
+
+    def _check_ids(self) -> None:
+        elements = [e for e in self.root.iter() if isinstance(e.tag, str)]
+        for element in elements:
+            ident = element.get("id")
+            if not ident and _local(element) in IDENTIFIED and etree.QName(element).namespace == self.ns:
+                self.fail(element, f"attribute id {'empty' if ident == '' else 'missing'} (the import names and "
+                                   f"links every {_local(element)} by its id)")
+            if ident is None:
+                continue
+            first = self.by_id.setdefault(ident, element)
+            if first is not element:
+                self.fail(element, f"id {ident!r} is also the id of the {_local(first)} at line {first.sourceline} "
+                                   "(railML ids are unique in a file)")
+        for element in elements:
+            for name, value in element.attrib.items():
+                local = _attribute(name).rpartition(":")[2]
+                if (local == "ref" or local.endswith("Ref") or local in REFERENCE_ATTRIBUTES) and \
+                        value not in self.by_id:
+                    owner = element if element.get("id") is not None else next(
+                        (e for e in element.iterancestors() if e.get("id")), element)
+                    what = f"attribute {_attribute(name)}={_shown(value)}" if owner is element else \
+                        f"<{_local(element)} {_attribute(name)}={_shown(value)}> at line {element.sourceline}"
+                    self.fail(owner, f"{what} names no element of the file (railML refers by id within the file)")
 
     def q(self, tag: str) -> str:
         return "{%s}%s" % (self.ns, tag)
@@ -148,18 +208,30 @@ class _Doc:
         line = "" if isinstance(element_or_id, str) else f" (line {element_or_id.sourceline})"
         raise UserError(f"{self.path}: {what}{line}: {message}")
 
-    def float_attr(self, element, name: str, required: bool = False):
+    def float_attr(self, element, name: str, required: bool = False, minimum: Optional[float] = None,
+                   maximum: Optional[float] = None, what: str = ""):
+        """Attribute ``name`` of ``element`` as a number (None when absent and not ``required``):
+        a decimal literal, finite, within ±MAX_MAGNITUDE and [``minimum``, ``maximum``]
+        (``what`` says why), else one line naming the element and the attribute."""
         value = element.get(name)
+        shown = f"attribute {_attribute(name)}"
         if value is None:
             if required:
-                self.fail(element, f"attribute {name} missing")
+                self.fail(element, f"{shown} missing")
             return None
         try:
             number = _number(value)
         except ValueError:
-            self.fail(element, f"attribute {name}={value!r} is not a number")
-        if not math.isfinite(number):
-            self.fail(element, f"attribute {name}={value!r} is not a finite number")
+            self.fail(element, f"{shown}={_shown(value)} is not a number")
+        if isinstance(number, float) and not math.isfinite(number) and value.strip().lower() in _NOT_FINITE:
+            self.fail(element, f"{shown}={_shown(value)} is not a finite number")
+        if not abs(number) <= MAX_MAGNITUDE:      # (float() reads 1e400 as inf)       # (an int of 4000 digits would not even convert to float)
+            self.fail(element, f"{shown}={_shown(value)} is beyond ±{MAX_MAGNITUDE:g}: no railway "
+                               "quantity is that large")
+        if (minimum is not None and number < minimum) or (maximum is not None and number > maximum):
+            bounds = f"from {minimum:g} to {maximum:g}" if minimum is not None and maximum is not None else (
+                f"at least {minimum:g}" if minimum is not None else f"at most {maximum:g}")
+            self.fail(element, f"{shown}={_shown(value)}: must be {bounds}{what}")
         return number
 
     def name_of(self, element) -> Optional[str]:
@@ -230,7 +302,7 @@ def _net_elements(doc: _Doc, notes: List[str]) -> Dict[str, _NetElement]:
         measures, points = [], []
         for system in doc.findall(element, "associatedPositioningSystem"):
             for coordinate in doc.findall(system, "intrinsicCoordinate"):
-                intrinsic = doc.float_attr(coordinate, "intrinsicCoord", required=True)
+                intrinsic = doc.float_attr(coordinate, "intrinsicCoord", required=True, **INTRINSIC)
                 for linear in doc.findall(coordinate, "linearCoordinate"):
                     reference = linear.get("positioningSystemRef") or system.get("positioningSystemRef") or ""
                     measure = doc.float_attr(linear, "measure", required=True)
@@ -257,6 +329,9 @@ def _net_elements(doc: _Doc, notes: List[str]) -> Dict[str, _NetElement]:
         if length is None or length <= 0:
             doc.fail(element, "no length: give it a length attribute, linear coordinates at both ends, or a "
                               "track with a length")
+        if length > MAX_LINE_M:
+            doc.fail(element, f"length {length:g} m: longer than the longest line railcosim runs "
+                              f"({MAX_LINE_M / 1000:g} km)")
         elements[ident] = _NetElement(ident, element, length, measures)
     if by_geometry:
         notes.append(f"lengths of netElements {', '.join(by_geometry)} taken from their geometric coordinates "
@@ -360,10 +435,13 @@ def _relations(doc: _Doc, elements: Dict[str, _NetElement]):
         if a_id not in elements or b_id not in elements:
             continue                                  # a relation between macro elements
         navigability = relation.get("navigability", "Both")
-        try:
-            end_a, end_b = int(relation.get("positionOnA", "1")), int(relation.get("positionOnB", "0"))
-        except ValueError:
-            doc.fail(relation, "positionOnA and positionOnB must be 0 or 1")
+        ends = {name: relation.get(name, default).strip() for name, default in (("positionOnA", "1"),
+                                                                                  ("positionOnB", "0"))}
+        for name, value in ends.items():
+            if value not in ("0", "1"):
+                doc.fail(relation, f"attribute {name}={_shown(value)}: must be 0 or 1 (the netElement's start "
+                                   "or end)")
+        end_a, end_b = int(ends["positionOnA"]), int(ends["positionOnB"])
         if navigability in ("Both", "AB"):
             links.setdefault((a_id, end_a), []).append((b_id, end_b))
         if navigability in ("Both", "BA"):
@@ -434,6 +512,9 @@ def _choose_path(doc: _Doc, elements, line_id: Optional[str], via: Sequence[str]
         steps.append(_Step(ident, forward, offset, length))
         offset = offset + length
     chosen = _Path(steps)
+    if chosen.length > MAX_LINE_M:
+        raise UserError(f"{doc.path}: the running path {' → '.join(s.id for s in steps)} is {chosen.length:g} m "
+                        f"long: longer than the longest line railcosim runs ({MAX_LINE_M / 1000:g} km)")
     if len({frozenset(i for i, _ in c) for c in candidates}) > 1:
         notes.append(f"running path chosen among {len(candidates)} ways through the topology (most stations, "
                      "then most block signals facing the train, then the longest, then main tracks): "
@@ -502,8 +583,13 @@ class _Locator:
     def _pos_on(self, ident: str, element, pos_name: str, intrinsic_name: str) -> Optional[float]:
         pos = self.doc.float_attr(element, pos_name)
         if pos is not None:
+            length = self.elements[ident].length
+            slack = LENGTH_TOLERANCE_M + LENGTH_TOLERANCE_SHARE * length
+            if not -slack <= pos <= length + slack:
+                self.doc.fail(element, f"attribute {pos_name}={pos:g} m is off netElement {ident!r}, which is "
+                                       f"{length:g} m long")
             return self.path.at(ident, pos)
-        intrinsic = self.doc.float_attr(element, intrinsic_name)
+        intrinsic = self.doc.float_attr(element, intrinsic_name, **INTRINSIC)
         if intrinsic is not None:
             return self.path.at(ident, intrinsic * self.elements[ident].length)
         return None
@@ -679,12 +765,16 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
         document["description"] = description
     document["length_m"] = length
     if line_element is not None and line_element.get(RC + "maxBallastOhmKm") is not None:
-        document["max_ballast_ohm_km"] = _number(line_element.get(RC + "maxBallastOhmKm"))
+        document["max_ballast_ohm_km"] = doc.float_attr(line_element, RC + "maxBallastOhmKm")
     if "max_ballast_ohm_km" in extras:
         document["max_ballast_ohm_km"] = extras["max_ballast_ohm_km"]
     if line_element is not None and line_element.get(RC + "divergingRoutes") is not None:
+        routes = line_element.get(RC + "divergingRoutes")
+        if json_nesting_depth(routes) > MAX_JSON_DEPTH:       # json.loads would recurse past Python's limit
+            doc.fail(line_element, f"rcs:divergingRoutes nested more than {MAX_JSON_DEPTH} deep: not a JSON list "
+                                   "of routes")
         try:                 # the line loader checks the routes themselves (signal, frog)
-            document["diverging_routes"] = json.loads(line_element.get(RC + "divergingRoutes"))
+            document["diverging_routes"] = json.loads(routes)
         except json.JSONDecodeError:
             raise UserError(f"{path}: line {line_element.get('id')}: rcs:divergingRoutes is not a JSON list") from None
     document["electrification"] = _electrification(doc, fi, locate, extras, notes)
@@ -791,11 +881,10 @@ def _detectors(doc: _Doc, fi, locate: _Locator, extras, notes):
         found.append(_Detector(position, element.get("id"), kind, element, zone))
         if kind == "insulatedRailJoint":
             joint = {"position_m": position}
-            for attribute, key, convert in (("impedanceBond", "impedance_bond", lambda v: v == "true"),
-                                            ("bondLeadOffsetM", "bond_lead_offset_m", _number)):
-                value = element.get(RC + attribute)
-                if value is not None:
-                    joint[key] = convert(value)
+            if element.get(RC + "impedanceBond") is not None:
+                joint["impedance_bond"] = element.get(RC + "impedanceBond") == "true"
+            if element.get(RC + "bondLeadOffsetM") is not None:
+                joint["bond_lead_offset_m"] = doc.float_attr(element, RC + "bondLeadOffsetM")
             for key in ("impedance_bond", "bond_lead_offset_m"):
                 value = joint_extras.get(element.get("id"), {}).get(key, defaults.get(key))
                 if value is not None and (key not in joint or key in joint_extras.get(element.get("id"), {})):
@@ -977,8 +1066,8 @@ def _sections(doc: _Doc, locate: _Locator, detectors: List[_Detector], signals: 
             assumed["transmitter"] += 1
         if transmitter == "alternate":     # the other type than the section before (docs/wayside_coder.md)
             transmitter = "KPT-7" if result and result[-1]["transmitter"] == "KPT-5" else "KPT-5"
-        ballast = own.get("ballast_ohm_km") or (_number(tvd.get(RC + "ballastOhmKm")) if tvd is not None and
-                                                tvd.get(RC + "ballastOhmKm") is not None else None)
+        ballast = own.get("ballast_ohm_km") or (doc.float_attr(tvd, RC + "ballastOhmKm") if tvd is not None
+                                                else None)
         if ballast is None:
             ballast = defaults.get("ballast_ohm_km", DEFAULTS["ballast_ohm_km"])
             assumed["ballast"] += 1
@@ -1167,11 +1256,7 @@ def _speeds(doc: _Doc, fi, locate: _Locator, line_element, extras, notes):
     default_speed = defaults.get("speed_kmh") or line_speed
     permanent, restrictions, unplaced, against = [], [], 0, 0
     for section in doc.findall(fi, "speeds", "speedSection"):
-        speed = section.get("maxSpeed")
-        try:
-            speed = _number(speed)
-        except (TypeError, ValueError):
-            speed = None
+        speed = doc.float_attr(section, "maxSpeed")
         if speed is None:
             continue
         refs = [r.get("ref") for r in doc.findall(section, "validForSpeedProfile")]
@@ -1503,7 +1588,14 @@ def validate_railml(path, schema_dir) -> Tuple[bool, List[str]]:
         raise UserError(f"--schema {schema_dir}: no railml3.xsd there (the folder of the railML 3.1 or 3.2 "
                         "schema files as railML.org distributes them)")
     doc = _parse(Path(path))
-    target = etree.parse(str(root_xsd)).getroot().get("targetNamespace")
+    try:
+        target = etree.parse(str(root_xsd), etree.XMLParser(resolve_entities=False, no_network=True)
+                             ).getroot().get("targetNamespace")
+    except etree.XMLSyntaxError as error:      # an undefined entity, a truncated file, not XML at all
+        raise UserError(f"--schema {schema_dir}: {root_xsd}:{error.lineno}: not an XML document "
+                        f"({error.msg})") from None
+    except OSError as error:
+        raise UserError(f"--schema {schema_dir}: {root_xsd}: cannot be read ({error})") from None
     if target != doc.ns:
         raise UserError(f"--schema {schema_dir}: holds the railML schema of {target}; {path} is railML "
                         f"{VERSION_OF_NS[doc.ns]} ({doc.ns})")
@@ -1516,10 +1608,21 @@ def validate_railml(path, schema_dir) -> Tuple[bool, List[str]]:
     try:
         schema = etree.XMLSchema(etree.fromstring(driver.encode(), parser, base_url=str(schema_dir.resolve()) + "/"))
     except etree.XMLSchemaParseError as error:
-        raise UserError(f"--schema {schema_dir}: the schema does not load ({' '.join(str(error).split())})") from None
-    document = etree.parse(str(path), etree.XMLParser(resolve_entities=False, no_network=True))
-    valid = schema.validate(document)
+        # the first problem, in the file it is in (an included schema's own, not the driver's)
+        entry = next((e for e in error.error_log if e.filename and not e.filename.startswith("<")), None)
+        where = f"{_file_of(entry.filename)}:{entry.line}: " if entry is not None else ""
+        message = entry.message if entry is not None else str(error)
+        raise UserError(f"--schema {schema_dir}: {where}the schema does not load ({' '.join(message.split())})") \
+            from None
+    valid = schema.validate(doc.root.getroottree())
     return valid, [f"line {e.line}: {e.message}" for e in schema.error_log]
+
+
+def _file_of(url: str) -> str:
+    """A path for messages from the file: URL lxml names a schema file by."""
+    from urllib.parse import unquote, urlparse
+
+    return unquote(urlparse(url).path) if url.startswith("file:") else url
 
 
 def system_line_file(system_path) -> Path:

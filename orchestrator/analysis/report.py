@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -34,18 +34,67 @@ ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e",
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
 
 
-def read_results(run_dir: Path):
+def _cell(text: str) -> float:
+    """A recorded value: a number, or a Boolean output as the recorder writes it (True, False)."""
+    return float(text == "True") if text in ("True", "False") else float(text)
+
+
+def results_rows(path: Path) -> Iterator[Tuple[int, List[float]]]:
+    """The header of a results.csv or capture file the run wrote (as (1, names)), then each row
+    as (its line number, its values): the one reader of those files (``report``, ``netlist
+    --results``). Whatever else the file holds — text that is not a number, a row of another
+    length, bytes that are not text, a line beyond the csv module's field limit — is one line
+    naming ``file:line`` and the column, not a traceback."""
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            if not header or header[0] != "time":
+                raise UserError(f"{path}: {'no header line' if not header else 'its first column is not time'} "
+                                "(not a file a railcosim run wrote)")
+            yield 1, header
+            for row in reader:
+                if len(row) != len(header):
+                    raise UserError(f"{path}:{reader.line_num}: {len(row)} values in a row of "
+                                    f"{len(header)} columns (not a file a railcosim run wrote)")
+                try:
+                    yield reader.line_num, [_cell(cell) for cell in row]
+                except ValueError:
+                    column = next(k for k, cell in enumerate(row) if not _is_cell(cell))
+                    shown = row[column] if len(row[column]) <= 40 else row[column][:20] + "…"
+                    raise UserError(f"{path}:{reader.line_num}: column {header[column]}: {shown!r} is not "
+                                    "a number (not a file a railcosim run wrote)") from None
+    except UnicodeDecodeError as error:
+        raise UserError(f"{path}: not UTF-8 text (byte 0x{error.object[error.start]:02x}); "
+                        "not a file a railcosim run wrote") from None
+    except csv.Error as error:
+        raise UserError(f"{path}: not a CSV file a railcosim run wrote ({error})") from None
+    except OSError as error:
+        raise UserError(f"{path}: cannot be read ({error.strerror or error})") from None
+
+
+def _is_cell(text: str) -> bool:
+    try:
+        _cell(text)
+    except ValueError:
+        return False
+    return True
+
+
+def read_results_file(path: Path) -> Dict[str, np.ndarray]:
+    """A results.csv or capture file: column name → its values (:func:`results_rows`)."""
+    rows = results_rows(path)
+    _, header = next(rows)
+    values = [row for _, row in rows]
+    data = np.array(values) if values else np.zeros((0, len(header)))
+    return {name: data[:, k] for k, name in enumerate(header)}
+
+
+def read_results(run_dir: Path) -> Dict[str, np.ndarray]:
     path = run_dir / "results.csv"
     if not path.is_file():
         raise UserError(f"{run_dir}: no results.csv (not a railcosim run folder)")
-    with path.open() as handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
-        if not header:
-            raise UserError(f"{path}: empty")
-        rows = [[float(v) if v not in ("", "True", "False") else float(v == "True") for v in row] for row in reader]
-    data = np.array(rows) if rows else np.zeros((0, len(header)))
-    return {name: data[:, k] for k, name in enumerate(header)}
+    return read_results_file(path)
 
 
 def _json(path: Path) -> dict:
@@ -314,8 +363,11 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     if not captures:
         return None
     capture = read_results_file(captures[0])
-    t = capture["time"]
     columns = [name for name in capture if name != "time"]
+    if not columns or not len(capture["time"]):
+        raise UserError(f"{captures[0]}: {'no rows' if columns else 'no EMF column'} (not a capture a railcosim "
+                        "run wrote)")
+    t = capture["time"]
     emf = capture[columns[0]]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
     params = _parameters_of(components, receiver)
@@ -345,14 +397,6 @@ def _save(fig, path: Path) -> Path:
         fig.savefig(handle, format="png", dpi=100)
     plt.close(fig)
     return path
-
-
-def read_results_file(path: Path):
-    with path.open() as handle:
-        reader = csv.reader(handle)
-        header = next(reader)
-        data = np.array([[float(v) for v in row] for row in reader])
-    return {name: data[:, k] for k, name in enumerate(header)}
 
 
 def _receiver_band_pass(params: dict):
