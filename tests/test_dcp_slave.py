@@ -671,7 +671,8 @@ def _next_line(lines, containing, timeout_s=10.0):
 def test_overruns_are_reported_as_they_happen_and_a_session_that_cannot_keep_up_stops(test_fmus):
     """TestSine (10 ms step) in soft real time; the slave's process is held (SIGSTOP) once for
     0.3 s: overruns reported at once, the session goes on; then held 150 ms of every 152 ms: every
-    step late, and after 50 steps and 2 s the session stops in ERROR with one line saying why."""
+    step late or nearly every one (the host decides how soon a held process catches up), and
+    within a 2 s window of 90 % overruns the session stops in ERROR with one line saying why."""
     from orchestrator.fmu import read_interface
 
     fmu = test_fmus / "TestSine.fmu"

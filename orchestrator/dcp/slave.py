@@ -55,8 +55,11 @@ MAX_FMU_STEPS_PER_DO_STEP = 1000
 MAX_START_DELAY_S = 3600
 #: a real-time period at least this long when the FMU declares no step of its own, in seconds
 MIN_RT_PERIOD_S = 0.001
-#: a soft real-time session stops when this many steps in a row, over at least this long, overran
-OVERRUN_STOP_STEPS, OVERRUN_STOP_S = 50, 2.0
+#: a soft real-time session stops when, over a window of this many seconds holding at least this
+#: many steps, at least this share of the steps overran: a stall caught up (the steps after it
+#: on time) stays far below the share, an FMU that cannot keep its period (or a host that gives it
+#: too little time) stays above it, whether or not a step now and then is on time
+OVERRUN_STOP_S, OVERRUN_STOP_STEPS, OVERRUN_STOP_SHARE = 2.0, 50, 0.9
 #: overruns are reported as they happen, at most one line per this many seconds
 OVERRUN_REPORT_S = 1.0
 #: addresses other than the master's each named in one line, up to this many (then only counted)
@@ -814,29 +817,39 @@ class DcpSlaveServer:
         # the first step at the start time (wall clock), mapped onto the monotonic clock
         self.clock = time.monotonic() + max(0.0, start - time.time())
         self.rt_count = 0
-        self.overrun_run, self.overrun_since, self.overrun_reported = 0, 0.0, -math.inf
+        self.overrun_reported = -math.inf
+        self._new_overrun_window(time.monotonic())
 
-    def _overrun(self, now: float, lateness: float) -> bool:
-        """Count and report an overrun as it happens (one line at most every OVERRUN_REPORT_S);
-        stop the session (True) when every step has overrun for OVERRUN_STOP_STEPS steps and
-        OVERRUN_STOP_S seconds: the FMU cannot be stepped at this period in real time."""
-        self.counters.overruns += 1
-        if self.overrun_run == 0:
-            self.overrun_since = now
-        self.overrun_run += 1
-        period_ms = self.rt_period_s * 1e3
-        if self.overrun_run >= OVERRUN_STOP_STEPS and now - self.overrun_since >= OVERRUN_STOP_S:
-            self.clock = None
-            self._fail(f"real time not kept, session stopped: the last {self.overrun_run} real-time steps all started more than a period "
-                       f"({period_ms:g} ms) late, {lateness * 1e3:.1f} ms at the last: the FMU cannot be "
-                       f"stepped at this period in real time")
+    def _new_overrun_window(self, now: float) -> None:
+        self.window_start, self.window_steps, self.window_overruns = now, 0, 0
+
+    def _kept_real_time(self, now: float, late: bool, lateness: float) -> bool:
+        """Count one real-time step in the current window of OVERRUN_STOP_S; at the window's end,
+        stop the session (False) when it held OVERRUN_STOP_STEPS steps or more of which the share
+        OVERRUN_STOP_SHARE or more overran: the FMU cannot be stepped at this period in real time."""
+        self.window_steps += 1
+        self.window_overruns += late
+        if now - self.window_start < OVERRUN_STOP_S:
             return True
+        steps, overruns = self.window_steps, self.window_overruns
+        self._new_overrun_window(now)
+        if steps < OVERRUN_STOP_STEPS or overruns < OVERRUN_STOP_SHARE * steps:
+            return True
+        self.clock = None
+        self._fail(f"real time not kept, session stopped: {overruns} of the last {steps} real-time steps started more "
+                   f"than a period ({self.rt_period_s * 1e3:g} ms) late, {lateness * 1e3:.1f} ms at the last: the FMU "
+                   "cannot be stepped at this period in real time")
+        return False
+
+    def _overrun(self, now: float, lateness: float) -> None:
+        """Count and report an overrun as it happens (one line at most every OVERRUN_REPORT_S)."""
+        self.counters.overruns += 1
+        period_ms = self.rt_period_s * 1e3
         if now - self.overrun_reported >= OVERRUN_REPORT_S:
             self.overrun_reported = now
             self.warn(f"overrun: real-time step {self.rt_count // self.rt_steps + 1} started "
                       f"{lateness * 1e3:.1f} ms late (period {period_ms:g} ms); {self.counters.overruns} "
                       f"overrun(s) so far")
-        return False
 
     def next_deadline(self) -> Optional[float]:
         return self.clock if self.clock is not None and self.state in states.RUN_STATES else None
@@ -846,11 +859,11 @@ class DcpSlaveServer:
         now = time.monotonic()
         lateness = now - self.clock
         self.counters.worst_lateness_s = max(self.counters.worst_lateness_s, lateness)
-        if lateness > self.rt_period_s:         # started more than a period late
-            if self._overrun(now, lateness):
-                return
-        else:
-            self.overrun_run = 0
+        late = lateness > self.rt_period_s      # started more than a period late
+        if late:
+            self._overrun(now, lateness)
+        if not self._kept_real_time(now, late, lateness):
+            return
         try:
             self._step(self.rt_steps)
         except (SimulationError, UserError) as error:
