@@ -348,10 +348,10 @@ def cmd_study(args) -> int:
                         "railcosim study report DIR)")
     if args.workers is not None and args.scheduler:
         raise UserError("--workers sizes the local cluster; with --scheduler the cluster's own workers run")
-    from orchestrator.study.spec import check_against_system, load_study
+    from orchestrator.study.spec import HARD_MAX_RUNS, MAX_RUNS, check_against_system, load_study
     from orchestrator.study.runner import run_study
 
-    spec = load_study(_study_path(args.study))
+    spec = load_study(_study_path(args.study), max_runs=HARD_MAX_RUNS if args.yes else MAX_RUNS)
     system = None
     if not spec.is_function:
         given = spec.data["system"]
@@ -371,6 +371,10 @@ def cmd_study(args) -> int:
         import_function(spec.data["function"], [str(spec.path.parent.resolve()), *python_path],
                         f"study {spec.path}: field function")
     output = Path(args.output) if args.output else Path("results") / spec.name
+    if _ENDS_WITH_PROCESS:   # a signal while Dask's threads end with the process: recorded, ignored
+        from orchestrator import interrupts
+
+        interrupts.hold_until_exit()
     result = run_study(spec, output, system, [_build_dir().resolve()], workers=args.workers,
                        scheduler=args.scheduler, resume=args.resume, progress=sys.stderr,
                        python_path=python_path)
@@ -702,6 +706,10 @@ def make_parser() -> argparse.ArgumentParser:
     study.add_argument("--resume", action="store_true",
                        help="skip runs finished by an earlier start of the same study file")
     study.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    from orchestrator.study.spec import HARD_MAX_RUNS, MAX_RUNS
+
+    study.add_argument("--yes", action="store_true",
+                       help=f"run a study of more than {MAX_RUNS} runs (up to {HARD_MAX_RUNS}; docs/studies.md)")
     study.set_defaults(func=cmd_study)
 
     add_new_command(sub)

@@ -256,7 +256,7 @@ def test_resume_reruns_nothing_of_a_finished_study(grid_study):
     other = _write(study.parent, "other.toml", GRID_STUDY.replace("stop_time = 20", "stop_time = 21"))
     from orchestrator.study.runner import _resumable
 
-    assert all(_resumable(out, run, load_study(other).hash) is None for run in load_study(other).runs)
+    assert all(_resumable(out / "runs" / run.id, load_study(other).hash) is None for run in load_study(other).runs)
 
 
 def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):

@@ -22,6 +22,7 @@ import gc
 import json
 import math
 import os
+import re
 import select
 import signal
 import sys
@@ -120,6 +121,15 @@ def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
             pass
     finally:
         description.close()
+
+
+def prepare_function(name: str, python_path: Sequence[str]) -> None:
+    """A function study's module imported once in the worker (its runs are forked from it
+    and find it imported); whatever fails here is left for the run to meet and report."""
+    try:
+        import_function(name, python_path, "function")
+    except Exception:                          # noqa: BLE001 — the run reports it
+        pass
 
 
 #: in a run process, each system folder's description as read for its first run (pickled):
@@ -224,23 +234,37 @@ def _outcome_of(job: dict, caught=BaseException, opened: bool = False) -> dict:
     return outcome
 
 
+#: the C library, opened once in the worker for its run processes' prctl (opening it in each
+#: run process cost 5 ms of a 15 ms function run)
+_LIBC = None
+
+
+def _open_libc() -> None:
+    global _LIBC
+    if _LIBC is None and sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            _LIBC = ctypes.CDLL(None)
+            _LIBC.prctl     # noqa: B018 — a C library without prctl is no use here
+        except (OSError, AttributeError):
+            _LIBC = False
+
+
 def _serve(job_fd: int, outcome_fd: int, one_shot: bool) -> None:
     """A run process's loop: a job as one JSON line in, its outcome as one JSON line out, until
     the worker closes the job pipe, a run does not end ``ok`` (the next run gets a process
     forked afresh: nothing a failed run left behind reaches it) or, ``one_shot``, after the
     first run; then _exit (no exit-time handlers of the worker's)."""
     try:
-        try:     # die with the worker: a lost worker leaves no run behind (Linux)
-            import ctypes
-
-            ctypes.CDLL(None).prctl(1, signal.SIGKILL)     # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
-        import orchestrator.run
-
+        if _LIBC:                # die with the worker: a lost worker leaves no run behind (Linux)
+            _LIBC.prctl(1, signal.SIGKILL)                 # PR_SET_PDEATHSIG
         # the worker's objects were frozen before the fork and stay so; each run's own garbage
-        # is collected after it (below)
-        orchestrator.run.HOST_KEEPS_FROZEN = True
+        # is collected after it (below). A function's worker has not imported the run module
+        # and its run processes need not (half a second each)
+        run_module = sys.modules.get("orchestrator.run")
+        if run_module is not None:
+            run_module.HOST_KEEPS_FROZEN = True
         with os.fdopen(job_fd, "rb") as jobs:
             for line in jobs:
                 outcome = _outcome_of(json.loads(line), opened=not one_shot)
@@ -273,13 +297,27 @@ class RunProcess:
 
     def __init__(self, key: tuple, one_shot: bool = False):
         self.key = key
+        self._job_fd = self._outcome_fd = None
+        self.pid: Optional[int] = None
+        _open_libc()
         job_read, self._job_fd = os.pipe()
-        self._outcome_fd, outcome_write = os.pipe()
+        try:
+            self._outcome_fd, outcome_write = os.pipe()
+        except OSError:
+            os.close(job_read)
+            self.close()
+            raise
         # what the worker holds goes to the collector's permanent generation: a collection in
         # the child would otherwise touch every object of the worker's and copy its memory
         # page by page
         gc.freeze()
-        pid = os.fork()
+        try:
+            pid = os.fork()
+        except OSError:                                # no process to be had: no pipe kept either
+            os.close(job_read)
+            os.close(outcome_write)
+            self.close()
+            raise
         if pid == 0:                                   # the run process
             # the worker's ends of its other run processes' pipes, inherited: held here they
             # would keep those processes from seeing the worker close their job pipe
@@ -308,13 +346,18 @@ class RunProcess:
 
     def run(self, job: dict, timeout_s: float) -> dict:
         """The job's outcome; after anything but ``ok`` the process has ended (reaped)."""
+        data = (json.dumps(job) + "\n").encode()
         try:
-            os.write(self._job_fd, (json.dumps(job) + "\n").encode())
+            while data:
+                data = data[os.write(self._job_fd, data):]
         except BrokenPipeError:              # it ended since ready(): the run did not begin
             self.close()
             raise _NotStarted from None
         chunks: List[bytes] = []
         deadline, killed, ended = time.monotonic() + timeout_s, None, False
+        # poll, not select: select cannot watch a descriptor numbered 1024 or above
+        waiting = select.poll()
+        waiting.register(self._outcome_fd, select.POLLIN)
         try:
             while True:
                 try:
@@ -334,7 +377,7 @@ class RunProcess:
                     killed = now
                 elif killed is not None and now > killed + GRACE_S:
                     os.kill(self.pid, signal.SIGKILL)
-                select.select([self._outcome_fd], [], [], POLL_S)
+                waiting.poll(POLL_S * 1000)
         except BaseException:            # the worker itself stopped: so does the run
             self.close(kill=True)
             raise
@@ -389,10 +432,13 @@ def _run_elsewhere(job: dict) -> dict:
     anew for another system or after a run that did not end ``ok``); a function's run from a
     process of its own."""
     if job.get("function"):
+        process = RunProcess(("function",), one_shot=True)
         try:
-            return RunProcess(("function",), one_shot=True).run(job, job["timeout_s"])
+            return process.run(job, job["timeout_s"])
         except _NotStarted:
             return {"status": "failed", "error": "the run's process ended before the run began", "warnings": []}
+        finally:                 # its pipes closed and the process reaped, whatever the outcome
+            process.close()
     key = (job["system"], tuple(job["fmu_dirs"]))
     process = getattr(_RUN_PROCESSES, "process", None)
     if process is not None and (process.key != key or not process.ready()):
@@ -416,7 +462,9 @@ def execute_run(job: dict) -> dict:
     run_dir.mkdir(parents=True, exist_ok=True)
     for stale in (RECORD, "summary.json"):   # what an earlier attempt left must not be read as this run's
         (run_dir / stale).unlink(missing_ok=True)
-    if not job.get("function"):
+    if job.get("function"):
+        prepare_function(job["function"], job["python_path"])
+    else:
         prepare_worker()
         prepare_system(job["system"], job["fmu_dirs"])
     began = time.perf_counter()
@@ -474,54 +522,149 @@ class StudyResult:
     files: List[Path] = field(default_factory=list)
 
 
+def _common_job(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: Sequence[Path],
+                python_path: Sequence[str] = ()) -> dict:
+    """What every job of the study shares."""
+    data = spec.data
+    return {"output": str(output), "spec_hash": spec.hash, "collect": spec.collect,
+            "timeout_s": spec.timeout_s, "stop_time": data.get("stop_time"),
+            "options": data.get("options", {}), "seed_variables": data.get("seed_variables", []),
+            "system": str(system) if system else None, "fmu_dirs": [str(p) for p in fmu_dirs],
+            "function": data.get("function"), "arguments": data.get("arguments", {}),
+            "python_path": [str(spec.path.parent.resolve()), *map(str, python_path)]}
+
+
+def _job(common: dict, run: Run) -> dict:
+    return {**common, "id": run.id, "point": run.point, "values": run.values, "seed": run.seed,
+            "scenario": run.scenario, "label": point_label(run)}
+
+
 def jobs_of(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: Sequence[Path],
             python_path: Sequence[str] = ()) -> List[dict]:
     """One plain dictionary per run: everything a worker needs, nothing of the client's."""
-    data, spec_hash = spec.data, spec.hash
-    common = {"output": str(output), "spec_hash": spec_hash, "collect": spec.collect,
-              "timeout_s": spec.timeout_s, "stop_time": data.get("stop_time"),
-              "options": data.get("options", {}), "seed_variables": data.get("seed_variables", []),
-              "system": str(system) if system else None, "fmu_dirs": [str(p) for p in fmu_dirs],
-              "function": data.get("function"), "arguments": data.get("arguments", {}),
-              "python_path": [str(spec.path.parent.resolve()), *map(str, python_path)]}
-    return [{**common, "id": run.id, "point": run.point, "values": run.values, "seed": run.seed,
-             "scenario": run.scenario, "label": point_label(run)} for run in spec.runs]
+    common = _common_job(spec, output, system, fmu_dirs, python_path)
+    return [_job(common, run) for run in spec.runs]
 
 
-def _resumable(output: Path, run: Run, spec_hash: str) -> Optional[dict]:
-    """The record of a finished run of this very study (same hash), else None."""
-    folder = output / "runs" / run.id
+#: a run's folder under DIR/runs/ (Run.id)
+RUN_ID = re.compile(r"r\d{4,}")
+
+
+def _resumable(folder: Path, spec_hash: str) -> Optional[dict]:
+    """The record of a finished run of this very study (same hash) in ``folder``, else None."""
     try:
         record = json.loads((folder / RECORD).read_text())
     except (OSError, ValueError):
         return None
-    if record.get("spec_hash") == spec_hash and record.get("status") == "ok" and (folder / "summary.json").is_file():
+    if (isinstance(record, dict) and record.get("spec_hash") == spec_hash and record.get("status") == "ok"
+            and (folder / "summary.json").is_file()):
         return record
     return None
 
 
+def _is_run_folder(path: Path) -> bool:
+    """A folder a study's run made: empty (made, the run not begun) or holding a run's own
+    files (its record, a function's summary, a system run's lock and results)."""
+    from orchestrator.run import LOCK_FILE, RUN_FILES
+
+    if path.is_symlink() or not path.is_dir():
+        return False
+    names = set(os.listdir(path))
+    return not names or bool(names & {RECORD, LOCK_FILE, *RUN_FILES})
+
+
+def _clear_runs(output: Path, spec: StudySpec, resume: bool) -> Dict[str, dict]:
+    """DIR/runs/ made ready for this study: with ``resume`` the records of its finished runs
+    kept (returned by id); every other run folder — a run to do again, or a run of an earlier,
+    different study — removed, so the folder holds this study's runs only. Anything under
+    runs/ named like a run that is not a run folder is refused before anything is removed."""
+    import shutil
+
+    runs = output / "runs"
+    try:
+        runs.mkdir(exist_ok=True)
+        entries = [entry for entry in os.scandir(runs) if RUN_ID.fullmatch(entry.name)]
+    except OSError as error:
+        raise UserError(f"--output {output}: cannot use {runs} as the folder of the runs "
+                        f"({error.strerror or error})") from None
+    ids = {run.id for run in spec.runs} if resume else set()
+    kept: Dict[str, dict] = {}
+    stale: List[Path] = []
+    for entry in entries:
+        folder = Path(entry.path)
+        record = _resumable(folder, spec.hash) if entry.name in ids else None
+        if record is not None and record.get("id") == entry.name:
+            kept[entry.name] = record
+        elif _is_run_folder(folder):
+            stale.append(folder)
+        else:
+            raise UserError(f"--output {output}: {folder} is not a study's run folder; move it away or "
+                            "choose another --output")
+    for folder in stale:
+        try:
+            shutil.rmtree(folder)
+        except OSError as error:
+            raise UserError(f"--output {output}: cannot remove the earlier run folder {folder} "
+                            f"({error.strerror or error})") from None
+    return kept
+
+
+def _clock(seconds: float) -> str:
+    """``1 d 02:03:04``, ``00:06:10``."""
+    days, rest = divmod(int(seconds + 0.5), 86400)
+    return (f"{days} d " if days else "") + time.strftime("%H:%M:%S", time.gmtime(rest))
+
+
 class _Progress:
     """``study: 5/8 done, 1 failed, 2 running, ETA 0:40`` — redrawn in place on a terminal, a
-    line per tenth of the study otherwise."""
+    line per tenth of the study otherwise; once, after a few seconds or a tenth of the study,
+    the estimate of the whole study's time. The pace is taken from the first task's end on:
+    before it lie the workers' own start (imports, the FMUs' extraction)."""
+
+    #: the estimate is stated once this long has passed or a tenth of the runs are done
+    ESTIMATE_AFTER_S = 3.0
 
     def __init__(self, total: int, workers: int, stream: Optional[TextIO]):
         self.total, self.workers, self.stream = total, max(workers, 1), stream
         self.done = self.failed = 0
         self.began = time.monotonic()
+        self.first: Optional[tuple] = None          # (time, runs done) at the first task's end
         self.tty = bool(stream is not None and stream.isatty())
         self.shown = -1
+        self.estimated = False
+        self.run_s, self.timed = 0.0, 0            # the runs' own wall time, over so many runs
 
-    def update(self, record: dict) -> None:
-        self.done += 1
-        self.failed += record["status"] != "ok"
+    def left_s(self) -> float:
+        """The time still to go at the slower of two paces: the study's since the first task
+        ended (once each worker has ended a run since), and the runs' own mean time per worker."""
+        now = time.monotonic()
+        since, done = self.first if self.first and self.done - self.first[1] >= self.workers else (self.began, 0)
+        pace = (now - since) / max(self.done - done, 1)
+        return max(pace, self.run_s / max(self.timed, 1) / self.workers) * (self.total - self.done)
+
+    def update(self, records: List[dict]) -> None:
+        self.done += len(records)
+        timed = [r["wall_time_s"] for r in records if r.get("wall_time_s") is not None]
+        self.run_s += sum(timed)
+        self.timed += len(timed)
+        self.failed += sum(record["status"] != "ok" for record in records)
+        if self.first is None:
+            self.first = (time.monotonic(), self.done)
         if self.stream is None:
             return
         running = min(self.workers, self.total - self.done)
-        elapsed = time.monotonic() - self.began
-        left = elapsed / self.done * (self.total - self.done)
-        eta = time.strftime("%H:%M:%S", time.gmtime(left)) if self.done < self.total else "done"
+        left = self.left_s()
+        eta = _clock(left) if self.done < self.total else "done"
         text = (f"study: {self.done}/{self.total} done, {self.failed} failed, {running} running, "
                 f"ETA {eta}")
+        elapsed = time.monotonic() - self.began
+        if (not self.estimated and self.done < self.total and self.done > self.first[1]
+                and (elapsed >= self.ESTIMATE_AFTER_S or self.done * 10 >= self.total)):
+            self.estimated = True
+            self.stream.write(("\r" if self.tty else "")
+                              + f"study: about {_clock(left + elapsed)} for the {self.total} run(s) at the pace so "
+                              f"far ({_clock(left)} to go); Ctrl-C stops it, keeping the runs done (--resume "
+                              "runs the rest)\n")
         if self.tty:
             self.stream.write("\r" + text + ("\n" if self.done == self.total else ""))
         elif self.done * 10 // self.total != self.shown or self.done == self.total:
@@ -544,8 +687,19 @@ def _dashboard(client) -> Optional[str]:
         return None
 
 
-def _client(workers: Optional[int], scheduler: Optional[str]):
-    """(client, cluster or None, number of workers)."""
+def dask_setup(worker) -> None:
+    """A local cluster's worker process at its start (a Dask preload): Ctrl-C in the terminal
+    reaches every process of the study; the submitting side stops the study and then the
+    workers, so a worker ignores SIGINT rather than dying mid-run with a traceback (its run
+    processes inherit that; a system run still stops in order on its own handlers)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _client(workers: Optional[int], scheduler: Optional[str], scratch: Optional[Path] = None):
+    """(client, cluster or None, number of workers). A local cluster's workers keep all their
+    temporary files (Dask's own, the worker folders, the runs' temp folders) in ``scratch``,
+    which the submitting side removes however the workers end."""
     import logging
 
     from distributed import Client, LocalCluster
@@ -567,10 +721,20 @@ def _client(workers: Optional[int], scheduler: Optional[str]):
         return client, None, count
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=":0", silence_logs=logging.ERROR,
-                           host="127.0.0.1")
+    import dask
+
+    where = {} if scratch is None else {"temporary-directory": str(scratch)}
+    with dask.config.set(where):          # the scheduler's and the workers' dask-scratch-space
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=":0", silence_logs=logging.ERROR, host="127.0.0.1",
+                               preload=[__name__], env={"TMPDIR": str(scratch)} if scratch else None)
     return Client(cluster), cluster, workers
+
+
+#: how often the submitting side looks for finished tasks and for a signal
+WAIT_S = 0.02
+#: how long the workers of a local cluster get to close after an interruption
+CLOSE_S = 2.0
 
 
 def run_study(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: Sequence[Path],
@@ -579,57 +743,125 @@ def run_study(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: S
               runs_per_task: Optional[int] = None) -> StudyResult:
     """Run every run of ``spec`` not already done (``resume``) and write DIR/study.csv and
     DIR/study.json. ``runs_per_task`` fixes how many runs a task takes (default: chosen by
-    :func:`default_runs_per_task` from the number of runs and workers)."""
+    :func:`default_runs_per_task` from the number of runs and workers).
+
+    The folder is locked for the study as a run's folder is (orchestrator/run.py
+    OutputFolder: a second study or run into it is refused). SIGINT, SIGTERM or SIGHUP stop
+    the study: no run is handed out any more, the workers are stopped, the runs done are
+    kept and written to study.csv, and :class:`~orchestrator.interrupts.Interrupted` is raised
+    (``--resume`` goes on from there)."""
+    from orchestrator import interrupts
+    from orchestrator.run import OutputFolder
+
     output = Path(output).resolve()
-    (output / "runs").mkdir(parents=True, exist_ok=True)
-    jobs = jobs_of(spec, output, system, fmu_dirs, python_path)
-    records: Dict[str, dict] = {}
-    if resume:
-        for run in spec.runs:
-            record = _resumable(output, run, spec.hash)
-            if record is not None:
-                records[run.id] = record
+    with interrupts.deferred() as flag:
+        if flag is not None:
+            flag.check("before the study started; nothing written")
+        folder = OutputFolder(output)
+        folder.claim()
+        try:
+            return _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, progress,
+                                python_path, runs_per_task, flag)
+        finally:
+            folder.release()
+
+
+def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, progress, python_path,
+                 runs_per_task, flag) -> StudyResult:
+    import shutil
+    import tempfile
+
+    records: Dict[str, dict] = _clear_runs(output, spec, resume)
     skipped = len(records)
-    todo = [job for job in jobs if job["id"] not in records]
+    common = _common_job(spec, output, system, fmu_dirs, python_path)
+    todo = [run for run in spec.runs if run.id not in records]
     began = time.time()
-    dashboard, worker_count = None, 0
+    dashboard, worker_count, stopped = None, 0, 0
     if todo:
         from distributed import as_completed
 
-        client, cluster, worker_count = _client(workers, scheduler)
-        dashboard = _dashboard(client)
-        if progress is not None:
-            where = scheduler or f"a local cluster of {worker_count} worker process(es)"
-            progress.write(f"study {spec.name}: {len(todo)} run(s) on {where}"
-                           + (f" ({skipped} done before, skipped)" if skipped else "")
-                           + (f"; dashboard {dashboard}" if dashboard else "") + "\n")
-            progress.flush()
-        bar = _Progress(len(todo), worker_count, progress)
-        token = uuid.uuid4().hex[:8]
-        size = runs_per_task if runs_per_task else default_runs_per_task(len(todo), worker_count)
+        scratch = None if scheduler else Path(tempfile.mkdtemp(prefix="railcosim_study_"))
+        client = cluster = None
         try:
-            futures = {client.submit(execute_runs, batch, key=f"{spec.name}-{batch[0]['id']}-{token}",
-                                     retries=0): batch
-                       for batch in (todo[i:i + size] for i in range(0, len(todo), size))}
-            for future in as_completed(futures):
-                batch = futures[future]
-                try:
-                    done = future.result()
-                except Exception as error:        # noqa: BLE001 — the task itself was lost
-                    done = [_lost(job, error) for job in batch]
-                for record in done:
-                    records[record["id"]] = record
-                    bar.update(record)
+            client, cluster, worker_count = _client(workers, scheduler, scratch)
+            if flag is not None:
+                flag.check(f"before the first run; nothing run ({output})")
+            dashboard = _dashboard(client)
+            if progress is not None:
+                where = scheduler or f"a local cluster of {worker_count} worker process(es)"
+                progress.write(f"study {spec.name}: {len(todo)} run(s) of {len({r.point for r in todo})} point(s) "
+                               f"on {where}" + (f" ({skipped} done before, skipped)" if skipped else "")
+                               + (f"; dashboard {dashboard}" if dashboard else "") + "\n")
+                progress.flush()
+            bar = _Progress(len(todo), worker_count, progress)
+            token = uuid.uuid4().hex[:8]
+            size = runs_per_task if runs_per_task else default_runs_per_task(len(todo), worker_count)
+            batches = ([_job(common, run) for run in todo[i:i + size]] for i in range(0, len(todo), size))
+            # a bounded number of tasks handed out at a time: the scheduler holds a few per
+            # worker, not the whole study, and an interruption has only these to cancel
+            pending: Dict[object, List[dict]] = {}
+            finished = as_completed()
+
+            def hand_out() -> None:
+                batch = next(batches, None)
+                if batch is not None:
+                    future = client.submit(execute_runs, batch, key=f"{spec.name}-{batch[0]['id']}-{token}",
+                                           retries=0)
+                    pending[future] = batch
+                    finished.add(future)
+
+            for _ in range(max(worker_count, 1) * TASKS_PER_WORKER):
+                hand_out()
+            while pending and not (flag is not None and flag.signum):
+                ready = finished.next_batch(block=False)
+                if not ready:
+                    time.sleep(WAIT_S)
+                for future in ready:
+                    batch = pending.pop(future)
+                    try:
+                        done = future.result()
+                    except Exception as error:        # noqa: BLE001 — the task itself was lost
+                        done = [_lost(job, error) for job in batch]
+                    for record in done:
+                        records[record["id"]] = record
+                    bar.update(done)
+                    hand_out()
+            if pending:
+                client.cancel(list(pending))
+                stopped = len(todo) - bar.done
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    ordered = [records[job["id"]] for job in jobs]
+            _close(client, cluster, quick=bool(flag is not None and flag.signum))
+            if scratch is not None:
+                shutil.rmtree(scratch, ignore_errors=True)
+    ordered = [records[run.id] for run in spec.runs if run.id in records]
     counts = {status: sum(r["status"] == status for r in ordered) for status in STATUSES}
     counts.update(runs=len(ordered), points=len({r["point"] for r in ordered}), skipped=skipped)
+    if stopped:
+        counts["not_run"] = stopped
     files = [_write_csv(output / "study.csv", spec, ordered),
-             _write_json(output / "study.json", spec, counts, began, worker_count, scheduler, system)]
+             _write_json(output / "study.json", spec, counts, began, worker_count, scheduler, system,
+                         interrupted=interrupts_name(flag) if stopped else None)]
+    if stopped:
+        from orchestrator.interrupts import Interrupted
+
+        raise Interrupted(flag.signum, f"after {len(ordered) - skipped} of {len(todo)} run(s) had ended; every run "
+                                       f"done is kept in {output} (--resume runs the rest)")
     return StudyResult(output, ordered, counts, skipped, dashboard, files)
+
+
+def interrupts_name(flag) -> str:
+    from orchestrator.interrupts import signal_name
+
+    return signal_name(flag.signum)
+
+
+def _close(client, cluster, quick: bool) -> None:
+    """The client and a local cluster closed; after an interruption within :data:`CLOSE_S`
+    each (a worker's run processes die with it)."""
+    if client is not None:
+        client.close(**({"timeout": CLOSE_S} if quick else {}))
+    if cluster is not None:
+        cluster.close(**({"timeout": CLOSE_S} if quick else {}))
 
 
 def columns_of(spec: StudySpec) -> List[str]:
@@ -656,11 +888,12 @@ def _write_csv(path: Path, spec: StudySpec, records: List[dict]) -> Path:
 
 
 def _write_json(path: Path, spec: StudySpec, counts: dict, began: float, workers: int,
-                scheduler: Optional[str], system: Optional[Path]) -> Path:
+                scheduler: Optional[str], system: Optional[Path], interrupted: Optional[str] = None) -> Path:
     data = {"name": spec.name, "file": str(spec.path.resolve()), "hash": spec.hash, "spec": spec.data,
             "system": str(system) if system else None, "axes": spec.axes, "collect": spec.collect,
             "safety": spec.safety, "counts": counts,
             "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(began)),
-            "wall_time_s": time.time() - began, "workers": workers, "scheduler": scheduler}
+            "wall_time_s": time.time() - began, "workers": workers, "scheduler": scheduler,
+            "interrupted": interrupted}
     path.write_text(json.dumps(data, indent=1, default=str) + "\n")
     return path

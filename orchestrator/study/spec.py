@@ -7,6 +7,7 @@ Everything here is decided on the machine that submits the study; the runs thems
 """
 from __future__ import annotations
 
+import gc
 import hashlib
 import itertools
 import json
@@ -23,9 +24,21 @@ DEFAULT_COLLECT = ("verdict", "signals_passed_at_danger", "wrong_side_failures",
 DEFAULT_TIMEOUT_S = 3600.0
 #: names an axis may not use: they are columns of study.csv already
 RESERVED = ("id", "point", "seed", "status", "error", "wall_time_s", "scenario")
+#: the runs a study may have without being asked for more (`railcosim study --yes`): each run
+#: writes a folder of its own (a system run's results.csv is tens of kB to MBs), and 10 000 runs
+#: are 7-10 minutes on two workers at the fastest rate measured (docs/studies.md#throughput),
+#: hours for runs of a few seconds
+MAX_RUNS = 10_000
+#: the runs a study may have at all, --yes or not: the submitting side holds every run and its
+#: record (about 2 kB each: 2 GB at this bound); a larger campaign is several studies. The
+#: schema bounds random.count by the same number, before any draw is made
+HARD_MAX_RUNS = 1_000_000
+#: how deeply a study file's tables and lists may nest (the deepest field a study has is
+#: random.variables.NAME.values[k]: 4); deeper is refused before the schema walks it
+MAX_DEPTH = 32
 
 
-@dataclass
+@dataclass(slots=True)    # a million of them in a large study
 class Run:
     id: str                      # r0000 … : the folder DIR/runs/<id>/
     point: int                   # index of the point (all axes but the seed)
@@ -93,19 +106,50 @@ def _parse(path: Path) -> dict:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise UserError(f"study {path}: cannot read ({error})") from None
+    too_deep = UserError(f"study {path}: tables or lists nested more than {MAX_DEPTH} deep; a study file "
+                         "nests a few levels")
     if path.suffix.lower() == ".toml":
         import tomllib
 
         try:
-            return tomllib.loads(text)
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as error:
             raise UserError(f"study {path}: not valid TOML ({error})") from None
-    if path.suffix.lower() == ".json":
+        except RecursionError:             # the readers recurse once per level of nesting
+            raise too_deep from None
+    elif path.suffix.lower() == ".json":
         try:
-            return json.loads(text)
+            data = json.loads(text)
         except json.JSONDecodeError as error:
             raise UserError(f"study {path}:{error.lineno}: not valid JSON ({error.msg})") from None
-    raise UserError(f"study {path}: a study file is .toml or .json")
+        except RecursionError:
+            raise too_deep from None
+    else:
+        raise UserError(f"study {path}: a study file is .toml or .json")
+    if _depth(data) > MAX_DEPTH:
+        raise too_deep
+    return data
+
+
+def _depth(document) -> int:
+    """How deeply ``document``'s dictionaries and lists nest (a walk without recursion)."""
+    deepest, pending = 0, [(document, 1)]
+    while pending:
+        value, level = pending.pop()
+        if isinstance(value, (dict, list)):
+            deepest = max(deepest, level)
+            pending.extend((item, level + 1) for item in (value.values() if isinstance(value, dict) else value))
+    return deepest
+
+
+def run_count(data: dict) -> tuple:
+    """(runs, points) of a validated study file's content, from its lengths alone (before any
+    point is made or drawn)."""
+    points = len(data.get("cases", [{}])) * len(data.get("scenarios", [None]))
+    for values in data.get("grid", {}).values():
+        points *= len(values)
+    points *= data["random"]["count"] if "random" in data else 1
+    return points * len(data.get("seeds", [None])), points
 
 
 def _field(error) -> str:
@@ -174,11 +218,20 @@ def _draws(random: dict) -> List[Dict[str, object]]:
     return [{name: columns[name][k] for name in names} for k in range(random["count"])]
 
 
-def load_study(path) -> StudySpec:
-    """The study file at ``path``, validated and expanded into its runs."""
+def load_study(path, max_runs: int = HARD_MAX_RUNS) -> StudySpec:
+    """The study file at ``path``, validated and expanded into its runs; a UserError stating
+    its size when it has more than ``max_runs`` runs (at most :data:`HARD_MAX_RUNS`), before
+    any point is made."""
     path = Path(path)
     data = _read(path)
     _validate(path, data)
+    runs, points = run_count(data)
+    if runs > min(max_runs, HARD_MAX_RUNS):
+        size = f"study {path}: {runs} runs ({points} points × {len(data.get('seeds', [None]))} seed(s))"
+        if runs > HARD_MAX_RUNS:
+            raise UserError(f"{size}: more than the {HARD_MAX_RUNS} a study can hold; split it into several studies")
+        raise UserError(f"{size}: more than {max_runs} runs, each writing a folder; give --yes to run a study "
+                        "this size")
     name = data.get("name", path.stem)
     cases = data.get("cases", [{}])
     grid = data.get("grid", {})
@@ -200,11 +253,17 @@ def load_study(path) -> StudySpec:
     if "scenarios" in data:
         spec.axes.append("scenario")
     point = 0
-    for case, values, drawn, scenario in itertools.product(cases, grid_points, draws, scenarios):
-        merged = {**case, **values, **drawn}
-        for seed in seeds:
-            spec.runs.append(Run(f"r{len(spec.runs):04d}", point, merged, seed, scenario))
-        point += 1
+    collecting = gc.isenabled()
+    gc.disable()        # nothing made here is garbage: the collector's passes over the growing
+    try:                # list would take most of the time of a large study's expansion
+        for case, values, drawn, scenario in itertools.product(cases, grid_points, draws, scenarios):
+            merged = {**case, **values, **drawn}
+            for seed in seeds:
+                spec.runs.append(Run(f"r{len(spec.runs):04d}", point, merged, seed, scenario))
+            point += 1
+    finally:
+        if collecting:
+            gc.enable()
     return spec
 
 
