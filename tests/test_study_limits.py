@@ -83,7 +83,7 @@ def test_a_study_of_a_million_points_is_refused_with_its_size(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda out: out.write_text("a file"), "cannot create the results folder"),
+    (lambda out: out.write_text("a file"), "cannot create the folder (File exists)"),
     (lambda out: (out.mkdir(), (out / "runs").write_text("a file")), "as the folder of the runs"),
     (lambda out: (out.mkdir(), (out / "runs").mkdir(), (out / "runs" / "r0000").mkdir(),
                   (out / "runs" / "r0000" / "notes.txt").write_text("mine")), "runs/r0000 is not a study's run folder"),
@@ -204,7 +204,7 @@ def test_a_second_study_into_a_folder_in_use_is_refused_in_one_line(tmp_path, ca
         _wait_for_runs(first)
         assert main(["study", str(study), "--output", str(out)]) == 2
         err = capsys.readouterr().err
-        assert err.count("\n") == 1 and f"--output {out.resolve()}: in use by another run (process {first.pid})" in err, err
+        assert err.count("\n") == 1 and f"--output {out.resolve()}: in use by another study or run (process {first.pid})" in err, err
     finally:
         os.killpg(first.pid, signal.SIGINT)
         first.communicate(timeout=30)

@@ -565,7 +565,8 @@ def _resumable(folder: Path, spec_hash: str) -> Optional[dict]:
 def _is_run_folder(path: Path) -> bool:
     """A folder a study's run made: empty (made, the run not begun) or holding a run's own
     files (its record, a function's summary, a system run's lock and results)."""
-    from orchestrator.run import LOCK_FILE, RUN_FILES
+    from orchestrator.folders import LOCK_FILE
+    from orchestrator.run import RUN_FILES
 
     if path.is_symlink() or not path.is_dir():
         return False
@@ -745,20 +746,19 @@ def run_study(spec: StudySpec, output: Path, system: Optional[Path], fmu_dirs: S
     DIR/study.json. ``runs_per_task`` fixes how many runs a task takes (default: chosen by
     :func:`default_runs_per_task` from the number of runs and workers).
 
-    The folder is locked for the study as a run's folder is (orchestrator/run.py
-    OutputFolder: a second study or run into it is refused). SIGINT, SIGTERM or SIGHUP stop
+    The folder is locked for the study as a run's folder is (orchestrator/folders.py
+    FolderLock: a second study or run into it is refused). SIGINT, SIGTERM or SIGHUP stop
     the study: no run is handed out any more, the workers are stopped, the runs done are
     kept and written to study.csv, and :class:`~orchestrator.interrupts.Interrupted` is raised
     (``--resume`` goes on from there)."""
     from orchestrator import interrupts
-    from orchestrator.run import OutputFolder
+    from orchestrator.folders import FolderLock
 
     output = Path(output).resolve()
     with interrupts.deferred() as flag:
         if flag is not None:
             flag.check("before the study started; nothing written")
-        folder = OutputFolder(output)
-        folder.claim()
+        folder = FolderLock(output, f"--output {output}", "another study or run").acquire()
         try:
             return _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, progress,
                                 python_path, runs_per_task, flag)
