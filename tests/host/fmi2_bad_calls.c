@@ -1,6 +1,6 @@
 /* Every FMI 2.0 co-simulation function called with bad arguments, as a careless or hostile host
  * would: a NULL, freed or foreign component, NULL arrays, value references that are no
- * variable, more values than the FMU has, the state and derivative calls the FMU does not offer,
+ * variable, n = SIZE_MAX and 2^40, the state and derivative calls the FMU does not offer,
  * and fmi2Instantiate with each bad argument. Each call prints "<case> <status>" (an
  * fmi2Instantiate prints "NULL" or "instance") and flushes, so a crash names the case it happened
  * in. After the bad calls the instance must still run: "life <status>" of a normal
@@ -161,7 +161,7 @@ int main(int argc, char **argv) {
     show("getReal_null_vr", fmi2GetReal(c, NULL, 1, &real));
     show("getReal_null_values", fmi2GetReal(c, &vr, 1, NULL));
     show("getReal_huge_n", fmi2GetReal(c, two, SIZE_MAX, reals));
-    show("getReal_n_beyond_variables", fmi2GetReal(c, two, (size_t)1 << 40, reals));
+    show("getReal_n_2_40", fmi2GetReal(c, two, (size_t)1 << 40, reals));
     show("getReal_no_variable", fmi2GetReal(c, &no_variable, 1, &real));
     show("getInteger_null_values", fmi2GetInteger(c, &vr, 1, NULL));
     show("getInteger_huge_n", fmi2GetInteger(c, two, SIZE_MAX, &integer));

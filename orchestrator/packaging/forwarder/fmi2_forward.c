@@ -23,7 +23,7 @@
  * which `railcosim build` writes from the modelDescription: a host need not extract
  * modelDescription.xml); a bad one is NULL with a logged message. pythonfmu gets "file://" and the
  * decoded path. Every other call finds its component in the instance list first (a NULL, freed or
- * foreign one: fmi2Error, a line on stderr) and refuses NULL arrays, n beyond the FMU's variables,
+ * foreign one: fmi2Error, a line on stderr) and refuses NULL arrays, n above 2^20 values,
  * the calls the modelDescription does not offer (FMU state, derivatives) with fmi2Error and a
  * logged message (docs/architecture.md, "Forwarding binary").
  *
@@ -454,6 +454,9 @@ static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "Str
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
 
 typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
+/* a host may repeat a reference in one list, so the bound is not the FMU's variable count: it
+ * is far above any list of ours (the largest FMU has a few thousand values) */
+#define MAX_VALUES_PER_CALL (1 << 20)
 #define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
 
 /* a list of value references of one number type, checked for a get or for a set, resolved by
@@ -477,7 +480,6 @@ typedef struct Instance {
     int checked;                       /* 0: the table was not read, calls are forwarded as they are */
     Bitmap valid[TYPES];               /* every variable of the type */
     Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
-    size_t count[TYPES];               /* variables of the type: no get or set asks for more values */
     Description description;           /* the calls the FMU offers */
     /* the slave's store resolvers per number type (fmus/fmi/bulk.py), or NULL; the reference
      * lists they resolved */
@@ -567,10 +569,7 @@ static int read_value_references(const char *folder, Instance *entry) {
         while (c != EOF && !isspace(c)) { if (len + 1 < sizeof word) word[len++] = (char)c; c = getc(file); }
         word[len] = '\0';
         if (isdigit((unsigned char)word[0])) {
-            if (current && !bitmap_has(current, (fmi2ValueReference)strtoul(word, NULL, 10))) {
-                ok = bitmap_add(current, strtoul(word, NULL, 10));
-                for (int t = 0; t < TYPES; t++) entry->count[t] += current == &entry->valid[t];
-            }
+            if (current) ok = bitmap_add(current, strtoul(word, NULL, 10));
             continue;
         }
         current = NULL;
@@ -605,8 +604,8 @@ static void log_error(const Instance *entry, const char *text) {
     entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Error, "logStatusError", escaped);
 }
 
-/* fmi2Error, logged, for a get or set whose arrays are missing, that asks for more values than
- * the FMU has variables of `type` (a host's n beyond its arrays: never read), or at the first
+/* fmi2Error, logged, for a get or set whose arrays are missing, that asks for more than
+ * MAX_VALUES_PER_CALL values (n = SIZE_MAX: never read, never allocated), or at the first
  * value reference that is not a variable of `type` (or, setting, one that cannot be set); fmi2OK
  * when all are good. Without the table only the arrays are checked. */
 static fmi2Status check_references(const Instance *entry, const fmi2ValueReference vr[], size_t n, const void *value,
@@ -620,13 +619,13 @@ static fmi2Status check_references(const Instance *entry, const fmi2ValueReferen
         log_error(entry, text);
         return fmi2Error;
     }
-    if (!entry->checked) return fmi2OK;
-    if (n > entry->count[type]) {
-        snprintf(text, sizeof text, "%s: fmi2%s%s of %zu values refused: the FMU has %zu %s variables",
-                 entry->name, call, type_names[type], n, entry->count[type], type_names[type]);
+    if (n > MAX_VALUES_PER_CALL) {
+        snprintf(text, sizeof text, "%s: fmi2%s%s of %zu values refused: more than %d values in one call",
+                 entry->name, call, type_names[type], n, MAX_VALUES_PER_CALL);
         log_error(entry, text);
         return fmi2Error;
     }
+    if (!entry->checked) return fmi2OK;
     const Bitmap *allowed = setting ? &entry->settable[type] : &entry->valid[type];
     for (size_t i = 0; i < n; i++) {
         if (bitmap_has(allowed, vr[i])) continue;
