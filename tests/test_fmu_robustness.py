@@ -514,3 +514,56 @@ def test_value_reference_table_matches_the_model_description(product_fmus):
 
 if __name__ == "__main__":
     print(json.dumps(_driver(json.loads(sys.argv[1]))))
+
+
+# ---- where the FMU is extracted: a folder whose URI must be percent-encoded -----------------------
+AWKWARD_TMP = "врем #1 100% x"   # Cyrillic, '#', '%' and a space: each is encoded in a file: URI
+
+
+def test_the_slave_decodes_a_file_uri_and_keeps_a_path():
+    from fmus.errors import FmuInputError
+    from fmus.fmi.slave import resources_folder
+
+    assert resources_folder("file:///tmp/%D0%B2%D1%80%D0%B5%D0%BC%20%231%20100%25/resources") == \
+        "/tmp/врем #1 100%/resources"
+    assert resources_folder("FILE://localhost/a%2Fb") == "/a/b"
+    assert resources_folder("file:/a#b?c%zz") == "/a#b?c%zz"          # a host that does not encode
+    assert resources_folder("/tmp/%41/resources") == "/tmp/%41/resources"   # a path is not decoded
+    assert resources_folder(None) is None
+    with pytest.raises(FmuInputError, match="names another host"):
+        resources_folder("file://server/share/resources")
+
+
+@pytest.mark.parametrize("command", [
+    ["run", "ato_only", "--stop-time", "5", "--output", "{out}"],
+    ["validate", "ato_only"],
+    ["validate", "{fmus}/Traction.fmu"],
+    ["conform", "--role", "traction", "{fmus}/Traction.fmu"],
+], ids=["run", "validate-system", "validate-fmu", "conform"])
+def test_commands_run_with_a_temporary_folder_the_uri_must_encode(command, product_fmus, tmp_path):
+    """TMPDIR with Cyrillic, '#', '%' and a space: every FMU extracted there got its resources as
+    file:///…/%D0%B2… and pythonfmu, reading that undecoded, crashed the command (exit 139)."""
+    from helpers import railcosim
+
+    tmp = tmp_path / AWKWARD_TMP
+    tmp.mkdir()
+    arguments = [part.format(out=tmp_path / "out", fmus=product_fmus) for part in command]
+    code, out, err = railcosim(*arguments, env={"TMPDIR": tmp})
+    assert code == 0, (code, out[-800:], err[-1500:])
+    assert list(tmp.iterdir()) == []   # and nothing left behind
+
+
+def test_dcp_slave_serves_an_fmu_extracted_under_such_a_temporary_folder(product_fmus, tmp_path, monkeypatch):
+    """The slave instantiates its FMU before it says LISTENING."""
+    from dcp_test_master import start_slave
+
+    tmp = tmp_path / AWKWARD_TMP
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    proc, _ = start_slave(product_fmus / "Traction.fmu")
+    try:
+        assert proc.poll() is None
+    finally:
+        proc.terminate()
+        proc.wait(timeout=60)
+    assert proc.returncode in (0, -15, 143), proc.stderr.read()[-1500:]

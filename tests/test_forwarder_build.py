@@ -141,3 +141,15 @@ def test_the_built_table_is_the_facades_value_reference_table(product_fmus):
         for fmi_type, by_causality in table.items():
             assert built[fmi_type] == sorted(vr for vrs in by_causality.values() for vr in vrs), (facade, fmi_type)
             assert built[f"{fmi_type}:set"] == sorted(by_causality.get("parameter", []) + by_causality.get("input", []))
+
+
+def test_the_description_copy_holds_the_guid_and_the_capabilities():
+    """resources/railcosim_description.txt: what fmi2Instantiate and the optional calls are checked
+    against (a host need not extract modelDescription.xml)."""
+    xml = (b'<fmiModelDescription fmiVersion="2.0" guid="{abc}"><CoSimulation modelIdentifier="m"'
+           b' canGetAndSetFMUstate="true" maxOutputDerivativeOrder="2"/></fmiModelDescription>')
+    assert fwd.description_text(xml).splitlines()[1:] == [
+        "guid={abc}", "CoSimulation=1", "canGetAndSetFMUstate=1", "canSerializeFMUstate=0",
+        "providesDirectionalDerivative=0", "canInterpolateInputs=0", "maxOutputDerivativeOrder=2"]
+    model_exchange = b'<fmiModelDescription guid="g"><ModelExchange modelIdentifier="m"/></fmiModelDescription>'
+    assert "CoSimulation=0" in fwd.description_text(model_exchange)

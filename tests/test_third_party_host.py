@@ -20,7 +20,7 @@ import fmpy
 import pytest
 from fmpy import read_model_description
 
-from orchestrator.packaging.forwarder import MARKER_SYMBOL, SETTINGS_MEMBER
+from orchestrator.packaging.forwarder import DESCRIPTION_MEMBER, MARKER_SYMBOL, SETTINGS_MEMBER
 
 HOST_SOURCE = Path(__file__).resolve().parent / "host" / "fmi2_host.c"
 PRODUCT = ("Traction", "AtoController", "WaysideCoder", "RailLine", "LocoReceiver")
@@ -90,7 +90,9 @@ def test_every_product_fmu_has_the_forwarding_binary(name, product_fmus, tmp_pat
     with zipfile.ZipFile(fmu) as archive:
         members = set(archive.namelist())
         archive.extractall(tmp_path)
-    assert {f"binaries/linux64/{name}.so", f"binaries/linux64/{name}_pythonfmu.so", SETTINGS_MEMBER} <= members
+    assert {f"binaries/linux64/{name}.so", f"binaries/linux64/{name}_pythonfmu.so", SETTINGS_MEMBER,
+            DESCRIPTION_MEMBER} <= members
+    assert f"guid={read_model_description(str(fmu)).guid}\n" in (tmp_path / DESCRIPTION_MEMBER).read_text()
     settings = dict(line.split("=", 1) for line in (tmp_path / SETTINGS_MEMBER).read_text().splitlines())
     assert set(settings) == {"LIBPYTHON", "PYTHONHOME", "PYTHONPATH"} and Path(settings["LIBPYTHON"]).is_file()
     # loading runs nothing: the forwarder loads Python and pythonfmu at the first fmi2Instantiate
@@ -337,3 +339,109 @@ def test_c_host_calls_after_fmi2fatal_are_refused_not_crashed(product_fmus, host
     refused = [line for line in proc.stderr.splitlines() if "refused: the instance returned fmi2Fatal" in line]
     assert len(refused) == 6 and "[host 3] host: fmi2DoStep refused" in refused[0]
     assert proc.stderr.count("v0 = 1e+09 is above its maximum 150") == 2
+
+
+# ---- (f) an FMU extracted where the path needs encoding: the forwarder decodes the URI -----------
+AWKWARD_FOLDERS = {"cyrillic": "врем", "hash": "a#b", "percent": "100%", "percent_hex": "%41", "space": "a b",
+                   "long": "/".join(["l" * 60] * 12)}
+
+
+@pytest.mark.parametrize("uri", ["encoded", "as-is"])
+@pytest.mark.parametrize("kind", AWKWARD_FOLDERS)
+def test_c_host_runs_an_fmu_extracted_under_a_folder_the_uri_must_encode(kind, uri, product_fmus, host_binary,
+                                                                         tmp_path):
+    """The host's resource URI is percent-encoded (file:///…/%D0%B2…, %23, %25, %20) as FMI 2.0
+    asks; some hosts write the path as it is after "file://". Both name the folder: the run gives
+    the outputs of the same FMU in a plain folder (pythonfmu, handed the URI undecoded, crashed at
+    fmi2Instantiate). "%41" is a folder of that name, not "A": encoded it is %2541."""
+    fmu = product_fmus / "Traction.fmu"
+    plain = run_host(host_binary, host_arguments(fmu, tmp_path / "plain"))
+    folder = tmp_path / AWKWARD_FOLDERS[kind] / "fmu"
+    arguments = host_arguments(fmu, folder)
+    if uri == "as-is":
+        arguments[1] = f"file://{folder / 'resources'}"
+    else:
+        assert arguments[1] == (folder / "resources").as_uri() and (kind == "long" or "%" in arguments[1])
+    proc = run_host(host_binary, arguments)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-800:])
+    assert proc.stdout == plain.stdout and plain.stdout.strip()
+
+
+@pytest.mark.parametrize("name", PRODUCT)
+def test_every_fmu_runs_extracted_under_cyrillic_hash_percent_and_space(name, product_fmus, host_binary, tmp_path):
+    proc = run_host(host_binary, host_arguments(product_fmus / f"{name}.fmu", tmp_path / "врем #1 100% x" / "fmu"))
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-800:])
+    assert proc.stdout.strip()
+
+
+def test_simulate_fmu_with_a_temporary_folder_of_cyrillic_hash_percent_and_space(product_fmus, tmp_path):
+    """fmpy extracts into TMPDIR and hands the FMU the percent-encoded URI of that folder."""
+    tmp = tmp_path / "врем #1 100% x"
+    tmp.mkdir()
+    path = str(product_fmus / "AtoController.fmu")
+    proc = subprocess.run([sys.executable, "-c", SIMULATE_THRICE, path], capture_output=True, text=True,
+                          timeout=300, env=dict(os.environ, TMPDIR=str(tmp)))
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-1500:])
+    assert "distinct 1" in proc.stdout and list(tmp.iterdir()) == []
+
+
+# ---- (g) every fmi2 function with bad arguments: an error status, never a crash ------------------
+BAD_CALLS_SOURCE = HOST_SOURCE.with_name("fmi2_bad_calls.c")
+DISCARD, ERROR = 2, 3
+BAD_INSTANTIATIONS = ("null_name", "empty_name", "model_exchange", "unknown_type", "wrong_guid", "null_guid",
+                      "null_location", "missing_location", "http_location", "other_host", "relative_location",
+                      "nul_escape", "overlong_location", "null_callbacks")
+
+
+@pytest.fixture(scope="module")
+def bad_calls_binary(tmp_path_factory):
+    compiler = shutil.which("gcc") or shutil.which("cc")
+    binary = tmp_path_factory.mktemp("bad_calls") / "fmi2_bad_calls"
+    headers = Path(fmpy.__file__).parent / "c-code"
+    subprocess.run([compiler, "-O1", f"-I{headers}", "-o", str(binary), str(BAD_CALLS_SOURCE), "-ldl", "-lm"],
+                   check=True)
+    return binary
+
+
+@pytest.mark.parametrize("name", PRODUCT)
+def test_every_fmi2_function_with_bad_arguments_is_refused_never_a_crash(name, product_fmus, bad_calls_binary,
+                                                                          tmp_path):
+    """tests/host/fmi2_bad_calls.c: fmi2Instantiate with each bad argument returns NULL with the
+    reason logged (a wrong GUID and ModelExchange among them, issue of co-simulation-only FMUs); every
+    other function with a NULL or foreign component, NULL arrays, unknown references, n = SIZE_MAX,
+    or a call the modelDescription does not offer answers fmi2Error (a step the slave refuses:
+    fmi2Discard); the instance then still runs, and freeing twice is harmless."""
+    fmu = product_fmus / f"{name}.fmu"
+    md = read_model_description(str(fmu))
+    arguments = host_arguments(fmu, tmp_path / "fmu")
+    real_output = next(v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real")
+    string_parameter = next((v.valueReference for v in md.modelVariables
+                             if v.causality == "parameter" and v.type == "String"), 0)
+    proc = subprocess.run([str(bad_calls_binary), *arguments[:3], arguments[4], str(real_output), str(string_parameter)],
+                          capture_output=True, text=True, env=clean_environment(), timeout=300)
+    assert proc.returncode == 0, (proc.returncode, proc.stdout[-600:], proc.stderr[-1500:])
+    answers = dict(line.split(" ", 1) for line in proc.stdout.splitlines())
+    assert list(answers)[-1] == "getReal_after_free" and len(answers) == len(proc.stdout.splitlines()) > 130
+    assert {answers[f"instantiate_{case}"] for case in BAD_INSTANTIATIONS} == {"NULL"}
+    assert answers.pop("instantiate_without_memory_functions") == "instance" and answers.pop("life") == "0"
+    assert answers.pop("instantiate_without_logger") == "instance"
+
+    def expected(label):
+        if label.startswith("freeInstance"):
+            return {"0"}                     # (void: printed once it returned)
+        if label.startswith("doStep_"):
+            return {str(DISCARD), str(ERROR)}  # the slave refuses a step with fmi2Discard
+        return {str(ERROR)}
+
+    unexpected = {label: status for label, status in answers.items()
+                  if not label.startswith("instantiate_") and status not in expected(label)}
+    assert unexpected == {}
+    for reason in ("ModelExchange requested; this FMU is for co-simulation only",
+                   f'GUID "{{not-this-fmu}}" is not this FMU\'s {md.guid}',
+                   "the instance name is NULL", "no resource location (NULL)",
+                   "/nonexistent/railcosim/resources/slavemodule.txt cannot be read",
+                   "fmi2SetString: the value for reference", "canGetAndSetFMUstate=\"false\"",
+                   "fmi2GetReal of 18446744073709551615 values refused",
+                   "fmi2SetupExperiment refused: the start time is not finite",
+                   "fmi2DoStep refused: the component is NULL"):
+        assert reason in proc.stderr, reason

@@ -27,6 +27,7 @@ core. No physics or logic lives here or in a facade.
 from __future__ import annotations
 
 import math
+import os
 import traceback
 from typing import Any, Dict, List, Optional, Sequence
 from xml.etree.ElementTree import Element
@@ -52,6 +53,27 @@ INSTANTIATED, INITIALISATION, STEPPING, TERMINATED, FAILED = (
 _TIME_REL_TOL, _TIME_ABS_TOL = 1e-12, 1e-9
 
 
+def resources_folder(resources: Optional[str]) -> Optional[str]:
+    """The FMU's resources folder from pythonfmu's ``resources`` argument: a path (pythonfmu 0.7.0
+    strips "file://" and decodes nothing; our forwarding binary hands it the decoded path, and the
+    orchestrator's in-process FMUs pass a path), or a ``file:`` URI, decoded per RFC 3986
+    (``file:///home/%D0%B2%20x/resources`` is ``/home/в x/resources``). As in the forwarder, a
+    '#' or '?' is part of the path (hosts that do not encode) and a '%' without two hex digits
+    stays as it is."""
+    if not resources or resources[:5].lower() != "file:":
+        return resources
+    from urllib.parse import unquote_to_bytes
+
+    path = resources[5:]
+    if path[:12].lower() == "//localhost/":
+        path = path[11:]
+    elif path.startswith("///"):
+        path = path[2:]
+    elif path.startswith("//"):
+        raise FmuInputError(f"resource location {resources!r} names another host")
+    return os.fsdecode(unquote_to_bytes(path))
+
+
 class FacadeSlave(Fmi2Slave):
     """Base of every railcosim facade.
 
@@ -72,6 +94,7 @@ class FacadeSlave(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
+        self.resources = resources_folder(self.resources)
         self.build = BuildConfig(**self.build_config)
         self.ports: List[Port] = list(self.declare_ports(self.build))
         self.store = ValueStore(self.ports, self._register)
@@ -148,8 +171,6 @@ class FacadeSlave(Fmi2Slave):
         to this FMU's resources folder (where the bundled defaults live). A default inside the
         imported ``fmus`` package (whose module-level paths point where this interpreter first
         imported it: maybe another FMU's extraction, removed since) is this FMU's own copy."""
-        import os
-
         package = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         if self.resources and os.path.isabs(path) and os.path.commonpath([path, package]) == package:
             own = os.path.join(self.resources, "fmus", os.path.relpath(path, package))

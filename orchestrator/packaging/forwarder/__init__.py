@@ -6,8 +6,10 @@ are needed (else the FMUs stay plain pythonfmu FMUs and the build says so on std
 Python's shared libpython must exist (else a UserError naming where it looked). ``install``
 rewrites a built FMU: pythonfmu's ``binaries/linux64/<id>.so`` becomes ``<id>_pythonfmu.so``,
 the forwarder takes its name, ``resources/railcosim_python.txt`` holds the Python the
-forwarder starts in a process that has none, and ``resources/railcosim_value_references.txt``
-the value references it lets through to pythonfmu (``value_reference_text``).
+forwarder starts in a process that has none, ``resources/railcosim_value_references.txt``
+the value references it lets through to pythonfmu (``value_reference_text``), and
+``resources/railcosim_description.txt`` the GUID and capabilities fmi2Instantiate and the other
+calls are checked against (``description_text``).
 """
 from __future__ import annotations
 
@@ -26,6 +28,10 @@ from orchestrator.errors import UserError
 SOURCE = Path(__file__).resolve().with_name("fmi2_forward.c")
 SETTINGS_MEMBER = "resources/railcosim_python.txt"
 VALUE_REFERENCES_MEMBER = "resources/railcosim_value_references.txt"
+DESCRIPTION_MEMBER = "resources/railcosim_description.txt"
+#: the CoSimulation attributes the forwarder answers by (a call the FMU does not offer: fmi2Error)
+CAPABILITIES = ("canGetAndSetFMUstate", "canSerializeFMUstate", "providesDirectionalDerivative",
+                "canInterpolateInputs", "maxOutputDerivativeOrder")
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
 MARKER_SYMBOL = "railcosim_forwarder"
 PLATFORM = "linux64"
@@ -127,6 +133,24 @@ def value_reference_text(model_description: bytes) -> str:
     return "\n".join(lines) + "\n"
 
 
+def description_text(model_description: bytes) -> str:
+    """The forwarder's copy of what it checks (resources/railcosim_description.txt): ``guid=``,
+    ``CoSimulation=1`` when the FMU has that interface, and each of CAPABILITIES as a number (a
+    boolean 1/0). A host need not extract modelDescription.xml (fmpy.simulate_fmu does not), so
+    the binary cannot read it there."""
+    from xml.etree import ElementTree
+
+    root = ElementTree.fromstring(model_description)
+    co_simulation = root.find("CoSimulation")
+    lines = ["# railcosim_description 1: written by `railcosim build` from modelDescription.xml,"
+             " read by the FMU's forwarding binary (docs/architecture.md, \"Forwarding binary\")",
+             f"guid={root.get('guid')}", f"CoSimulation={int(co_simulation is not None)}"]
+    for name in CAPABILITIES:
+        value = co_simulation.get(name, "0") if co_simulation is not None else "0"
+        lines.append(f"{name}={ {'true': 1, 'false': 0}.get(value, value) }")
+    return "\n".join(lines) + "\n"
+
+
 def install(fmu_path: Path, model_identifier: str, forwarder: Forwarder) -> None:
     """Put the forwarder in front of pythonfmu's linux64 binary inside ``fmu_path``."""
     binary = f"binaries/{PLATFORM}/{model_identifier}.so"
@@ -140,15 +164,17 @@ def install(fmu_path: Path, model_identifier: str, forwarder: Forwarder) -> None
             names = source.namelist()
             if binary not in names:
                 raise RuntimeError(f"{fmu_path}: pythonfmu wrote no {binary}")
-            table = value_reference_text(source.read("modelDescription.xml"))  # before writestr moves the infos
+            description = source.read("modelDescription.xml")  # before writestr moves the infos
+            table = value_reference_text(description)
             for info in source.infolist():
                 data = source.read(info)
                 if info.filename == binary:
                     info.filename = renamed
-                if info.filename in (SETTINGS_MEMBER, VALUE_REFERENCES_MEMBER):
+                if info.filename in (SETTINGS_MEMBER, VALUE_REFERENCES_MEMBER, DESCRIPTION_MEMBER):
                     continue
                 target.writestr(info, data)
             target.write(compiled, binary)
             target.writestr(SETTINGS_MEMBER, forwarder.settings)
             target.writestr(VALUE_REFERENCES_MEMBER, table)
+            target.writestr(DESCRIPTION_MEMBER, description_text(description))
         shutil.move(str(rewritten), fmu_path)

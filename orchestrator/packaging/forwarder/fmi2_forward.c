@@ -15,6 +15,18 @@
  *   2. loads <id>_pythonfmu.so from its own folder (dladdr) and forwards every fmi2 function.
  * pythonfmu then finds Python initialised and never starts or finalises one itself.
  *
+ * Arguments: pythonfmu strips "file://" from the resource location and decodes nothing (a folder
+ * with a Cyrillic letter, '#', '%' or a space: its slavemodule.txt not found, then a NULL class
+ * called, SIGSEGV) and builds std::strings from NULL names (abort). fmi2Instantiate checks every
+ * argument first (instantiation_refused): the URI decoded per RFC 3986 to a folder holding
+ * slavemodule.txt, a co-simulation request, the FMU's GUID (from resources/railcosim_description.txt,
+ * which `railcosim build` writes from the modelDescription: a host need not extract
+ * modelDescription.xml); a bad one is NULL with a logged message. pythonfmu gets "file://" and the
+ * decoded path. Every other call finds its component in the instance list first (a NULL, freed or
+ * foreign one: fmi2Error, a line on stderr) and refuses NULL arrays, n above 2^20 values,
+ * the calls the modelDescription does not offer (FMU state, derivatives) with fmi2Error and a
+ * logged message (docs/architecture.md, "Forwarding binary").
+ *
  * Value references: pythonfmu cannot return fmi2Error (a Python exception is fmi2Fatal). Each
  * instance keeps the valid value references per FMI type, read at fmi2Instantiate from
  * resources/railcosim_value_references.txt under the resource location (written by
@@ -61,6 +73,9 @@
 #include <dlfcn.h>
 #include <pthread.h>
 #include <ctype.h>
+#include <math.h>
+#include <strings.h>
+#include <unistd.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -69,10 +84,11 @@
 #include "fmi2Functions.h"
 
 /* marker checked by tests/test_third_party_host.py */
-FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 4";
+FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 5";
 
 #define SETTINGS_FILE "railcosim_python.txt"
 #define VALUE_REFERENCES_FILE "railcosim_value_references.txt"
+#define DESCRIPTION_FILE "railcosim_description.txt"
 
 /* ---- the Python C API, resolved at run time (libpython is not a link-time dependency) ---- */
 static int (*py_IsInitialized)(void);
@@ -99,7 +115,6 @@ static void (*py_DecRef)(PyObject *);
 static void (*pyErr_Clear)(void);
 static int python_api;                 /* the functions above are resolved */
 static int bulk_enabled;
-static int fatal_instances;            /* live instances that returned fmi2Fatal (atomic; 0: no look-up per call) */
 #ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
 static void (*pyEval_RestoreThread)(PyThreadState *);
 static int (*py_FinalizeEx)(void);
@@ -152,10 +167,8 @@ static void own_stem(char *out, size_t size) {
     }
 }
 
-/* one "KEY=value" line of resources/railcosim_python.txt (written by `railcosim build`) */
-static int setting(const char *folder, const char *key, char *out, size_t size) {
-    char path[4096];
-    snprintf(path, sizeof path, "%s/../../resources/%s", folder, SETTINGS_FILE);
+/* one "KEY=value" line of a file `railcosim build` wrote; 1 if found */
+static int key_value(const char *path, const char *key, char *out, size_t size) {
     FILE *file = fopen(path, "r");
     if (!file) return 0;
     char line[8192];
@@ -170,6 +183,13 @@ static int setting(const char *folder, const char *key, char *out, size_t size) 
     }
     fclose(file);
     return found;
+}
+
+/* one line of resources/railcosim_python.txt */
+static int setting(const char *folder, const char *key, char *out, size_t size) {
+    char path[4200];
+    snprintf(path, sizeof path, "%s/../../resources/%s", folder, SETTINGS_FILE);
+    return key_value(path, key, out, size);
 }
 
 static void fail(const char *format, ...) {
@@ -308,12 +328,135 @@ static void release_at_unload(void) {
     pthread_mutex_unlock(&lock);
 }
 
+/* ---- fmi2Instantiate's arguments, checked before pythonfmu sees any of them --------------- */
+#define RESOURCE_MODULE_FILE "slavemodule.txt"   /* what pythonfmu reads first from the resources */
+
+/* the local path of a file: URI per RFC 3986 (file:///a%20b, file:/a, file://localhost/a; the
+ * scheme and "localhost" in any case), every %XX decoded; 1, or 0 with *why: not a local file:
+ * URI, a %00, or longer than `size`. A '%' without two hex digits after it, '#' and '?' are taken
+ * as part of the path: a host that does not encode (the spec asks for a URI, some hosts pass
+ * "file://" and the path as it is) still names its folder. */
+static int uri_folder(const char *uri, char *out, size_t size, const char **why) {
+    if (strncasecmp(uri, "file:", 5) != 0) { *why = "not a file: URI"; return 0; }
+    const char *p = uri + 5;
+    if (strncasecmp(p, "//localhost/", 12) == 0) p += 11;
+    else if (strncmp(p, "///", 3) == 0) p += 2;
+    else if (p[0] == '/' && p[1] == '/') { *why = "a file: URI of another host"; return 0; }
+    if (p[0] != '/') { *why = "not an absolute path"; return 0; }
+    size_t k = 0;
+    for (; *p; p++) {
+        if (k + 1 >= size) { *why = "the path is too long"; return 0; }
+        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
+            char hex[3] = {p[1], p[2], 0};
+            out[k] = (char)strtol(hex, NULL, 16);
+            if (!out[k++]) { *why = "the path contains %00"; return 0; }
+            p += 2;
+        } else {
+            out[k++] = *p;
+        }
+    }
+    out[k] = '\0';
+    while (k > 1 && out[k - 1] == '/') out[--k] = '\0';
+    return 1;
+}
+
+static int has_module_file(const char *folder) {
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", folder, RESOURCE_MODULE_FILE);
+    return access(path, R_OK) == 0;
+}
+
+/* the resources folder the host names: the decoded path, else (a host that does not encode and a
+ * folder named like "%41") the path as written; 1, or 0 with a message in why */
+static int resource_folder(const char *uri, char *out, size_t size, char *why, size_t why_size) {
+    const char *problem = NULL;
+    if (!uri) { snprintf(why, why_size, "no resource location (NULL)"); return 0; }
+    if (!uri_folder(uri, out, size, &problem)) {
+        snprintf(why, why_size, "resource location \"%.300s\": %s", uri, problem);
+        return 0;
+    }
+    if (has_module_file(out)) return 1;
+    const char *literal = strncasecmp(uri, "file://localhost/", 17) == 0 ? uri + 16 : uri + (strncmp(uri + 5, "///", 3) == 0 ? 7 : 5);
+    if (strchr(literal, '%') && strlen(literal) < size && has_module_file(literal)) {
+        snprintf(out, size, "%s", literal);
+        return 1;
+    }
+    snprintf(why, why_size, "resource location \"%.300s\": %.300s/%s cannot be read (not this FMU's extracted resources folder)",
+             uri, out, RESOURCE_MODULE_FILE);
+    return 0;
+}
+
+/* what fmi2Instantiate checks and the calls a host may make: the modelDescription's, copied by
+ * `railcosim build` into resources/railcosim_description.txt (a host need not extract
+ * modelDescription.xml: fmpy.simulate_fmu extracts binaries/ and resources/ only) */
+typedef struct {
+    char guid[128];
+    int co_simulation, fmu_state, serialize, directional, interpolate_inputs, output_derivatives;
+} Description;
+
+static int description_number(const char *path, const char *key) {
+    char value[32];
+    return key_value(path, key, value, sizeof value) ? atoi(value) : 0;
+}
+
+/* 1, or 0 with a message in why */
+static int read_description(const char *resources, Description *out, char *why, size_t why_size) {
+    char path[4200];
+    snprintf(path, sizeof path, "%s/%s", resources, DESCRIPTION_FILE);
+    memset(out, 0, sizeof *out);
+    if (!key_value(path, "guid", out->guid, sizeof out->guid)) {
+        snprintf(why, why_size, "%.300s has no guid line (an FMU built without it?)", path);
+        return 0;
+    }
+    out->co_simulation = description_number(path, "CoSimulation");
+    out->fmu_state = description_number(path, "canGetAndSetFMUstate");
+    out->serialize = description_number(path, "canSerializeFMUstate");
+    out->directional = description_number(path, "providesDirectionalDerivative");
+    out->interpolate_inputs = description_number(path, "canInterpolateInputs");
+    out->output_derivatives = description_number(path, "maxOutputDerivativeOrder") > 0;
+    return 1;
+}
+
+/* the reason fmi2Instantiate must refuse these arguments (into why), or 0 when they are good;
+ * *description and the decoded resources folder are filled in */
+static int instantiation_refused(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID, fmi2String location,
+                                 char *folder, size_t folder_size, Description *description, char *why, size_t why_size) {
+    if (!instanceName || !*instanceName) {
+        snprintf(why, why_size, "fmi2Instantiate refused: the instance name is %s (FMI 2.0 asks for a non-empty name)",
+                 instanceName ? "empty" : "NULL");
+        return 1;
+    }
+    char problem[1200];
+    if (!resource_folder(location, folder, folder_size, problem, sizeof problem) ||
+        !read_description(folder, description, problem, sizeof problem)) {
+        snprintf(why, why_size, "fmi2Instantiate refused: %s", problem);
+        return 1;
+    }
+    if (fmuType != fmi2CoSimulation || !description->co_simulation) {
+        snprintf(why, why_size, "fmi2Instantiate refused: %s",
+                 fmuType == fmi2ModelExchange ? "ModelExchange requested; this FMU is for co-simulation only" :
+                 fmuType != fmi2CoSimulation ? "an unknown FMU type requested; this FMU is for co-simulation only" :
+                 "the FMU's description has no CoSimulation interface");
+        return 1;
+    }
+    if (!fmuGUID || strcmp(fmuGUID, description->guid) != 0) {
+        snprintf(why, why_size, "fmi2Instantiate refused: GUID %s%.200s%s is not this FMU's %s (a modelDescription.xml of "
+                 "another FMU or build?)", fmuGUID ? "\"" : "", fmuGUID ? fmuGUID : "NULL", fmuGUID ? "\"" : "",
+                 description->guid);
+        return 1;
+    }
+    return 0;
+}
+
 /* ---- per instance: its name, the host's callbacks and its valid value references ---------- */
 enum { REAL, INTEGER, BOOLEAN, STRING, TYPES, DIRECT_TYPES = STRING };  /* direct: the number types */
 static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "String"};
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
 
 typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
+/* a host may repeat a reference in one list, so the bound is not the FMU's variable count: it
+ * is far above any list of ours (the largest FMU has a few thousand values) */
+#define MAX_VALUES_PER_CALL (1 << 20)
 #define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
 
 /* a list of value references of one number type, checked for a get or for a set, resolved by
@@ -337,6 +480,7 @@ typedef struct Instance {
     int checked;                       /* 0: the table was not read, calls are forwarded as they are */
     Bitmap valid[TYPES];               /* every variable of the type */
     Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
+    Description description;           /* the calls the FMU offers */
     /* the slave's store resolvers per number type (fmus/fmi/bulk.py), or NULL; the reference
      * lists they resolved */
     PyObject *resolvers[DIRECT_TYPES];
@@ -407,37 +551,11 @@ static void free_instance_entry(Instance *entry) {
     free(entry);
 }
 
-/* the local folder of a file: URI (file:///a%20b, file:/a, file://localhost/a), else 0 */
-static int uri_folder(const char *uri, char *out, size_t size) {
-    if (!uri || strncmp(uri, "file:", 5) != 0) return 0;
-    const char *p = uri + 5;
-    if (strncmp(p, "//localhost/", 12) == 0) p += 11;
-    else if (strncmp(p, "///", 3) == 0) p += 2;
-    else if (p[0] == '/' && p[1] == '/') return 0;  /* another host */
-    size_t k = 0;
-    for (; *p && k + 1 < size; p++) {
-        if (p[0] == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
-            char hex[3] = {p[1], p[2], 0};
-            out[k++] = (char)strtol(hex, NULL, 16);
-            p += 2;
-        } else {
-            out[k++] = *p;
-        }
-    }
-    out[k] = '\0';
-    while (k > 1 && out[k - 1] == '/') out[--k] = '\0';
-    return k > 0;
-}
-
 /* resources/railcosim_value_references.txt: whitespace-separated words; a word naming a table
  * ("Real", "Real:set", ...) makes the numbers after it that table's value references; '#'
  * starts a comment line. Returns 0 if the file cannot be read. */
-static int read_value_references(const char *resource_location, Instance *entry) {
-    char folder[4096], path[4400];
-    if (!uri_folder(resource_location, folder, sizeof folder)) {  /* no usable location: the FMU's own */
-        own_folder(folder, sizeof folder);
-        strncat(folder, "/../../resources", sizeof folder - strlen(folder) - 1);
-    }
+static int read_value_references(const char *folder, Instance *entry) {
+    char path[4400];
     snprintf(path, sizeof path, "%s/%s", folder, VALUE_REFERENCES_FILE);
     FILE *file = fopen(path, "r");
     if (!file) return 0;
@@ -486,22 +604,28 @@ static void log_error(const Instance *entry, const char *text) {
     entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Error, "logStatusError", escaped);
 }
 
-/* fmi2Error, logged, at the first value reference that is not a variable of `type` (or, setting,
- * one that cannot be set); fmi2OK when all are, or when the instance has no table. *checked is
- * the instance's entry when its table was read (its references are then known good), else NULL */
-static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[], size_t n, int type, int setting,
-                                   Instance **checked) {
-    *checked = NULL;
+/* fmi2Error, logged, for a get or set whose arrays are missing, that asks for more than
+ * MAX_VALUES_PER_CALL values (n = SIZE_MAX: never read, never allocated), or at the first
+ * value reference that is not a variable of `type` (or, setting, one that cannot be set); fmi2OK
+ * when all are good. Without the table only the arrays are checked. */
+static fmi2Status check_references(const Instance *entry, const fmi2ValueReference vr[], size_t n, const void *value,
+                                   int type, int setting) {
     if (n == 0) return fmi2OK;
-    Instance *entry = find_instance(c);
-    if (!entry || !entry->checked) return fmi2OK;
     char text[600];
-    if (!vr) {
-        snprintf(text, sizeof text, "%s: fmi2%s%s with %zu value references and no array",
-                 entry->name, setting ? "Set" : "Get", type_names[type], n);
+    const char *call = setting ? "Set" : "Get";
+    if (!vr || !value) {
+        snprintf(text, sizeof text, "%s: fmi2%s%s with %zu values and no %s array", entry->name, call, type_names[type], n,
+                 vr ? "value" : "value reference");
         log_error(entry, text);
         return fmi2Error;
     }
+    if (n > MAX_VALUES_PER_CALL) {
+        snprintf(text, sizeof text, "%s: fmi2%s%s of %zu values refused: more than %d values in one call",
+                 entry->name, call, type_names[type], n, MAX_VALUES_PER_CALL);
+        log_error(entry, text);
+        return fmi2Error;
+    }
+    if (!entry->checked) return fmi2OK;
     const Bitmap *allowed = setting ? &entry->settable[type] : &entry->valid[type];
     for (size_t i = 0; i < n; i++) {
         if (bitmap_has(allowed, vr[i])) continue;
@@ -514,7 +638,15 @@ static fmi2Status check_references(fmi2Component c, const fmi2ValueReference vr[
         log_error(entry, text);
         return fmi2Error;
     }
-    *checked = entry;
+    if (type == STRING && setting) {  /* pythonfmu would read through a NULL string */
+        const fmi2String *strings = value;
+        for (size_t i = 0; i < n; i++) {
+            if (strings[i]) continue;
+            snprintf(text, sizeof text, "%s: fmi2SetString: the value for reference %u is NULL", entry->name, (unsigned)vr[i]);
+            log_error(entry, text);
+            return fmi2Error;
+        }
+    }
     return fmi2OK;
 }
 
@@ -612,15 +744,12 @@ static int resolve_list(Instance *entry, int type, int setting, const fmi2ValueR
 
 /* a get or set of `type` straight between the host's array and the slave's store: 1 done
  * (*status the answer: fmi2Error for a reference the checks refuse), 0 not (pythonfmu's route) */
-static int direct_values(fmi2Component c, int type, int setting, const fmi2ValueReference vr[], size_t n,
+static int direct_values(Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n,
                          void *value, fmi2Status *status) {
-    if (!bulk_enabled || n == 0 || !vr || !value) return 0;
-    Instance *entry = find_instance(c);
-    if (!entry || !entry->direct) return 0;
+    if (!bulk_enabled || n == 0 || !vr || !value || !entry->direct) return 0;
     int k = known_list(entry, type, setting, vr, n);
     if (k < 0) {
-        Instance *checked;
-        if (check_references(c, vr, n, type, setting, &checked) != fmi2OK) {
+        if (check_references(entry, vr, n, value, type, setting) != fmi2OK) {
             *status = fmi2Error;
             return 1;
         }
@@ -646,10 +775,8 @@ static int direct_values(fmi2Component c, int type, int setting, const fmi2Value
 }
 
 /* an instance that returned fmi2Fatal: the call refused with fmi2Error and a logged message (1), or 0 */
-static int refused_after_fatal(fmi2Component c, const char *call) {
-    if (!__atomic_load_n(&fatal_instances, __ATOMIC_ACQUIRE)) return 0;
-    Instance *entry = find_instance(c);
-    if (!entry || !entry->fatal) return 0;
+static int refused_after_fatal(const Instance *entry, const char *call) {
+    if (!entry->fatal) return 0;
     char text[400];
     snprintf(text, sizeof text, "%s: %s refused: the instance returned fmi2Fatal before (FMI 2.0 allows no "
              "further call; fmi2FreeInstance still releases it)", entry->name, call);
@@ -658,100 +785,195 @@ static int refused_after_fatal(fmi2Component c, const char *call) {
 }
 
 /* pythonfmu's answer, noted when fatal (`reset`: the answer of fmi2Reset) */
-static fmi2Status noted(fmi2Component c, fmi2Status status, int reset) {
-    if (status != fmi2Fatal) return status;
-    Instance *entry = find_instance(c);
-    if (entry && !entry->fatal) {
+static fmi2Status noted(Instance *entry, fmi2Status status, int reset) {
+    if (status == fmi2Fatal && !entry->fatal) {
         entry->fatal = 1;
         if (reset || !entry->held[0]) entry->leak = 1;
         else for (int k = 0; k < 3; k++) entry->held[k] = NULL;  /* pythonfmu's second release takes them */
-        __atomic_add_fetch(&fatal_instances, 1, __ATOMIC_RELEASE);
     }
     return status;
+}
+
+/* the instance `c` names, or NULL for a NULL, freed or foreign component (refused with fmi2Error:
+ * no logger is known for it, so the line goes to stderr) */
+static Instance *known(fmi2Component c, const char *call) {
+    Instance *entry = c ? find_instance(c) : NULL;
+    if (!entry)
+        fprintf(stderr, "railcosim FMU: %s refused: %s\n", call,
+                c ? "the component is not a live instance of this FMU (freed, or another FMU's)" : "the component is NULL");
+    return entry;
+}
+
+/* a call refused for its arguments: fmi2Error with `why` logged */
+static fmi2Status refused(const Instance *entry, const char *call, const char *why) {
+    char text[600];
+    snprintf(text, sizeof text, "%s: %s refused: %s", entry->name, call, why);
+    log_error(entry, text);
+    return fmi2Error;
+}
+
+/* fmi2SetDebugLogging's categories: n of them, none NULL, or why not */
+static const char *bad_categories(size_t n, const fmi2String categories[]) {
+    if (n && !categories) return "categories counted and no array given";
+    for (size_t i = 0; i < n; i++)
+        if (!categories[i]) return "a category is NULL";
+    return NULL;
+}
+
+/* fmi2SetupExperiment's times: the slave answers a non-finite start with fmi2Fatal (the instance
+ * lost); a bad argument is refused here with fmi2Error instead, the instance untouched */
+static const char *bad_experiment(fmi2Boolean tolerance_defined, fmi2Real tolerance, fmi2Real start,
+                                  fmi2Boolean stop_defined, fmi2Real stop) {
+    if (!isfinite(start)) return "the start time is not finite";
+    if (stop_defined && (isnan(stop) || stop < start)) return "the stop time is NaN or before the start time";
+    if (tolerance_defined && !(tolerance > 0.0)) return "the tolerance is not positive";
+    return NULL;
+}
+
+static const char *bad_status_kind(fmi2StatusKind kind, const void *value) {
+    if (!value) return "no value pointer";
+    if (kind < fmi2DoStepStatus || kind > fmi2Terminated) return "not an fmi2StatusKind";
+    return NULL;
 }
 
 /* ---- the FMI functions -------------------------------------------------------------------- */
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
+/* a refused instantiation, logged through the host's logger (else stderr) */
+static void log_refusal(const fmi2CallbackFunctions *functions, fmi2String instanceName, fmi2Status status,
+                        const char *text) {
+    const char *name = instanceName && *instanceName ? instanceName : "FMU";
+    if (functions && functions->logger)
+        functions->logger(functions->componentEnvironment, name, status, status == fmi2Fatal ? "error" : "logStatusError",
+                          "%s", text);
+    else
+        fprintf(stderr, "%s: %s\n", name, text);
+}
+
+/* the logger of a host that gives none (pythonfmu calls it unchecked) */
+static void silent_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                          fmi2String message, ...) {
+    (void)env; (void)name; (void)status; (void)category; (void)message;
+}
+
+/* the arguments checked first (instantiation_refused); pythonfmu gets the decoded resources folder
+ * as "file://<path>" (it strips those seven characters and decodes nothing) and a copy of the
+ * callbacks that lives as long as the instance */
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
+    char folder[4096], why[2048];
+    Description description;
+    if (!functions) {
+        log_refusal(NULL, instanceName, fmi2Error, "fmi2Instantiate refused: no callback functions (NULL)");
+        return NULL;
+    }
+    if (instantiation_refused(instanceName, fmuType, fmuGUID, fmuResourceLocation, folder, sizeof folder,
+                              &description, why, sizeof why)) {
+        log_refusal(functions, instanceName, fmi2Error, why);
+        return NULL;
+    }
     pthread_mutex_lock(&lock);
     int ready = state == LOADED || (state == NOT_LOADED && load());
     pthread_mutex_unlock(&lock);
     if (!ready) {
-        if (functions && functions->logger)
-            functions->logger(functions->componentEnvironment, instanceName, fmi2Fatal, "error", "%s", failure);
-        else
-            fprintf(stderr, "%s: %s\n", instanceName ? instanceName : "FMU", failure);
+        log_refusal(functions, instanceName, fmi2Fatal, failure);
         return NULL;
     }
-    fmi2Component component = target_fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation,
-                                                     functions, visible, loggingOn);
-    if (component) {
-        pthread_mutex_lock(&lock);
-        live_instances++;
-        pthread_mutex_unlock(&lock);
-        Instance *entry = calloc(1, sizeof *entry);
-        if (entry) {  /* without memory for it: forwarded unchecked */
-            entry->component = component;
-            snprintf(entry->name, sizeof entry->name, "%s", instanceName ? instanceName : "FMU");
-            if (functions) entry->callbacks = *functions;
-            entry->checked = read_value_references(fmuResourceLocation, entry);
-            claim_instance(entry);
-            pthread_mutex_lock(&table_lock);
-            entry->next = instances;
-            instances = entry;
-            pthread_mutex_unlock(&table_lock);
-        }
+    Instance *entry = calloc(1, sizeof *entry);
+    size_t location_size = strlen(folder) + sizeof "file://";
+    char *location = malloc(location_size);
+    if (!entry || !location) {
+        free(entry);
+        free(location);
+        log_refusal(functions, instanceName, fmi2Error, "fmi2Instantiate refused: out of memory");
+        return NULL;
     }
+    snprintf(location, location_size, "file://%s", folder);
+    snprintf(entry->name, sizeof entry->name, "%s", instanceName);
+    entry->callbacks = *functions;
+    if (!entry->callbacks.logger) entry->callbacks.logger = silent_logger;
+    /* the modelDescription says canNotUseMemoryManagementFunctions: a host may leave them out */
+    if (!entry->callbacks.allocateMemory || !entry->callbacks.freeMemory) {
+        entry->callbacks.allocateMemory = calloc;
+        entry->callbacks.freeMemory = free;
+    }
+    entry->description = description;
+    fmi2Component component = target_fmi2Instantiate(instanceName, fmuType, fmuGUID, location, &entry->callbacks,
+                                                     visible, loggingOn);
+    free(location);
+    if (!component) {
+        free(entry);
+        return NULL;
+    }
+    pthread_mutex_lock(&lock);
+    live_instances++;
+    pthread_mutex_unlock(&lock);
+    entry->component = component;
+    entry->checked = read_value_references(folder, entry);
+    claim_instance(entry);
+    pthread_mutex_lock(&table_lock);
+    entry->next = instances;
+    instances = entry;
+    pthread_mutex_unlock(&table_lock);
     return component;
 }
 
+/* a component that is not a live instance of this FMU (NULL, freed twice, another FMU's) is
+ * left alone with a line on stderr */
 void fmi2FreeInstance(fmi2Component c) {
-    if (!c || !target_fmi2FreeInstance) return;
     pthread_mutex_lock(&table_lock);
     Instance **link = &instances;
-    while (*link && (*link)->component != c) link = &(*link)->next;
-    Instance *entry = *link;
+    while (c && *link && (*link)->component != c) link = &(*link)->next;
+    Instance *entry = c ? *link : NULL;
     if (entry) *link = entry->next;
     pthread_mutex_unlock(&table_lock);
-    int leak = entry && entry->leak;
-    if (entry && entry->fatal) __atomic_sub_fetch(&fatal_instances, 1, __ATOMIC_RELEASE);
-    if (!leak) target_fmi2FreeInstance(c);  /* (its references are released in there) */
-    if (entry) {
-        if (leak) for (int k = 0; k < 3; k++) entry->held[k] = NULL;  /* kept: the instance is never freed */
-        free_instance_entry(entry);
+    if (!entry) {
+        known(c, "fmi2FreeInstance");
+        return;
     }
+    if (!entry->leak) target_fmi2FreeInstance(c);  /* (its references are released in there) */
+    if (entry->leak) for (int k = 0; k < 3; k++) entry->held[k] = NULL;  /* kept: the instance is never freed */
+    free_instance_entry(entry);
     pthread_mutex_lock(&lock);
     live_instances--;
     pthread_mutex_unlock(&lock);
 }
 
-#define FORWARD(name, params, args) \
+/* every call: the component one of ours (known), not after fmi2Fatal, its arguments good
+ * (`bad`: why not, or NULL), then pythonfmu's function */
+#define FORWARD(name, params, args, bad) \
     fmi2Status name params { \
-        if (!target_##name || refused_after_fatal(c, #name)) return fmi2Error; \
-        return noted(c, target_##name args, 0); \
+        Instance *entry = known(c, #name); \
+        if (!entry || !target_##name || refused_after_fatal(entry, #name)) return fmi2Error; \
+        const char *why = (bad); \
+        if (why) return refused(entry, #name, why); \
+        return noted(entry, target_##name args, 0); \
     }
+#define STATE_CALLS(entry) \
+    (!(entry)->description.fmu_state ? "the FMU cannot get or set its state (canGetAndSetFMUstate=\"false\")" : NULL)
+#define SERIALIZE_CALLS(entry) \
+    (!(entry)->description.serialize ? "the FMU cannot serialize its state (canSerializeFMUstate=\"false\")" : NULL)
 
 FORWARD(fmi2SetDebugLogging, (fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[]),
-        (c, on, n, categories))
+        (c, on, n, categories), bad_categories(n, categories))
 FORWARD(fmi2SetupExperiment, (fmi2Component c, fmi2Boolean tolerance_defined, fmi2Real tolerance,
         fmi2Real start, fmi2Boolean stop_defined, fmi2Real stop),
-        (c, tolerance_defined, tolerance, start, stop_defined, stop))
-FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c))
-FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c))
-FORWARD(fmi2Terminate, (fmi2Component c), (c))
+        (c, tolerance_defined, tolerance, start, stop_defined, stop),
+        bad_experiment(tolerance_defined, tolerance, start, stop_defined, stop))
+FORWARD(fmi2EnterInitializationMode, (fmi2Component c), (c), NULL)
+FORWARD(fmi2ExitInitializationMode, (fmi2Component c), (c), NULL)
+FORWARD(fmi2Terminate, (fmi2Component c), (c), NULL)
 
 /* pythonfmu's reset makes a new slave object (with new stores): the direct route is dropped
  * before it and claimed again from the new slave after it */
 fmi2Status fmi2Reset(fmi2Component c) {
-    if (!target_fmi2Reset || refused_after_fatal(c, "fmi2Reset")) return fmi2Error;
-    Instance *entry = find_instance(c);
-    if (entry) drop_bulk(entry);
-    fmi2Status status = noted(c, target_fmi2Reset(c), 1);
-    if (entry && status <= fmi2Warning) {
+    Instance *entry = known(c, "fmi2Reset");
+    if (!entry || !target_fmi2Reset || refused_after_fatal(entry, "fmi2Reset")) return fmi2Error;
+    drop_bulk(entry);
+    fmi2Status status = noted(entry, target_fmi2Reset(c), 1);
+    if (status <= fmi2Warning) {
         release_held(entry);         /* the old slave's: pythonfmu made a new one */
         claim_instance(entry);
     }
@@ -761,12 +983,12 @@ fmi2Status fmi2Reset(fmi2Component c) {
  * straight between the host's array and the slave's store when the instance allows it */
 #define CHECKED(name, type, setting, params) \
     fmi2Status name params { \
-        Instance *entry; \
         fmi2Status status; \
-        if (!target_##name || refused_after_fatal(c, #name)) return fmi2Error; \
-        if (type < DIRECT_TYPES && direct_values(c, type, setting, vr, n, (void *)value, &status)) return status; \
-        if (check_references(c, vr, n, type, setting, &entry) != fmi2OK) return fmi2Error; \
-        return noted(c, target_##name(c, vr, n, value), 0); \
+        Instance *entry = known(c, #name); \
+        if (!entry || !target_##name || refused_after_fatal(entry, #name)) return fmi2Error; \
+        if (type < DIRECT_TYPES && direct_values(entry, type, setting, vr, n, (void *)value, &status)) return status; \
+        if (check_references(entry, vr, n, value, type, setting) != fmi2OK) return fmi2Error; \
+        return noted(entry, target_##name(c, vr, n, value), 0); \
     }
 
 CHECKED(fmi2GetReal, REAL, 0, (fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real value[]))
@@ -777,23 +999,41 @@ CHECKED(fmi2SetReal, REAL, 1, (fmi2Component c, const fmi2ValueReference vr[], s
 CHECKED(fmi2SetInteger, INTEGER, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer value[]))
 CHECKED(fmi2SetBoolean, BOOLEAN, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean value[]))
 CHECKED(fmi2SetString, STRING, 1, (fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String value[]))
-FORWARD(fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
-FORWARD(fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s))
-FORWARD(fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s))
-FORWARD(fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size))
-FORWARD(fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size), (c, s, bytes, size))
-FORWARD(fmi2DeSerializeFMUstate, (fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s), (c, bytes, size, s))
+FORWARD(fmi2GetFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s),
+        STATE_CALLS(entry) ? STATE_CALLS(entry) : !s ? "no FMUstate pointer" : NULL)
+FORWARD(fmi2SetFMUstate, (fmi2Component c, fmi2FMUstate s), (c, s),
+        STATE_CALLS(entry) ? STATE_CALLS(entry) : !s ? "no FMUstate (NULL)" : NULL)
+FORWARD(fmi2FreeFMUstate, (fmi2Component c, fmi2FMUstate *s), (c, s),
+        STATE_CALLS(entry) ? STATE_CALLS(entry) : !s ? "no FMUstate pointer" : NULL)
+FORWARD(fmi2SerializedFMUstateSize, (fmi2Component c, fmi2FMUstate s, size_t *size), (c, s, size),
+        SERIALIZE_CALLS(entry) ? SERIALIZE_CALLS(entry) : !s || !size ? "no FMUstate or no size pointer" : NULL)
+FORWARD(fmi2SerializeFMUstate, (fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size), (c, s, bytes, size),
+        SERIALIZE_CALLS(entry) ? SERIALIZE_CALLS(entry) : !s || (size && !bytes) ? "no FMUstate or no byte array" : NULL)
+FORWARD(fmi2DeSerializeFMUstate, (fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s), (c, bytes, size, s),
+        SERIALIZE_CALLS(entry) ? SERIALIZE_CALLS(entry) : !s || (size && !bytes) ? "no FMUstate pointer or no byte array" : NULL)
 FORWARD(fmi2GetDirectionalDerivative, (fmi2Component c, const fmi2ValueReference unknown[], size_t n_unknown,
-        const fmi2ValueReference known[], size_t n_known, const fmi2Real dv_known[], fmi2Real dv_unknown[]),
-        (c, unknown, n_unknown, known, n_known, dv_known, dv_unknown))
+        const fmi2ValueReference known_vr[], size_t n_known, const fmi2Real dv_known[], fmi2Real dv_unknown[]),
+        (c, unknown, n_unknown, known_vr, n_known, dv_known, dv_unknown),
+        !entry->description.directional ? "the FMU provides no directional derivatives (providesDirectionalDerivative)" :
+        (n_unknown && (!unknown || !dv_unknown)) || (n_known && (!known_vr || !dv_known)) ? "an array is NULL" : NULL)
 FORWARD(fmi2SetRealInputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n,
-        const fmi2Integer order[], const fmi2Real value[]), (c, vr, n, order, value))
+        const fmi2Integer order[], const fmi2Real value[]), (c, vr, n, order, value),
+        !entry->description.interpolate_inputs ? "the FMU does not interpolate inputs (canInterpolateInputs=\"false\")" :
+        n && (!vr || !order || !value) ? "an array is NULL" : NULL)
 FORWARD(fmi2GetRealOutputDerivatives, (fmi2Component c, const fmi2ValueReference vr[], size_t n,
-        const fmi2Integer order[], fmi2Real value[]), (c, vr, n, order, value))
-FORWARD(fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior_state), (c, t, h, no_prior_state))
-FORWARD(fmi2CancelStep, (fmi2Component c), (c))
-FORWARD(fmi2GetStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Status *value), (c, kind, value))
-FORWARD(fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Real *value), (c, kind, value))
-FORWARD(fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Integer *value), (c, kind, value))
-FORWARD(fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Boolean *value), (c, kind, value))
-FORWARD(fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2String *value), (c, kind, value))
+        const fmi2Integer order[], fmi2Real value[]), (c, vr, n, order, value),
+        !entry->description.output_derivatives ? "the FMU provides no output derivatives (maxOutputDerivativeOrder)" :
+        n && (!vr || !order || !value) ? "an array is NULL" : NULL)
+FORWARD(fmi2DoStep, (fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_prior_state), (c, t, h, no_prior_state), NULL)
+/* fmi2DoStep never returns fmi2Pending (canRunAsynchronuously is false): no step to cancel */
+FORWARD(fmi2CancelStep, (fmi2Component c), (c), "no step is pending (the FMU never returns fmi2Pending)")
+FORWARD(fmi2GetStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Status *value), (c, kind, value),
+        bad_status_kind(kind, value))
+FORWARD(fmi2GetRealStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Real *value), (c, kind, value),
+        bad_status_kind(kind, value))
+FORWARD(fmi2GetIntegerStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Integer *value), (c, kind, value),
+        bad_status_kind(kind, value))
+FORWARD(fmi2GetBooleanStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2Boolean *value), (c, kind, value),
+        bad_status_kind(kind, value))
+FORWARD(fmi2GetStringStatus, (fmi2Component c, const fmi2StatusKind kind, fmi2String *value), (c, kind, value),
+        bad_status_kind(kind, value))
