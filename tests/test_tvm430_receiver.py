@@ -285,7 +285,7 @@ def test_through_the_rail_line_where_the_code_is_weakest(section, ballast):
 
 
 def test_every_speed_pair_through_the_rail_line_on_one_running_receiver():
-    """The 15 speed pairs of the tables in turn, 2.5 s each, on the 2300 Hz section 10 m in:
+    """The speed pairs of the tables in turn, 2.5 s each, on the 2300 Hz section 10 m in:
     each shown by the end of its slot (benchmarks/tvm430_decode.py adds every distance and
     gradient code and the 1700 Hz section), nothing else ever."""
     from fmus.data.loader import load_line
