@@ -15,7 +15,7 @@ docs/loco_receiver.md#tvm-430 and docs/performance.md#tvm-430-receiver.
    the smallest fitted amplitude of a present tone and the largest of an absent one (units of
    the deviation per tone; decided above 0.65, below 0.35);
 3. every used field value, coder core → the high-speed line's rail line at 12 kHz → receiver
-   (each of the 15 speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one
+   (each of the speed pairs, 29 distance codes and 16 gradients once, 2.5 s each, on one
    running receiver),
    a train standing 10 m into a 1700 Hz and a 2300 Hz section (where its code is weakest), the
    neighbour sections sending a more permissive word, at the line's ballast (its minimum, 1 and

@@ -39,24 +39,55 @@ def occupancy(code: int, section: int) -> np.ndarray:
     return occupied
 
 
-def _channel(kpt: str, phase: float, receiver=None) -> CodeChannel:
-    return CodeChannel(SECTION[kpt], 40, BENCH_COIL_COUPLING, coder=CoderSettings(seed=1), receiver=receiver,
-                       cam_phase=phase)
+def _channel(kpt: str, phase: float, receiver=None, carrier_hz: float = 0.0) -> CodeChannel:
+    """Coder section of ``kpt`` into a receiver; ``carrier_hz`` both ends' carrier (0: the
+    line's, 50 Hz; a ``receiver``'s settings then keep their own)."""
+    if receiver is None and carrier_hz:
+        receiver = ReceiverSettings(carrier_hz=carrier_hz)
+    return CodeChannel(SECTION[kpt], 40, BENCH_COIL_COUPLING, coder=CoderSettings(seed=1, carrier_hz=carrier_hz),
+                       receiver=receiver, cam_phase=phase)
 
 
-def acquisition_s(kpt: str, code: int, phase: float) -> float:
-    rows = _channel(kpt, phase).run(AFTER_S, occupancy(code, SECTION[kpt]))
+def acquisition_s(kpt: str, code: int, phase: float, carrier_hz: float = 0.0) -> float:
+    rows = _channel(kpt, phase, carrier_hz=carrier_hz).run(AFTER_S, occupancy(code, SECTION[kpt]))
     hit = np.flatnonzero((rows[:, 1] == code) & (rows[:, 2] == 1))
     return float(rows[hit[0], 0]) if hit.size else np.inf
 
 
+COLD_FRAME = 400            # 0.1 s frames for cold starts: the receiver's results do not depend on it
+
+
+def cold_starts(kpt: str, code: int, carrier_hz: float, step_s: float = 0.01, seconds: float = AFTER_S):
+    """Cold starts every ``step_s`` of the cam's cycle: the coder's EMF of ``code`` computed
+    once, a new receiver started at each offset into it. (start offsets s, time until ``code``
+    is shown (inf: never), the most permissive aspect shown meanwhile by rank
+    (aspects.restrictiveness)) as arrays; times are frame ends, so up to 0.1 s late."""
+    channel = _channel(kpt, 0.0, carrier_hz=carrier_hz)
+    cycle_s = float(channel.coder.cycle_s[SECTION[kpt]])
+    _, emf = channel.run(cycle_s + seconds + 0.1, occupancy(code, SECTION[kpt]), keep_emf=True)
+    fs = channel.fs
+    starts = np.arange(0.0, cycle_s, step_s)
+    settings = channel.receiver.settings
+    frames = int(round(seconds * fs / COLD_FRAME))
+    shown_s, most = np.full(starts.size, np.inf), np.zeros(starts.size, dtype=int)
+    for i, start_s in enumerate(starts):
+        first = int(round(start_s * fs))
+        receiver = LocoReceiverCore(COLD_FRAME, settings)
+        for k in range(frames):
+            out = receiver.step(k * COLD_FRAME / fs, emf[first + k * COLD_FRAME:first + (k + 1) * COLD_FRAME])
+            most[i] = max(most[i], sig.restrictiveness(out.aspect) if out.code_valid else 0)
+            if out.code_valid and out.aspect == code and shown_s[i] == np.inf:
+                shown_s[i] = (k + 1) * COLD_FRAME / fs
+    return starts, shown_s, most
+
+
 def change_s(kpt: str, before: int, after: int, phase: float, receiver=None,
-             disturb: Optional[Disturbance] = None) -> float:
+             disturb: Optional[Disturbance] = None, carrier_hz: float = 0.0) -> float:
     """Time from the change of the code sent until the display shows ``after`` (a restrictive
     change: ``after`` or anything more restrictive); ``disturb`` adds to the coil EMF."""
     section = SECTION[kpt]
     schedule = lambda t: occupancy(before if t < SETTLE_S else after, section)
-    rows = _channel(kpt, phase, receiver).run(SETTLE_S + AFTER_S, schedule, disturb=disturb)
+    rows = _channel(kpt, phase, receiver, carrier_hz).run(SETTLE_S + AFTER_S, schedule, disturb=disturb)
     assert rows[rows[:, 0] <= SETTLE_S][-1, 1] == before, "the code before the change was not shown"
     late = rows[rows[:, 0] > SETTLE_S]
     if sig.restrictiveness(after) < sig.restrictiveness(before):
@@ -66,11 +97,12 @@ def change_s(kpt: str, before: int, after: int, phase: float, receiver=None,
     return float(late[hit[0], 0] - SETTLE_S) if hit.size else np.inf
 
 
-def loss_s(kpt: str, code: int, phase: float, gap_s: float = np.inf, receiver=None) -> Tuple[float, bool]:
+def loss_s(kpt: str, code: int, phase: float, gap_s: float = np.inf, receiver=None,
+           carrier_hz: float = 0.0) -> Tuple[float, bool]:
     """A loss of the code's EMF from SETTLE_S for ``gap_s``: (time until the no-code
     indication, inf if never; whether the display stayed on ``code`` throughout otherwise)."""
     cut = lambda t, e: e * ((t < SETTLE_S) | (t >= SETTLE_S + gap_s))
-    rows = _channel(kpt, phase, receiver).run(SETTLE_S + AFTER_S, occupancy(code, SECTION[kpt]), disturb=cut)
+    rows = _channel(kpt, phase, receiver, carrier_hz).run(SETTLE_S + AFTER_S, occupancy(code, SECTION[kpt]), disturb=cut)
     late = rows[rows[:, 0] > SETTLE_S]
     hit = np.flatnonzero(np.isin(late[:, 1], NO_CODE) & (late[:, 2] == 0))
     return (float(late[hit[0], 0] - SETTLE_S) if hit.size else np.inf), bool(np.all(late[:, 1] == code))
@@ -81,8 +113,9 @@ PERMISSIVE = ((sig.RED_YELLOW, sig.YELLOW), (sig.YELLOW, sig.GREEN), (sig.RED_YE
 CODES = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 
 
-def table(phases: Iterable[float], kpts=("KPT-5", "KPT-7")) -> List[Dict]:
-    """One row per (what, transmitter): the least and the greatest latency over the phases."""
+def table(phases: Iterable[float], kpts=("KPT-5", "KPT-7"), carrier_hz: float = 0.0) -> List[Dict]:
+    """One row per (what, transmitter): the least and the greatest latency over the phases, at
+    ``carrier_hz`` (0: the line's, 50 Hz)."""
     phases = list(phases)
     rows = []
 
@@ -93,14 +126,14 @@ def table(phases: Iterable[float], kpts=("KPT-5", "KPT-7")) -> List[Dict]:
     name = sig.ASPECT_NAMES
     for kpt in kpts:
         for code in CODES:
-            add(f"acquisition, {name[code]}", kpt, [acquisition_s(kpt, code, p) for p in phases])
+            add(f"acquisition, {name[code]}", kpt, [acquisition_s(kpt, code, p, carrier_hz) for p in phases])
         for before, after in RESTRICTIVE:
-            add(f"restrictive {name[before]} → {name[after]}", kpt, [change_s(kpt, before, after, p) for p in phases])
+            add(f"restrictive {name[before]} → {name[after]}", kpt, [change_s(kpt, before, after, p, carrier_hz=carrier_hz) for p in phases])
         for before, after in PERMISSIVE:
-            add(f"permissive {name[before]} → {name[after]}", kpt, [change_s(kpt, before, after, p) for p in phases])
+            add(f"permissive {name[before]} → {name[after]}", kpt, [change_s(kpt, before, after, p, carrier_hz=carrier_hz) for p in phases])
         for code in CODES:
             add(f"loss, {name[code]} → {'red' if code == sig.RED_YELLOW else 'white'}", kpt,
-                [loss_s(kpt, code, p)[0] for p in phases])
+                [loss_s(kpt, code, p, carrier_hz=carrier_hz)[0] for p in phases])
     return rows
 
 

@@ -48,6 +48,10 @@ def test_the_table_is_the_thesis_tone_plan_fifteen_pairs_and_its_code_meanings()
     # code numbers rise with the permitted speed (passenger readings)
     ranks = [SYSTEM.rank(n) for n in (1, 3, 4, 6, 7, 10, 9)]
     assert ranks == sorted(ranks)
+    # the order is the table's (permissiveness): 10 (140 km/h) below 9 (160) though numbered
+    # above it; 11 (160, gentle braking for a restriction) below 9 (160 towards a signal); 8 = 9
+    assert SYSTEM.rank(10) < SYSTEM.rank(11) < SYSTEM.rank(9) == SYSTEM.rank(8) < SYSTEM.rank(12) < SYSTEM.rank(13)
+    assert SYSTEM.more_restrictive(9, 10) == 10 and SYSTEM.more_restrictive(7, 10) == 7
 
 
 def _table_with(tmp_path, change):
@@ -65,6 +69,13 @@ def _table_with(tmp_path, change):
     (lambda d: d["codes"]["6"].update(reserved=True), "field codes.6: the block rules send this code"),
     (lambda d: d["tones"].update(f3=100), "field tones: frequencies must rise"),
     (lambda d: d["codes"]["4"]["speeds_kmh"].pop("freight"), "field codes.4.speeds_kmh: expected one entry per category"),
+    (lambda d: d.pop("permissiveness"), "field permissiveness.order: expected the codes a wayside sends"),
+    (lambda d: d["permissiveness"]["order"].remove([13]), "field permissiveness.order: expected the codes"),
+    # code numbers are not the order: 10 permits 140 km/h, 9 160
+    (lambda d: d["permissiveness"].update(order=[[1], [3], [4], [5], [6], [7], [11], [8, 9], [10], [12], [13]]),
+     "field permissiveness.order: code 10 is listed as more permissive than code 8 but is not"),
+    (lambda d: d["permissiveness"].update(order=[[1], [3], [4], [5], [6], [7], [10], [8, 9, 11], [12], [13]]),
+     "field permissiveness.order: codes 8 and 11 share a group but read differently"),
 ])
 def test_a_bad_code_table_is_one_error_naming_the_field(tmp_path, change, message):
     import re

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from harness import latency as lat
+from harness.display import rank
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
@@ -33,6 +34,20 @@ def test_a_loss_shorter_than_the_inertia_is_bridged(kpt, code):
     for phase in PHASES:
         no_code_s, held = lat.loss_s(kpt, code, phase, gap_s=1.5)
         assert no_code_s == np.inf and held, (phase, no_code_s)
+
+
+@pytest.mark.parametrize("carrier_hz", [25.0, 50.0])
+@pytest.mark.parametrize("kpt", ["KPT-5", "KPT-7"])
+@pytest.mark.parametrize("code", [sig.GREEN, sig.YELLOW, sig.RED_YELLOW], ids=["Z", "Zh", "KZh"])
+def test_a_cold_start_anywhere_in_the_cycle_shows_the_code_within_two_cycles_and_half_a_second(carrier_hz, kpt, code):
+    # every 10 ms of the cam's cycle: at 25 Hz a start in the last 25 ms of З's second pulse
+    # (too short to raise the relay) once read the third pulse as a cycle's start, showed КЖ
+    # and З only after two more cycles (4.3 s KPT-5, 5.0 s KPT-7), while the cold-start rule's
+    # threshold was 50 Hz's 0.2 s
+    bound = 2 * CYCLE_S[kpt] + 0.5
+    starts, shown_s, most = lat.cold_starts(kpt, code, carrier_hz, step_s=0.01, seconds=bound + 0.2)
+    assert shown_s.max() <= bound, (starts[np.argmax(shown_s)], shown_s.max())
+    assert (most <= sig.restrictiveness(code)).all(), starts[most > sig.restrictiveness(code)]
 
 
 @pytest.mark.parametrize("kpt", ["KPT-5", "KPT-7"])
@@ -74,6 +89,28 @@ def test_a_restrictive_change_at_a_joint_within_the_stated_latency_over_noise_se
     took = {(phase, old_phase, seed): lat.joint_change_s(case, phase, old_phase, seed)
             for phase, old_phase in JOINT_WORST[case] for seed in range(1, 7)}
     assert max(took.values()) <= STATED_LATENCY_S, took
+
+
+@pytest.mark.parametrize("case", sorted(lat.JOINT_CASES))
+@pytest.mark.parametrize("standing", [None, 2, 1], ids=["Z-Z", "Z-Zh", "Zh-KZh"])
+def test_crossing_a_joint_shows_no_white_between_the_old_code_and_the_new(case, standing):
+    # 12 cam phases past the joint × 2 behind it: the display goes from the code behind the joint
+    # to the code past it, never through the no-code indication, never above the code behind it,
+    # and above the code past it no longer than the stated latency. Two of these crossings
+    # showed white for 50 ms: two restrictive cycles ended the old code's hold while the second
+    # one waited for the level of the pulse after it
+    for old_phase in (0.0, 0.5):
+        for phase in np.linspace(0.0, 1.0, 12, endpoint=False):
+            t_end, shown, sent = lat.joint_crossing(case, phase, old_phase, 1, standing=standing)
+            past = t_end > lat.CROSS_S
+            behind, ahead = sent[~past][-1], sent[past][0]
+            where = (round(phase, 3), old_phase)
+            assert shown[~past][-1] == behind, where
+            after = shown[past]
+            assert not np.isin(after, lat.NO_CODE).any(), (where, t_end[past][np.isin(after, lat.NO_CODE)][:3])
+            assert (rank(after) <= sig.restrictiveness(behind)).all(), where
+            late = t_end[past] > lat.CROSS_S + STATED_LATENCY_S
+            assert (rank(after[late]) <= sig.restrictiveness(ahead)).all(), where
 
 
 def test_red_yellow_to_yellow_does_not_pass_through_red():

@@ -138,3 +138,26 @@ def test_a_bad_code_table_names_its_field(tmp_path, edit, message):
     path.write_text(json.dumps(doc))
     with pytest.raises(FmuInputError, match=message):
         tvm430.load_codes(path)
+
+
+def test_a_pair_the_block_rules_never_send_is_refused_and_free_blocks_read_from_the_rules(tmp_path):
+    # 230/0 (a stop one block ahead from 230 km/h) is sent by no wayside: a table listing it is
+    # refused, so no receiver shows a word no wayside sends; it read as green 5 free blocks before
+    doc = json.loads(tvm430.CODES_FILE.read_text())
+    doc["speed_codes"]["204"] = [230, 0]
+    path = tmp_path / "codes.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(FmuInputError, match="field speed_codes.204: 230/0 km/h is a pair the block rules never send"):
+        tvm430.system(str(path))
+    tvm = tvm430.system()
+    table = tvm.table
+    sent = {}
+    for m, pair in enumerate(tvm.pair_of_blocks):
+        sent.setdefault(pair, m)
+    # a pair a line's limit makes (270/270: 300/270 capped at 270, four blocks before the target)
+    # reports the fewest free blocks the block rules send it with; the uncapped pairs their own
+    for (step, following), blocks in {(270.0, 270.0): 4, (300.0, 230.0): 4, (170.0, 170.0): 2,
+                                      (230.0, 170.0): 2, (170.0, 0.0): 1, (0.0, 0.0): 0}.items():
+        word = tvm430.assemble(table.addresses[0], table.speed_code(step, following), 8, 9)
+        assert tvm.reading(word).free_blocks == blocks, (step, following)
+    assert set(table.speed_codes.values()) == set(tvm.blocks_of_pair)

@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from fmus.dsp.filter_design import SampleSosFilter, sos_frame
+from fmus.dsp.filter_design import SampleSosFilter, SosFilter, sos_frame
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
@@ -68,8 +68,6 @@ from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.units import MPS_PER_KMH
 
 LEVEL_RELEASE_S = 1.0
-# longer than any short interval (0.12 s + 5 % drift + filter smearing), shorter than any long one
-UNAMBIGUOUS_OFF_S = 0.2
 # a cycle whose pulses differ in level by more than this straddles an insulated joint (the
 # feed end of one section against the entry end of the next, ≈ 10× apart, docs/sources.md#interference-at-insulated-joints)
 LEVEL_SPREAD = 2.5
@@ -78,6 +76,8 @@ LEVEL_SPREAD = 2.5
 RELAY_MARGIN = 1.5
 # how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
 PENDING_S = 0.05
+# the carrier step simulated for the pick-up delay (s): longer than any chain's delay
+COLD_START_PROBE_S = 0.5
 # display hold of a digital receiver whose `inertia` is 0: none [U] (docs/loco_receiver.md). The
 # sources give no inertia for the digital equipment, and a receiver cannot tell a joint's dropout
 # from the next section's code: a hold bridging FIRE_DQPSK's re-acquisition at joints showed the
@@ -85,6 +85,33 @@ PENDING_S = 0.05
 # beyond the stated latency (a wrong-side indication); without a hold the display shows no code
 # while it re-acquires, which is restrictive
 DIGITAL_DEFAULT_HOLD_S = 0.0
+
+
+def pick_up_delay_s(band_pass: SosFilter, envelope_lp: SosFilter, carrier_hz: float, fs_hz: float,
+                    pick_up_v: float) -> float:
+    """How long the chain takes from a carrier switched on at the coil to the relay's pick-up
+    (s), for a code of RELAY_MARGIN × pick-up (a weaker one is marginal, and takes longer):
+    the band-pass's rise at the carrier and the envelope low-pass's, simulated once on a
+    carrier step (the later of two carrier phases)."""
+    amplitude_v = RELAY_MARGIN * pick_up_v
+    t = np.arange(int(round(COLD_START_PROBE_S * fs_hz))) / fs_hz
+    delays = []
+    for phase_rad in (0.0, np.pi / 2.0):
+        band, _ = sos_frame(band_pass.sos, amplitude_v * np.sin(2.0 * np.pi * carrier_hz * t + phase_rad),
+                            band_pass.initial_state())
+        envelope, _ = sos_frame(envelope_lp.sos, np.abs(band), envelope_lp.initial_state())
+        above = np.flatnonzero(envelope * (np.pi / 2.0) > pick_up_v)
+        delays.append(t[above[0]] if above.size else COLD_START_PROBE_S)
+    return float(max(delays))
+
+
+def cold_start_off_s(pick_up_delay: float) -> float:
+    """The relay off since reception began for longer than this is the tail of a long interval
+    (docs/loco_receiver.md, display rule): the longest off stretch a cold start can see
+    anywhere else is the tail of a pulse too short to raise the relay (shorter than the
+    pick-up delay: a longer one is the carrier step itself up to its end), the short interval
+    after it (0.12 s + drift) and the next pulse's pick-up delay."""
+    return alsn.SHORT_INTERVAL_S * (1.0 + alsn.TIMING_DRIFT) + 2.0 * pick_up_delay
 
 
 def resolve_inertia_s(inertia_s: float, digital: bool) -> float:
@@ -166,6 +193,8 @@ class LocoReceiverCore:
         self.band_pass = filters.band_pass(carrier_hz, bandwidth, order, s.fs_hz)
         self.envelope_lp = filters.envelope_low_pass(filters.default_envelope_corner(carrier_hz), s.fs_hz)
         self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz))
+        self.cold_start_off_s = cold_start_off_s(pick_up_delay_s(self.band_pass, self.envelope_lp, carrier_hz,
+                                                                 s.fs_hz, s.pick_up_v))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
         # a build with one sample per frame filters in floats (the same samples as sosfilt)
@@ -357,11 +386,12 @@ class LocoReceiverCore:
             self._pulse_drive = 0.0
             return
         if self._last_fall_s is None and self._started_s is not None \
-                and time_s - self._started_s > UNAMBIGUOUS_OFF_S:
-            # relay off since reception began, for longer than any short interval can last:
-            # the tail of a long interval, so this rise starts a cycle (saves one cycle of
-            # latency on a cold start; a truncated cycle can only under-count short
-            # intervals, i.e. decode more restrictively or not at all)
+                and time_s - self._started_s > self.cold_start_off_s:
+            # relay off since reception began, for longer than a short interval can reach the
+            # relay after a pulse's tail (cold_start_off_s): the tail of a long interval, so
+            # this rise starts a cycle (saves one cycle of latency on a cold start; a cycle
+            # begun mid-pattern could only under-count short intervals, but then showed З as
+            # КЖ and made З wait two more cycles)
             self._cycle_start_s = time_s
             self._short = 0
             self._implausible = False
@@ -486,7 +516,11 @@ class LocoReceiverCore:
         cycle_s = (alsn.KPT5_WINDOW_S if out.transmitter == 5 else alsn.KPT7_WINDOW_S)[1]
         expired = quiet > self.inertia_s or unsupported_s > self.inertia_s + cycle_s \
             or (self._contradictions >= 2 and unsupported_s > alsn.CODE_TIMEOUT_S)
-        if out.code_valid and expired:
+        # a clean cycle no more permissive than the code shown waits (PENDING_S at most) for the
+        # level of the pulse that ends it: the code shown holds until that is settled, so the
+        # display goes from the old code to the new one without white between (after a joint,
+        # two restrictive cycles end the hold just as the second one is pending)
+        if out.code_valid and expired and self._pending is None:
             out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
             out.code_valid = False
             self._contradictions = 0

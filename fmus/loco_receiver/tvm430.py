@@ -74,6 +74,11 @@ HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
 #: (docs/rail_line.md#tvm-430-track-circuits, "Levels"); a carrier that stops falls below it
 #: within the low-pass's settling (a few ms)
 SQUELCH_V = 0.03
+WEAKEST_CARRIER_V = 0.1
+#: the baseband low-pass's rise (s): its step response reaches SQUELCH_V / WEAKEST_CARRIER_V
+#: after 7.2 ms (a third after 7.5 ms), so a carrier that starts is above the squelch that much later
+#: (tests/test_tvm430_receiver.py checks it against the filter at 8 and 12 kHz)
+BASEBAND_RISE_S = 0.0076
 #: the fs needed above the highest carrier: its image fs − f must stay out of the baseband
 #: low-pass (more than its stop band, 5× the corner) — fs ≥ 2·(2600 + 250) = 5.7 kHz for track 2
 IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
@@ -84,10 +89,12 @@ IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
 #: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
 STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
 #: a word is shown within this of the instant it starts at the coils (from cold, on a new
-#: carrier, a change of word): the window must fill with it, then a decision boundary and one
-#: more to confirm (1.81 s; a restrictive change needs no confirmation). Measured: cold start
-#: 1.75 s, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
-STATED_DECODE_S = WINDOW_S + 2 * HOP_S
+#: carrier, a change of word): the carrier rises above the squelch through the baseband
+#: low-pass, the window must fill with it, then a decision boundary and one more to confirm
+#: (1.82 s; a restrictive change needs no confirmation); an output read at step ends shows it
+#: by the end of the step. Measured: a carrier starting anywhere in a hop 1.69–1.818 s at
+#: 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
+STATED_DECODE_S = WINDOW_S + 2 * HOP_S + BASEBAND_RISE_S
 
 
 @dataclass

@@ -30,6 +30,8 @@ BENCH_COIL_COUPLING = 0.1
 
 # decoder rules, firmware kpt.h (docs/sources.md#alsn-decoder-rules) [S]
 LONG_INTERVAL_S = 0.35
+#: a transmitter's code timings may drift by this share either way (its cam's speed)
+TIMING_DRIFT = 0.05
 LONG_INTERVAL_MAX_S = 1.0     # the longest code interval is 0.86 s (KPT-7 Ж) + 5 % drift: longer = pulses missed
 KPT5_WINDOW_S = (1.47, 1.73)
 KPT7_WINDOW_S = (1.73, 1.99)

@@ -47,7 +47,7 @@ TONE_SPACING_HZ = 50.0
 #: top speed of each category under ALSU: freight 100, passenger 160, high-speed 200 km/h [S]
 CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 100.0, "high_speed": 200.0}
 ASPECTS = {"red_yellow": sig.RED_YELLOW, "yellow": sig.YELLOW, "green": sig.GREEN}
-BRAKINGS = ("signal", "restriction")
+BRAKINGS = ("restriction", "signal")       # at equal speeds, gentle braking first: the more restrictive
 #: the ATP's supervision deceleration for a code's target, as a share of its own: braking for a
 #: permanent restriction is gentler than towards a closed signal [S]; how much gentler [U]
 BRAKING_SHARE = {"signal": 1.0, "restriction": 0.5}
@@ -86,6 +86,7 @@ class CodeTable:
     path: Path
     tones_hz: Tuple[float, ...]              # f2..f7
     codes: Dict[int, Code]
+    permissiveness: Dict[int, int]           # sent code → its place in the order, 0 the most restrictive
 
     def code_of_tones(self) -> np.ndarray:
         """(6, 6) code number of each tone pair (symmetric), 0 on the diagonal."""
@@ -168,7 +169,41 @@ def load_codes(path=CODES_FILE) -> CodeTable:
     for number in block_codes + tuple(c for _, c in RESTRICTION_CODES + HIGH_SPEED_CODES) + PRE_ROUTE_CODES:
         if codes[number].reserved:
             fail(f"codes.{number}", "the block rules send this code: it cannot be reserved")
-    return CodeTable(path, tuple(frequencies), codes)
+    order = _permissiveness(doc.get("permissiveness"), codes, fail)
+    return CodeTable(path, tuple(frequencies), codes, order)
+
+
+def _readings(code: Code) -> List[float]:
+    """A code's readings compared for permissiveness: per category its permitted speed and its
+    speed at the next signal (CATEGORY_MAX_KMH for the line's limit), its aspect and free blocks."""
+    values = [float(sig.restrictiveness(code.aspect)), float(code.free_blocks)]
+    for category in sig.TRAIN_CATEGORIES:
+        ceiling, at_signal = code.speeds_kmh[category]
+        permitted = CATEGORY_MAX_KMH[category] if ceiling is None else min(ceiling, CATEGORY_MAX_KMH[category])
+        values += [permitted, permitted if at_signal is None else min(at_signal, permitted)]
+    return values
+
+
+def _permissiveness(doc, codes: Dict[int, Code], fail) -> Dict[int, int]:
+    """Each sent code's place in the table's ``permissiveness.order`` (0: the most restrictive),
+    checked against the readings (the table's ``permissiveness.rule``)."""
+    order = doc.get("order") if isinstance(doc, dict) else None
+    sent = sorted(n for n, c in codes.items() if not c.reserved)
+    if not isinstance(order, list) or not all(isinstance(g, list) and g for g in order) \
+            or sorted(n for g in order for n in g if isinstance(n, int)) != sent:
+        fail("permissiveness.order", "expected the codes a wayside sends (" + ", ".join(map(str, sent)) +
+             "), each once, in groups from the most restrictive to the most permissive")
+    place = {n: index for index, group in enumerate(order) for n in group}
+    for a in sent:
+        for b in sent:
+            ra, rb = _readings(codes[a]), _readings(codes[b])
+            steeper = BRAKINGS.index(codes[b].braking) - BRAKINGS.index(codes[a].braking)   # > 0: b brakes more steeply
+            if place[a] == place[b] and (ra != rb or steeper):
+                fail("permissiveness.order", f"codes {a} and {b} share a group but read differently")
+            if place[a] < place[b] and (any(y < x for x, y in zip(ra, rb)) or (ra == rb and steeper <= 0)):
+                fail("permissiveness.order", f"code {b} is listed as more permissive than code {a} but is not "
+                                             "(speeds per category, then braking: permissiveness.rule)")
+    return place
 
 
 def all_pairs() -> List[Tuple[int, int]]:
@@ -183,7 +218,6 @@ class AlsuSystem:
 
     def __init__(self, table: Optional[CodeTable] = None):
         self.table = table or load_codes()
-        self._ranks = {n: self._rank(n) for n in self.codes()}
 
     def codes(self) -> Tuple[int, ...]:
         """The codes a wayside may send (not reserved)."""
@@ -210,16 +244,10 @@ class AlsuSystem:
         passes it under ``code`` (the ATP assumes it until the new code is shown)."""
         return WORST_AFTER_CLEAR if self.table.codes[int(code)].free_blocks >= 2 else WORST_AFTER_RESTRICTIVE
 
-    def _rank(self, code: int) -> tuple:
-        readings = [self.indication(code, category) for category in ("passenger", "freight", "high_speed")]
-        first = readings[0]
-        return (sig.restrictiveness(first.aspect), first.free_blocks, *(r.target_kmh for r in readings),
-                *(r.permitted_kmh for r in readings))
-
-    def rank(self, code: int) -> tuple:
-        """Higher is more permissive: aspect, free blocks, then the speeds at the next signal
-        (passenger, freight, high-speed), then the ceilings."""
-        return self._ranks[int(code)]
+    def rank(self, code: int) -> int:
+        """Higher is more permissive: the code's place in the table's permissiveness order
+        (alsu_codes.json ``permissiveness``; equal for codes that mean the same)."""
+        return self.table.permissiveness[int(code)]
 
     def more_restrictive(self, a: int, b: int) -> int:
         return a if self.rank(a) <= self.rank(b) else b

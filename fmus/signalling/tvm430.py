@@ -231,6 +231,22 @@ class Tvm430System:
         last = len(steps) - 1
         self.pair_of_blocks = ([(0.0, 0.0)] + [(steps[last - m], steps[last - m + 1]) for m in range(1, last + 1)]
                                + [(steps[0], steps[0])])
+        # every pair the block rules send on some line (BlockWords.word: a block's step capped by
+        # its limit, the next step by the next block's) → the fewest blocks before the target
+        # that give it: a receiver reports that many free blocks (the restrictive reading where
+        # a cap makes two counts send the same pair)
+        self.blocks_of_pair: Dict[Tuple[float, float], int] = {}
+        caps = [c for c in steps if c > 0]
+        for m, (step, following) in enumerate(self.pair_of_blocks):
+            for cap in caps:
+                for cap_next in caps:
+                    pair = (min(step, cap), min(following, step, cap, cap_next))
+                    self.blocks_of_pair[pair] = min(self.blocks_of_pair.get(pair, m), m)
+        for code, pair in self.table.speed_codes.items():
+            if pair not in self.blocks_of_pair:
+                raise FmuInputError(f"{self.table.path}: field speed_codes.{code}: {pair[0]:g}/{pair[1]:g} km/h is a pair "
+                                    "the block rules never send (a step falls to 0 only from the lowest step): "
+                                    "a receiver must not show a word no wayside sends")
 
     def reading(self, word: int) -> Optional[Reading]:
         """The word's meaning, None for a word that fails its check, carries an address not
@@ -268,10 +284,9 @@ class Tvm430System:
         return Indication(word, read.aspect, read.free_blocks, read.step_kmh, read.next_kmh)
 
     def blocks_before_target(self, step_kmh: float, next_kmh: float) -> int:
-        for m, pair in enumerate(self.pair_of_blocks):
-            if pair == (step_kmh, next_kmh):
-                return m
-        return FREE_BLOCKS_OPEN - 1
+        """The fewest blocks before the target that make the block rules send this pair (the
+        free blocks a receiver reports for a word with a target)."""
+        return self.blocks_of_pair[(step_kmh, next_kmh)]
 
     def at_most(self, a: int, b: int) -> bool:
         """Whether word ``a`` (of the same block as ``b``) permits nothing that ``b`` does not: no

@@ -349,7 +349,7 @@ def _tvm_emf(seconds: float, plan: List[tuple], noise_v: float = 0.0, seed: int 
 
 def _tvm430_receiver_vectors(role: RoleFile) -> List[dict]:
     """TVM-430 (docs/loco_receiver.md#tvm-430): a word from cold and a restrictive change within
-    the stated decode time (a window and two decisions, 1.81 s), a lost carrier → the
+    the stated decode time (a window, two decisions and the baseband low-pass's rise, 1.82 s), a lost carrier → the
     restrictive display within the stated latency (5.19 s) and not before the hold less one
     decision; a neighbour's more permissive word 20 dB down and a word with two bits flipped
     never shown. The coil EMF is our coder core's output at 8 kHz; the readings are the shipped
