@@ -88,7 +88,7 @@ def test_the_bare_command_says_what_to_do_once():
     assert stderr.count("railcosim") == 2 and stderr.startswith("railcosim: error: no command given")
     assert "validate" in stderr and len(stderr.splitlines()) == 1
     code, _, stderr = railcosim("run", "free_run", "--stop-time", "x")
-    assert stderr.startswith("railcosim: error: run: argument --stop-time") and stderr.count("railcosim") == 1
+    assert stderr.startswith("railcosim: error: run: --stop-time x: ") and stderr.count("railcosim") == 1
 
 
 def test_packing_again_without_changes_leaves_the_archive_alone(tmp_path, test_fmus):

@@ -308,7 +308,7 @@ def test_the_bound_can_be_raised_and_a_bad_bound_is_one_line(tmp_path, test_fmus
     monkeypatch.setenv("RAILCOSIM_MAX_UNPACKED_MB", "0.001")
     code, _, stderr = railcosim("inspect", test_fmus / "TestCounter.fmu", env={"RAILCOSIM_MAX_UNPACKED_MB": "0.001"})
     _one_line(code, stderr, f"{test_fmus / 'TestCounter.fmu'}!modelDescription.xml", "2292 bytes, more than the 1000 bytes allowed")
-    with pytest.raises(UserError, match="TestCounter.fmu: unpacks to 1.4 MB .* more than the 1000 bytes allowed"):
+    with pytest.raises(UserError, match=r"TestCounter.fmu: unpacks to [0-9.]+ MB .* more than the 1000 bytes allowed"):
         safe_extract(test_fmus / "TestCounter.fmu", tmp_path / "c")
 
 
