@@ -540,8 +540,9 @@ def test_inputs_are_received_and_outputs_sent_only_where_the_slave_and_its_maste
 
 
 def test_dat_sequence_ids_are_judged_modulo_2_16_within_a_window(test_fmus):
-    """1 … 1024 ahead: applied; 0 … 1024 behind: stale; farther: applied only when the next
-    datagram follows it (the stream really jumped), so a single far one changes nothing."""
+    """1 … 1024 ahead: applied; 0 … 16 behind: stale; farther: applied only when the next
+    datagram follows it (the stream really jumped), so a single far one changes nothing, and
+    one injected ahead within the window costs the real stream one datagram, not 1024."""
     proc, master, desc = _wire(test_fmus, quiet=False)
     codec = PayloadCodec([(DataType.float64, 4)])
     seen = []
@@ -563,7 +564,11 @@ def test_dat_sequence_ids_are_judged_modulo_2_16_within_a_window(test_fmus):
                            (0xFFF1 + 1025, 4.0),    # beyond the window: held
                            (0xFFF1 + 1026, 5.0),    # the next follows it: the stream jumped
                            (0xFFF1 + 1026 + 1024, 6.0),    # the window's edge, across the wrap
-                           (0xFFF1 + 1026, 7.0)):   # 1024 behind: stale
+                           (0xFFF1 + 1026, 7.0),    # 1024 behind: held as a jump, not taken
+                           (0xFFF1 + 1026 + 1021, 7.5),    # 3 behind: stale
+                           (0xFFF1 + 1026 + 2048, 8.0),    # injected 1024 ahead: taken …
+                           (0xFFF1 + 1026 + 1025, 9.0),    # … the real stream's next is held …
+                           (0xFFF1 + 1026 + 1026, 10.0)):  # … and the one after it taken again
             exchange(seq & 0xFFFF, value)
         master.stc(PduType.STC_stop, State.RUNNING, State.STOPPED)
         master.stc(PduType.STC_deregister, State.STOPPED, State.ALIVE)
@@ -571,8 +576,8 @@ def test_dat_sequence_ids_are_judged_modulo_2_16_within_a_window(test_fmus):
         err = proc.stderr.read()
     finally:
         _end(proc, master)
-    assert seen == [1.0, 1.0, 3.0, 3.0, 5.0, 6.0, 6.0]
-    assert "DAT in 4 (missing 2047, stale 1, outside the window 2, rejected 0)" in err
+    assert seen == [1.0, 1.0, 3.0, 3.0, 5.0, 6.0, 6.0, 6.0, 8.0, 8.0, 10.0]
+    assert "DAT in 6 (missing 3070, stale 1, outside the window 4, rejected 0)" in err
 
 
 def test_steps_times_and_resolutions_are_bounded_or_refused_with_the_standards_codes(test_fmus):
@@ -763,3 +768,24 @@ def test_dcplib_example_masters_choices_step_the_fmu_by_its_own_step(product_fmu
     assert 5 <= steps <= 8                       # ≈ 2.7 s of 0.5 s steps, not 1 ns ones
     assert f"DAT in {steps - 1} " in summary or f"DAT in {steps} " in summary      # its own outputs, looped back
     assert "ignored from other addresses 0" in summary and "overruns 0 " in summary
+
+
+def test_a_slave_serving_every_interface_takes_as_its_own_only_senders_of_this_machine():
+    """Its outputs looped back to its inputs come from one of its ports on an address of this
+    machine; another host sending from the same port number is foreign, not the slave."""
+    import types
+
+    from orchestrator.dcp.slave import DcpSlaveServer
+
+    data_socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    data_socket.bind(("127.0.0.1", 0))
+    try:
+        port = data_socket.getsockname()[1]
+        for host in ("0.0.0.0", "127.0.0.1"):
+            slave = types.SimpleNamespace(port=port + 1, data_sockets={1: data_socket}, host=host,
+                                          _local_addresses={})
+            assert DcpSlaveServer._is_own(slave, ("127.0.0.1", port))
+            assert not DcpSlaveServer._is_own(slave, ("203.0.113.9", port))     # a remote host, same port
+            assert not DcpSlaveServer._is_own(slave, ("127.0.0.1", port + 2))   # not one of its ports
+    finally:
+        data_socket.close()

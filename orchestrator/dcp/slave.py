@@ -46,9 +46,13 @@ P = PduType
 _DAT_TYPE_ID = bytes([P.DAT_input_output])
 
 # Bounds of what a master may ask (docs/hil.md#bounds-of-a-session says why each):
-#: a DAT whose sequence id is more than this ahead of (or behind) the last one applied is not
-#: taken as the stream's new position unless the next one follows it within the window
+#: a DAT whose sequence id is more than this ahead of the last one applied is not taken as the
+#: stream's new position unless the next one follows it within the window
 DAT_SEQ_WINDOW = 1024
+#: a DAT at most this many behind the last one applied is a repeat or reordered (stale); one
+#: farther behind is judged as a jump, so a datagram injected ahead of the stream costs the real
+#: stream at most this many datagrams plus one, not the whole forward window
+DAT_STALE_WINDOW = 16
 #: one STC_do_step advances the FMU by at most this many of its own steps
 MAX_FMU_STEPS_PER_DO_STEP = 1000
 #: STC_run's start time at most this far ahead of the slave's clock, in seconds
@@ -141,6 +145,7 @@ class DcpSlaveServer:
         self.log = log or (lambda message: None)
         self.warn = warn or self.log       # what the user must see even with --quiet
         self.foreign_seen: set = set()
+        self._local_addresses: Dict[str, bool] = {}     # sender IP → an address of this machine
         self.counters = Counters()
         self.state = State.ALIVE
         self.error = ErrorCode.NONE
@@ -258,7 +263,16 @@ class DcpSlaveServer:
         """Sent by one of this slave's own sockets: its outputs looped back to its inputs (a
         CFG_target_network_information naming the slave itself, as DCPLib's example does)."""
         ports = {self.port} | {s.getsockname()[1] for s in self.data_sockets.values()}
-        return address[1] in ports and (self.host == "0.0.0.0" or address[0] == self.host)
+        if address[1] not in ports:
+            return False
+        if self.host != "0.0.0.0":
+            return address[0] == self.host
+        # serving every interface: the sender must be an address of this machine, not any host
+        # that sends from a port number the slave happens to use
+        local = self._local_addresses.get(address[0])
+        if local is None:
+            local = self._local_addresses[address[0]] = _is_local(address[0])
+        return local
 
     def _foreign(self, address: Tuple[str, int]) -> None:
         self.counters.foreign += 1
@@ -760,20 +774,21 @@ class DcpSlaveServer:
 
     def _in_sequence(self, config: _DataId, seq: int) -> bool:
         """Sequence ids in DCP's modular arithmetic (uint16): 1 … DAT_SEQ_WINDOW ahead of the last
-        one applied is next (the ids between are missing); 0 or up to the window behind is a
-        repeat or older (stale). Farther either way, a datagram is taken only when it follows the
-        previous such one within the window (the stream really jumped, e.g. after a long loss),
-        so no single datagram can make the later ones of the stream look stale."""
+        one applied is next (the ids between are missing); 0 or up to DAT_STALE_WINDOW behind is
+        a repeat or reordered (stale). Farther either way, a datagram is taken only when it
+        follows the previous such one within the window (the stream really jumped, e.g. after a
+        long loss, or a datagram injected ahead of it moved the position), so no single datagram
+        can make more than DAT_STALE_WINDOW + 1 later ones of the stream look stale."""
         gap = (seq - config.last_seq) & 0xFFFF
         if 1 <= gap <= DAT_SEQ_WINDOW:
             self.counters.dat_missing += gap - 1
             return True
-        if gap == 0 or gap >= 0x10000 - DAT_SEQ_WINDOW:
+        if gap == 0 or gap >= 0x10000 - DAT_STALE_WINDOW:
             self.counters.dat_stale += 1
             return False
         if config.jump_seq is not None and 1 <= (seq - config.jump_seq) & 0xFFFF <= DAT_SEQ_WINDOW:
-            self.counters.dat_missing += ((config.jump_seq - config.last_seq) & 0xFFFF) - 1 \
-                + ((seq - config.jump_seq) & 0xFFFF) - 1
+            ahead = (config.jump_seq - config.last_seq) & 0xFFFF     # a jump back misses nothing
+            self.counters.dat_missing += (ahead - 1 if ahead < 0x8000 else 0) + ((seq - config.jump_seq) & 0xFFFF) - 1
             return True
         config.jump_seq = seq
         self.counters.dat_out_of_window += 1
