@@ -146,16 +146,21 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
         sim_time = end_s - system.start_time
         summary = _summary(graph, sim_time, outcome, scenario)
         metadata = _metadata(system, graph, options, stop_s, outcome.steps_taken, interval_ticks)
-        problems = _write_results(out.path, summary, metadata)
+        # the folder (or a file streamed into it) removed or replaced meanwhile: never "results
+        # in", and no summary written into a folder that is no longer the one locked (another
+        # run's, perhaps); checked again after the writes
+        streamed = outcome.streamed if outcome.failure is None else ()
+        lost = out.lost(streamed)
+        problems = _write_results(out.path, summary, metadata) if lost is None else []
         if flag.signum and outcome.failure is None:
             # the signal came while the files were closed or written: the run says so
             outcome.failure = Interrupted(flag.signum, "while the results were written")
             summary = _summary(graph, sim_time, outcome, scenario)
-            problems = _write_results(out.path, summary, None) + problems
+            if lost is None:
+                problems = _write_results(out.path, summary, None) + problems
         if outcome.pacer is not None and outcome.pacer.verdict_line():
             options.warn(outcome.pacer.verdict_line())
-        # the folder (or a file streamed into it) removed or replaced meanwhile: never "results in"
-        lost = out.lost(outcome.streamed if outcome.failure is None else ())
+        lost = lost or out.lost(streamed)
         if lost is not None:
             problems = [lost]          # what could not be written there follows from it
         _raise_failure(outcome, problems, out.path)

@@ -417,6 +417,8 @@ def test_an_output_folder_removed_during_a_run_is_an_error_not_results(tmp_path,
                        if not line.startswith("railcosim: warning: --real-time"))
     _one_error_line(proc.returncode, errors, f"--output {out}", f"the folder was {what}")
     assert "results in" not in stdout
+    if then == "made again":         # not this run's folder: nothing written into it
+        assert sorted(p.name for p in out.iterdir()) == []
     _no_leftovers(private_tmp)
 
 
