@@ -212,3 +212,16 @@ def test_a_second_study_into_a_folder_in_use_is_refused_in_one_line(tmp_path, ca
         os.killpg(first.pid, signal.SIGINT)
         first.communicate(timeout=30)
     assert first.returncode == 130
+
+
+@pytest.mark.parametrize("name", ["study.csv", "study.json", "runs"])
+def test_a_study_writes_nothing_through_a_link_in_its_folder(tmp_path, capsys, name):
+    study = _study(tmp_path, "s.json", "slow", 2)
+    out, victim = tmp_path / "out", tmp_path / "victim"
+    victim.mkdir() if name == "runs" else victim.write_text("the user's own file\n")
+    out.mkdir()
+    (out / name).symlink_to(victim)
+    assert main(["study", str(study), "--output", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{out / name}: is a symbolic link" in err, err
+    assert (list(victim.iterdir()) == []) if name == "runs" else victim.read_text() == "the user's own file\n"

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence, TextIO
 
 from orchestrator.errors import UserError
+from orchestrator.folders import create_file, refuse_link, replace_file
 from orchestrator.study.collect import collect
 from orchestrator.study.spec import Run, StudySpec, point_label, set_text
 
@@ -574,6 +575,9 @@ def _is_run_folder(path: Path) -> bool:
     return not names or bool(names & {RECORD, LOCK_FILE, *RUN_FILES})
 
 
+STUDY_CSV, STUDY_JSON = "study.csv", "study.json"
+
+
 def _clear_runs(output: Path, spec: StudySpec, resume: bool) -> Dict[str, dict]:
     """DIR/runs/ made ready for this study: with ``resume`` the records of its finished runs
     kept (returned by id); every other run folder — a run to do again, or a run of an earlier,
@@ -582,6 +586,10 @@ def _clear_runs(output: Path, spec: StudySpec, resume: bool) -> Dict[str, dict]:
     import shutil
 
     runs = output / "runs"
+    # nothing of the study written through a link planted in its folder (docs/reliability.md,
+    # "What a run writes"): refused before any run starts
+    for name in (STUDY_CSV, STUDY_JSON, "runs"):
+        refuse_link(output / name)
     try:
         runs.mkdir(exist_ok=True)
         entries = [entry for entry in os.scandir(runs) if RUN_ID.fullmatch(entry.name)]
@@ -838,8 +846,8 @@ def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, pro
     counts.update(runs=len(ordered), points=len({r["point"] for r in ordered}), skipped=skipped)
     if stopped:
         counts["not_run"] = stopped
-    files = [_write_csv(output / "study.csv", spec, ordered),
-             _write_json(output / "study.json", spec, counts, began, worker_count, scheduler, system,
+    files = [_write_csv(output / STUDY_CSV, spec, ordered),
+             _write_json(output / STUDY_JSON, spec, counts, began, worker_count, scheduler, system,
                          interrupted=interrupts_name(flag) if stopped else None)]
     if stopped:
         from orchestrator.interrupts import Interrupted
@@ -877,7 +885,7 @@ def _cell(value) -> str:
 
 
 def _write_csv(path: Path, spec: StudySpec, records: List[dict]) -> Path:
-    with open(path, "w", newline="") as f:
+    with create_file(path) as f:
         writer = csv.writer(f)
         writer.writerow(columns_of(spec))
         for r in records:
@@ -895,5 +903,5 @@ def _write_json(path: Path, spec: StudySpec, counts: dict, began: float, workers
             "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(began)),
             "wall_time_s": time.time() - began, "workers": workers, "scheduler": scheduler,
             "interrupted": interrupted}
-    path.write_text(json.dumps(data, indent=1, default=str) + "\n")
+    replace_file(path, json.dumps(data, indent=1, default=str) + "\n")
     return path
