@@ -192,14 +192,20 @@ def test_a_foreign_dcp_slave_stands_in_for_a_component_with_the_same_results(tmp
     assert seen[-3:] == [P.State.STOPPING, P.State.STOPPED, P.State.ALIVE]
 
 
-def test_malformed_truncated_oversized_and_stale_pdus_never_disturb_the_master(tmp_path, test_fmus, counter_slave):
-    slave, dcpx = counter_slave(noise=True)
+def _swapped_run_equals_the_fmus(tmp_path, test_fmus, slave, dcpx) -> dict:
+    """The system run with its FMU and with the slave swapped in: results.csv byte-identical;
+    the swapped component's summary.json `hil` entry."""
     system = _system(tmp_path, test_fmus, stop_time=0.5)
     run_system(system, RunOptions(output_dir=tmp_path / "fmu"))
     swap = parse_swap(f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}")
     result = run_system(system, RunOptions(output_dir=tmp_path / "dcp", swaps={"dut": swap}))
     assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
-    hil = result.summary["hil"]["dut"]
+    return result.summary["hil"]["dut"]
+
+
+def test_malformed_truncated_oversized_and_stale_pdus_never_disturb_the_master(tmp_path, test_fmus, counter_slave):
+    slave, dcpx = counter_slave(noise=True)
+    hil = _swapped_run_equals_the_fmus(tmp_path, test_fmus, slave, dcpx)
     assert hil["lost"] == 0 and hil["late"] >= 20           # each stale PDU counted and dropped
 
 
@@ -207,12 +213,7 @@ def test_outputs_from_any_other_address_than_the_slaves_are_ignored_and_counted(
     """A third socket sends the master each of the slave's outputs PDUs first, with the same
     sequence id and other values: none is taken, each is counted, the run is the FMU's run."""
     slave, dcpx = counter_slave(intruder=True)
-    system = _system(tmp_path, test_fmus, stop_time=0.5)
-    run_system(system, RunOptions(output_dir=tmp_path / "fmu"))
-    swap = parse_swap(f"dut=dcp://127.0.0.1:{slave.port}?dcpx={dcpx}")
-    result = run_system(system, RunOptions(output_dir=tmp_path / "dcp", swaps={"dut": swap}))
-    assert (tmp_path / "dcp" / "results.csv").read_bytes() == (tmp_path / "fmu" / "results.csv").read_bytes()
-    hil = result.summary["hil"]["dut"]
+    hil = _swapped_run_equals_the_fmus(tmp_path, test_fmus, slave, dcpx)
     assert slave.spoofed == 25 and hil["ignored"] == 25 and hil["late"] == 0 and hil["lost"] == 0
 
 

@@ -35,6 +35,7 @@ from typing import Dict, List, Optional, Sequence, TextIO
 
 from orchestrator.errors import UserError
 from orchestrator.folders import create_file, refuse_link, replace_file
+from orchestrator.interrupts import signal_name
 from orchestrator.study.collect import collect
 from orchestrator.study.spec import Run, StudySpec, point_label, set_text
 
@@ -848,19 +849,13 @@ def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, pro
         counts["not_run"] = stopped
     files = [_write_csv(output / STUDY_CSV, spec, ordered),
              _write_json(output / STUDY_JSON, spec, counts, began, worker_count, scheduler, system,
-                         interrupted=interrupts_name(flag) if stopped else None)]
+                         interrupted=signal_name(flag.signum) if stopped else None)]
     if stopped:
         from orchestrator.interrupts import Interrupted
 
         raise Interrupted(flag.signum, f"after {len(ordered) - skipped} of {len(todo)} run(s) had ended; every run "
                                        f"done is kept in {output} (--resume runs the rest)")
     return StudyResult(output, ordered, counts, skipped, dashboard, files)
-
-
-def interrupts_name(flag) -> str:
-    from orchestrator.interrupts import signal_name
-
-    return signal_name(flag.signum)
 
 
 def _close(client, cluster, quick: bool) -> None:
