@@ -388,6 +388,38 @@ def cmd_study(args) -> int:
     return 0 if counts["ok"] == counts["runs"] else 1
 
 
+def cmd_headway(args) -> int:
+    """``railcosim headway SYSTEM``: the minimum headway by blocking-time theory and by
+    co-simulation of N trains (docs/capacity.md)."""
+    from orchestrator.headway import search
+    from orchestrator.headway.output import write_outputs
+
+    system = _system_path(args.system).resolve()
+    if args.method != "blocking" and args.trains < 2:
+        raise UserError(f"--trains {args.trains}: the co-simulated headway needs at least 2 trains")
+    build_dir = _build_dir().resolve()
+    if not args.no_build:
+        from orchestrator.packaging.builder import build_all
+
+        build_all(build_dir)
+    if _ENDS_WITH_PROCESS:
+        from orchestrator import interrupts
+
+        interrupts.hold_until_exit()
+    output = Path(args.output) if args.output else Path("results") / f"headway_{system.name}"
+    result = search.headway(system, args.method, args.trains, output, [build_dir], build_dir, args.workers,
+                            progress=sys.stderr)
+    document = write_outputs(result, output)
+    if args.format == "json":
+        print(json.dumps({k: v for k, v in document.items() if k != "stairway"}, indent=1, ensure_ascii=False))
+    else:
+        from orchestrator.headway.report import text_lines
+
+        print("\n".join(text_lines(document)))
+        print(f"results in {output} (headway.json, stairway.png, report.html)")
+    return 0
+
+
 def cmd_new(args) -> int:
     """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md), from a line
     file or from a railML 3 file (docs/railml.md)."""
@@ -711,6 +743,19 @@ def make_parser() -> argparse.ArgumentParser:
     study.add_argument("--yes", action="store_true",
                        help=f"run a study of more than {MAX_RUNS} runs (up to {HARD_MAX_RUNS}; docs/studies.md)")
     study.set_defaults(func=cmd_study)
+
+    headway = sub.add_parser("headway", help="a system's minimum headway: blocking-time theory and N trains "
+                                             "co-simulated through the signal chain (docs/capacity.md)")
+    headway.add_argument("system", help="a single-train system with a signal chain (folder, .ssp or shipped name)")
+    headway.add_argument("--method", choices=["blocking", "cosim", "both"], default="both")
+    headway.add_argument("--trains", action=_Number, kind=int, minimum=1, maximum=MAX_TRAINS, default=3,
+                         help=f"trains in each co-simulated trial (default 3, at least 2, at most {MAX_TRAINS})")
+    headway.add_argument("--format", choices=["text", "json"], default="text")
+    headway.add_argument("-o", "--output", help="folder (default results/headway_SYSTEM)")
+    headway.add_argument("--workers", action=_Number, kind=int, minimum=1, maximum=MAX_LOCAL_WORKERS,
+                         help="trials run side by side (a local Dask cluster; default one per core)")
+    headway.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    headway.set_defaults(func=cmd_headway)
 
     add_new_command(sub)
     add_export_command(sub)
