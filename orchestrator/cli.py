@@ -398,16 +398,18 @@ def cmd_headway(args) -> int:
     if args.method != "blocking" and args.trains < 2:
         raise UserError(f"--trains {args.trains}: the co-simulated headway needs at least 2 trains")
     build_dir = _build_dir().resolve()
+    build = None
     if not args.no_build:
-        from orchestrator.packaging.builder import build_all
+        from orchestrator.packaging.builder import build_all, build_sized_for
 
         build_all(build_dir)
+        build = lambda folders: build_sized_for(build_dir, folders)  # noqa: E731 — the trials' sizes
     if _ENDS_WITH_PROCESS:
         from orchestrator import interrupts
 
         interrupts.hold_until_exit()
     output = Path(args.output) if args.output else Path("results") / f"headway_{system.name}"
-    result = search.headway(system, args.method, args.trains, output, [build_dir], build_dir, args.workers,
+    result = search.headway(system, args.method, args.trains, output, [build_dir], build, args.workers,
                             progress=sys.stderr)
     document = write_outputs(result, output)
     if args.format == "json":

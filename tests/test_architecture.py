@@ -62,7 +62,7 @@ def _forbidden_for(module: str):
         return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
                 *(f"fmus.{u}.facade" for u in UNITS)), set()
     if parts[0] == "orchestrator":
-        if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study"):   # railway knowledge on the engine
+        if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study", "headway"):   # railway knowledge on the engine
             return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
         if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__", "catalogue"):   # the front ends
             return ("benchmarks",), set()

@@ -52,18 +52,20 @@ class Trajectory:
         # the first time the head reaches each new furthest position: a train standing adds no
         # point, so a position passed after a stop gets a time after the departure
         furthest = np.maximum.accumulate(x)
-        new = np.concatenate(([True], furthest[1:] > furthest[:-1]))
-        object.__setattr__(self, "_reach_m", furthest[new])
-        object.__setattr__(self, "_reach_s", t[new])
+        first = np.flatnonzero(np.concatenate(([True], furthest[1:] > furthest[:-1])))
+        moved = np.flatnonzero(x > x[0])
+        # the last instant at the starting position: the departure of a train standing there
+        departure = t[moved[0] - 1] if moved.size else t[-1]
+        reach_s = t[first].copy()
+        reach_s[0] = departure
+        object.__setattr__(self, "departure_s", float(departure))
+        object.__setattr__(self, "_first", first)
+        object.__setattr__(self, "_reach_m", furthest[first])
+        object.__setattr__(self, "_reach_s", reach_s)
 
     @property
     def start_m(self) -> float:
         return float(self.head_m[0])
-
-    @property
-    def departure_s(self) -> float:
-        """When the head first leaves its starting position."""
-        return float(self._reach_s[1]) if self._reach_s.size > 1 else float(self.time_s[-1])
 
     @property
     def furthest_m(self) -> float:
@@ -80,12 +82,7 @@ class Trajectory:
 
     def speed_at(self, position_m) -> np.ndarray:
         """The speed when the head first reaches each position (m/s)."""
-        return np.interp(np.asarray(position_m, dtype=float), self.head_m[self._first_index()],
-                         self.speed_mps[self._first_index()])
-
-    def _first_index(self) -> np.ndarray:
-        furthest = np.maximum.accumulate(self.head_m)
-        return np.flatnonzero(np.concatenate(([True], furthest[1:] > furthest[:-1])))
+        return np.interp(np.asarray(position_m, dtype=float), self._reach_m, self.speed_mps[self._first])
 
 
 @dataclass(frozen=True)

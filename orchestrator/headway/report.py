@@ -8,7 +8,7 @@ import html
 import json
 import os
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional
 
 from orchestrator.folders import replace_file
 

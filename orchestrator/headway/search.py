@@ -16,10 +16,9 @@ interval never hinders where a shorter one does not).
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, TextIO
+from typing import Dict, List, Optional, Sequence, TextIO
 
 import numpy as np
 
@@ -71,13 +70,6 @@ def _run(system: Path, output: Path, stop_time_s: float, fmu_dirs: Sequence[Path
                          output_interval=OUTPUT_INTERVAL_S, in_process=True, fmu_dirs=list(fmu_dirs),
                          default_scenario=False, progress=False, warn=lambda line: None)
     return run_system(system, options)
-
-
-def _build(build_dir: Path, folders: Sequence[Path]) -> None:
-    from orchestrator.packaging.builder import build_all, build_sized_for
-
-    build_all(build_dir)
-    build_sized_for(build_dir, list(folders))
 
 
 def _study(folder: Path, name: str, system: Path, cases: List[dict], stop_time_s: float,
@@ -183,9 +175,9 @@ class Search:
     """The trials of one system (module docstring)."""
 
     def __init__(self, plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path], workers: Optional[int],
-                 progress: Optional[TextIO], build_dir: Path):
+                 progress: Optional[TextIO], build: Optional[Callable[[Sequence[Path]], None]]):
         self.plan, self.folder, self.fmu_dirs = plan, folder, list(fmu_dirs)
-        self.workers, self.progress, self.build_dir = workers, progress, build_dir
+        self.workers, self.progress, self.build = workers, progress, build
         self.references: Dict[str, Trajectory] = {}
         self.outcomes: Dict[float, dict] = {}
         self.rounds = 0
@@ -205,7 +197,8 @@ class Search:
         first = plan.slots[-1]
         trials.write_system(system, plan, [first], "reference", {first.index: self.reference_timetables[first.index]},
                             plan.stop_time_s(0.0))
-        _build(self.build_dir, [system, self.trial_system(build=False)])
+        if self.build is not None:
+            self.build([system, self.trial_system()])
 
     def run_references(self) -> None:
         plan = self.plan
@@ -220,7 +213,7 @@ class Search:
                                                          stop, self.fmu_dirs, self.workers, self.progress)):
             self.references[slot.name] = trials.read_trajectories(run_dir, ["train"])["train"]
 
-    def trial_system(self, build: bool = True) -> Path:
+    def trial_system(self) -> Path:
         plan = self.plan
         system = self.folder / "systems" / "trial"
         if not (system / "SystemStructure.ssd").is_file():
@@ -242,7 +235,7 @@ class Search:
             cases.append({f"{slot.name}_ato.timetable_file":
                           trials.write_timetable(system, plan, slot, (slot.index - 1) * h, label) for slot in plan.slots})
         reference_last = self.references[plan.slots[-1].name]
-        stop = max(plan.stop_time_s(h, reference_last) for h in headways)
+        stop = max(plan.stop_time_s(h, float(reference_last.time_at(plan.judge_end_m))) for h in headways)
         self._say(f"round {self.rounds}: trains at {', '.join(f'{h:g}' for h in headways)} s")
         runs = _study(self.folder / "trials" / f"round{self.rounds}", f"round{self.rounds}", system, cases, stop,
                       self.fmu_dirs, self.workers, self.progress)
@@ -296,18 +289,19 @@ class Search:
 
 # ---- the command ------------------------------------------------------------------------------
 def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAINS, output: Optional[Path] = None,
-            fmu_dirs: Sequence[Path] = (), build_dir: Optional[Path] = None, workers: Optional[int] = None,
-            progress: Optional[TextIO] = None) -> HeadwayResult:
+            fmu_dirs: Sequence[Path] = (), build: Optional[Callable[[Sequence[Path]], None]] = None,
+            workers: Optional[int] = None, progress: Optional[TextIO] = None) -> HeadwayResult:
+    """The system's headway by ``method`` (module docstring) into ``output``; ``build`` makes
+    the FMU sizes the trial systems name (the CLI passes the builder; None: already built)."""
     if method not in METHODS:
         raise UserError(f"--method {method}: choose one of {', '.join(METHODS)}")
     base = trials.read_base(system_path)
     plan = trials.TrialPlan(base, trains)
     folder = Path(output) if output else Path("results") / f"headway_{base.name}"
     folder.mkdir(parents=True, exist_ok=True)
-    build_dir = Path(build_dir) if build_dir else (Path(fmu_dirs[0]) if fmu_dirs else Path("build/fmus"))
-    fmu_dirs = list(fmu_dirs) or [build_dir]
+    fmu_dirs = list(fmu_dirs)
     result = HeadwayResult(base.name, base.cab_system, trains, method, output=str(folder))
-    search = Search(plan, folder, fmu_dirs, workers, progress, build_dir)
+    search = Search(plan, folder, fmu_dirs, workers, progress, build)
     if method in ("cosim", "both"):
         search.prepare()
     run = unhindered_run(plan, folder / "unhindered", fmu_dirs)
