@@ -1,0 +1,1 @@
+"""Headway and capacity: blocking-time theory, co-simulated headway search, timetable compression."""
