@@ -372,6 +372,27 @@ class Atp:
             return False
         return self.mode in ("ALSN", "ALSU") or v_permitted_mps > 0.0
 
+    def indication_constraints(self, x: float, aspect: int = sig.WHITE, code: int = 0, v_permitted: float = 0.0,
+                               v_target: float = 0.0, free_blocks: int = 0, target_distance_m: float = 0.0,
+                               gradient_permille: float = 0.0, word_carrier_hz: float = 0.0) -> Constraints:
+        """What a valid cab indication imposes with the head at ``x`` (the receiver's outputs as
+        :meth:`supervise` takes them), through the constraint builders it uses: no state read or
+        kept — not the last valid code, the assumption after passing a signal, nor the curve of a
+        falling ceiling — and no line limit. For planning without a run (the approach of a block,
+        orchestrator/headway/approach.py). TVM430: a word on no carrier of ours is no word."""
+        k = self.section_of(x)
+        if self.mode == "ALSN":
+            return self._alsn(aspect, k)
+        if self.mode == "ALSU":
+            return self._alsu(code, k)
+        if self.mode == "TVM430":
+            block = self.word_block(x, word_carrier_hz)
+            return self._no_code() if block is None else \
+                self._tvm430(v_permitted, v_target, target_distance_m, gradient_permille, block)
+        if self.mode == "digital":
+            return self._digital(v_permitted, v_target, free_blocks, k)
+        return Constraints()
+
     def _no_code(self) -> Constraints:
         if self.mode == "TVM430":
             return Constraints(0.0)               # the most restrictive indication: step 0
