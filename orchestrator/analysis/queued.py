@@ -43,6 +43,8 @@ QUEUE_GAP_M = 50.0
 FINAL_DWELL_S = 30.0
 #: the sidings' speed limit: the cab's no-code ceiling (ALSN white, 40 km/h) [U]
 SIDINGS_KMH = 40.0
+#: a trial runs on this long after the last train, alone, would reach the end of judging (s)
+JUDGED_MARGIN_S = 30.0
 #: between the last track circuit and the last train's tail in the sidings (m)
 SIDINGS_CLEARANCE_M = 20.0
 #: trains a trial may hold (the build sizes of the rail line, docs/architecture.md#build-sizes)
@@ -231,14 +233,13 @@ class TrialPlan:
         return {"train": f"{self.base_timetable.get('train', 'train')} ({slot.name})", "stops": stops}
 
     def stop_time_s(self, headway_s: float, judge_end_s: Optional[float] = None) -> float:
-        """Long enough for the last train to reach its sidings (with a run-off), or to pass the
-        end of judging (``judge_end_s``: when the last train, alone, passes it; else its last
-        arrival)."""
+        """Long enough for the last train to pass the end of judging (``judge_end_s``: when it,
+        alone, reaches it), or else to reach its sidings (or its last stop, without a run-off)."""
         shift = (self.count - 1) * headway_s
-        if self.run_off or judge_end_s is None:
+        if judge_end_s is None:
             last = self.timetable(self.slots[-1], shift)["stops"][-1]["arrival_s"]
             return math.ceil(last + 120.0)
-        return math.ceil(judge_end_s + shift + 120.0)
+        return math.ceil(judge_end_s + shift + JUDGED_MARGIN_S)
 
     def timing_points_m(self) -> np.ndarray:
         """Block signals and stops of the base line from the queue on, up to the last stop."""

@@ -394,6 +394,54 @@ def write_same_block(root: Path = SSP_ROOT) -> Path:
 
 
 # name → writer(root) of every shipped system
+# suburban: one ЭР2 EMU stopping at all 13 stations of the 36 km suburban line (31 sections of
+# 1.0-1.4 km, 4-aspect ALSN block, DC 3 kV): the base of suburban_peak and of its headway; the
+# chain on a build of 32 sections (resources/k32m2n40/)
+SUBURBAN_LINE, SUBURBAN_STOCK, SUBURBAN_TIMETABLE = "suburban_line.json", "emu_er2.json", "suburban_timetable.json"
+SUBURBAN_BUILD = BuildConfig(sections=32, trains=2, frame=40)
+SUBURBAN_BLOCK_ASPECTS = 4
+
+
+def write_suburban(root: Path = SSP_ROOT, name: str = "suburban") -> Path:
+    line, timetable = _shipped_json(SUBURBAN_LINE), _shipped_json(SUBURBAN_TIMETABLE)
+    origin_m = _stop_m(line, timetable["stops"][0]["station"])
+    check_placements(line, [("train", origin_m, stock_length_m(SUBURBAN_STOCK))])
+    files = {"line_file": SUBURBAN_LINE}
+    stock = {"rolling_stock_file": SUBURBAN_STOCK}
+    coder, rail, receiver, ato = cab_settings("ALSN")
+    chain, links = signal_chain(sections=SUBURBAN_BUILD.sections, frame=SUBURBAN_BUILD.frame,
+                                fmu_folder=f"resources/{SUBURBAN_BUILD.folder_name}",
+                                coder={**coder, **files, "block_aspects": SUBURBAN_BLOCK_ASPECTS},
+                                rail={**rail, **files}, receiver=receiver, stocks=[SUBURBAN_STOCK])
+    components, connections = train_and_ato(
+        train_parameters={**files, **stock, "x0": origin_m},
+        ato_parameters={**ato, **files, **stock, "timetable_file": SUBURBAN_TIMETABLE})
+    folder = root / name
+    last = timetable["stops"][-1]["arrival_s"]
+    path = write_ssd(folder, name, chain + components, connections + links, stop_time=float(last + 120))
+    for document, file in ((line, SUBURBAN_LINE), (_shipped_json(SUBURBAN_STOCK), SUBURBAN_STOCK),
+                           (timetable, SUBURBAN_TIMETABLE)):
+        _write_json(folder / "resources" / file, document)
+    return path
+
+
+# ---- many trains: a single-train system's train queued N times at a headway ----------------------
+def write_queued(root: Path, name: str, base: Callable[[Path], Path], trains: int, headway_s: float,
+                 stop_time_s: Optional[float] = None) -> Path:
+    """``trains`` copies of the train of the single-train system ``base`` writes, queued at its
+    start and departing ``headway_s`` apart (orchestrator/analysis/queued.py: the headway
+    trials' layout, with sidings beyond the line where the cab system allows them)."""
+    from orchestrator.analysis import queued
+
+    with tempfile.TemporaryDirectory() as scratch:
+        plan = queued.TrialPlan(queued.read_base(base(Path(scratch)).parent), trains)
+        folder = root / name
+        timetables = {slot.index: queued.write_timetable(folder, plan, slot, (slot.index - 1) * headway_s, name)
+                      for slot in plan.slots}
+        return queued.write_system(folder, plan, plan.slots, name, timetables,
+                                   stop_time_s or plan.stop_time_s(headway_s))
+
+
 SHIPPED: Dict[str, Callable[[Path], Path]] = {
     "free_run": write_free_run, "ato_only": write_ato_only, "following": write_following,
     "faults": write_faults, "joints_at_speed": write_joints_at_speed, "freight_ac": write_freight_ac,

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, TextIO
+from typing import Callable, Dict, List, Optional, Sequence, TextIO
 
 import numpy as np
 
@@ -129,6 +129,12 @@ def unhindered_run(plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path
     (resources / stock).write_text(Path(base.stock_file).read_text())
     timetable = trials.write_timetable(system, plan, slot, 0.0, "unhindered")
     ato = {k: v for k, v in base.parameters["ato"].items() if k not in ("line_file", "rolling_stock_file", "timetable_file")}
+    if not float(ato.get("braking_decel", 0.0) or 0.0) > 0.0:
+        # the ATO plans its braking by its cab mode (TVM-430's harder): keep the base's plan
+        from fmus.ato_controller.core import AtoSettings, default_plan_decel_mps2
+
+        mode = str(ato.get("cab_signal") or AtoSettings().cab_signal)
+        ato["braking_decel"] = round(default_plan_decel_mps2(base.stock, mode), 6)
     files = {"line_file": "trial_line.json", "rolling_stock_file": stock}
     components, connections = train_and_ato(
         train_parameters={**files, "x0": slot.start_m},
@@ -140,33 +146,49 @@ def unhindered_run(plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path
     return trials.read_trajectories(folder / "run", ["train"])["train"]
 
 
-def approach_points(base: trials.BaseSystem, plan: trials.TrialPlan, run: Trajectory) -> List[Optional[float]]:
-    """Each block's approach point on the unhindered run: the first head position at which its
-    speed exceeds the ATP's permitted speed were that block occupied (orchestrator/headway/approach.py)."""
+def approach_points(base: trials.BaseSystem, plan: trials.TrialPlan, run: Trajectory):
+    """Each block's approach points on the unhindered run, were that block occupied
+    (orchestrator/headway/approach.py; docs/capacity.md#approach): by **indication**, the entry
+    of the first block behind it whose indication's permitted speed lies anywhere below the
+    unhindered run (the ATO must find the free-line indication there, or it is slowed); by
+    **braking curve**, the first head position where the unhindered speed exceeds the ATP's
+    permitted speed (the latest the ATP itself would intervene). None: nothing restricts."""
     from orchestrator.headway import approach
 
     line = base.line
     setup = approach.cab_setup(base.cab_system, base.block_aspects, base.line_file, base.stock_file,
-                               base.parameters["ato"])
+                               base.parameters["ato"], base.parameters["receiver"])
     grid = np.arange(max(run.start_m, 0.0), run.furthest_m, 5.0)
     speeds = run.speed_at(grid)
-    points: List[Optional[float]] = []
+    starts = np.array([entry for entry, _ in line.block_bounds])
+    by_indication: List[Optional[float]] = []
+    by_curve: List[Optional[float]] = []
     for k, (entry, _) in enumerate(line.block_bounds):
         ahead = grid < entry
         if not ahead.any():
-            points.append(None)
+            by_indication.append(None)
+            by_curve.append(None)
             continue
-        permitted = approach.permitted_speed_mps(setup, k, grid[ahead])
+        permitted = approach.permitted_speed_mps(setup, k, grid[ahead], speeds[ahead])
         over = np.flatnonzero(np.nan_to_num(speeds[ahead] - permitted, nan=-1.0) > 0.0)
-        points.append(float(grid[ahead][over[0]]) if over.size else None)
-    return points
+        if not over.size:
+            by_indication.append(None)
+            by_curve.append(None)
+            continue
+        by_curve.append(float(grid[ahead][over[0]]))
+        block = int(np.searchsorted(starts, grid[ahead][over[0]], side="right") - 1)
+        by_indication.append(float(max(starts[block], run.start_m)))
+    return by_indication, by_curve
 
 
-def blocking_stairway(plan: trials.TrialPlan, run: Trajectory) -> List[blocking.BlockingTime]:
+def blocking_stairway(plan: trials.TrialPlan, run: Trajectory, by: str = "indication") -> List[blocking.BlockingTime]:
+    """The run's stairway with the approach points ``by`` indication (the headline) or by the
+    ATP's braking curve (:func:`approach_points`)."""
     base = plan.base
     line = base.line
     names = [line.sections[line.block_of_section.index(k)].signal or str(k + 1) for k in range(len(line.block_bounds))]
-    return blocking.stairway(run, line.block_bounds, names, approach_points(base, plan, run),
+    by_indication, by_curve = approach_points(base, plan, run)
+    return blocking.stairway(run, line.block_bounds, names, by_indication if by == "indication" else by_curve,
                              plan.length_m, _latency_s(base), _release_s(base))
 
 
@@ -180,6 +202,8 @@ class Search:
         self.workers, self.progress, self.build = workers, progress, build
         self.references: Dict[str, Trajectory] = {}
         self.outcomes: Dict[float, dict] = {}
+        #: each block's approach point by indication on the unhindered run (set by headway())
+        self.approach_m: List[Optional[float]] = []
         self.rounds = 0
 
     def _say(self, text: str) -> None:
@@ -244,7 +268,8 @@ class Search:
         for h, (record, run_dir) in zip(headways, runs):
             runs_of = trials.read_trajectories(run_dir, names)
             judged = [trials.judge(slot.name, runs_of[slot.name], self.references[slot.name], (slot.index - 1) * h,
-                                   points, plan.judge_end_m) for slot in plan.slots[1:]]
+                                   points, self.judge_end_m(runs_of[ahead.name]))
+                      for ahead, slot in zip(plan.slots, plan.slots[1:])]
             # the leader has nobody ahead: it must match its reference (the check of the method)
             leader = trials.judge(plan.slots[0].name, runs_of[plan.slots[0].name],
                                   self.references[plan.slots[0].name], 0.0, points, plan.judge_end_m)
@@ -253,13 +278,29 @@ class Search:
                 "headway_s": h, "hindered": any(j.hindered for j in judged), "run_dir": str(run_dir),
                 "worst_follower": worst.train, "late_s": round(worst.late_s, 2), "late_at_m": worst.late_at_m,
                 "speed_deficit_kmh": round(max(j.speed_deficit_kmh for j in judged), 2),
-                "leader_late_s": round(leader.late_s, 2), "verdict": record.get("verdict"),
-                "signals_passed_at_danger": record.get("signals_passed_at_danger"),
-                "wrong_side_failures": record.get("wrong_side_failures"),
-                "unsafe_indications": record.get("unsafe_indications")}
+                "leader_late_s": round(leader.late_s, 2), "verdict": record["collected"].get("verdict"),
+                "signals_passed_at_danger": record["collected"].get("signals_passed_at_danger"),
+                "wrong_side_failures": record["collected"].get("wrong_side_failures"),
+                "unsafe_indications": record["collected"].get("unsafe_indications")}
             self._say(f"  {h:g} s: {'hindered' if self.outcomes[h]['hindered'] else 'unhindered'} "
                       f"(worst {worst.train}: {worst.late_s:+.1f} s at {worst.late_at_m:g} m, "
                       f"{self.outcomes[h]['speed_deficit_kmh']:.1f} km/h slower)")
+
+    def judge_end_m(self, ahead: Trajectory) -> float:
+        """Where judging a follower ends: the plan's end (the last stop, or without a run-off the
+        approach point of its block), or, without a run-off, the approach point of the block in
+        which the train ahead stands at the end — trains held behind a full terminus stand
+        further back on the line, and what they restrict is the terminus, not the headway."""
+        end = self.plan.judge_end_m
+        if self.plan.run_off or abs(float(ahead.speed_mps[-1])) > 1e-3:
+            return end
+        bounds = self.plan.base.line.block_bounds
+        standing = float(ahead.head_m[-1])
+        block = next((k for k, (a, b) in enumerate(bounds) if a <= standing < b), None)
+        if block is None:
+            return end
+        point = self.approach_m[block] if self.approach_m[block] is not None else bounds[block][0]
+        return min(end, float(point))
 
     def bracket(self) -> tuple:
         free = [h for h, o in self.outcomes.items() if not o["hindered"]]
@@ -306,16 +347,18 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
         search.prepare()
     run = unhindered_run(plan, folder / "unhindered", fmu_dirs)
     steps = blocking_stairway(plan, run)
+    search.approach_m = approach_points(base, plan, run)[0]
     if not plan.run_off:
         # the trains stay at their last stop: its block is never cleared; judging ends where a
         # train standing there would first restrict its follower
         last_block = next(k for k, (a, b) in enumerate(base.line.block_bounds) if a <= plan.last_stop_m < b)
-        points = approach_points(base, plan, run)
+        points, _ = approach_points(base, plan, run)
         end = points[last_block] if points[last_block] is not None else base.line.block_bounds[last_block][0]
         plan.judge_end_m = float(end)
         steps = [s for s in steps if s.exit_m <= plan.judge_end_m]
         result.notes.append(f"the trains stay at their last stop ({plan.last_stop_m:g} m); headway judged up "
-                            f"to {plan.judge_end_m:g} m, the approach point of its block")
+                            f"to {plan.judge_end_m:g} m, the approach point of its block, and each follower "
+                            "only up to the approach point of the block where the train ahead of it ends up")
     result.stairway = [s.as_dict() for s in steps]
     critical = blocking.critical_section(steps)
     result.headway_blocking_s = round(critical.duration_s, 1)
@@ -323,6 +366,7 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
                                "exit_m": critical.exit_m, "approach_m": critical.approach_m}
     result.parts_s = {k: round(v, 2) for k, v in critical.parts_s.items()}
     if method in ("cosim", "both"):
+        search.unhindered = run
         search.run_references()
         found = search.run(critical.duration_s)
         result.headway_cosim_s = found
@@ -337,15 +381,27 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
 
 
 def breakdown(plan, steps, critical, search, found_s: float) -> Dict[str, float]:
-    """The difference between the two methods, part by part (docs/capacity.md#the-difference)."""
-    reference = search.references[plan.slots[-1].name]
-    unhindered = Trajectory(reference.time_s, reference.head_m, reference.speed_mps)
-    # the same stairway on the chain's own unhindered run (the last train alone through the
-    # whole chain): what the chain's driving (cab ceilings, the ATO under them) changes
-    chain_steps = {s.section: s for s in blocking_stairway(plan, unhindered)}
-    same = chain_steps.get(critical.section)
+    """The difference between the two methods, part by part (docs/capacity.md#the-difference):
+    ``cosim_minus_blocking`` = ``chain_running`` + ``chain_reaction``, where
+
+    * ``chain_running``: the critical blocking time on the train's run alone through the whole
+      chain (its reference) less that on its run with line limits only (``ato_only``): what the
+      cab's ceilings and the ATP's own assumptions do to the train's running;
+    * ``chain_reaction``: the co-simulated headway less that blocking time: what the stated
+      latency, relay and coder times and the ATO's driving under restrictive indications
+      (its margins below the ATP's curves) differ from as simulated;
+
+    and, apart, ``approach_by_braking_curve``: the critical blocking time with the approach point
+    where the ATP's curve would first bind instead of at the first restrictive block's entry
+    (what the shape of the braking curves leaves of the approach)."""
+    run = search.references[plan.slots[-1].name]
+    chain_steps = {s.section: s for s in blocking_stairway(plan, run)}
+    curve_steps = {s.section: s for s in blocking_stairway(plan, search.unhindered, by="curve")}
     out = {"cosim_minus_blocking": round(found_s - critical.duration_s, 1)}
+    same = chain_steps.get(critical.section)
     if same is not None:
-        out["chain_running_times"] = round(same.duration_s - critical.duration_s, 1)
-        out["signal_chain_and_ato_margins"] = round(found_s - same.duration_s, 1)
+        out["chain_running"] = round(same.duration_s - critical.duration_s, 1)
+        out["chain_reaction"] = round(found_s - same.duration_s, 1)
+    if critical.section in curve_steps:
+        out["approach_by_braking_curve"] = round(curve_steps[critical.section].duration_s - critical.duration_s, 1)
     return out
