@@ -32,6 +32,7 @@ class Queue:
     first_departure_s: float = 30.0             # the foremost train
     departure_interval_s: float = 120.0         # each train behind it that much later
     sections: Optional[int] = None              # K of the build; None: the line's sections rounded up to 8
+    block_aspects: int = 3                      # the coder's block (the suburban line's is 4-aspect)
     stop_time_s: float = 60.0
     scheduled_speed_mps: float = 16.0           # the timetable's average speed, origin to terminus,
     start_allowance_s: float = 120.0            # plus this for starting and stopping
@@ -62,8 +63,12 @@ def queued_line(queue: Queue) -> dict:
 
 
 def build_sizes(queue: Queue, line: dict) -> BuildConfig:
-    sections = queue.sections or 8 * -(-len(line["block_sections"]) // 8)
-    return BuildConfig(sections=sections, trains=queue.trains)
+    return BuildConfig(sections=queue.sections or sections_for(line), trains=queue.trains)
+
+
+def sections_for(line: dict) -> int:
+    """The build's K for a line: its block sections rounded up to a multiple of 8."""
+    return 8 * -(-len(line["block_sections"]) // 8)
 
 
 def write_queued_trains(folder: Path, queue: Queue, system: str = "ALSN") -> Path:
@@ -77,6 +82,7 @@ def write_queued_trains(folder: Path, queue: Queue, system: str = "ALSN") -> Pat
     files = {"line_file": "queued_line.json"}
     stock = {"rolling_stock_file": queue.stock_file} if queue.stock_file else {}
     coder, rail, receiver, ato = cab_settings(system)
+    coder = {**coder, "block_aspects": queue.block_aspects}
     components, connections = [], []
     pairs = []
     for j, (origin, head_m) in enumerate(heads, start=1):
