@@ -14,7 +14,7 @@ taken in turn within each repetition, so the machine's drift hits all alike) of
 
 * the real-time factor of the whole run (what summary.json reports: initialisation included),
 * the wall cost of a simulated second while stepping (initialisation excluded),
-* the initialisation (loading the FMUs, the ATOs' planning, the rail line's models),
+* the initialisation (loading the FMUs, the ATOs' planning from cold, the rail line's models),
 * how many trains moved (more than 1 m),
 
 then the least-squares fit of log cost = c + β·log N (β ≤ 1.1 is the target: no worse than one
@@ -23,6 +23,7 @@ receiver, ATO and traction unit more per train) for the stepping and for the who
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import tempfile
@@ -33,6 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
 
+from fmus.ato_controller import planner  # noqa: E402
 from harness.queued_trains import Queue, write_queued_trains  # noqa: E402
 from harness.suburban import EMU, SUBURBAN_LINE  # noqa: E402
 from orchestrator.analysis.report import read_results  # noqa: E402
@@ -72,6 +74,9 @@ def queue_of(trains: int, stop_time_s: float) -> Queue:
 
 
 def one_run(system: Path, in_process: bool, fmu_dir: Path) -> dict:
+    # each run plans from cold, as a fresh `railcosim run` does: the FMUs run in this interpreter
+    # and would find the stages an earlier run planned (the queues of 12 and 16 share origins)
+    planner._IN_MEMORY._kept.clear()
     watch = Stopwatch()
     with tempfile.TemporaryDirectory() as out:
         options = RunOptions(summaries=lambda graph: list(railway_verdicts(graph)) + [watch], output_dir=Path(out),
@@ -101,6 +106,7 @@ def main():
     args = parser.parse_args()
     fmu_dir = default_build_dir()
     build_all(fmu_dir)
+    load_before = os.getloadavg()
     with tempfile.TemporaryDirectory() as scratch:
         systems = {}
         for n in args.trains:
@@ -114,7 +120,8 @@ def main():
                 print(f"  repeat {repeat + 1} N={n}: {r['rtf']:.2f}x, {1e3 * r['step_cost']:.0f} ms per sim s, "
                       f"init {r['init_s']:.1f} s, moved {r['moved']}", flush=True)
     mode = "in process" if args.in_process else "through FMI"
-    print(f"\n{mode}, {args.stop_time:g} s simulated, median of {args.repeats}")
+    print(f"\n{mode}, {args.stop_time:g} s simulated, median of {args.repeats}; load average (1, 5, 15 min) "
+          f"before {' '.join(f'{x:.1f}' for x in load_before)}, after {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
     print(f"{'trains':>6} {'real time':>10} {'ms/sim s stepping':>18} {'per train':>10} {'init s':>7} {'moved':>6} "
           f"{'SPAD':>5} {'wrong-side':>10}")
     med = {}
