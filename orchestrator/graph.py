@@ -311,8 +311,10 @@ def _order(names: List[str], edges: List[Edge]) -> Tuple[List[str], List[List[st
     while remaining:
         ready = [n for n in remaining if indegree[n] == 0]
         if not ready:
-            # a cycle: take the first declared component among those left, and report it
-            cycles.append(list(remaining))
+            # a cycle: take the first declared component among those left, and report the
+            # components in a cycle with it (not all those left: with N trains that listed
+            # every later train's loop again, N² names in metadata.json)
+            cycles.append(_cycle_through(remaining, successors))
             ready = [remaining[0]]
         for name in ready[:1]:
             order.append(name)
@@ -320,3 +322,25 @@ def _order(names: List[str], edges: List[Edge]) -> Tuple[List[str], List[List[st
             for succ in successors[name]:
                 indegree[succ] -= 1
     return order, cycles
+
+
+def _cycle_through(remaining: List[str], successors: Dict[str, set]) -> List[str]:
+    """The components among ``remaining`` in a cycle with its first (its strongly connected
+    component), in declaration order."""
+    left = set(remaining)
+    predecessors: Dict[str, set] = {n: set() for n in remaining}
+    for name in remaining:
+        for succ in successors[name] & left:
+            predecessors[succ].add(name)
+
+    def reached(links: Dict[str, set]) -> set:
+        seen, todo = {remaining[0]}, [remaining[0]]
+        while todo:
+            for other in links[todo.pop()] & left:
+                if other not in seen:
+                    seen.add(other)
+                    todo.append(other)
+        return seen
+
+    both = reached({n: successors[n] for n in remaining}) & reached(predecessors)
+    return [n for n in remaining if n in both]

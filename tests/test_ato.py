@@ -105,6 +105,22 @@ def test_a_kept_stage_plan_is_the_computed_one_bit_for_bit(tmp_path, monkeypatch
     _same_plan(planner.plan(400, 10300, 1.08 * minimum), fresh)
 
 
+def test_identical_trains_plan_a_stage_once_and_share_it_read_only(monkeypatch):
+    """N identical trains of one line and timetable (a headway study's) in one process: the
+    second ATO's plan of a stage is the first's family, not planned again, and no ATO can
+    change the arrays the others read."""
+    line, stock = load_line(), load_rolling_stock()
+    planner = StagePlanner(NominalTrain(stock, line), line, "passenger", 0.5, 2 * KMH)
+    monkeypatch.delenv("RAILCOSIM_PLAN_CACHE", raising=False)
+    first = planner.plan(400, 10300, 600.0)
+    computed = []
+    monkeypatch.setattr(StagePlanner, "_family", lambda self, *args: computed.append(args) or None)
+    second = StagePlanner(NominalTrain(load_rolling_stock(), line), line, "passenger", 0.5, 2 * KMH).plan(400, 10300, 600.0)
+    assert computed == [] and second.family is first.family and second.chosen == first.chosen
+    with pytest.raises(ValueError):
+        second.family.v[0, 0] = 0.0
+
+
 def test_infeasible_timetable_is_an_initialisation_error_with_the_minimum_time(tmp_path):
     path = tmp_path / "tight.json"
     path.write_text(json.dumps({"train": "t", "stops": [{"station": "A", "departure_s": 0},

@@ -17,7 +17,8 @@ from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 FS, N = 4000.0, 40
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_LINES = [DEFAULT_LINE, DEFAULT_LINE.parent / "default_line_ac.json",
-                 ROOT / "ssp" / "joints_at_speed" / "resources" / "throat_line.json"]
+                 ROOT / "ssp" / "joints_at_speed" / "resources" / "throat_line.json",
+                 DEFAULT_LINE.parent / "suburban_line.json"]
 OFF = -1000.0
 
 
@@ -277,12 +278,13 @@ def test_calibration_table_in_docs_matches_the_model():
     """docs/rail_line.md, relay calibration: the levels per shipped line are the model's."""
     text = (ROOT / "docs" / "rail_line.md").read_text()
     rows = [line.split("|")[1:-1] for line in text.splitlines()
-            if line.startswith("| default_line") or line.startswith("| throat line")]
-    assert len(rows) == 8
+            if line.startswith(("| default_line", "| throat line", "| suburban_line"))]
+    assert len(rows) == 10
     cores = {}
     for cells in rows:
         name = cells[0].strip()
-        path = SHIPPED_LINES[0 if name == "default_line" else 1 if name.startswith("default_line_ac") else 2]
+        path = SHIPPED_LINES[0 if name == "default_line" else 1 if name.startswith("default_line_ac")
+                             else 3 if name.startswith("suburban_line") else 2]
         core = cores.setdefault(path, _core(load_line(path)))
         first = int(cells[1].strip().split("–")[0]) - 1
         calibration = core.bank.calibration.table[first]

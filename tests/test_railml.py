@@ -16,6 +16,7 @@ DATA = REPO / "tests" / "data" / "railml"
 FIXTURE_31, FIXTURE_32 = DATA / "double_track_3.1.xml", DATA / "double_track_3.2.xml"
 SHIPPED_LINES = [REPO / "fmus" / "data" / "shipped" / "default_line.json",
                  REPO / "fmus" / "data" / "shipped" / "default_line_ac.json",
+                 REPO / "fmus" / "data" / "shipped" / "suburban_line.json",
                  *sorted({p.name: p for p in REPO.glob("ssp/*/resources/*line*.json")}.values()),
                  REPO / "docs" / "examples" / "short_line.json"]
 

@@ -29,13 +29,16 @@ docs/studies.md), each stage's family is kept there under a hash of everything i
 from (the grid, the speed profiles, the path retardation, the train's force tables, the
 scheduled time, this module's code and numpy's version), so the runs of a study that share
 a line, timetable, rolling stock and ATO settings plan once: a kept family is the computed
-one's bytes.
+one's bytes. Within one process the families are also kept in memory (the last
+``PLAN_MEMORY_ENTRIES``, read-only): the ATOs of identical trains on one line and timetable
+(N trains of a headway study, each its own FMU instance in the one interpreter) plan it once.
 """
 from __future__ import annotations
 
 import hashlib
 import os
 import tempfile
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -54,6 +57,8 @@ PLAN_CACHE_ENV = "RAILCOSIM_PLAN_CACHE"
 #: families a cache folder keeps (about 1 MB each for a 10 km stage); the least recently used go
 PLAN_CACHE_ENTRIES = 64
 _FAMILY_FIELDS = ("cruise_mps", "coast_end_mps", "v", "t", "regime", "energy_j")
+#: families this process keeps in memory (about 1 MB each for a 10 km stage), the least recently used go
+PLAN_MEMORY_ENTRIES = 32
 
 
 class InfeasibleStage(ValueError):
@@ -231,12 +236,13 @@ class StagePlanner:
         ceiling = self.ceiling(s, static)
         path = self.path_on_grid(s)
         cache = _PlanCache.from_environment()
-        key = self._key(s, static, ceiling, path, scheduled_time_s) if cache is not None else None
+        key = self._key(s, static, ceiling, path, scheduled_time_s)
         kept = cache.load(key) if cache is not None else None
         if kept is None:
-            kept = self._family(s, static, ceiling, path, scheduled_time_s)
+            kept = _IN_MEMORY.load(key) or self._family(s, static, ceiling, path, scheduled_time_s)
             if cache is not None:
                 cache.store(key, *kept)
+        _IN_MEMORY.store(key, *kept)
         family, chosen, minimum = kept
         return StagePlan(start_m, end_m, s, static, ceiling, family, chosen, minimum, scheduled_time_s)
 
@@ -317,6 +323,32 @@ def _code_fingerprint() -> bytes:
             digest.update(Path(source).read_bytes())
         _CODE_FINGERPRINT = digest.digest()
     return _CODE_FINGERPRINT
+
+
+class _MemoryCache:
+    """The last PLAN_MEMORY_ENTRIES families of this process by key, their arrays read-only
+    (every ATO given one shares the arrays)."""
+
+    def __init__(self, entries: int):
+        self.entries = entries
+        self._kept: "OrderedDict[str, tuple]" = OrderedDict()
+
+    def load(self, key: str):
+        kept = self._kept.get(key)
+        if kept is not None:
+            self._kept.move_to_end(key)
+        return kept
+
+    def store(self, key: str, family: "Programmes", chosen: int, minimum: int) -> None:
+        for name in _FAMILY_FIELDS:
+            getattr(family, name).setflags(write=False)
+        self._kept[key] = (family, chosen, minimum)
+        self._kept.move_to_end(key)
+        while len(self._kept) > self.entries:
+            self._kept.popitem(last=False)
+
+
+_IN_MEMORY = _MemoryCache(PLAN_MEMORY_ENTRIES)
 
 
 class _PlanCache:

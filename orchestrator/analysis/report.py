@@ -226,7 +226,8 @@ def _speed_distance(output: Path, results, trains, components, summary_events=()
     import matplotlib.pyplot as plt
 
     line = _line_of(components, trains[0].get("ato"))
-    fig, axes = plt.subplots(len(trains) + 1, 1, figsize=(12, 3.6 * len(trains) + 2), sharex=True,
+    height_in = 3.6 * len(trains) + 2
+    fig, axes = plt.subplots(len(trains) + 1, 1, figsize=(12, height_in), sharex=True,
                              gridspec_kw={"height_ratios": [3] * len(trains) + [1]})
     axes = np.atleast_1d(axes)
     grid_m = np.arange(0.0, line.length_m + 1.0, 1.0)
@@ -274,9 +275,11 @@ def _speed_distance(output: Path, results, trains, components, summary_events=()
     ax.set_ylabel("gradient (‰)")
     ax.set_xlabel("distance (km)")
     ax.grid(alpha=0.3)
+    # the title and the panels' layout in inches from the top: a fraction of a 16-train
+    # figure's height would put the title over the first panel
     fig.suptitle("Speed over distance: static permitted speed and braking curves (ATP), ATO ceiling, "
-                 "aspect acted on (band), signals, stations, gradient", fontsize=10)
-    return _save(fig, output / "speed_distance.png")
+                 "aspect acted on (band), signals, stations, gradient", fontsize=10, y=1.0 - 0.1 / height_in, va="top")
+    return _save(fig, output / "speed_distance.png", top=1.0 - 0.4 / height_in)
 
 
 def restrictions_drawn(line, components, ato: Optional[str], events) -> List[tuple]:
@@ -311,19 +314,38 @@ def _draw_restrictions(ax, line, components, ato: Optional[str], events) -> None
         ax.text(start, speed + 2.0, f"{speed:.0f} km/h {label}", fontsize=7, color="tab:orange")
 
 
+def train_styles(names: Sequence[str]) -> Dict[str, dict]:
+    """A colour and line style per train, distinct for any number of trains: the ten colours of
+    matplotlib's cycle, then the same ten dashed, dotted, dash-dotted (16 trains would otherwise
+    repeat six colours, and two trains' lines and legend entries would look alike)."""
+    styles = ("-", "--", ":", "-.")
+    return {name: {"color": f"C{k % 10}", "ls": styles[(k // 10) % len(styles)]} for k, name in enumerate(names)}
+
+
+def _legend_outside(ax, entries: int) -> None:
+    """The key beside the axes, in columns of at most 20 entries, so that it never hides a line."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8 if entries > 10 else None,
+              ncol=-(-entries // 20))
+
+
 def _time_distance(output: Path, results, trains, components) -> Path:
     import matplotlib.pyplot as plt
     from fmus.data.loader import DEFAULT_TIMETABLE, load_timetable
 
     fig, ax = plt.subplots(figsize=(11, 5))
     t = results["time"]
+    styles = train_styles([train["name"] for train in trains])
+    lines: Dict[str, object] = {}     # each line file loaded once, however many trains run on it
     for train in trains:
         name, ato = train["name"], train.get("ato")
-        (handle,) = ax.plot(t, results[f"{name}.x"] / 1000.0, lw=1.2, label=name)
+        ax.plot(t, results[f"{name}.x"] / 1000.0, lw=1.2, label=name, **styles[name])
         if not ato:
             continue
-        line = _line_of(components, ato)
         params = _parameters_of(components, ato)
+        line_file = params.get("line_file") or ""
+        if line_file not in lines:
+            lines[line_file] = _line_of(components, ato)
+        line = lines[line_file]
         try:
             timetable = load_timetable(params.get("timetable_file") or DEFAULT_TIMETABLE, line)
         except Exception:
@@ -332,11 +354,11 @@ def _time_distance(output: Path, results, trains, components) -> Path:
         for stop in timetable:
             for when in (stop.arrival_s, stop.departure_s):
                 if when is not None:
-                    ax.plot(when, stations[stop.station] / 1000.0, "o", mfc="none", color=handle.get_color())
+                    ax.plot(when, stations[stop.station] / 1000.0, "o", mfc="none", color=styles[name]["color"])
     ax.set_xlabel("time (s)")
     ax.set_ylabel("distance (km)")
     ax.grid(alpha=0.3)
-    ax.legend()
+    _legend_outside(ax, len(trains))
     ax.set_title("Time–distance: trains (lines) against their timetables (circles: scheduled arrival / departure)")
     return _save(fig, output / "time_distance.png")
 
@@ -345,12 +367,14 @@ def _energy(output: Path, results, trains) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(9, 4))
+    styles = train_styles([train["name"] for train in trains])
     for train in trains:
-        ax.plot(results["time"], results[f"{train['name']}.energy"] / 3.6e6, label=train["name"])
+        name = train["name"]
+        ax.plot(results["time"], results[f"{name}.energy"] / 3.6e6, label=name, **styles[name])
     ax.set_xlabel("time (s)")
     ax.set_ylabel("energy (kWh)")
     ax.grid(alpha=0.3)
-    ax.legend()
+    _legend_outside(ax, len(trains))
     ax.set_title("Energy from the line per train (drawn − returned by regenerative braking)")
     return _save(fig, output / "energy.png")
 
@@ -389,10 +413,11 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     return _save(fig, output / "coil_emf.png")
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig, path: Path, top: float = 1.0) -> Path:
+    """Lay the figure out below ``top`` (a fraction of its height: room for a title) and write it."""
     import matplotlib.pyplot as plt
 
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
     with create_file(path, binary=True) as handle:     # never through a link planted at its name
         fig.savefig(handle, format="png", dpi=100)
     plt.close(fig)
