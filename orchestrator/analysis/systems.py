@@ -454,6 +454,7 @@ SHIPPED["alsu"] = write_alsu
 SHIPPED["tvm430"] = write_tvm430
 SHIPPED["tvm430_following"] = write_tvm430_following
 SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
+SHIPPED["suburban"] = write_suburban
 
 
 def write_shipped(root: Path = SSP_ROOT, names: Optional[Iterable[str]] = None) -> List[Path]:
