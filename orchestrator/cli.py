@@ -30,6 +30,8 @@ DEFAULT_SYSTEM = "free_run"
 #: build sizes the CLI accepts (fmus/sizes.py has no limit of its own): a frame of 4096 samples
 #: is 1 s at 4 kHz, and every FMU holds K×M×N-sized arrays, so larger sizes only build for ages
 MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
+#: the units whose arrays the build sizes shape (the others are the same at every size)
+SIZED_UNITS = ("wayside_coder", "rail_line", "loco_receiver")
 #: the largest local Dask cluster `study --workers` makes: each worker is a Python process of its
 #: own with its FMUs loaded (about 0.1 GB), and runs are CPU-bound, so beyond this on one machine
 #: a study only thrashes; a larger cluster is a --scheduler of its own
@@ -364,6 +366,13 @@ def cmd_study(args) -> int:
             build_all(_build_dir())
             build_sized_for(_build_dir(), [system.parent if system.is_file() else system])
         check_against_system(spec, system, [_build_dir()])
+    if spec.data.get("build_sizes") and not args.no_build:     # what a function study's runs name
+        from fmus.sizes import BuildConfig
+        from orchestrator.packaging.builder import build_all
+
+        for size in spec.data["build_sizes"]:
+            config = BuildConfig(size["sections"], size["trains"], size["frame"])
+            build_all(_build_dir() / config.folder_name, config, units=SIZED_UNITS)
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:
         from orchestrator.study.runner import import_function
@@ -419,6 +428,32 @@ def cmd_headway(args) -> int:
 
         print("\n".join(text_lines(document)))
         print(f"results in {output} (headway.json, stairway.png, report.html)")
+    return 0
+
+
+def cmd_capacity(args) -> int:
+    """``railcosim capacity SYSTEM``: UIC 406 capacity consumption of a multi-train system by
+    compressing its trains' blocking-time stairways (docs/capacity.md#compression)."""
+    from orchestrator.headway.capacity import capacity
+
+    system = _system_path(args.system).resolve()
+    output = Path(args.output) if args.output else Path("results") / f"capacity_{system.name}"
+    if not args.no_build:
+        from orchestrator.packaging.builder import build_all
+
+        build_all(_build_dir())
+    result = capacity(system, [_build_dir().resolve()], output)
+    if args.format == "json":
+        print(json.dumps({k: v for k, v in result.items() if k != "stairways"}, indent=1, ensure_ascii=False))
+        return 0
+    critical = result["critical_section"]
+    print(f"capacity of {result['system']} ({result['cab_signal']}), {len(result['trains'])} trains: "
+          f"{100 * result['consumption_line']:.1f} % of {result['window_s']:.0f} s "
+          f"({result['compressed_s']:.0f} s compressed); critical section {critical['name']}")
+    for section in result["sections"]:
+        print(f"  {section['name']:>6} {section['entry_m']:8.0f}-{section['exit_m']:<8.0f} m "
+              f"{section['occupied_s']:7.1f} s  {100 * section['consumption']:5.1f} %")
+    print(f"results in {output} (capacity.json)")
     return 0
 
 
@@ -758,6 +793,14 @@ def make_parser() -> argparse.ArgumentParser:
                          help="trials run side by side (a local Dask cluster; default one per core)")
     headway.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
     headway.set_defaults(func=cmd_headway)
+
+    capacity = sub.add_parser("capacity", help="capacity consumption of a system of several trains: their "
+                                               "stairways compressed (UIC 406, docs/capacity.md)")
+    capacity.add_argument("system", help="a system of two or more trains (folder, .ssp or shipped name)")
+    capacity.add_argument("--format", choices=["text", "json"], default="text")
+    capacity.add_argument("-o", "--output", help="folder (default results/capacity_SYSTEM)")
+    capacity.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    capacity.set_defaults(func=cmd_capacity)
 
     add_new_command(sub)
     add_export_command(sub)

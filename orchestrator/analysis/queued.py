@@ -49,8 +49,8 @@ JUDGED_MARGIN_S = 30.0
 SIDINGS_CLEARANCE_M = 20.0
 #: trains a trial may hold (the build sizes of the rail line, docs/architecture.md#build-sizes)
 MAX_TRAINS = 16
-#: the unit sources by FMU file name
-_UNITS = {"WaysideCoder.fmu": "coder", "RailLine.fmu": "rail", "LocoReceiver.fmu": "receiver",
+#: the unit of each railcosim FMU, by its file name
+UNIT_OF_FMU = {"WaysideCoder.fmu": "coder", "RailLine.fmu": "rail", "LocoReceiver.fmu": "receiver",
           "Traction.fmu": "train", "AtoController.fmu": "ato"}
 #: per-train parameters of the rail line (set for each train of a trial)
 _PER_TRAIN = ("train_length[", "rolling_stock_file[")
@@ -84,7 +84,7 @@ class BaseSystem:
         return load_rolling_stock(self.stock_file)
 
 
-def _resolved(value, folder: Path, default: Path) -> Path:
+def resolved_file(value, folder: Path, default: Path) -> Path:
     from orchestrator.graph import resolve_data_file
 
     if not value:
@@ -107,7 +107,7 @@ def read_base(system_path: Path) -> BaseSystem:
     folder = description.folder
     units: Dict[str, list] = {}
     for component in description.components.values():
-        unit = _UNITS.get(Path(component.source).name)
+        unit = UNIT_OF_FMU.get(Path(component.source).name)
         if unit:
             units.setdefault(unit, []).append(component)
     name = description.name
@@ -127,9 +127,9 @@ def read_base(system_path: Path) -> BaseSystem:
     rail = units["rail"][0]
     sizes = sizes_of_source(rail.source) or BuildConfig()
     ato, train = parameters["ato"], parameters["train"]
-    line_file = _resolved(ato.get("line_file") or parameters["rail"].get("line_file"), folder, DEFAULT_LINE)
-    stock_file = _resolved(ato.get("rolling_stock_file") or train.get("rolling_stock_file"), folder, DEFAULT_ROLLING_STOCK)
-    timetable_file = _resolved(ato.get("timetable_file"), folder, DEFAULT_TIMETABLE)
+    line_file = resolved_file(ato.get("line_file") or parameters["rail"].get("line_file"), folder, DEFAULT_LINE)
+    stock_file = resolved_file(ato.get("rolling_stock_file") or train.get("rolling_stock_file"), folder, DEFAULT_ROLLING_STOCK)
+    timetable_file = resolved_file(ato.get("timetable_file"), folder, DEFAULT_TIMETABLE)
     coder = parameters["coder"]
     return BaseSystem(
         name=name, folder=folder, cab_system=str(coder.get("system") or "ALSN"),

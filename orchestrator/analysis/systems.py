@@ -455,6 +455,11 @@ SHIPPED["tvm430"] = write_tvm430
 SHIPPED["tvm430_following"] = write_tvm430_following
 SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
 SHIPPED["suburban"] = write_suburban
+# the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
+# suburban --method blocking: 357.8 s, critical the terminal block) plus a margin of 10 % [U]
+SUBURBAN_PEAK_TRAINS, SUBURBAN_PEAK_HEADWAY_S = 10, 394.0
+SHIPPED["suburban_peak"] = partial(write_queued, name="suburban_peak", base=write_suburban,
+                                   trains=SUBURBAN_PEAK_TRAINS, headway_s=SUBURBAN_PEAK_HEADWAY_S)
 
 
 def write_shipped(root: Path = SSP_ROOT, names: Optional[Iterable[str]] = None) -> List[Path]:

@@ -48,6 +48,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from orchestrator.errors import UserError
+from orchestrator.analysis import queued
 from orchestrator.headway import blocking, trials
 from orchestrator.headway.blocking import BlockingTime, Trajectory
 
@@ -171,7 +172,7 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
     name, folder = description.name, description.folder
     by_unit: Dict[str, list] = {}
     for component in description.components.values():
-        unit = trials._UNITS.get(Path(component.source).name)
+        unit = queued.UNIT_OF_FMU.get(Path(component.source).name)
         if unit:
             by_unit.setdefault(unit, []).append(component)
     for unit in ("coder", "rail", "receiver"):
@@ -197,12 +198,12 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
     for train, ato in pairs:
         values = {**chain, "train": _value_names(train), "ato": _value_names(ato)}
         a, t = values["ato"], values["train"]
-        timetable = trials._resolved(a.get("timetable_file"), folder, DEFAULT_TIMETABLE)
+        timetable = queued.resolved_file(a.get("timetable_file"), folder, DEFAULT_TIMETABLE)
         base = trials.BaseSystem(
             name=name, folder=folder, cab_system=str(chain["coder"].get("system") or "ALSN"),
             block_aspects=int(chain["coder"].get("block_aspects") or 3),
-            line_file=trials._resolved(a.get("line_file") or chain["rail"].get("line_file"), folder, DEFAULT_LINE),
-            stock_file=trials._resolved(a.get("rolling_stock_file") or t.get("rolling_stock_file"), folder,
+            line_file=queued.resolved_file(a.get("line_file") or chain["rail"].get("line_file"), folder, DEFAULT_LINE),
+            stock_file=queued.resolved_file(a.get("rolling_stock_file") or t.get("rolling_stock_file"), folder,
                                         DEFAULT_ROLLING_STOCK),
             timetable_file=timetable, x0_m=float(t.get("x0", 400.0)), sections=sizes.sections, frame=sizes.frame,
             fs_hz=float(chain["coder"].get("fs") or DEFAULT_SAMPLE_RATE_HZ),
@@ -216,33 +217,14 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
 
 def unhindered_run(train: TrainOfSystem, folder: Path, fmu_dirs: Sequence[Path]) -> Trajectory:
     """The train alone on the system's line with its own ATO and timetable, cab signal "off"
-    (as ``orchestrator.headway.search.unhindered_run`` does for a trial's train): its trajectory,
-    at the timetable's own times. The run ends 120 s after the timetable's last time."""
-    from orchestrator.analysis.systems import train_and_ato, write_ssd
-    from orchestrator.headway.search import _run
+    (orchestrator/headway/search.py ``run_alone``): its trajectory, at the timetable's own
+    times. The run ends 120 s after the timetable's last time."""
+    from orchestrator.headway.search import run_alone
 
     base = train.base
-    system = Path(folder) / "system"
-    resources = system / "resources"
-    resources.mkdir(parents=True, exist_ok=True)
-    files = {}
-    for key, path in (("line_file", base.line_file), ("rolling_stock_file", base.stock_file),
-                      ("timetable_file", base.timetable_file)):
-        (resources / Path(path).name).write_text(Path(path).read_text())
-        files[key] = Path(path).name
-    stops = json.loads(Path(base.timetable_file).read_text())["stops"]
-    stop_time = max(float(s.get(k, 0.0)) for s in stops for k in ("arrival_s", "departure_s")) + 120.0
-    keep = ("line_file", "rolling_stock_file", "timetable_file")
-    ato = {k: v for k, v in base.parameters["ato"].items() if k not in keep}
-    plant = {k: v for k, v in base.parameters["train"].items() if k not in keep and k != "x0"}
-    components, connections = train_and_ato(
-        train_parameters={**plant, "line_file": files["line_file"], "rolling_stock_file": files["rolling_stock_file"],
-                          "x0": base.x0_m},
-        ato_parameters={**ato, **files, "cab_signal": "off"},
-        step_s=(base.steps_s["train"], base.steps_s["ato"]))
-    write_ssd(system, "unhindered", components, connections, stop_time=stop_time)
-    _run(system, Path(folder) / "run", stop_time, fmu_dirs)
-    return trials.read_trajectories(Path(folder) / "run", ["train"])["train"]
+    timetable = json.loads(Path(base.timetable_file).read_text())
+    stop_time = max(float(s.get(k, 0.0)) for s in timetable["stops"] for k in ("arrival_s", "departure_s")) + 120.0
+    return run_alone(base, folder, fmu_dirs, Path(base.line_file).read_text(), timetable, base.x0_m, stop_time)
 
 
 def train_stairway(train: TrainOfSystem, run: Trajectory) -> List[BlockingTime]:
@@ -253,8 +235,8 @@ def train_stairway(train: TrainOfSystem, run: Trajectory) -> List[BlockingTime]:
     line = base.line
     names = [line.sections[line.block_of_section.index(k)].signal or str(k + 1) for k in range(len(line.block_bounds))]
     length_m = float(base.stock.length_m)
-    return blocking.stairway(run, line.block_bounds, names, search.approach_points(base, None, run), length_m,
-                             search._latency_s(base), search._release_s(base))
+    return blocking.stairway(run, line.block_bounds, names, search.approach_points(base, None, run)[0], length_m,
+                             search.latency_s(base), search.release_s(base))
 
 
 def capacity(system_path: Path, fmu_dirs: Sequence[Path], output_dir: Path, window_s: Optional[float] = None) -> dict:

@@ -110,7 +110,6 @@ def interval_trial(driving: str, seed: int, system: str = "free_run", trains: in
                       for slot in plan.slots}
         stop_s = math.ceil(float(timed["departure_s"]) + float(shifts.max()) + RUN_MARGIN_S)
         trials.write_system(system_dir, plan, plan.slots, "interval_trial", timetables, stop_s)
-        search._build(build, [system_dir])
         run_dir = folder / "run"
         summary = _run_judged(system_dir, run_dir, stop_s, [build])
         names = [slot.name for slot in plan.slots]

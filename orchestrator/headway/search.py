@@ -63,7 +63,7 @@ class HeadwayResult:
 
 
 # ---- running systems ---------------------------------------------------------------------------
-def _run(system: Path, output: Path, stop_time_s: float, fmu_dirs: Sequence[Path], overrides=None):
+def run_in_process(system: Path, output: Path, stop_time_s: float, fmu_dirs: Sequence[Path], overrides=None):
     from orchestrator.run import RunOptions, run_system
 
     options = RunOptions(stop_time=stop_time_s, output_dir=output, overrides=dict(overrides or {}),
@@ -96,7 +96,7 @@ def _study(folder: Path, name: str, system: Path, cases: List[dict], stop_time_s
 
 
 # ---- the blocking-time method -----------------------------------------------------------------
-def _release_s(base: trials.BaseSystem) -> float:
+def release_s(base: trials.BaseSystem) -> float:
     """Track relay pick-up (the section shows free) and the coder's switch-on delay."""
     from fmus.rail_line.core import RailSettings
     from fmus.wayside_coder.core import CoderSettings
@@ -108,42 +108,51 @@ def _release_s(base: trials.BaseSystem) -> float:
     return pick_up + switch_on
 
 
-def _latency_s(base: trials.BaseSystem) -> float:
+def latency_s(base: trials.BaseSystem) -> float:
     from fmus.ato_controller.core import AtoSettings
 
     return float(base.parameters["ato"].get("decoding_latency", AtoSettings().decoding_latency_s))
 
 
-def unhindered_run(plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path]) -> Trajectory:
-    """The last train (standing where the base train stands) alone with its ATO and no signal
-    chain (the ATP on line limits, as ``ato_only``): its trajectory."""
-    from orchestrator.analysis.systems import train_and_ato, write_ssd
+def run_alone(base: trials.BaseSystem, folder: Path, fmu_dirs: Sequence[Path], line_text: str,
+              timetable: dict, x0_m: float, stop_time_s: float) -> Trajectory:
+    """The base system's train alone with its ATO and no signal chain (the ATP on line limits,
+    as ``ato_only``) on the line ``line_text`` (a line file's text) to ``timetable``: its
+    trajectory. The ATO keeps the base's planned deceleration (its default depends on the cab
+    mode: TVM-430's is harder), so that it drives as it does in the chain."""
+    from orchestrator.analysis.chain import train_and_ato, write_ssd
 
-    base = plan.base
-    slot = plan.slots[-1]
-    system = folder / "system"
+    system = Path(folder) / "system"
     resources = system / "resources"
     resources.mkdir(parents=True, exist_ok=True)
-    (resources / "trial_line.json").write_text(json.dumps(plan.line_doc, indent=1, ensure_ascii=False) + "\n")
+    (resources / "line.json").write_text(line_text)
     stock = Path(base.stock_file).name
     (resources / stock).write_text(Path(base.stock_file).read_text())
-    timetable = trials.write_timetable(system, plan, slot, 0.0, "unhindered")
+    (resources / "timetable.json").write_text(json.dumps(timetable, indent=1, ensure_ascii=False) + "\n")
     ato = {k: v for k, v in base.parameters["ato"].items() if k not in ("line_file", "rolling_stock_file", "timetable_file")}
     if not float(ato.get("braking_decel", 0.0) or 0.0) > 0.0:
-        # the ATO plans its braking by its cab mode (TVM-430's harder): keep the base's plan
         from fmus.ato_controller.core import AtoSettings, default_plan_decel_mps2
 
         mode = str(ato.get("cab_signal") or AtoSettings().cab_signal)
         ato["braking_decel"] = round(default_plan_decel_mps2(base.stock, mode), 6)
-    files = {"line_file": "trial_line.json", "rolling_stock_file": stock}
+    files = {"line_file": "line.json", "rolling_stock_file": stock}
+    plant = {k: v for k, v in base.parameters["train"].items() if k not in ("line_file", "rolling_stock_file", "x0")}
     components, connections = train_and_ato(
-        train_parameters={**files, "x0": slot.start_m},
-        ato_parameters={**ato, **files, "cab_signal": "off", "timetable_file": timetable},
+        train_parameters={**plant, **files, "x0": float(x0_m)},
+        ato_parameters={**ato, **files, "cab_signal": "off", "timetable_file": "timetable.json"},
         step_s=(base.steps_s["train"], base.steps_s["ato"]))
-    stop = plan.stop_time_s(0.0) if plan.run_off else plan.timetable(slot, 0.0)["stops"][-1]["arrival_s"] + 120.0
-    write_ssd(system, "unhindered", components, connections, stop_time=float(stop))
-    _run(system, folder / "run", float(stop), fmu_dirs)
-    return trials.read_trajectories(folder / "run", ["train"])["train"]
+    write_ssd(system, "unhindered", components, connections, stop_time=float(stop_time_s))
+    run_in_process(system, Path(folder) / "run", float(stop_time_s), fmu_dirs)
+    return trials.read_trajectories(Path(folder) / "run", ["train"])["train"]
+
+
+def unhindered_run(plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path]) -> Trajectory:
+    """The last train of the plan (standing where the base train stands) alone: :func:`run_alone`."""
+    slot = plan.slots[-1]
+    timetable = plan.timetable(slot, 0.0)
+    stop = plan.stop_time_s(0.0) if plan.run_off else timetable["stops"][-1]["arrival_s"] + 120.0
+    return run_alone(plan.base, folder, fmu_dirs, json.dumps(plan.line_doc, indent=1, ensure_ascii=False) + "\n",
+                     timetable, slot.start_m, stop)
 
 
 def approach_points(base: trials.BaseSystem, plan: trials.TrialPlan, run: Trajectory):
@@ -189,7 +198,7 @@ def blocking_stairway(plan: trials.TrialPlan, run: Trajectory, by: str = "indica
     names = [line.sections[line.block_of_section.index(k)].signal or str(k + 1) for k in range(len(line.block_bounds))]
     by_indication, by_curve = approach_points(base, plan, run)
     return blocking.stairway(run, line.block_bounds, names, by_indication if by == "indication" else by_curve,
-                             plan.length_m, _latency_s(base), _release_s(base))
+                             plan.length_m, latency_s(base), release_s(base))
 
 
 # ---- the co-simulation method -----------------------------------------------------------------
