@@ -43,6 +43,11 @@ SYSTEM_DESCRIPTIONS: Dict[str, str] = {
               "1700 / 2300 Hz track circuits), stopping at the end",
     "tvm430_following": "two TGV sets 3 min apart under TVM-430: the follower closes in on the halted "
                         "leader under the steps 300-270-230-170-0",
+    "suburban": "one ЭР2 EMU stopping at all 13 stations of the 36 km suburban line (DC 3 kV, 4-aspect "
+                "ALSN block of 31 sections)",
+    "suburban_peak": "ten ЭР2 EMUs on the suburban line 394 s apart: its blocking-time headway plus 10 % "
+                     "(docs/capacity.md)",
+    "tvm430_headway": "five TGV sets on the high-speed line at TVM-430's co-simulated headway (docs/capacity.md)",
 }
 
 #: one line per role (the unit an FMU in that role replaces)

@@ -55,12 +55,6 @@ TIMING_BEYOND_STOP_M = 20.0
 RUN_MARGIN_S = 150.0
 
 
-def _default_build_dir() -> Path:
-    from orchestrator.packaging.builder import default_build_dir
-
-    return default_build_dir()
-
-
 def _system_path(system: str) -> Path:
     """A system folder, or a shipped system's name in a checkout of the repository (ssp/NAME)."""
     path = Path(system)
@@ -75,6 +69,7 @@ def _system_path(system: str) -> Path:
 
 def interval_trial(driving: str, seed: int, system: str = "free_run", trains: int = 4,
                    interval_factor: float = 1.3, timing_station: str = "B", build_dir: Optional[str] = None,
+                   fmu_dirs: Optional[Sequence[str]] = None,
                    keep_in: Optional[str] = None, deviations_s: Optional[Sequence[float]] = None) -> dict:
     """One run of the study (module docstring): the measured intervals at the timing point and
     what they come from. ``keep_in``: a folder to keep the run's systems and results in (by
@@ -91,7 +86,9 @@ def interval_trial(driving: str, seed: int, system: str = "free_run", trains: in
     if timed is None:
         raise UserError(f"timing_station {timing_station!r}: not a stop with a departure in {base.timetable_file} "
                         f"(its stops: {', '.join(s['station'] for s in stops)})")
-    build = Path(build_dir) if build_dir else _default_build_dir()
+    if not build_dir and not fmu_dirs:
+        raise UserError("interval_trial: give build_dir, or run it as a study (which passes its fmu_dirs)")
+    build = Path(build_dir) if build_dir else Path(fmu_dirs[0])
     folder = Path(keep_in) if keep_in else Path(tempfile.mkdtemp(prefix="railcosim_capacity_"))
     try:
         unhindered = search.unhindered_run(plan, folder / "unhindered", [build])

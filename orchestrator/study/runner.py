@@ -206,8 +206,16 @@ def import_function(name: str, python_path: Sequence[str], where: str):
 
 
 def _run_function_here(job: dict, run_dir: Path) -> dict:
+    import inspect
+
     function = import_function(job["function"], job["python_path"], "function")
     keywords = {**job["arguments"], **job["values"]}
+    try:          # a function that takes fmu_dirs gets the study's FMU folders (docs/studies.md)
+        takes_fmu_dirs = "fmu_dirs" in inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        takes_fmu_dirs = False
+    if takes_fmu_dirs:
+        keywords.setdefault("fmu_dirs", list(job["fmu_dirs"]))
     if job["seed"] is not None:
         keywords["seed"] = job["seed"]
     began = time.perf_counter()
