@@ -419,7 +419,7 @@ def cmd_headway(args) -> int:
         interrupts.hold_until_exit()
     output = Path(args.output) if args.output else Path("results") / f"headway_{system.name}"
     result = search.headway(system, args.method, args.trains, output, [build_dir], build, args.workers,
-                            progress=sys.stderr)
+                            progress=sys.stderr, resume=args.resume)
     document = write_outputs(result, output)
     if args.format == "json":
         print(json.dumps({k: v for k, v in document.items() if k != "stairway"}, indent=1, ensure_ascii=False))
@@ -792,6 +792,8 @@ def make_parser() -> argparse.ArgumentParser:
     headway.add_argument("--workers", action=_Number, kind=int, minimum=1, maximum=MAX_LOCAL_WORKERS,
                          help="trials run side by side (a local Dask cluster; default one per core)")
     headway.add_argument("--no-build", action="store_true", help="do not (re)build FMUs first")
+    headway.add_argument("--resume", action="store_true",
+                         help="keep the runs an earlier search into the same folder finished (same trials)")
     headway.set_defaults(func=cmd_headway)
 
     capacity = sub.add_parser("capacity", help="capacity consumption of a system of several trains: their "

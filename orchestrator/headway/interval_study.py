@@ -16,7 +16,7 @@ successive deviations, so independent deviations of standard deviation σ make i
 RMS deviation σ·√2):
 
 * ``manual``: the book's pooled RMS of suburban intervals under manual driving, 77.6 s
-  (docs/sources.md#headway-and-capacity, row 4), as per-train σ = 77.6 / √2 = 54.9 s;
+  (docs/sources.md#headway-and-capacity, row 8), as per-train σ = 77.6 / √2 = 54.9 s;
 * ``ato``: our ATO's own spread, the RMS of its arrival deviations at B and C in the shipped
   ``ato_robustness`` study with its default strategy (programme): 5.7 s over its 7 plant
   variants (mass ±10 %, resistance ±20 %, voltage ±5 %; docs/capacity.md#the-capacity_ato-study

@@ -73,7 +73,7 @@ def run_in_process(system: Path, output: Path, stop_time_s: float, fmu_dirs: Seq
 
 
 def _study(folder: Path, name: str, system: Path, cases: List[dict], stop_time_s: float,
-           fmu_dirs: Sequence[Path], workers: Optional[int], progress: Optional[TextIO]):
+           fmu_dirs: Sequence[Path], workers: Optional[int], progress: Optional[TextIO], resume: bool = False):
     """Run ``cases`` of ``system`` as one study into ``folder``; its records by run id, in order."""
     from orchestrator.study.runner import run_study
     from orchestrator.study.spec import load_study
@@ -87,7 +87,8 @@ def _study(folder: Path, name: str, system: Path, cases: List[dict], stop_time_s
         "collect": ["verdict", "signals_passed_at_danger", "wrong_side_failures", "unsafe_indications"],
         "cases": cases}, indent=1) + "\n")
     spec = load_study(spec_path)
-    result = run_study(spec, folder / "study", system, list(fmu_dirs), workers=workers, progress=progress)
+    result = run_study(spec, folder / "study", system, list(fmu_dirs), workers=workers, progress=progress,
+                       resume=resume)
     failed = [r for r in result.records if r["status"] != "ok"]
     if failed:
         raise UserError(f"headway: {len(failed)} run(s) of {name} failed, first {failed[0]['id']}: "
@@ -206,8 +207,9 @@ class Search:
     """The trials of one system (module docstring)."""
 
     def __init__(self, plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path], workers: Optional[int],
-                 progress: Optional[TextIO], build: Optional[Callable[[Sequence[Path]], None]]):
+                 progress: Optional[TextIO], build: Optional[Callable[[Sequence[Path]], None]], resume: bool = False):
         self.plan, self.folder, self.fmu_dirs = plan, folder, list(fmu_dirs)
+        self.resume = resume
         self.workers, self.progress, self.build = workers, progress, build
         self.references: Dict[str, Trajectory] = {}
         self.outcomes: Dict[float, dict] = {}
@@ -243,7 +245,7 @@ class Search:
             stop = plan.stop_time_s(0.0)
         self._say(f"{len(cases)} reference run(s): each train alone on the line")
         for slot, (_, run_dir) in zip(plan.slots, _study(self.folder / "references", "references", system, cases,
-                                                         stop, self.fmu_dirs, self.workers, self.progress)):
+                                                         stop, self.fmu_dirs, self.workers, self.progress, self.resume)):
             self.references[slot.name] = trials.read_trajectories(run_dir, ["train"])["train"]
 
     def trial_system(self) -> Path:
@@ -271,7 +273,7 @@ class Search:
         stop = max(plan.stop_time_s(h, float(reference_last.time_at(plan.judge_end_m))) for h in headways)
         self._say(f"round {self.rounds}: trains at {', '.join(f'{h:g}' for h in headways)} s")
         runs = _study(self.folder / "trials" / f"round{self.rounds}", f"round{self.rounds}", system, cases, stop,
-                      self.fmu_dirs, self.workers, self.progress)
+                      self.fmu_dirs, self.workers, self.progress, self.resume)
         points = plan.timing_points_m()
         names = [slot.name for slot in plan.slots]
         for h, (record, run_dir) in zip(headways, runs):
@@ -340,9 +342,11 @@ class Search:
 # ---- the command ------------------------------------------------------------------------------
 def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAINS, output: Optional[Path] = None,
             fmu_dirs: Sequence[Path] = (), build: Optional[Callable[[Sequence[Path]], None]] = None,
-            workers: Optional[int] = None, progress: Optional[TextIO] = None) -> HeadwayResult:
+            workers: Optional[int] = None, progress: Optional[TextIO] = None, resume: bool = False) -> HeadwayResult:
     """The system's headway by ``method`` (module docstring) into ``output``; ``build`` makes
-    the FMU sizes the trial systems name (the CLI passes the builder; None: already built)."""
+    the FMU sizes the trial systems name (the CLI passes the builder; None: already built);
+    ``resume``: the runs an earlier call into the same folder finished for the same study are
+    kept (the study machinery's --resume)."""
     if method not in METHODS:
         raise UserError(f"--method {method}: choose one of {', '.join(METHODS)}")
     base = trials.read_base(system_path)
@@ -351,7 +355,7 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
     folder.mkdir(parents=True, exist_ok=True)
     fmu_dirs = list(fmu_dirs)
     result = HeadwayResult(base.name, base.cab_system, trains, method, output=str(folder))
-    search = Search(plan, folder, fmu_dirs, workers, progress, build)
+    search = Search(plan, folder, fmu_dirs, workers, progress, build, resume)
     if method in ("cosim", "both"):
         search.prepare()
     run = unhindered_run(plan, folder / "unhindered", fmu_dirs)

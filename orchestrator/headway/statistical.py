@@ -1,4 +1,4 @@
-"""The ATO book's statistical capacity method (docs/sources.md#headway-and-capacity, rows 1–5;
+"""The ATO book's statistical capacity method (docs/sources.md#headway-and-capacity, rows 5–9;
 docs/capacity.md#the-books-statistical-method).
 
 Trains keep their schedule only approximately; a follower's actual interval differs from the

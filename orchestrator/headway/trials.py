@@ -63,7 +63,7 @@ def judge(train: str, run: Trajectory, reference: Trajectory, shift_s: float,
           points_m: np.ndarray, end_m: float) -> Hindrance:
     """The follower ``run`` against its ``reference`` run shifted by ``shift_s`` (module
     docstring); points behind the train's start are left out."""
-    points = points_m[points_m > run.start_m]
+    points = points_m[(points_m > run.start_m) & (points_m <= end_m)]
     late = run.time_at(points) - (reference.time_at(points) + shift_s)
     late = np.where(np.isnan(late), np.inf, late)        # never reached: as late as can be
     k = int(np.argmax(late)) if late.size else 0
