@@ -458,6 +458,11 @@ SHIPPED["suburban"] = write_suburban
 # the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
 # suburban --method blocking: 357.8 s, critical the terminal block) plus a margin of 10 % [U]
 SUBURBAN_PEAK_TRAINS, SUBURBAN_PEAK_HEADWAY_S = 10, 394.0
+# five TGV sets at TVM-430's co-simulated headway on the high-speed line (railcosim headway tvm430:
+# 140 s, the blocking-time figure 142.5 s; docs/capacity.md)
+TVM430_HEADWAY_TRAINS, TVM430_HEADWAY_S = 5, 140.0
+SHIPPED["tvm430_headway"] = partial(write_queued, name="tvm430_headway", base=write_tvm430,
+                                    trains=TVM430_HEADWAY_TRAINS, headway_s=TVM430_HEADWAY_S)
 SHIPPED["suburban_peak"] = partial(write_queued, name="suburban_peak", base=write_suburban,
                                    trains=SUBURBAN_PEAK_TRAINS, headway_s=SUBURBAN_PEAK_HEADWAY_S)
 
