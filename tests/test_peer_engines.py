@@ -19,7 +19,10 @@ RUNNER = Path(__file__).resolve().parent / "host" / "peer_run.py"
 # systems whose parameters name data files of their own (resources/ of the system): libcosim passes a
 # String parameter as written; the FMU finds the file in its own resources, where packing copies it
 OWN_DATA_FILES = ("following", "same_block", "joints_at_speed", "freight_ac", "als_en_following",
-                  "fire_dqpsk_following", "alsu", "alsu_following", "tvm430", "tvm430_following")
+                  "fire_dqpsk_following", "alsu", "alsu_following", "tvm430", "tvm430_following",
+                  "suburban", "suburban_peak", "tvm430_headway")
+#: systems of several trains: their receivers are rx1, rx2 …
+SEVERAL_TRAINS = ("same_block", "suburban_peak", "tvm430_headway")
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +93,7 @@ def test_libcosim_loads_and_steps_the_other_shipped_systems(tmp_path, packed, sy
     """Every other shipped system loads and steps in libcosim as written (ato_only and free_run run
     in full above), those with data files of their own too: the packed FMUs carry the system's
     data files in their resources (orchestrator/packaging/packing.py)."""
-    receiver = "rx1" if "following" in system or system == "same_block" else "rx"
+    receiver = "rx1" if "following" in system or system in SEVERAL_TRAINS else "rx"
     code, out, err = _peer("libcosim", packed / f"{system}.ssp", 1.0, 0.5, tmp_path / "libcosim.csv",
                            [f"{receiver}.level"])
     assert "file not found" not in err

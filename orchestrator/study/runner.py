@@ -869,10 +869,16 @@ def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, pro
 def _close(client, cluster, quick: bool) -> None:
     """The client and a local cluster closed; after an interruption within :data:`CLOSE_S`
     each (a worker's run processes die with it)."""
-    if client is not None:
-        client.close(**({"timeout": CLOSE_S} if quick else {}))
-    if cluster is not None:
-        cluster.close(**({"timeout": CLOSE_S} if quick else {}))
+    # a close that times out (a loaded machine after an interruption) must not stop the study
+    # from writing study.csv and study.json: the workers die with the cluster's processes anyway
+    for part in (client, cluster):
+        if part is None:
+            continue
+        try:
+            part.close(**({"timeout": CLOSE_S} if quick else {}))
+        except (TimeoutError, OSError) as error:
+            print(f"railcosim study: closing the Dask {type(part).__name__} took too long ({error or 'timed out'}); "
+                  "its processes end with this one", file=sys.stderr)
 
 
 def columns_of(spec: StudySpec) -> List[str]:
