@@ -64,9 +64,11 @@ def test_the_following_system_compressed(product_fmus, tmp_path):
     out = capacity.capacity("ssp/following", [product_fmus], tmp_path)
     assert out["trains"] == ["leader", "follower"]
     assert json.loads((tmp_path / "capacity.json").read_text())["compressed_s"] == out["compressed_s"]
-    # the leader keeps its time; the follower (timetabled 370 s behind) moves up, not past it
+    # the leader keeps its time; the follower (timetabled 370 s behind, running through B where
+    # the leader stops) goes to the least interval at which no section overlaps: later than its
+    # timetable, the timetable asking more than the line allows (docs/capacity.md: over 100 %)
     leader, follower = out["compressed_departures_s"]
-    assert leader == 60.0 and leader < follower < 430.0
+    assert leader == 60.0 and follower > 430.0 and out["consumption_line"] > 1.0
     # their stairways touch on one section and overlap on none
     shift = follower - 430.0
     ends = {b["section"]: b["end_s"] for b in out["stairways"]["leader"]}
@@ -77,5 +79,4 @@ def test_the_following_system_compressed(product_fmus, tmp_path):
     assert out["headways"][0]["section"] == touching
     assert out["window_s"] == 740.0
     assert out["consumption_line"] == pytest.approx(out["compressed_s"] / 740.0, abs=1e-4)
-    assert 0.0 < out["consumption_line"] < 1.0
     assert out["critical_section"]["consumption"] == max(s["consumption"] for s in out["sections"])

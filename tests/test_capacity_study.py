@@ -18,12 +18,12 @@ def _first_passing_s(results_csv, train, point_m):
 
 
 def test_a_late_leader_holds_its_follower_and_the_interval_is_measured(product_fmus, tmp_path):
-    # the leader 150 s late: its follower is scheduled 1.3 × headway − 150 s behind it, less
-    # than the headway, and must be held by the leader's codes
+    # the leader 300 s late: its follower is scheduled 1.3 × headway − 300 s behind it, well
+    # less than the headway (blocking 459 s, co-simulated 443 s), and must be held by its codes
     out = interval_study.interval_trial("ato", 0, trains=2, build_dir=str(product_fmus), keep_in=str(tmp_path),
-                                        deviations_s=[150.0, 0.0])
+                                        deviations_s=[300.0, 0.0])
     scheduled_gap = out["scheduled_passing_s"][1] - out["scheduled_passing_s"][0]
-    assert scheduled_gap == pytest.approx(out["scheduled_interval_s"] - 150.0, abs=0.01)
+    assert scheduled_gap == pytest.approx(out["scheduled_interval_s"] - 300.0, abs=0.01)
     assert scheduled_gap < out["headway_blocking_s"]
     # the intervals, read back from the run's own results.csv (sampled every 0.5 s)
     passed = [_first_passing_s(tmp_path / "run" / "results.csv", t, out["timing_point_m"]) for t in ("train1", "train2")]
@@ -31,7 +31,7 @@ def test_a_late_leader_holds_its_follower_and_the_interval_is_measured(product_f
     assert out["passing_s"][0] == pytest.approx(passed[0], abs=0.6)
     # the leader runs as it would alone; the follower is held well past its schedule
     assert abs(out["delays_s"][0]) < 2.0
-    assert out["delays_s"][1] > 10.0 and out["held"] == [True]
-    assert out["interval_1_s"] > scheduled_gap + 10.0
+    assert out["delays_s"][1] > 5.0 and out["held"] == [True]
+    assert out["interval_1_s"] > scheduled_gap + 5.0
     assert out["signals_passed_at_danger"] == 0
     assert out["rms_s"] == pytest.approx(abs(out["interval_1_s"] - out["scheduled_interval_s"]), abs=0.01)

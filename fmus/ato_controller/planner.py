@@ -236,7 +236,7 @@ class StagePlanner:
         ceiling = self.ceiling(s, static)
         path = self.path_on_grid(s)
         cache = _PlanCache.from_environment()
-        key = self._key(s, static, ceiling, path, scheduled_time_s)
+        key = self._key(s, static, ceiling, path, scheduled_time_s, on_disk=cache is not None)
         kept = cache.load(key) if cache is not None else None
         if kept is None:
             kept = _IN_MEMORY.load(key) or self._family(s, static, ceiling, path, scheduled_time_s)
@@ -270,11 +270,13 @@ class StagePlanner:
             chosen = int(np.argmin(np.abs(times - scheduled_time_s) + 1e-9 * np.isinf(family.cruise_mps)))
         return family, chosen, minimum
 
-    def _key(self, s, static, ceiling, path, scheduled_time_s: Optional[float]) -> str:
+    def _key(self, s, static, ceiling, path, scheduled_time_s: Optional[float], on_disk: bool = True) -> str:
         """A hash of everything :meth:`_family` reads: the arrays, the train's force tables and
-        constants, the braking deceleration, the schedule, this code and numpy's version."""
+        constants, the braking deceleration, the schedule and, for a key kept on disk, this code
+        and numpy's version (in memory the process's own code is the code: its source is not
+        read, since the folder a host extracted it to may be gone by then)."""
         tr, stock = self.train, self.train.stock
-        digest = hashlib.sha256(_code_fingerprint())
+        digest = hashlib.sha256(_code_fingerprint() if on_disk else b"in memory")
         for array in (s, static, ceiling, path, tr.speeds, tr.traction_accel, tr.resistance_accel,
                       tr.coasting_resistance_accel, tr.electric_brake_accel):
             array = np.ascontiguousarray(array)
