@@ -97,6 +97,13 @@ def resolved_file(value, folder: Path, default: Path) -> Path:
     raise UserError(f"{folder}: {value}: file not found (looked for in its resources/ and the bundled data)")
 
 
+def parameter_values(component) -> Dict[str, object]:
+    """A component's bound parameters by the FMU's own names (a binding may name them
+    ``component.var``; an array element's ``var[j]`` keeps its index)."""
+    return {p.name.split(".")[-1] if "." in p.name and "[" not in p.name.split(".")[0] else p.name: p.value
+            for p in component.parameters}
+
+
 def read_base(system_path: Path) -> BaseSystem:
     """The parts of a single-train system with a signal chain; a UserError naming what is
     missing otherwise (no chain: no line to block; several trains: no single train to copy)."""
@@ -121,9 +128,7 @@ def read_base(system_path: Path) -> BaseSystem:
         if not units.get(unit):
             raise UserError(f"system {name!r}: no signal chain (no {unit}); headway needs a line with block "
                             "sections and a cab system (e.g. free_run, alsu, als_en, fire_dqpsk, tvm430)")
-    parameters = {unit: {p.name.split(".")[-1] if "." in p.name and "[" not in p.name.split(".")[0] else p.name:
-                         p.value for p in components[0].parameters}
-                  for unit, components in units.items()}
+    parameters = {unit: parameter_values(components[0]) for unit, components in units.items()}
     rail = units["rail"][0]
     sizes = sizes_of_source(rail.source) or BuildConfig()
     ato, train = parameters["ato"], parameters["train"]

@@ -154,12 +154,6 @@ class TrainOfSystem:
     departure_s: float
 
 
-def _value_names(component) -> Dict[str, object]:
-    """A component's parameters by their own name (as trials.read_base takes them)."""
-    return {p.name.split(".")[-1] if "." in p.name and "[" not in p.name.split(".")[0] else p.name: p.value
-            for p in component.parameters}
-
-
 def read_trains(system_path: Path) -> List[TrainOfSystem]:
     """Each train of a system with a signal chain, paired with the ATO whose ``x`` input its
     position feeds, in running order (by its timetable's first departure); a UserError naming
@@ -191,12 +185,12 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
     if len(pairs) < 2:
         raise UserError(f"system {name!r}: capacity needs at least two trains; it has {len(pairs)} "
                         "(for one train's headway: railcosim headway)")
-    chain = {unit: _value_names(by_unit[unit][0]) for unit in ("coder", "rail", "receiver")}
+    chain = {unit: queued.parameter_values(by_unit[unit][0]) for unit in ("coder", "rail", "receiver")}
     rail = by_unit["rail"][0]
     sizes = sizes_of_source(rail.source) or BuildConfig()
     out = []
     for train, ato in pairs:
-        values = {**chain, "train": _value_names(train), "ato": _value_names(ato)}
+        values = {**chain, "train": queued.parameter_values(train), "ato": queued.parameter_values(ato)}
         a, t = values["ato"], values["train"]
         timetable = queued.resolved_file(a.get("timetable_file"), folder, DEFAULT_TIMETABLE)
         base = trials.BaseSystem(

@@ -191,13 +191,14 @@ def approach_points(base: trials.BaseSystem, plan: trials.TrialPlan, run: Trajec
     return by_indication, by_curve
 
 
-def blocking_stairway(plan: trials.TrialPlan, run: Trajectory, by: str = "indication") -> List[blocking.BlockingTime]:
+def blocking_stairway(plan: trials.TrialPlan, run: Trajectory, by: str = "indication",
+                      points=None) -> List[blocking.BlockingTime]:
     """The run's stairway with the approach points ``by`` indication (the headline) or by the
-    ATP's braking curve (:func:`approach_points`)."""
+    ATP's braking curve (:func:`approach_points`; ``points``: as it gave them for this run)."""
     base = plan.base
     line = base.line
     names = [line.sections[line.block_of_section.index(k)].signal or str(k + 1) for k in range(len(line.block_bounds))]
-    by_indication, by_curve = approach_points(base, plan, run)
+    by_indication, by_curve = points if points is not None else approach_points(base, plan, run)
     return blocking.stairway(run, line.block_bounds, names, by_indication if by == "indication" else by_curve,
                              plan.length_m, latency_s(base), release_s(base))
 
@@ -215,6 +216,9 @@ class Search:
         self.outcomes: Dict[float, dict] = {}
         #: each block's approach point by indication on the unhindered run (set by headway())
         self.approach_m: List[Optional[float]] = []
+        #: the unhindered run and its approach points (for the breakdown; set by headway())
+        self.unhindered: Optional[Trajectory] = None
+        self.unhindered_points = None
         self.rounds = 0
 
     def _say(self, text: str) -> None:
@@ -359,14 +363,14 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
     if method in ("cosim", "both"):
         search.prepare()
     run = unhindered_run(plan, folder / "unhindered", fmu_dirs)
-    steps = blocking_stairway(plan, run)
-    search.approach_m = approach_points(base, plan, run)[0]
+    points = approach_points(base, plan, run)
+    steps = blocking_stairway(plan, run, points=points)
+    search.approach_m = points[0]
     if not plan.run_off:
         # the trains stay at their last stop: its block is never cleared; judging ends where a
         # train standing there would first restrict its follower
         last_block = next(k for k, (a, b) in enumerate(base.line.block_bounds) if a <= plan.last_stop_m < b)
-        points, _ = approach_points(base, plan, run)
-        end = points[last_block] if points[last_block] is not None else base.line.block_bounds[last_block][0]
+        end = points[0][last_block] if points[0][last_block] is not None else base.line.block_bounds[last_block][0]
         plan.judge_end_m = float(end)
         steps = [s for s in steps if s.exit_m <= plan.judge_end_m]
         result.notes.append(f"the trains stay at their last stop ({plan.last_stop_m:g} m); headway judged up "
@@ -379,7 +383,7 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
                                "exit_m": critical.exit_m, "approach_m": critical.approach_m}
     result.parts_s = {k: round(v, 2) for k, v in critical.parts_s.items()}
     if method in ("cosim", "both"):
-        search.unhindered = run
+        search.unhindered, search.unhindered_points = run, points
         search.run_references()
         found = search.run(critical.duration_s)
         result.headway_cosim_s = found
@@ -409,7 +413,8 @@ def breakdown(plan, steps, critical, search, found_s: float) -> Dict[str, float]
     (what the shape of the braking curves leaves of the approach)."""
     run = search.references[plan.slots[-1].name]
     chain_steps = {s.section: s for s in blocking_stairway(plan, run)}
-    curve_steps = {s.section: s for s in blocking_stairway(plan, search.unhindered, by="curve")}
+    curve_steps = {s.section: s for s in blocking_stairway(plan, search.unhindered, by="curve",
+                                                           points=search.unhindered_points)}
     out = {"cosim_minus_blocking": round(found_s - critical.duration_s, 1)}
     same = chain_steps.get(critical.section)
     if same is not None:
