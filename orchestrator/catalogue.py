@@ -45,8 +45,8 @@ SYSTEM_DESCRIPTIONS: Dict[str, str] = {
                         "leader under the steps 300-270-230-170-0",
     "suburban": "one ЭР2 EMU stopping at all 13 stations of the 36 km suburban line (DC 3 kV, 4-aspect "
                 "ALSN block of 31 sections)",
-    "suburban_peak": "ten ЭР2 EMUs on the suburban line 394 s apart: its blocking-time headway plus 10 % "
-                     "(docs/capacity.md)",
+    "suburban_peak": "ten ЭР2 EMUs on the suburban line at its blocking-time headway plus 10 %, the "
+                     "followers drawing up from holding tracks (docs/capacity.md)",
     "tvm430_headway": "five TGV sets on the high-speed line at TVM-430's co-simulated headway (docs/capacity.md)",
 }
 

@@ -65,19 +65,31 @@ def test_minimum_headway_of_different_trains_is_the_worst_section():
     assert blocking.minimum_headway_s(a, b) == (310.0 - 25.0, 1)
 
 
-def test_trial_plan_queues_the_trains_and_shifts_their_timetables(tmp_path):
+def test_trial_plan_holds_each_follower_in_a_track_circuit_of_its_own(tmp_path):
+    """No two trains share a track circuit at the start (docs/capacity.md#co-simulated-headway):
+    the leader stands at the origin, each follower on a holding circuit of its own before the
+    line, and calls at the origin (j − 1)·h after the leader; each ends in sidings of its own."""
     system = _short_system(tmp_path)
     base = trials.read_base(system)
     plan = trials.TrialPlan(base, 3)
     length = base.stock.length_m
+    sections = plan.line_doc["block_sections"]
+    assert [s["name"] for s in sections[:2]] == ["H3", "H2"] and sections[2]["start_m"] == plan.offset_m
     starts = [slot.start_m for slot in plan.slots]
-    assert starts[-1] == base.x0_m and np.allclose(np.diff(starts), -(length + trials.QUEUE_GAP_M))
+    assert starts[0] == base.x0_m + plan.offset_m and plan.origin_slot is plan.slots[0]
+    for slot in plan.slots[1:]:      # the whole train inside one holding circuit
+        inside = [s for s in sections if s["start_m"] <= slot.start_m - length and slot.start_m <= s["end_m"]]
+        assert [s["name"] for s in inside] == [f"H{slot.index}"]
     leader, last = plan.timetable(plan.slots[0], 0.0), plan.timetable(plan.slots[-1], 240.0)
-    assert leader["stops"][0]["station"] == "queue 1" and last["stops"][0]["station"] == "A"
-    assert last["stops"][0]["departure_s"] == leader["stops"][0]["departure_s"] + 240.0
+    assert leader["stops"][0]["station"] == "A" and last["stops"][0]["station"] == "holding 3"
+    assert last["stops"][1]["station"] == "A"
+    assert last["stops"][1]["departure_s"] == pytest.approx(leader["stops"][0]["departure_s"] + 240.0)
+    assert last["stops"][0]["departure_s"] >= 0.0 and leader["stops"][0]["departure_s"] > 0.0
+    # positions judged are the base line's: the trial's less the holding tracks
+    assert plan.timing_points_m()[0] == 0.0
     # every train ends in sidings of its own beyond the last track circuit, clear of each other
     sidings = sorted(slot.sidings_m for slot in plan.slots)
-    assert sidings[0] - length >= 4200.0 and np.all(np.diff(sidings) >= length)
+    assert sidings[0] - length >= 4200.0 + plan.offset_m and np.all(np.diff(sidings) >= length)
 
 
 def _short_system(tmp_path: Path) -> Path:

@@ -241,12 +241,12 @@ def test_every_shipped_system_is_written_and_packed(tmp_path, product_fmus):
     assert {e["variable"] for e in scenario["events"]} == {"feed_open[1]", "fault_main", "fault_reserve", "broken_rail_at"}
 
 
-@pytest.mark.parametrize("system, trains, stop_s", [("suburban_peak", 10, 300.0), ("tvm430_headway", 5, 150.0)])
+@pytest.mark.parametrize("system, trains, stop_s", [("suburban_peak", 10, 420.0), ("tvm430_headway", 5, 150.0)])
 def test_systems_of_many_trains_start_in_order_and_safely(tmp_path, product_fmus, system, trains, stop_s):
-    """The queued trains of the many-train systems (docs/capacity.md): only the leader has left
-    by its first minutes, the others stand where they were queued, one behind the other, and
-    nothing is unsafe while they stand in the circuits they share. The full runs:
-    docs/scenarios.md#systems-of-many-trains."""
+    """The waiting trains of the many-train systems (docs/capacity.md): only the leader has left
+    by its first minutes, the others stand where they wait (suburban_peak: on holding circuits
+    of their own; tvm430_headway: queued in the circuits they share), one behind the other, and
+    nothing is unsafe while they stand. The full runs: docs/scenarios.md#systems-of-many-trains."""
     if not (SSP_ROOT / system).is_dir():
         pytest.skip(f"{system} not written")
     summary, columns = _run(tmp_path, product_fmus, system, stop_s,

@@ -5,10 +5,23 @@ headway trials (orchestrator/headway/) and the shipped systems of many trains
 What a trial holds, built from the base system's own line, rolling stock, timetable and cab
 signalling (its SSD's parameters, read by :func:`read_base`):
 
-* **the trains queued** at the base train's starting point: the last train stands where the
-  base train stands, each train ahead of it ``QUEUE_GAP_M`` clear of the next, at a stopping
-  point added to the line ("queue 1" is the leader's); train j departs (j − 1)·h after the
-  leader, and every later time of its timetable is the base timetable's shifted the same;
+* **the trains waiting** where the cab system lets a train start from its own track circuit
+  (every system but TVM-430): the leader stands where the base train stands; the others wait
+  on **holding tracks** laid before the line's first track circuit, one short coded track
+  circuit each (its own signal at its exit, ``pitch = train length + QUEUE_GAP_M`` long, the
+  base line's first circuit copied), nearest the line the second train. Each follower draws up
+  to the origin at ``HOLDING_KMH`` in time to call there ``ORIGIN_DWELL_S`` before its
+  departure, train j's (j − 1)·h after the leader's, and every later time of its timetable is
+  the base timetable's shifted the same. No two trains ever share a track circuit: a train
+  standing behind another in one circuit may pick up the code meant for the one ahead once
+  that one's last wheelsets near the feed end (docs/scenarios.md#systems-of-many-trains), which
+  a real line forbids and the verdicts rightly call unsafe. The trial's line is the base line
+  shifted by the holding tracks' length (``offset_m``); everything judged and reported is in
+  the base line's positions (trajectories are read back shifted);
+* **the trains queued** on TVM-430 lines, where a train without a word may not move (step 0),
+  so no holding track can be left: the last train stands where the base train stands, each
+  train ahead of it ``QUEUE_GAP_M`` clear of the next, at a stopping point added to the line
+  ("queue 1" is the leader's); train j departs (j − 1)·h after the leader;
 * **a run-off** where the cab system allows it: at its last stop each train dwells
   ``FINAL_DWELL_S`` and runs on to sidings beyond the last track circuit (track without track
   circuits, ``SIDINGS_KMH``: the no-code ceiling), each to its own place, so that no train stands
@@ -25,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
@@ -39,6 +53,12 @@ from orchestrator.errors import UserError
 
 #: clear space between the tail of one queued train and the head of the next (m) [U]
 QUEUE_GAP_M = 50.0
+#: the holding tracks' speed limit, and the speed a follower is timed to draw up at (km/h) [U]
+HOLDING_KMH = 40.0
+#: a follower calls at the origin this long before its departure (s) [U]
+ORIGIN_DWELL_S = 30.0
+#: a follower's draw-up is timed this much slower than the ATO's fastest (s) [U]
+DRAW_UP_MARGIN_S = 30.0
 #: dwell at the last stop before running on to the sidings (s) [U]
 FINAL_DWELL_S = 30.0
 #: the sidings' speed limit: the cab's no-code ceiling (ALSN white, 40 km/h) [U]
@@ -159,7 +179,10 @@ class TrainSlot:
 
 
 class TrialPlan:
-    """The line, the queue and the timetables of N trains of a base system (module docstring)."""
+    """The line, the trains' places and the timetables of N trains of a base system (module
+    docstring). Positions: ``slots``, ``line_doc`` and the timetables are the trial's line
+    (the base line shifted by ``offset_m``); ``judge_end_m``, ``last_stop_m`` and
+    :meth:`timing_points_m` are the base line's."""
 
     def __init__(self, base: BaseSystem, trains: int):
         if not 2 <= trains <= MAX_TRAINS:
@@ -171,36 +194,63 @@ class TrialPlan:
         timetable = json.loads(Path(base.timetable_file).read_text())
         self.base_timetable = timetable
         stops = timetable["stops"]
-        origin = stops[0]["station"]
+        self.origin = stops[0]["station"]
         stations = {s["name"]: float(s["stop_m"]) for s in line_doc["stations"]}
-        pitch = self.length_m + QUEUE_GAP_M
-        line_end = float(line_doc["length_m"])
-        last_circuit_m = max(float(s["end_m"]) for s in line_doc["block_sections"])
-        #: sidings beyond the line for the trains to clear it (module docstring)
-        self.run_off = base.cab_system != "TVM430"
+        self.pitch_m = pitch = self.length_m + QUEUE_GAP_M
+        #: sidings beyond the line for the trains to clear it, holding tracks before it (module docstring)
+        self.run_off = self.holding = base.cab_system != "TVM430"
+        self.offset_m = (trains - 1) * pitch if self.holding else 0.0
+        line_end = float(line_doc["length_m"]) + self.offset_m
+        last_circuit_m = max(float(s["end_m"]) for s in line_doc["block_sections"]) + self.offset_m
         self.slots: List[TrainSlot] = []
         for j in range(1, trains + 1):
-            start = base.x0_m + (trains - j) * pitch
+            if self.holding:
+                # the leader at the origin; train j ≥ 2 in holding circuit j, its head half the
+                # gap short of that circuit's signal
+                start = base.x0_m + self.offset_m if j == 1 else self.offset_m - (j - 2) * pitch - QUEUE_GAP_M / 2
+                station = self.origin if j == 1 else f"holding {j}"
+            else:
+                start = base.x0_m + (trains - j) * pitch
+                station = self.origin if j == trains else f"queue {j}"
             sidings = max(line_end, last_circuit_m) + SIDINGS_CLEARANCE_M + self.length_m + (trains - j) * pitch
-            self.slots.append(TrainSlot(j, f"train{j}", start, origin if j == trains else f"queue {j}",
-                                        f"sidings {j}", sidings))
+            self.slots.append(TrainSlot(j, f"train{j}", start, station, f"sidings {j}", sidings))
         # the queue must stand before the train's first stop after the origin
-        if len(stops) > 1 and self.slots[0].start_m >= stations[stops[1]["station"]] - 1.0:
+        if not self.holding and len(stops) > 1 \
+                and self.slots[0].start_m >= stations[stops[1]["station"]] - 1.0:
             raise UserError(f"--trains {trains}: the queue of {trains} trains ({pitch:g} m each) reaches "
                             f"{self.slots[0].start_m:g} m, past {stops[1]['station']!r} "
                             f"({stations[stops[1]['station']]:g} m); fewer trains")
         self.last_stop_m = stations[stops[-1]["station"]]
         self.line_doc = self._line(line_doc)
+        self._trial_line = None            # loaded when first needed (:meth:`_fastest_s`)
+        #: every timetable's times later by this (s), so that no train's draw-up starts before 0
+        self.lead_s = max([0.0] + [self._draw_up_s(slot) - float(stops[0]["departure_s"])
+                                   for slot in self.slots[1:] if self.holding])
+        self.sections = len(self.line_doc["block_sections"])
         #: where judging ends: the last stop with a run-off, else set by the caller (the approach
         #: point of the last stop's block: a train standing there holds its followers)
         self.judge_end_m = self.last_stop_m
 
+    @property
+    def origin_slot(self) -> TrainSlot:
+        """The train standing where the base train stands (its run is the base train's)."""
+        return self.slots[0] if self.holding else self.slots[-1]
+
+    def _draw_up_s(self, slot: TrainSlot) -> float:
+        """From a follower's holding place to its departure from the origin (s): the ATO's
+        fastest run there, a margin and the dwell."""
+        return self._fastest_s(slot.start_m, self.base.x0_m + self.offset_m) + DRAW_UP_MARGIN_S + ORIGIN_DWELL_S
+
     def _line(self, doc: dict) -> dict:
         line = json.loads(json.dumps(doc))
-        line["name"] = f"{doc['name']} (headway trial: {self.count} trains queued"
+        if self.holding:
+            line = self._with_holding_tracks(line)
+            line["name"] = f"{doc['name']} (headway trial: {self.count} trains, holding tracks"
+        else:
+            line["name"] = f"{doc['name']} (headway trial: {self.count} trains queued"
         line["name"] += ", sidings)" if self.run_off else ")"
         extra = [{"name": s.start_station, "stop_m": s.start_m, "platform_length_m": self.length_m}
-                 for s in self.slots if s.start_station.startswith("queue")]
+                 for s in self.slots if s.start_station != self.origin]
         if not self.run_off:
             line["stations"] = sorted(line["stations"] + extra, key=lambda s: s["stop_m"])
             return line
@@ -213,28 +263,87 @@ class TrialPlan:
         if any("high_speed_kmh" in item for item in line["speed_limits"]):
             limit["high_speed_kmh"] = kmh
         # the sidings' limit from the last stop on, so a train leaving it enters them within it
-        line["speed_limits"] = [item for item in line["speed_limits"] if item["start_m"] < self.last_stop_m] \
-            + [{"start_m": self.last_stop_m, **limit}]
+        last_stop_m = self.last_stop_m + self.offset_m
+        line["speed_limits"] = [item for item in line["speed_limits"] if item["start_m"] < last_stop_m] \
+            + [{"start_m": last_stop_m, **limit}]
+        return line
+
+    def _with_holding_tracks(self, line: dict) -> dict:
+        """The base line shifted by ``offset_m``, the holding circuits laid before it (level,
+        straight, ``HOLDING_KMH``), each a copy of the base line's first circuit."""
+        offset = self.offset_m
+        for key, fields in _POSITIONS.items():
+            for item in line.get(key, []):
+                for name in fields:
+                    if name in item:
+                        item[name] = item[name] + offset
+        line["length_m"] = float(line["length_m"]) + offset
+        first = min(line["block_sections"], key=lambda s: s["start_m"])
+        holding = [{**first, "name": f"H{j}", "signal": f"H{j}",
+                    "start_m": offset - (j - 1) * self.pitch_m, "end_m": offset - (j - 2) * self.pitch_m}
+                   for j in range(self.count, 1, -1)]
+        line["block_sections"] = holding + line["block_sections"]
+        joints = line.get("insulated_joints", [])
+        if joints:
+            model = {k: v for k, v in min(joints, key=lambda j: j["position_m"]).items() if k != "position_m"}
+            line["insulated_joints"] = [{"position_m": s["start_m"], **model} for s in holding] + joints
+        limit = {key: HOLDING_KMH for key in ("passenger_kmh", "freight_kmh")}
+        if any("high_speed_kmh" in item for item in line["speed_limits"]):
+            limit["high_speed_kmh"] = HOLDING_KMH
+        line["speed_limits"] = [{"start_m": 0, **limit}] + line["speed_limits"]
+        line["gradients"] = [{"start_m": 0, "permille": 0.0}] + line["gradients"]
         return line
 
     def timetable(self, slot: TrainSlot, shift_s: float) -> dict:
-        """Train ``slot``'s timetable with every time shifted by ``shift_s``."""
+        """Train ``slot``'s timetable with every time shifted by ``shift_s`` (and ``lead_s``)."""
         stops = [dict(s) for s in self.base_timetable["stops"]]
-        stops[0]["station"] = slot.start_station
+        if not self.holding:
+            stops[0]["station"] = slot.start_station
+        elif slot is not self.origin_slot:
+            departure = float(stops[0]["departure_s"])
+            stops[0] = {"station": self.origin, "arrival_s": departure - ORIGIN_DWELL_S, "departure_s": departure}
+            stops.insert(0, {"station": slot.start_station, "departure_s": departure - self._draw_up_s(slot)})
         last = stops[-1]
         if not self.run_off:
             return self._shifted(stops, slot, shift_s)
         last.setdefault("departure_s", float(last["arrival_s"]) + FINAL_DWELL_S)
-        run_off_m = slot.sidings_m - self.last_stop_m
+        # timed at the ATO's own minimum running time, so that every train clears the last block
+        # as fast as the sidings allow (with slack the ATO would creep out, and the last block's
+        # blocking time would be its choice of speed, not the line's)
         stops.append({"station": slot.sidings_station,
-                      "arrival_s": float(last["departure_s"]) + 60.0 + run_off_m / (SIDINGS_KMH * MPS_PER_KMH)})
+                      "arrival_s": float(last["departure_s"])
+                      + self._fastest_s(self.last_stop_m + self.offset_m, slot.sidings_m)})
         return self._shifted(stops, slot, shift_s)
+
+    def _fastest_s(self, from_m: float, to_m: float) -> float:
+        """The ATO's minimum running time between two stops of the trial line (s), rounded up
+        to 0.1 s: its own planner, with the base ATO's braking and speed margin."""
+        from fmus.ato_controller.core import AtoSettings, default_plan_decel_mps2
+        from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
+        from fmus.ato_controller.train_model import NominalTrain
+
+        if self._trial_line is None:
+            with tempfile.TemporaryDirectory() as scratch:
+                path = Path(scratch) / "trial_line.json"
+                path.write_text(json.dumps(self.line_doc))
+                self._trial_line = load_line(path)
+        ato, stock = self.base.parameters["ato"], self.base.stock
+        defaults = AtoSettings()
+        decel = float(ato.get("braking_decel") or 0.0) or default_plan_decel_mps2(stock, str(ato.get("cab_signal", "ALSN")))
+        margin = float(ato.get("speed_margin", defaults.speed_margin_mps))
+        category = str(ato.get("train_category") or stock.category)
+        planner = StagePlanner(NominalTrain(stock, self._trial_line), self._trial_line, category, decel, margin)
+        try:
+            planner.plan(from_m, to_m, 0.0)
+        except InfeasibleStage as fastest:
+            return math.ceil(fastest.minimum_time_s * 10.0) / 10.0
+        raise AssertionError("a zero running time cannot be feasible")
 
     def _shifted(self, stops: List[dict], slot: TrainSlot, shift_s: float) -> dict:
         for stop in stops:
             for key in ("arrival_s", "departure_s"):
                 if key in stop:
-                    stop[key] = round(float(stop[key]) + shift_s, 3)
+                    stop[key] = round(float(stop[key]) + shift_s + self.lead_s, 3)
         return {"train": f"{self.base_timetable.get('train', 'train')} ({slot.name})", "stops": stops}
 
     def stop_time_s(self, headway_s: float, judge_end_s: Optional[float] = None) -> float:
@@ -253,6 +362,13 @@ class TrialPlan:
         stops = [s.stop_m for s in line.stations]
         points = np.unique(np.array(signals + stops, dtype=float))
         return points[points <= self.judge_end_m]
+
+
+#: the position fields of a line file (docs/interfaces.md#line-file), shifted with the line
+_POSITIONS = {"block_sections": ("start_m", "end_m"), "insulated_joints": ("position_m",),
+              "separation_zones": ("position_m",), "stations": ("stop_m",), "gradients": ("start_m",),
+              "curves": ("start_m", "end_m"), "temporary_restrictions": ("start_m", "end_m"),
+              "speed_limits": ("start_m",)}
 
 
 # ---- writing the systems ---------------------------------------------------------------------
@@ -280,11 +396,11 @@ def write_system(folder: Path, plan: TrialPlan, slots: Sequence[TrainSlot], name
     stock_name = Path(base.stock_file).name
     (resources / stock_name).write_text(Path(base.stock_file).read_text())
     files = {"line_file": "trial_line.json"}
-    size = BuildConfig(base.sections, max(len(slots), BuildConfig().trains), base.frame)
+    size = BuildConfig(max(base.sections, plan.sections), max(len(slots), BuildConfig().trains), base.frame)
     fmu_folder = f"resources/{size.folder_name}" if size.folder_name else "resources"
     coder, rail, receiver = _chain_parameters(base, len(slots), files)
     pairs = [(slot.name, f"{slot.name}_ato") for slot in slots] if len(slots) > 1 else [("train", "ato")]
-    chain, links = signal_chain(pairs, sections=base.sections, frame=base.frame, fmu_folder=fmu_folder,
+    chain, links = signal_chain(pairs, sections=size.sections, frame=base.frame, fmu_folder=fmu_folder,
                                 coder=coder, rail=rail, receiver=receiver, stocks=[stock_name] * len(slots),
                                 fs_hz=base.fs_hz)
     components, connections = list(chain), list(links)

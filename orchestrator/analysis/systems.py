@@ -456,8 +456,8 @@ SHIPPED["tvm430_following"] = write_tvm430_following
 SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
 SHIPPED["suburban"] = write_suburban
 # the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
-# suburban --method blocking: 357.8 s, critical the terminal block) plus a margin of 10 % [U]
-SUBURBAN_PEAK_TRAINS, SUBURBAN_PEAK_HEADWAY_S = 10, 394.0
+# suburban --method blocking: 292.4 s, critical the terminal block) plus a margin of 10 % [U]
+SUBURBAN_PEAK_TRAINS, SUBURBAN_PEAK_HEADWAY_S = 10, 322.0
 # five TGV sets at TVM-430's co-simulated headway on the high-speed line (railcosim headway tvm430:
 # 140 s, the blocking-time figure 142.5 s; docs/capacity.md)
 TVM430_HEADWAY_TRAINS, TVM430_HEADWAY_S = 5, 140.0

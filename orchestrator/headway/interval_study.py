@@ -105,12 +105,12 @@ def interval_trial(driving: str, seed: int, system: str = "free_run", trains: in
         system_dir = folder / "trial"
         timetables = {slot.index: trials.write_timetable(system_dir, plan, slot, float(shifts[slot.index - 1]), "t")
                       for slot in plan.slots}
-        stop_s = math.ceil(float(timed["departure_s"]) + float(shifts.max()) + RUN_MARGIN_S)
+        stop_s = math.ceil(float(timed["departure_s"]) + plan.lead_s + float(shifts.max()) + RUN_MARGIN_S)
         trials.write_system(system_dir, plan, plan.slots, "interval_trial", timetables, stop_s)
         run_dir = folder / "run"
         summary = _run_judged(system_dir, run_dir, stop_s, [build])
         names = [slot.name for slot in plan.slots]
-        runs = trials.read_trajectories(run_dir, names)
+        runs = trials.read_trajectories(run_dir, names, plan.offset_m)
         point_m = stations[timing_station] + TIMING_BEYOND_STOP_M
         passed = np.array([float(runs[n].time_at(point_m)) for n in names])
         # when each train would pass unhindered: the train alone, shifted as its timetable

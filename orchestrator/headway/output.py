@@ -20,7 +20,7 @@ def _paths(document: dict) -> dict:
         return {}
     run_dir = Path(trial["run_dir"])
     names = [f"train{j}" for j in range(1, document["trains"] + 1)]
-    runs = read_trajectories(run_dir, names)
+    runs = read_trajectories(run_dir, names, float(document.get("trial_offset_m", 0.0)))
     return {name: (run.head_m, run.time_s) for name, run in runs.items()}
 
 

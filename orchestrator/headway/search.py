@@ -53,13 +53,16 @@ class HeadwayResult:
     breakdown_s: Dict[str, float] = field(default_factory=dict)
     notes: List[str] = field(default_factory=list)
     output: Optional[str] = None
+    #: the trials' line is the base line shifted by this (m): their results.csv positions less it
+    trial_offset_m: float = 0.0
 
     def as_dict(self) -> dict:
         return {"system": self.system, "cab_signal": self.cab_signal, "trains": self.trains,
                 "method": self.method, "headway_blocking_s": self.headway_blocking_s,
                 "headway_cosim_s": self.headway_cosim_s, "critical_section": self.critical_section,
                 "parts_s": self.parts_s, "trials": self.trials, "breakdown_s": self.breakdown_s,
-                "stairway": self.stairway, "notes": self.notes, "output": self.output}
+                "stairway": self.stairway, "notes": self.notes, "output": self.output,
+                "trial_offset_m": self.trial_offset_m}
 
 
 # ---- running systems ---------------------------------------------------------------------------
@@ -116,11 +119,12 @@ def latency_s(base: trials.BaseSystem) -> float:
 
 
 def run_alone(base: trials.BaseSystem, folder: Path, fmu_dirs: Sequence[Path], line_text: str,
-              timetable: dict, x0_m: float, stop_time_s: float) -> Trajectory:
+              timetable: dict, x0_m: float, stop_time_s: float, offset_m: float = 0.0) -> Trajectory:
     """The base system's train alone with its ATO and no signal chain (the ATP on line limits,
     as ``ato_only``) on the line ``line_text`` (a line file's text) to ``timetable``: its
     trajectory. The ATO keeps the base's planned deceleration (its default depends on the cab
-    mode: TVM-430's is harder), so that it drives as it does in the chain."""
+    mode: TVM-430's is harder), so that it drives as it does in the chain. Positions read back
+    less ``offset_m`` (a trial's line against its base line)."""
     from orchestrator.analysis.chain import train_and_ato, write_ssd
 
     system = Path(folder) / "system"
@@ -144,16 +148,16 @@ def run_alone(base: trials.BaseSystem, folder: Path, fmu_dirs: Sequence[Path], l
         step_s=(base.steps_s["train"], base.steps_s["ato"]))
     write_ssd(system, "unhindered", components, connections, stop_time=float(stop_time_s))
     run_in_process(system, Path(folder) / "run", float(stop_time_s), fmu_dirs)
-    return trials.read_trajectories(Path(folder) / "run", ["train"])["train"]
+    return trials.read_trajectories(Path(folder) / "run", ["train"], offset_m)["train"]
 
 
 def unhindered_run(plan: trials.TrialPlan, folder: Path, fmu_dirs: Sequence[Path]) -> Trajectory:
-    """The last train of the plan (standing where the base train stands) alone: :func:`run_alone`."""
-    slot = plan.slots[-1]
+    """The train of the plan standing where the base train stands, alone: :func:`run_alone`."""
+    slot = plan.origin_slot
     timetable = plan.timetable(slot, 0.0)
     stop = plan.stop_time_s(0.0) if plan.run_off else timetable["stops"][-1]["arrival_s"] + 120.0
     return run_alone(plan.base, folder, fmu_dirs, json.dumps(plan.line_doc, indent=1, ensure_ascii=False) + "\n",
-                     timetable, slot.start_m, stop)
+                     timetable, slot.start_m, stop, plan.offset_m)
 
 
 def approach_points(base: trials.BaseSystem, plan: trials.TrialPlan, run: Trajectory):
@@ -233,7 +237,7 @@ class Search:
         system = self.folder / "systems" / "reference"
         self.reference_timetables = {slot.index: trials.write_timetable(system, plan, slot, 0.0, "reference")
                                      for slot in plan.slots}
-        first = plan.slots[-1]
+        first = plan.origin_slot
         trials.write_system(system, plan, [first], "reference", {first.index: self.reference_timetables[first.index]},
                             plan.stop_time_s(0.0))
         if self.build is not None:
@@ -250,7 +254,7 @@ class Search:
         self._say(f"{len(cases)} reference run(s): each train alone on the line")
         for slot, (_, run_dir) in zip(plan.slots, _study(self.folder / "references", "references", system, cases,
                                                          stop, self.fmu_dirs, self.workers, self.progress, self.resume)):
-            self.references[slot.name] = trials.read_trajectories(run_dir, ["train"])["train"]
+            self.references[slot.name] = trials.read_trajectories(run_dir, ["train"], plan.offset_m)["train"]
 
     def trial_system(self) -> Path:
         plan = self.plan
@@ -261,7 +265,8 @@ class Search:
         return system
 
     def evaluate(self, headways: Sequence[float]) -> None:
-        """One round: the trials at ``headways`` (s) as one study."""
+        """One round: the trials at ``headways`` (s) as one study, and each follower's reference
+        at its trial's shift as another (orchestrator/headway/trials.py: why the same shift)."""
         plan = self.plan
         system = self.trial_system()
         headways = [h for h in dict.fromkeys(float(h) for h in headways) if h not in self.outcomes]
@@ -278,11 +283,12 @@ class Search:
         self._say(f"round {self.rounds}: trains at {', '.join(f'{h:g}' for h in headways)} s")
         runs = _study(self.folder / "trials" / f"round{self.rounds}", f"round{self.rounds}", system, cases, stop,
                       self.fmu_dirs, self.workers, self.progress, self.resume)
+        shifted = self.shifted_references(headways, stop)
         points = plan.timing_points_m()
         names = [slot.name for slot in plan.slots]
         for h, (record, run_dir) in zip(headways, runs):
-            runs_of = trials.read_trajectories(run_dir, names)
-            judged = [trials.judge(slot.name, runs_of[slot.name], self.references[slot.name], (slot.index - 1) * h,
+            runs_of = trials.read_trajectories(run_dir, names, plan.offset_m)
+            judged = [trials.judge(slot.name, runs_of[slot.name], shifted[h, slot.name], 0.0,
                                    points, self.judge_end_m(runs_of[ahead.name]))
                       for ahead, slot in zip(plan.slots, plan.slots[1:])]
             # the leader has nobody ahead: it must match its reference (the check of the method)
@@ -300,6 +306,19 @@ class Search:
             self._say(f"  {h:g} s: {'hindered' if self.outcomes[h]['hindered'] else 'unhindered'} "
                       f"(worst {worst.train}: {worst.late_s:+.1f} s at {worst.late_at_m:g} m, "
                       f"{self.outcomes[h]['speed_deficit_kmh']:.1f} km/h slower)")
+
+    def shifted_references(self, headways: Sequence[float], stop_s: float) -> Dict[tuple, Trajectory]:
+        """Each follower alone at its trial's shift, as one study: (headway, train) → its run."""
+        plan = self.plan
+        system = self.folder / "systems" / "reference"
+        keys = [(h, slot) for h in headways for slot in plan.slots[1:]]
+        cases = [{"train.x0": slot.start_m,
+                  "ato.timetable_file": trials.write_timetable(system, plan, slot, (slot.index - 1) * h, f"h{h:g}")}
+                 for h, slot in keys]
+        runs = _study(self.folder / "references" / f"round{self.rounds}", f"references{self.rounds}", system,
+                      cases, stop_s, self.fmu_dirs, self.workers, self.progress, self.resume)
+        return {(h, slot.name): trials.read_trajectories(run_dir, ["train"], plan.offset_m)["train"]
+                for (h, slot), (_, run_dir) in zip(keys, runs)}
 
     def judge_end_m(self, ahead: Trajectory) -> float:
         """Where judging a follower ends: the plan's end (the last stop, or without a run-off the
@@ -358,7 +377,8 @@ def headway(system_path: Path, method: str = "both", trains: int = DEFAULT_TRAIN
     folder = Path(output) if output else Path("results") / f"headway_{base.name}"
     folder.mkdir(parents=True, exist_ok=True)
     fmu_dirs = list(fmu_dirs)
-    result = HeadwayResult(base.name, base.cab_system, trains, method, output=str(folder))
+    result = HeadwayResult(base.name, base.cab_system, trains, method, output=str(folder),
+                           trial_offset_m=plan.offset_m)
     search = Search(plan, folder, fmu_dirs, workers, progress, build, resume)
     if method in ("cosim", "both"):
         search.prepare()
@@ -411,7 +431,7 @@ def breakdown(plan, steps, critical, search, found_s: float) -> Dict[str, float]
     and, apart, ``approach_by_braking_curve``: the critical blocking time with the approach point
     where the ATP's curve would first bind instead of at the first restrictive block's entry
     (what the shape of the braking curves leaves of the approach)."""
-    run = search.references[plan.slots[-1].name]
+    run = search.references[plan.origin_slot.name]
     chain_steps = {s.section: s for s in blocking_stairway(plan, run)}
     curve_steps = {s.section: s for s in blocking_stairway(plan, search.unhindered, by="curve",
                                                            points=search.unhindered_points)}

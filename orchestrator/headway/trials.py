@@ -1,12 +1,18 @@
 """Judging a headway trial (docs/capacity.md#co-simulated-headway): the trains of a system of
 queued trains (orchestrator/analysis/queued.py) against their references.
 
-Each train's **reference** is the same train alone on the same line, with the same timetable:
-one single-train system (the base system's chain) whose train is placed and timed by
-``--set``. A follower is *unhindered* when at every timing point (each block signal and each
-stop of the base line, up to the end of judging) it is at most ``LATE_TOLERANCE_S`` behind its
-reference, and nowhere on that stretch slower than its reference at the same position by more
-than ``SPEED_TOLERANCE_KMH``.
+Each train's **reference** is the same train alone on the same line, with the same timetable
+— the trial's own, shifted as in the trial: one single-train system (the base system's chain)
+whose train is placed and timed by ``--set``. A follower is *unhindered* when at every timing
+point (each block signal and each stop of the base line, up to the end of judging) it is at
+most ``LATE_TOLERANCE_S`` behind its reference, and nowhere on that stretch slower than its
+reference at the same position by more than ``SPEED_TOLERANCE_KMH``.
+
+Why the same shift: the ATO's discrete choices (where to coast) can turn on a micrometre, and a
+timetable shifted by whole seconds rounds its floating-point sums differently, so a train alone
+at another shift may run a few seconds apart from itself with no indication to blame (measured
+on free_run: 6–8 s at C and 10 km/h at 12.4 km, docs/capacity.md#judging-a-trial). At the same
+shift a follower whom no indication binds runs as its reference does.
 """
 from __future__ import annotations
 
@@ -27,8 +33,9 @@ SPEED_TOLERANCE_KMH = 5.0
 
 
 # ---- judging a trial ---------------------------------------------------------------------------
-def read_trajectories(run_dir: Path, trains: Sequence[str]) -> Dict[str, Trajectory]:
-    """Each train's trajectory from a run's results.csv (columns TRAIN.x, TRAIN.v)."""
+def read_trajectories(run_dir: Path, trains: Sequence[str], offset_m: float = 0.0) -> Dict[str, Trajectory]:
+    """Each train's trajectory from a run's results.csv (columns TRAIN.x, TRAIN.v), its
+    positions less ``offset_m`` (a trial's line against the base line's: ``TrialPlan.offset_m``)."""
     import csv
 
     path = Path(run_dir) / "results.csv"
@@ -40,7 +47,7 @@ def read_trajectories(run_dir: Path, trains: Sequence[str]) -> Dict[str, Traject
                          for row in reader])
     out = {}
     for n, name in enumerate(trains):
-        out[name] = Trajectory(rows[:, 0], rows[:, 1 + 2 * n], rows[:, 2 + 2 * n])
+        out[name] = Trajectory(rows[:, 0], rows[:, 1 + 2 * n] - offset_m, rows[:, 2 + 2 * n])
     return out
 
 
