@@ -28,11 +28,15 @@ _WALL_WORDS = ("wall", "realtime", "real_time")
 
 
 def _without_wall(value):
+    """The summary without its wall-clock keys, and paths inside the checkout relative to it (a
+    scenario's file: two checkouts of one commit must fingerprint alike)."""
     if isinstance(value, dict):
         return {k: _without_wall(v) for k, v in value.items()
                 if not any(word in k.lower() for word in _WALL_WORDS)}
     if isinstance(value, list):
         return [_without_wall(v) for v in value]
+    if isinstance(value, str) and value.startswith(str(ROOT)):
+        return value[len(str(ROOT)):]
     return value
 
 

@@ -7,7 +7,8 @@ unhindered run — and its blocking times over the line form its stairway
 (:func:`orchestrator.headway.blocking.stairway`, with the approach points of the system's cab
 system). The timetable is then **compressed**:
 
-* the trains keep their timetable's running order (by departure from their first stop);
+* the trains keep their timetable's running order (by departure from the first station they all
+  depart from, else from their first stop);
 * the first train keeps its times; each following train's stairway is moved, earlier or later,
   to the least shift at which none of its blocking times begins before the end of the same
   section's blocking time of any train placed before it (:func:`blocking.minimum_headway_s`
@@ -156,8 +157,8 @@ class TrainOfSystem:
 
 def read_trains(system_path: Path) -> List[TrainOfSystem]:
     """Each train of a system with a signal chain, paired with the ATO whose ``x`` input its
-    position feeds, in running order (by its timetable's first departure); a UserError naming
-    what is missing otherwise."""
+    position feeds, in running order (by departure from the first station all trains depart
+    from); a UserError naming what is missing otherwise."""
     from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE
     from fmus.sizes import BuildConfig, DEFAULT_SAMPLE_RATE_HZ, sizes_of_source
     from orchestrator.ssp import open_system
@@ -205,8 +206,15 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
         stops = json.loads(Path(timetable).read_text())["stops"]
         if "departure_s" not in stops[0]:
             raise UserError(f"{timetable}: the first stop of {train.name!r}'s timetable has no departure_s")
-        out.append(TrainOfSystem(train.name, ato.name, base, float(stops[0]["departure_s"])))
-    return sorted(out, key=lambda t: (t.departure_s, t.train))
+        out.append((TrainOfSystem(train.name, ato.name, base, float(stops[0]["departure_s"])), stops))
+    # the departures that order the trains and span the window: from the first station every
+    # train departs from (the origin of trains that draw up to it from holding tracks,
+    # docs/capacity.md#co-simulated-headway), else each train's first stop
+    departing = [{s["station"]: float(s["departure_s"]) for s in stops if "departure_s" in s} for _, stops in out]
+    common = next((s["station"] for s in out[0][1] if all(s["station"] in d for d in departing)), None)
+    trains = [TrainOfSystem(t.train, t.ato, t.base, d[common]) if common is not None else t
+              for (t, _), d in zip(out, departing)]
+    return sorted(trains, key=lambda t: (t.departure_s, t.train))
 
 
 def unhindered_run(train: TrainOfSystem, folder: Path, fmu_dirs: Sequence[Path]) -> Trajectory:
