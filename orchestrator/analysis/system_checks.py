@@ -34,6 +34,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling import alsn, alsu, tvm430
 from orchestrator.errors import RefusedComponents, UserError, print_warning
 from orchestrator.graph import SystemGraph
+from orchestrator.ports import split_element
 
 #: a relative data file the graph did not resolve in the system is one of the FMU's own
 #: resources/, which mirror the source tree (resources/fmus/data/shipped/…)
@@ -154,7 +155,7 @@ def placement_problems(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[
                 f"(0..{line.length_m:g} m): {where}; place its head (x0) from {length_m:g} m to "
                 f"{line.length_m:g} m"), frozenset()))
     for rail, node in graph.nodes.items():
-        slots = sorted((int(e.target_var.name[len("x_head["):-1]), e.source) for e in graph.edges
+        slots = sorted((split_element(e.target_var.name)[1][0], e.source) for e in graph.edges
                        if e.target == rail and e.target_var.name.startswith("x_head[") and e.source in spans)
         for slot, train in slots:
             given = _parameter(node, f"train_length[{slot}]", None)

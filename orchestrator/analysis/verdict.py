@@ -29,6 +29,7 @@ from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.errors import print_warning
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.ports import element_name, split_element
 from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
 TRAIN_MODEL = "Traction"
@@ -250,9 +251,11 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
 
     lengths = {}
     for edge in graph.edges:
-        if edge.source_var.name == "x" and edge.target_var.name.startswith("x_head["):
-            slot = edge.target_var.name[len("x_head"):]
-            lengths[edge.source] = float(_parameter(graph, edge.target, f"train_length{slot}", 0.0))
+        if edge.source_var.name != "x":
+            continue
+        port, slot = split_element(edge.target_var.name) or ("", ())
+        if port == "x_head" and slot:
+            lengths[edge.source] = float(_parameter(graph, edge.target, element_name("train_length", slot), 0.0))
     for name in graph.order:
         if graph.nodes[name].interface.model_identifier == TRAIN_MODEL:
             try:
@@ -447,7 +450,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         if feed is None:
             continue
         rail = feed.source
-        slot = int(feed.source_var.name.split("[")[1].split(",")[0])
+        slot = split_element(feed.source_var.name)[1][0]
         train = next((e.source for e in graph.edges if e.target == rail and e.target_var.name == f"x_head[{slot}]"), None)
         coder = next((e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("u_tx[")), None)
         if train is None or coder is None:

@@ -10,7 +10,6 @@ travels as one entry of a DAT payload and is configured with one CFG_input/CFG_o
 """
 from __future__ import annotations
 
-import re
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -21,6 +20,7 @@ from lxml import etree
 
 from orchestrator.dcp.pdu import DCP_MAJOR_VERSION, DCP_MINOR_VERSION, UDP_MAX_PDU_SIZE, DataType, OpMode
 from orchestrator.errors import UserError
+from orchestrator.ports import split_element
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
 _SCHEMA: Optional[etree.XMLSchema] = None
@@ -404,9 +404,6 @@ def write_dcpx(desc: SlaveDescription, path) -> None:
 
 # ---- an FMU as a DCP slave ---------------------------------------------------------------------
 
-_INDEXED = re.compile(r"^(?P<base>[^\[]+)\[(?P<index>[0-9]+(?:,[0-9]+)*)\]$")
-
-
 def slave_uuid(fmu_guid: str) -> uuidlib.UUID:
     """The DCP uuid of the slave serving an FMU: its GUID when that is a UUID (pythonfmu's
     are), else a name-based UUID of it, so that master and slave derive the same one."""
@@ -434,9 +431,7 @@ def _fmu_arrays(interface) -> Dict[str, list]:
     for fmi_var in interface.variables.values():
         if fmi_var.causality not in ("input", "output", "parameter") or fmi_var.type not in FMI_TO_DCP:
             continue
-        match = _INDEXED.match(fmi_var.name)
-        base, index = (match.group("base"), tuple(int(i) for i in match.group("index").split(","))) \
-            if match else (fmi_var.name, ())
+        base, index = split_element(fmi_var.name) or (fmi_var.name, ())
         groups.setdefault(base, []).append((index, fmi_var))
     for members in groups.values():
         members.sort(key=lambda m: m[0])

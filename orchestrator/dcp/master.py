@@ -46,6 +46,7 @@ from orchestrator.dcp.pdu import (UDP_MAX_PDU_SIZE, DataType, OpMode, PayloadCod
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.fmu import Interface, ValueBuffer, make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.ports import element_names, split_element
 from orchestrator.protocols import Slave
 
 P = PduType
@@ -399,13 +400,12 @@ class RemoteDcpSlave(Slave):
 
     def _remote(self, name: str, causality: str) -> Tuple[DcpVariable, int]:
         remote, element = self.description.by_name(name), 0
-        if remote is None and name.endswith("]") and "[" in name:
-            base, _, index = name[:-1].partition("[")
+        base, index = split_element(name) or (name, ())
+        if remote is None and index:
             remote = self.description.by_name(base)
             if remote is not None and remote.dims:
                 try:
-                    position = tuple(int(i) - 1 for i in index.split(","))
-                    element = int(np.ravel_multi_index(position, remote.dims))
+                    element = int(np.ravel_multi_index(tuple(i - 1 for i in index), remote.dims))
                 except ValueError:
                     remote = None
         if remote is None or remote.causality != causality:
@@ -679,8 +679,7 @@ def dcpx_interface(path: Path) -> Interface:
     description = read_description(path)
     variables = {}
     for variable in description.variables:
-        names = [variable.name] if not variable.dims else \
-            [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
+        names = element_names(variable.name, variable.dims)
         fmi_type = _FMI_TYPES.get(variable.data_type.name, "Integer")
         for name in names:
             # value references of their own: an array's elements share the slave's one
