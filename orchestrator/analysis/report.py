@@ -26,7 +26,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.analysis.verdict import safety_parts, safety_verdict, stop_cells
+from orchestrator.analysis.verdict import RECEIVER_MODEL, safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 from orchestrator.folders import create_file
 from orchestrator.ports import split_element
@@ -393,7 +393,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
                         "run wrote)")
     t = capture["time"]
     emf = capture[columns[0]]
-    receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
+    receiver = next((n for n, c in components.items() if c.get("model_identifier") == RECEIVER_MODEL), None)
     params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
     filtered = sosfilt(band.sos, emf) if band is not None else None

@@ -28,6 +28,7 @@ from typing import Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
 import numpy as np
 
 import fmus
+from fmus import traction
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
@@ -41,7 +42,7 @@ from orchestrator.ports import split_element
 FMU_RESOURCES_ROOT = Path(fmus.__file__).resolve().parent.parent
 SECTION_GAP_TOLERANCE_M = 1e-6
 LENGTH_TOLERANCE_M = 0.5        # a rail line's train_length against the rolling-stock file's
-TRAIN_MODEL = "Traction"
+TRAIN_MODEL = traction.MODEL_IDENTIFIER
 
 
 def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> None:

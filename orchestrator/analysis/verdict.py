@@ -16,6 +16,7 @@ import numpy as np
 
 from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
                               load_rolling_stock, load_timetable)
+from fmus import ato_controller, loco_receiver, traction
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
 from fmus.loco_receiver import tvm430 as tvm430_receiver
@@ -32,8 +33,8 @@ from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.ports import element_name, split_element
 from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
-TRAIN_MODEL = "Traction"
-ATO_MODEL = "AtoController"
+TRAIN_MODEL = traction.MODEL_IDENTIFIER
+ATO_MODEL = ato_controller.MODEL_IDENTIFIER
 TRAIN_OUTPUTS = ("energy", "x")
 ATO_OUTPUTS = ("stop_index", "arrival_time", "stop_error", "atp_aspect", "max_overspeed", "atp_interventions",
                "emergency_brakings", "vigilance_brakings", "signals_passed_at_danger", "departure_hold")
@@ -379,7 +380,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 
 
 # ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
-RECEIVER_MODEL = "LocoReceiver"
+RECEIVER_MODEL = loco_receiver.MODEL_IDENTIFIER
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 TVM430_OUTPUTS = ("target_distance", "gradient")
 SPEED_TOLERANCE_KMH = 0.5
