@@ -51,8 +51,13 @@ def element_names(base: str, shape: Sequence[int]) -> List[str]:
 
 
 def manifest_of(fmu_path: Path) -> Dict[str, dict]:
+    """The ports of the FMU at ``fmu_path``."""
     with zipfile.ZipFile(fmu_path) as archive:
-        root = etree.fromstring(archive.read("modelDescription.xml"))
+        return ports_of_description(etree.fromstring(archive.read("modelDescription.xml")))
+
+
+def ports_of_description(root: etree._Element) -> Dict[str, dict]:
+    """The ports of a modelDescription (its root element)."""
     ports: Dict[str, dict] = {}
     for sv in root.find("ModelVariables"):
         typed = sv[0]
