@@ -236,17 +236,18 @@ def _run_command(args) -> int:
 
 def _collapse(names: List[str]) -> List[str]:
     """u_tx[1,1] … u_tx[8,40] → u_tx[8,40]."""
+    from orchestrator.ports import element_name, split_element
+
     seen, shown = {}, []
     for name in names:
-        base, _, rest = name.partition("[")
-        if not rest:
+        base, index = split_element(name) or (name, ())
+        if not index:
             shown.append(name)
             continue
-        index = tuple(int(i) for i in rest.rstrip("]").split(","))
         if base not in seen:
             shown.append(base)
         seen[base] = tuple(max(a, b) for a, b in zip(seen.get(base, index), index))
-    return [f"{n}[{','.join(map(str, seen[n]))}]" if n in seen else n for n in shown]
+    return [element_name(n, seen[n]) if n in seen else n for n in shown]
 
 
 def cmd_report(args) -> int:
@@ -259,6 +260,7 @@ def cmd_report(args) -> int:
 
 def cmd_inspect(args) -> int:
     from orchestrator.fmu import read_interface
+    from orchestrator.ports import base_of
 
     path = Path(args.target)
     if path.suffix == ".fmu":
@@ -267,9 +269,9 @@ def cmd_inspect(args) -> int:
               f"step {interface.default_step_s if interface.default_step_s else 'any'} s")
         by_base = {}
         for var in interface.variables.values():
-            by_base.setdefault(var.name.partition("[")[0], []).append(var)
+            by_base.setdefault(base_of(var.name), []).append(var)
         for label in _collapse(list(interface.variables)):
-            var = by_base[label.partition("[")[0]][0]
+            var = by_base[base_of(label)][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
     from orchestrator.dcp.master import component_interface

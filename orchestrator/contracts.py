@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Dict, List, Optional, Tuple
 
 from orchestrator.errors import UserError
-from orchestrator.ports import manifest_of
+from orchestrator.ports import ports_of_description
 
 MANIFEST_VERSION = 1
 #: FMU-level fields of a manifest, and the fields of each port (``shape`` only for an array)
@@ -37,24 +37,38 @@ def snapshot(fmu_path: Path) -> dict:
     from orchestrator.fmu import read_interface
 
     fmu_path = Path(fmu_path)
-    interface = read_interface(fmu_path)           # not an FMU / invalid: one clear line
+    read_interface(fmu_path)           # not an FMU / invalid: one clear line
     with zipfile.ZipFile(fmu_path) as archive:
-        root = etree.fromstring(archive.read("modelDescription.xml"))
+        return manifest_of_description(etree.fromstring(archive.read("modelDescription.xml")))
+
+
+def manifest_of_description(root) -> dict:
+    """The manifest of a modelDescription (its lxml root element): of a built FMU, or of the one
+    a facade writes in process (orchestrator/packaging/declarations.py)."""
+    from orchestrator.fmu import frame_ports_of
+
     co_simulation = root.find("CoSimulation")
     variable_step = co_simulation.get("canHandleVariableCommunicationStepSize", "false") in ("true", "1")
-    ports = manifest_of(fmu_path)
+    experiment = root.find("DefaultExperiment")
+    step = experiment.get("stepSize") if experiment is not None else None
+    ports = ports_of_description(root)
     # a frame port's last index runs over the samples of one communication step
-    frames = {ports[name]["shape"][-1] for name in interface.frame_ports
+    frames = {ports[name]["shape"][-1] for name in frame_ports_of(root)
               if name in ports and ports[name].get("shape")}
-    return {"manifest_version": MANIFEST_VERSION, "model_identifier": interface.model_identifier,
-            "step_size_s": interface.default_step_s, "variable_step": variable_step,
+    return {"manifest_version": MANIFEST_VERSION, "model_identifier": co_simulation.get("modelIdentifier"),
+            "step_size_s": float(step) if step else None, "variable_step": variable_step,
             "frame": frames.pop() if len(frames) == 1 else None, "ports": ports}
+
+
+def manifest_text(manifest: dict) -> str:
+    """A manifest as its file holds it (the committed fmus/<unit>/contract.json are this text)."""
+    return json.dumps(manifest, indent=1, sort_keys=True) + "\n"
 
 
 def write_snapshot(fmu_path: Path, manifest_path: Path) -> dict:
     manifest = snapshot(fmu_path)
     try:
-        Path(manifest_path).write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+        Path(manifest_path).write_text(manifest_text(manifest))
     except OSError as error:
         raise UserError(f"{manifest_path}: cannot write the manifest: {error.strerror or error}") from None
     return manifest

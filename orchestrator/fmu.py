@@ -14,9 +14,9 @@ import shutil
 import sys
 import tempfile
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -53,6 +53,9 @@ class Interface:
     generation_tool: str
     version: Optional[str]
     frame_ports: frozenset = frozenset()   # waveform arrays (railcosim vendor annotation)
+    #: outputs' fail-safe values by name, what a DCP master shows while they are lost (railcosim
+    #: variable annotations; docs/hil.md)
+    fail_safe: Mapping[str, float] = field(default_factory=dict)
 
 
 def read_interface(fmu_path: Path) -> Interface:
@@ -112,19 +115,35 @@ def _read_interface(fmu_path: Path) -> Interface:
                                      None if v.min is None else float(v.min),
                                      None if v.max is None else float(v.max))
     step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
-    return Interface(md.coSimulation.modelIdentifier, variables, units,
-                     float(step) if step else None, md.guid, md.generationTool or "", md.version,
-                     _frame_ports(fmu_path))
-
-
-def _frame_ports(fmu_path: Path) -> frozenset:
-    """Frame ports named in our VendorAnnotations (absent in foreign FMUs)."""
     from lxml import etree
 
     with zipfile.ZipFile(fmu_path) as archive:
         root = etree.fromstring(archive.read("modelDescription.xml"))
+    return Interface(md.coSimulation.modelIdentifier, variables, units,
+                     float(step) if step else None, md.guid, md.generationTool or "", md.version,
+                     frame_ports_of(root), fail_safe_of(root, f"{fmu_path}!modelDescription.xml"))
+
+
+def frame_ports_of(root) -> frozenset:
+    """Frame ports named in our VendorAnnotations of a modelDescription (absent in foreign FMUs)."""
     node = root.find("VendorAnnotations/Tool[@name='railcosim']/FramePorts")
     return frozenset((node.text or "").split()) if node is not None else frozenset()
+
+
+def fail_safe_of(root, where: str = "modelDescription.xml") -> Dict[str, float]:
+    """Each output's fail-safe value from our variable annotations of a modelDescription
+    (``<Annotations><Tool name="railcosim"><FailSafe value="…"/>``; a Boolean as 0 or 1)."""
+    values = {}
+    for variable in root.iterfind("ModelVariables/ScalarVariable"):
+        node = variable.find("Annotations/Tool[@name='railcosim']/FailSafe")
+        if node is None:
+            continue
+        name, text = variable.get("name"), node.get("value", "")
+        try:
+            values[name] = 1.0 if text == "true" else 0.0 if text == "false" else float(text)
+        except ValueError:
+            raise UserError(f"{where}: variable {name}: fail-safe value {text!r} is not a number") from None
+    return values
 
 
 class ValueBuffer:

@@ -16,6 +16,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
+from orchestrator.ports import base_of
 from orchestrator.protocols import TRANSITIONS, Transition
 from orchestrator.ssp import Connection, SystemDescription, check_connectors, convert_unit
 
@@ -101,7 +102,7 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         node.parameters[var_name] = _parse_value(var, raw, f"--set {key}")
     for node in nodes.values():
         for name, value in node.parameters.items():
-            if name.split("[", 1)[0].endswith("_file"):       # rolling_stock_file[2] too
+            if base_of(name).endswith("_file"):       # rolling_stock_file[2] too
                 node.parameters[name] = resolve_data_file(value, system.folder)
                 _check_data_file(node, name, system.folder)
 

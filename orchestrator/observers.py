@@ -31,10 +31,8 @@ import numpy as np
 from orchestrator.errors import UserError
 from orchestrator.folders import create_file
 from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND
+from orchestrator.ports import split_element
 from orchestrator.protocols import MasterView, Observer, StepRecord
-
-_ELEMENT = re.compile(r"^(?P<base>[^\[]+)(\[(?P<index>[0-9, ]+)\])?$")
-
 
 class ResultsWriteError(UserError):
     """A results file could not be written; the run stops, what could be written is kept."""
@@ -68,9 +66,8 @@ def scalar_outputs(interface) -> List[str]:
     for name, var in interface.variables.items():
         if var.causality != "output" or var.type == "String":
             continue
-        match = _ELEMENT.match(name)
-        index = match.group("index")
-        if index is None or ("," not in index and match.group("base") not in interface.frame_ports):
+        base, index = split_element(name) or (name, ())
+        if len(index) == 0 or (len(index) == 1 and base not in interface.frame_ports):
             names.append(name)
     return names
 
@@ -165,15 +162,16 @@ class CaptureRequest:
     def elements(self, interface) -> List[List[str]]:
         """Element names of the frame, one list per captured row in sample order: one row for a
         1-D port or a named row (``e_coil[1]``), every row for a whole 2-D port (``e_coil``)."""
-        if "[" in self.port:
-            prefix = self.port[:-1] + ","
-        else:
-            prefix = self.port + "["
-        names = [n for n in interface.variables if n.startswith(prefix) and n.endswith("]")
-                 and interface.variables[n].causality == "output"]
+        base, named_row = split_element(self.port) or (self.port, ())
+        names, indices = [], []
+        for name, variable in interface.variables.items():
+            element = split_element(name)
+            if element is not None and element[0] == base and len(element[1]) > len(named_row) \
+                    and element[1][:len(named_row)] == named_row and variable.causality == "output":
+                names.append(name)
+                indices.append(element[1][len(named_row):])
         if not names:
             raise UserError(f"--capture {self.component}.{self.port}: no such frame output")
-        indices = [tuple(int(i) for i in n[len(prefix):-1].split(",")) for n in names]
         if len({len(i) for i in indices}) != 1 or len(indices[0]) > 2:
             raise UserError(f"--capture {self.component}.{self.port}: not a frame port or one row of one")
         by_row: Dict[int, List[Tuple[int, str]]] = {}
@@ -185,7 +183,8 @@ class CaptureRequest:
     def columns(self, elements: List[List[str]]) -> List[str]:
         """The CSV's value columns: the port (or the row named), or ``port[j]`` per row of a
         whole 2-D port."""
-        if "[" in self.port or "," not in elements[0][0]:
+        named_row = (split_element(self.port) or (self.port, ()))[1]
+        if named_row or len(split_element(elements[0][0])[1]) < 2:
             return [f"{self.component}.{self.port}"]
         return [f"{self.component}.{self.port}[{j}]" for j in range(1, len(elements) + 1)]
 

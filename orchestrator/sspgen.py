@@ -9,7 +9,6 @@ make every connection (docs/interfaces.md#ssp-conventions).
 """
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from lxml import etree
 
 from orchestrator.ssp import NS, OSP_ANNOTATION, OSP_NS, RCS_ANNOTATION, RCS_NS
+from orchestrator.ports import element_names
 
 SSD = "{%s}" % NS["ssd"]
 SSC = "{%s}" % NS["ssc"]
@@ -48,11 +48,7 @@ class ConnectionSpec:
 
 def frame_connections(start: str, end: str, shape: Sequence[int]) -> List[ConnectionSpec]:
     """All element connections between two ports of equal shape, e.g. u_tx[8,40] → u_tx[8,40]."""
-    connections = []
-    for index in itertools.product(*(range(1, n + 1) for n in shape)):
-        suffix = "[" + ",".join(map(str, index)) + "]"
-        connections.append(ConnectionSpec(start + suffix, end + suffix))
-    return connections
+    return [ConnectionSpec(a, b) for a, b in zip(element_names(start, shape), element_names(end, shape))]
 
 
 def _typed(parent, value, unit: Optional[str] = None, namespace: str = SSV):
@@ -127,9 +123,7 @@ def connectors_of(ports: Ports, connected_inputs: Sequence[str] = ()) -> List[Tu
         if kind not in ("input", "output", "parameter", "calculatedParameter") or ctype not in _CONNECTOR_TYPES:
             continue
         shape = port.get("shape")
-        names = [base] if not shape else [
-            base + "[" + ",".join(map(str, index)) + "]"
-            for index in itertools.product(*(range(1, n + 1) for n in shape))]
+        names = element_names(base, shape or ())
         result += [(name, kind, ctype, port.get("unit")) for name in names
                    if kind != "input" or name in connected]
     return result

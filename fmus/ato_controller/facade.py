@@ -4,8 +4,9 @@ from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FacadeSlave, Port, line_file_port
-from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, TSR_SLOTS, AtoCore, AtoSettings, event_restrictions,
-                                      judged_measurements)
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION
+from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, MODE_ATP_EMERGENCY, TSR_SLOTS, AtoCore, AtoSettings,
+                                      event_restrictions, judged_measurements)
 
 
 class AtoController(FacadeSlave):
@@ -84,28 +85,38 @@ class AtoController(FacadeSlave):
                  description="temporary restriction speed; 0: slot unused"),
             Port("vigilance_ack", "input", "Boolean", start=False,
                  description="driver's vigilance acknowledgement (a press: false → true answers a check)"),
-            Port("command", "output", unit="1", min=-1.0, max=1.0,
+            # outputs: each from the AtoOutputs field named (core_field; none: the port's own name);
+            # the fail-safe ones are what a DCP master shows while the ATO is not heard: full brake
+            Port("command", "output", unit="1", min=-1.0, max=1.0, fail_safe=-1.0,
                  description=">0 traction share, <0 brake share (to traction.command)"),
-            Port("emergency_brake", "output", "Boolean", start=False, description="ATP emergency brake (to traction.emergency_brake)"),
-            Port("mode", "output", "Integer", start=0,
+            Port("emergency_brake", "output", "Boolean", start=False, fail_safe=True,
+                 description="ATP emergency brake (to traction.emergency_brake)"),
+            Port("mode", "output", "Integer", start=0, fail_safe=MODE_ATP_EMERGENCY,
                  description="0 standstill, 1 traction, 2 coast, 3 brake, 4 ATP service, 5 ATP emergency"),
-            Port("v_ref", "output", unit="m/s", description="reference programme speed here"),
-            Port("schedule_deviation", "output", unit="s", description="late > 0"),
-            Port("v_ceiling", "output", unit="m/s", description="highest speed the ATO allows itself here"),
-            Port("v_atp", "output", unit="m/s", description="ATP permitted speed at the head (braking curves included)"),
-            Port("atp_aspect", "output", "Integer", start=0, description="aspect the ATP acts upon (fail-safe rules applied)"),
-            Port("atp_intervention", "output", "Integer", start=0, description="0 none, 1 service, 2 emergency"),
+            Port("v_ref", "output", unit="m/s", core_field="v_ref_mps", description="reference programme speed here"),
+            Port("schedule_deviation", "output", unit="s", core_field="schedule_deviation_s", description="late > 0"),
+            Port("v_ceiling", "output", unit="m/s", core_field="v_ceiling_mps",
+                 description="highest speed the ATO allows itself here"),
+            Port("v_atp", "output", unit="m/s", core_field="v_permitted_mps",
+                 description="ATP permitted speed at the head (braking curves included)"),
+            Port("atp_aspect", "output", "Integer", start=0, core_field="aspect",
+                 description="aspect the ATP acts upon (fail-safe rules applied)"),
+            Port("atp_intervention", "output", "Integer", start=0, fail_safe=EMERGENCY_INTERVENTION,
+                 description="0 none, 1 service, 2 emergency"),
             Port("atp_interventions", "output", "Integer", start=0, description="ATP interventions so far (service or emergency)"),
             Port("emergency_brakings", "output", "Integer", start=0, description="emergency brakings so far"),
             Port("signals_passed_at_danger", "output", "Integer", start=0,
                  description="signals at danger the head passed so far"),
-            Port("max_overspeed", "output", unit="m/s", description="largest excess over the line/cab-signal ceiling"),
+            Port("max_overspeed", "output", unit="m/s", core_field="max_overspeed_mps",
+                 description="largest excess over the line/cab-signal ceiling"),
             Port("stop_index", "output", "Integer", start=1, description="timetable stops reached (1: at the origin)"),
-            Port("arrival_time", "output", unit="s", start=-1.0, description="at the last stop reached; −1 before"),
-            Port("stop_error", "output", unit="m", description="head − stop point at the last arrival"),
+            Port("arrival_time", "output", unit="s", start=-1.0, core_field="arrival_time_s",
+                 description="at the last stop reached; −1 before"),
+            Port("stop_error", "output", unit="m", core_field="stop_error_m",
+                 description="head − stop point at the last arrival"),
             Port("mode_changes", "output", "Integer", start=0, description="traction/coast/brake changes while running"),
             Port("stage", "output", "Integer", start=0, description="timetable stage (0 = first stop to second)"),
-            Port("departure_hold", "output", unit="s",
+            Port("departure_hold", "output", unit="s", core_field="departure_hold_s",
                  description="time standing past a departure time without a valid permissive cab code"),
             Port("vigilance_warning", "output", "Boolean", start=False,
                  description="a vigilance check awaits its acknowledgement"),
@@ -140,7 +151,7 @@ class AtoController(FacadeSlave):
         return judged_measurements(self.param("cab_signal"))
 
     def publish_initial_outputs(self):
-        self._write(self.core.out)
+        self.write_outputs(self.core.out)
 
     def step_core(self, current_time, step_size):
         io = self.io
@@ -151,7 +162,7 @@ class AtoController(FacadeSlave):
         if slots != self._restriction_slots:
             self._restriction_slots = slots
             core.set_restrictions(event_restrictions(*slots))
-        self._write(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
+        self.write_outputs(core.step(current_time, step_size, float(io["x"]), float(io["v"]), int(io["aspect"]),
                               bool(io["code_valid"]), float(io["v_permitted"]), float(io["v_target"]),
                               int(io["free_blocks"]), bool(io["vigilance_ack"]), int(io["cab_code"]),
                               float(io["target_distance"]), float(io["gradient"]), float(io["word_carrier"])))
@@ -164,19 +175,3 @@ class AtoController(FacadeSlave):
                 self.log(f"AtoController: t={current_time:.6g} s: measurements valid again; the emergency "
                          f"brake holds until standstill", Fmi2Status.warning)
             self._fault_logged = fault
-
-    def _write(self, out):
-        self.write_outputs(out, _OUTPUT_FIELDS)
-
-
-# output port ← AtoOutputs field
-_OUTPUT_FIELDS = (
-    ("command", "command"), ("emergency_brake", "emergency_brake"), ("mode", "mode"), ("v_ref", "v_ref_mps"),
-    ("schedule_deviation", "schedule_deviation_s"), ("v_ceiling", "v_ceiling_mps"), ("v_atp", "v_permitted_mps"),
-    ("atp_aspect", "aspect"), ("atp_intervention", "atp_intervention"), ("atp_interventions", "atp_interventions"),
-    ("emergency_brakings", "emergency_brakings"), ("signals_passed_at_danger", "signals_passed_at_danger"),
-    ("max_overspeed", "max_overspeed_mps"), ("stop_index", "stop_index"), ("arrival_time", "arrival_time_s"),
-    ("stop_error", "stop_error_m"), ("mode_changes", "mode_changes"), ("stage", "stage"),
-    ("departure_hold", "departure_hold_s"), ("vigilance_warning", "vigilance_warning"),
-    ("vigilance_brakings", "vigilance_brakings"),
-)

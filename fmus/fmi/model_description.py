@@ -1,8 +1,9 @@
 """What pythonfmu leaves out of a facade's modelDescription.xml, added from its ports so that
 ``fmpy validate`` reports nothing: units and min/max on the variables, UnitDefinitions (SI base
-exponents), a vendor annotation naming the frame ports, ModelStructure Outputs (no direct
-feedthrough: outputs are computed in doStep) and InitialUnknowns, and whether the
-communication step may vary."""
+exponents), a vendor annotation naming the frame ports, on each output with a fail-safe value
+a variable annotation holding it (``<Annotations><Tool name="railcosim"><FailSafe value="0"/>``,
+read by a DCP master: docs/hil.md), ModelStructure Outputs (no direct feedthrough: outputs are
+computed in doStep) and InitialUnknowns, and whether the communication step may vary."""
 from __future__ import annotations
 
 from typing import Sequence
@@ -36,6 +37,9 @@ def complete(root: Element, ports: Sequence[Port], variable_step: bool) -> Eleme
                 type_node.set(bound, f"{value:.16g}" if port.type == "Real" else str(int(value)))
         if port.causality == "output":
             output_indices.append(index)
+        if port.fail_safe is not None:
+            tool = SubElement(SubElement(sv, "Annotations"), "Tool", name="railcosim")
+            SubElement(tool, "FailSafe", value=_typed_value(port.type, port.fail_safe))
     if units:
         position = list(root).index(root.find("CoSimulation")) + 1
         unit_defs = Element("UnitDefinitions")
@@ -59,3 +63,10 @@ def complete(root: Element, ports: Sequence[Port], variable_step: bool) -> Eleme
             SubElement(outputs, "Unknown", index=str(index), dependencies="")
             SubElement(initial, "Unknown", index=str(index))
     return root
+
+
+def _typed_value(fmi_type: str, value) -> str:
+    """A value as the modelDescription writes one of its type (``true``, ``-1``, ``0.5``)."""
+    if fmi_type == "Boolean":
+        return "true" if value else "false"
+    return str(int(value)) if fmi_type == "Integer" else f"{float(value):.16g}"

@@ -1,11 +1,15 @@
 """The ports a facade declares: scalars and frame arrays, with their start value (the core
-settings' default), unit, range and what a bad input does (no FMI library here)."""
+settings' default), unit, range, what a bad input does and, for an output, the core field it
+shows and its fail-safe value (no FMI library here). Every other statement of a port is derived
+from these declarations: the facade's output copy (:func:`output_fields`), the modelDescription,
+the committed contract.json and the port tables of docs/interfaces.md
+(orchestrator/packaging/declarations.py writes both and tests/test_declarations.py compares)."""
 from __future__ import annotations
 
 import inspect
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -30,10 +34,21 @@ class Port:
     # "unit" (the unit handles every value itself: the ATO's measurements fail safe), where the
     # facade's unit_handled_inputs says the unit reads it with its parameters; else "refuse"
     bad_input: str = "refuse"
+    # an output: the attribute of the core's output record it shows (None: the port's own name)
+    core_field: Optional[str] = None
+    # an output: what a DCP master shows in its place while the slave's outputs are lost
+    # (docs/hil.md, "What happens on loss"): the most restrictive value; None keeps the last one
+    fail_safe: Any = None
 
     def __post_init__(self):
         if self.bad_input not in ("refuse", "clamp", "unit"):
             raise TypeError(f"port {self.name}: bad_input {self.bad_input!r} is not refuse, clamp or unit")
+        if self.causality != "output" and (self.core_field is not None or self.fail_safe is not None):
+            raise TypeError(f"port {self.name}: only an output has a core field and a fail-safe value")
+        if self.fail_safe is not None and (self.type == "String" or self.shape
+                                           or self.range_error(self.name, float(self.fail_safe)) is not None):
+            raise TypeError(f"port {self.name}: fail-safe value {self.fail_safe!r} is not a value of this "
+                            "scalar numeric port")
 
     @property
     def size(self) -> int:
@@ -63,6 +78,17 @@ class Port:
         if self.max is not None and value > self.max:
             return f"{element} = {value:g} is above its maximum {self.max:g}"
         return None
+
+
+def output_fields(ports: Sequence[Port]) -> Tuple[Tuple[str, str], ...]:
+    """((output port, the core's output-record attribute it shows), ...) in declaration order:
+    what a facade copies from its core after each step (ValueStore.write_outputs)."""
+    return tuple((p.name, p.core_field or p.name) for p in ports if p.causality == "output")
+
+
+def fail_safe_values(ports: Sequence[Port]) -> Dict[str, float]:
+    """Each output's fail-safe value by port name (a Boolean as 0 or 1), for those that have one."""
+    return {p.name: float(p.fail_safe) for p in ports if p.fail_safe is not None}
 
 
 def keyword_defaults(function) -> Dict[str, Any]:

@@ -40,7 +40,7 @@ from pythonfmu.variables import Boolean, Integer, Real, String
 from fmus.errors import FmuCallError, FmuInputError
 from fmus.fmi import model_description
 from fmus.fmi.ports import (Port, cab_system_port, keyword_defaults, line_file_port,  # noqa: F401  (the facades' imports)
-                            sample_rate_port)
+                            output_fields, sample_rate_port)
 from fmus.fmi.value_store import FALLBACK, FMI_TYPES, InputChecks, ValueStore
 from fmus.sizes import BuildConfig
 
@@ -97,6 +97,7 @@ class FacadeSlave(Fmi2Slave):
         self.resources = resources_folder(self.resources)
         self.build = BuildConfig(**self.build_config)
         self.ports: List[Port] = list(self.declare_ports(self.build))
+        self.output_fields = output_fields(self.ports)
         self.store = ValueStore(self.ports, self._register)
         self.io: Dict[str, Any] = self.store.io
         self.input_checks = InputChecks(self.ports, self.store)
@@ -162,9 +163,10 @@ class FacadeSlave(Fmi2Slave):
                 if problem is not None:
                     raise FmuInputError(problem)
 
-    def write_outputs(self, out, fields) -> None:
-        """A core's output record to the ports (ValueStore.write_outputs)."""
-        self.store.write_outputs(out, fields)
+    def write_outputs(self, out) -> None:
+        """A core's output record to the output ports, each from its declared core field
+        (ValueStore.write_outputs)."""
+        self.store.write_outputs(out, self.output_fields)
 
     def resource_path(self, path: str) -> str:
         """A data file named by a parameter: absolute, or relative to the working folder, else

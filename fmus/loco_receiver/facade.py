@@ -2,7 +2,8 @@
 Tvm430ReceiverCore (TVM430) or DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see
 core.py, alsu.py, tvm430.py, digital_receiver.py)."""
 from fmus.errors import FmuInputError
-from fmus.signalling import alsu, cab_systems, tvm430
+from fmus.signalling import alsn, alsu, cab_systems, tvm430
+from fmus.signalling import aspects as sig
 from fmus.loco_receiver.alsu import AlsuReceiverCore
 from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore, Tvm430ReceiverSettings
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
@@ -59,33 +60,38 @@ class LocoReceiver(FrameFacadeSlave):
             Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,), min=0, max=3,
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
-            Port("aspect", "output", "Integer", start=0, description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
-            Port("code", "output", "Integer", start=0,
+            # outputs: each from the ReceiverOutputs field named (core_field; none: the port's own
+            # name); the fail-safe ones are what a DCP master shows while the receiver is not
+            # heard: the no-code indication, and no speed at all (more restrictive than white's)
+            Port("aspect", "output", "Integer", start=0, fail_safe=sig.WHITE,
+                 description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
+            Port("code", "output", "Integer", start=0, fail_safe=alsn.NO_CODE,
                  description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, "
                              "TVM430: the 27-bit word shown; 0 none"),
-            Port("code_valid", "output", "Boolean", start=False,
+            Port("code_valid", "output", "Boolean", start=False, fail_safe=False,
                  description="the indication shown is a received code (held ones included); false: the no-code indication"),
-            Port("v_permitted", "output", unit="m/s",
+            Port("v_permitted", "output", unit="m/s", core_field="v_permitted_mps", fail_safe=0.0,
                  description="speed permitted from now on, per train category (white 40 km/h, red 20 km/h)"),
-            Port("v_target", "output", unit="m/s",
+            Port("v_target", "output", unit="m/s", core_field="v_target_mps", fail_safe=0.0,
                  description="speed to be reached at the next signal; 0: stop before it"),
-            Port("free_blocks", "output", "Integer", start=0,
+            Port("free_blocks", "output", "Integer", start=0, fail_safe=0,
                  description="free block sections ahead: ALSN 2 green, 1 yellow, 0 otherwise; digital 0-6"),
-            Port("level", "output", unit="V", description="carrier amplitude at the coil (peak-hold, 1 s release)"),
+            Port("level", "output", unit="V", core_field="level_v",
+                 description="carrier amplitude at the coil (peak-hold, 1 s release)"),
             Port("errors", "output", "Integer", start=0, description="invalid cycles"),
             Port("decoded_codes", "output", "Integer", start=0, description="valid cycles"),
             Port("transmitter", "output", "Integer", start=0, description="5 (KPT-5) or 7 (KPT-7) of the last valid cycle"),
             Port("joints", "output", "Integer", start=0, description="changes of transmitter type (joints passed)"),
-            Port("relay", "output", "Boolean", start=False,
+            Port("relay", "output", "Boolean", start=False, fail_safe=False,
                  description="ALSN: impulse relay state at the frame end; digital: carrier above the squelch"),
-            Port("channel_code", "output", "Integer", start=0, shape=(CHANNELS,),
+            Port("channel_code", "output", "Integer", start=0, shape=(CHANNELS,), core_field="channel_codes",
                  description="digital: each channel's command (raw id), 0 none"),
             Port("foreign", "output", "Integer", start=0, description="digital: messages of the other track discarded"),
-            Port("target_distance", "output", unit="m",
+            Port("target_distance", "output", unit="m", core_field="target_distance_m",
                  description="TVM430: distance to the target point from the entry of the block whose word is shown; 0 no word"),
-            Port("gradient", "output", unit="1",
+            Port("gradient", "output", unit="1", core_field="gradient_permille",
                  description="TVM430: the word's gradient in ‰ (+ uphill), the most falling up to the target; 0 no word"),
-            Port("word_carrier", "output", unit="Hz",
+            Port("word_carrier", "output", unit="Hz", core_field="word_carrier_hz",
                  description="TVM430: the carrier the word shown came from; 0 none"),
         ]
 
@@ -122,18 +128,8 @@ class LocoReceiver(FrameFacadeSlave):
         return core
 
     def publish_initial_outputs(self):
-        self.write_outputs(self.core.out, _OUTPUT_FIELDS)
+        self.write_outputs(self.core.out)
 
     def step_core(self, current_time, step_size):
         io = self.io
-        self.write_outputs(self.core.step(current_time, io["e_coil"], io["channel_fault"]), _OUTPUT_FIELDS)
-
-
-# output port ← ReceiverOutputs field
-_OUTPUT_FIELDS = (
-    ("aspect", "aspect"), ("code", "code"), ("code_valid", "code_valid"), ("v_permitted", "v_permitted_mps"),
-    ("v_target", "v_target_mps"), ("free_blocks", "free_blocks"), ("level", "level_v"), ("errors", "errors"),
-    ("decoded_codes", "decoded_codes"), ("transmitter", "transmitter"), ("joints", "joints"), ("relay", "relay"),
-    ("channel_code", "channel_codes"), ("foreign", "foreign"), ("target_distance", "target_distance_m"),
-    ("gradient", "gradient_permille"), ("word_carrier", "word_carrier_hz"),
-)
+        self.write_outputs(self.core.step(current_time, io["e_coil"], io["channel_fault"]))

@@ -111,8 +111,8 @@ class RailLine(FrameFacadeSlave):
             tone_band_hz=(p("tone_band_min"), p("tone_band_max")))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         core = RailLineCore(line, self.build.sections, self.build.trains, self.build.frame, settings)
-        # the core writes its outputs straight into the output ports
-        core.bind_outputs(RailOutputs(io["e_coil"], io["occupied"], io["i_axle"], io["off_line"], io["coil_section"]))
+        # the core writes its outputs straight into the output ports, each its declared core field
+        core.bind_outputs(RailOutputs(**{field: io[port] for port, field in self.output_fields}))
         self.require_frame_step(settings.fs_hz)
         # the trains' initial positions (the traction units publish x0 in initialisation mode):
         # trains on the line occupy their circuits from the first sample

@@ -32,19 +32,25 @@ class Traction(FacadeSlave):
                  description=">0 traction share, <0 brake share; outside −1..1 clamped and counted"),
             Port("emergency_brake", "input", "Boolean", start=False,
                  description="emergency brake applied (overrides command)"),
-            Port("x", "output", unit="m", description="head position along the line"),
-            Port("v", "output", unit="m/s", description="speed, never negative"),
-            Port("a", "output", unit="m/s2", description="acceleration"),
-            Port("force_traction", "output", unit="N", description="tractive effort at the wheels"),
-            Port("force_brake", "output", unit="N", description="electric + pneumatic"),
-            Port("i_traction", "output", unit="A", description="line current, positive drawn"),
-            Port("energy", "output", unit="J", description="net energy from the line (drawn − returned)"),
-            Port("energy_returned", "output", unit="J", description="energy returned to the line by regenerative braking"),
+            # outputs: each from the TractionOutputs field named (core_field; none: the port's name)
+            Port("x", "output", unit="m", core_field="x_m", description="head position along the line"),
+            Port("v", "output", unit="m/s", core_field="v_mps", description="speed, never negative"),
+            Port("a", "output", unit="m/s2", core_field="a_mps2", description="acceleration"),
+            Port("force_traction", "output", unit="N", core_field="force_traction_n",
+                 description="tractive effort at the wheels"),
+            Port("force_brake", "output", unit="N", core_field="force_brake_n", description="electric + pneumatic"),
+            Port("i_traction", "output", unit="A", core_field="i_traction_a",
+                 description="line current, positive drawn"),
+            Port("energy", "output", unit="J", core_field="energy_j",
+                 description="net energy from the line (drawn − returned)"),
+            Port("energy_returned", "output", unit="J", core_field="energy_returned_j",
+                 description="energy returned to the line by regenerative braking"),
             Port("notch", "output", "Integer", start=0, description="traction controller position; 0: no traction"),
             Port("brake_step", "output", "Integer", start=0, description="0 released … steps, steps+1 emergency"),
             Port("commands_clamped", "output", "Integer", start=0,
                  description="commands outside −1…1 received (each clamped)"),
-            Port("stop_time", "output", unit="s", description="when the train last stopped; −1 while moving"),
+            Port("stop_time", "output", unit="s", core_field="stop_time_s",
+                 description="when the train last stopped; −1 while moving"),
             Port("off_line", "output", "Boolean", start=False, description="head position outside the line"),
         ]
 
@@ -69,23 +75,11 @@ class Traction(FacadeSlave):
         self.io["v"][...] = self.param("v0")
 
     def publish_initial_outputs(self):
-        self._write(self.core._publish(0.0))
+        self.write_outputs(self.core._publish(0.0))
 
     def step_refusal(self, current_time, step_size):
         return self.core.step_refusal(step_size)
 
     def step_core(self, current_time, step_size):
         io = self.io
-        self._write(self.core.step(current_time, step_size, float(io["command"]), bool(io["emergency_brake"])))
-
-    def _write(self, out):
-        self.write_outputs(out, _OUTPUT_FIELDS)
-
-
-# output port ← TractionOutputs field
-_OUTPUT_FIELDS = (
-    ("x", "x_m"), ("v", "v_mps"), ("a", "a_mps2"), ("force_traction", "force_traction_n"),
-    ("force_brake", "force_brake_n"), ("i_traction", "i_traction_a"), ("energy", "energy_j"),
-    ("energy_returned", "energy_returned_j"), ("notch", "notch"), ("brake_step", "brake_step"),
-    ("commands_clamped", "commands_clamped"), ("stop_time", "stop_time_s"), ("off_line", "off_line"),
-)
+        self.write_outputs(self.core.step(current_time, step_size, float(io["command"]), bool(io["emergency_brake"])))

@@ -6,11 +6,11 @@ checked, and SSDs written from the committed contract manifests."""
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import fmus
+from fmus import ato_controller, loco_receiver, rail_line, traction, wayside_coder
 from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.analysis.system_checks import span_defects
 from orchestrator.ports import read_manifest
@@ -21,6 +21,11 @@ from orchestrator.sspgen import write_ssd as _write_ssd
 ALSU_BLOCK_ASPECTS = 4
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
+_UNITS = (wayside_coder, rail_line, loco_receiver, traction, ato_controller)
+#: each unit's FMU file, named by the model identifier its package declares (fmus/<unit>/__init__.py)
+CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, ATO_FMU = (f"{unit.MODEL_IDENTIFIER}.fmu" for unit in _UNITS)
+#: the folder of each railcosim unit (fmus/<unit>/) by its model identifier
+UNIT_OF_MODEL = {unit.MODEL_IDENTIFIER: unit.__name__.rpartition(".")[2] for unit in _UNITS}
 
 
 def committed_ports(folder: Path, source: str) -> Optional[Ports]:
@@ -28,10 +33,9 @@ def committed_ports(folder: Path, source: str) -> Optional[Ports]:
     against the built FMU by tests/test_build_and_contracts.py), found by the FMU's file name
     (``Traction.fmu`` → ``fmus/traction``), its arrays sized as the source's folder says
     (``k32m2n40/RailLine.fmu``: 32 sections); None for any other FMU."""
-    stem = Path(source).stem
-    unit = re.sub(r"(?<!^)(?=[A-Z])", "_", stem).lower()
-    manifest = Path(fmus.__file__).parent / unit / "contract.json"
-    if not stem or not manifest.is_file():
+    unit = UNIT_OF_MODEL.get(Path(source).stem)
+    manifest = Path(fmus.__file__).parent / str(unit) / "contract.json"
+    if unit is None or not manifest.is_file():
         return None
     ports = read_manifest(manifest)
     sizes = sizes_of_source(source)
@@ -100,8 +104,8 @@ def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict
                   step_s: Tuple[float, float] = (TRAIN_STEP_S, ATO_STEP_S)):
     """Components and connections of one train driven by its ATO (closed loop)."""
     components = [
-        ComponentSpec(train, f"{fmu_folder}/Traction.fmu", step_s[0], dict(train_parameters or {})),
-        ComponentSpec(ato, f"{fmu_folder}/AtoController.fmu", step_s[1], dict(ato_parameters or {})),
+        ComponentSpec(train, f"{fmu_folder}/{TRAIN_FMU}", step_s[0], dict(train_parameters or {})),
+        ComponentSpec(ato, f"{fmu_folder}/{ATO_FMU}", step_s[1], dict(ato_parameters or {})),
     ]
     connections: List[ConnectionSpec] = [
         ConnectionSpec(f"{train}.x", f"{ato}.x"),
@@ -136,8 +140,8 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     # where each train's wheelsets are (an empty file name: the bundled default stock's)
     lengths.update({f"rolling_stock_file[{j}]": str(stock) for j, stock in enumerate(stocks, start=1) if stock})
     components = [
-        ComponentSpec("coder", f"{fmu_folder}/WaysideCoder.fmu", step, dict(coder or {}), parameter_file),
-        ComponentSpec("rail", f"{fmu_folder}/RailLine.fmu", step, {**lengths, **(rail or {})}, parameter_file),
+        ComponentSpec("coder", f"{fmu_folder}/{CODER_FMU}", step, dict(coder or {}), parameter_file),
+        ComponentSpec("rail", f"{fmu_folder}/{RAIL_FMU}", step, {**lengths, **(rail or {})}, parameter_file),
     ]
     connections = [ConnectionSpec(f"coder.u_tx[{k},{n}]", f"rail.u_tx[{k},{n}]")
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
@@ -146,7 +150,7 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     tvm_chain = (receiver or {}).get("system") == "TVM430"
     for j, (train, ato) in enumerate(trains, start=1):
         rx = "rx" if len(trains) == 1 else f"rx{j}"
-        components.append(ComponentSpec(rx, f"{fmu_folder}/LocoReceiver.fmu", step, dict(receiver or {})))
+        components.append(ComponentSpec(rx, f"{fmu_folder}/{RECEIVER_FMU}", step, dict(receiver or {})))
         connections += [ConnectionSpec(f"rail.e_coil[{j},{n}]", f"{rx}.e_coil[{n}]") for n in range(1, frame + 1)]
         # linear: the train publishes its state at the end of its 0.5 s step; the rail line needs
         # the position at each 10 ms frame, not half a second ahead (the master interpolates)

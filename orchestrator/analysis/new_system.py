@@ -37,6 +37,7 @@ from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, TVM_TRANSMITTER, Line
 from fmus.errors import FmuInputError
 from fmus.signalling.cab_systems import DIGITAL
 from fmus.sizes import BuildConfig, sizes_of_source
+from orchestrator.analysis.chain import RAIL_FMU
 from orchestrator.analysis.system_checks import check_sections_contiguous, load_data_file
 from orchestrator.analysis.systems import (TVM430_BUILD, TVM430_FS_HZ, TVM430_STOCK, cab_settings,
                                            check_placements, committed_ports, signal_chain, train_and_ato)
@@ -72,7 +73,7 @@ class Sizes:
 def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
     """K, M, N of the rail line FMU in ``fmu_dir`` (``railcosim build --sections/--trains/
     --frame``), else of the committed contract (8, 2, 40)."""
-    ports = built_ports(fmu_dir, "RailLine.fmu")
+    ports = built_ports(fmu_dir, RAIL_FMU)
     k, n = ports["u_tx"]["shape"]
     return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
 

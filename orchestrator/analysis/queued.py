@@ -48,7 +48,9 @@ import numpy as np
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock
 from fmus.sizes import BuildConfig, DEFAULT_SAMPLE_RATE_HZ, sizes_of_source
 from fmus.units import MPS_PER_KMH
-from orchestrator.analysis.chain import signal_chain, train_and_ato, write_ssd
+from orchestrator.analysis.chain import (ATO_FMU, CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, signal_chain, train_and_ato,
+                                         write_ssd)
+from orchestrator.analysis.verdict import ATO_MODEL, TRAIN_MODEL
 from orchestrator.errors import UserError
 
 #: clear space between the tail of one queued train and the head of the next (m) [U]
@@ -70,8 +72,7 @@ SIDINGS_CLEARANCE_M = 20.0
 #: trains a trial may hold (the build sizes of the rail line, docs/architecture.md#build-sizes)
 MAX_TRAINS = 16
 #: the unit of each railcosim FMU, by its file name
-UNIT_OF_FMU = {"WaysideCoder.fmu": "coder", "RailLine.fmu": "rail", "LocoReceiver.fmu": "receiver",
-          "Traction.fmu": "train", "AtoController.fmu": "ato"}
+UNIT_OF_FMU = {CODER_FMU: "coder", RAIL_FMU: "rail", RECEIVER_FMU: "receiver", TRAIN_FMU: "train", ATO_FMU: "ato"}
 #: per-train parameters of the rail line (set for each train of a trial)
 _PER_TRAIN = ("train_length[", "rolling_stock_file[")
 
@@ -142,7 +143,7 @@ def read_base(system_path: Path) -> BaseSystem:
         if len(units.get(unit, [])) != 1:
             count = len(units.get(unit, []))
             raise UserError(f"system {name!r}: headway needs a system of one train to copy; it has {count} "
-                            f"{'Traction' if unit == 'train' else 'AtoController'} components"
+                            f"{TRAIN_MODEL if unit == 'train' else ATO_MODEL} components"
                             + (" (a system of several trains: give its single-train counterpart)" if count > 1 else ""))
     for unit in ("coder", "rail", "receiver"):
         if not units.get(unit):

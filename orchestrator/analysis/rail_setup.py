@@ -21,6 +21,7 @@ from fmus.rail_line.track_circuit import CircuitParameters
 from fmus.traction.core import TractionCore
 from orchestrator.errors import UserError
 from orchestrator.graph import resolve_data_file
+from orchestrator.ports import split_element
 from orchestrator.ssp import SystemDescription
 
 # rail-line parameters → CircuitParameters fields (docs/interfaces.md, RailLine)
@@ -121,8 +122,9 @@ def rail_setup(system: SystemDescription, time_s: float = 0.0, results: Optional
     # train slots: the components whose x feeds x_head[j]
     slots: Dict[int, str] = {}
     for connection in system.connections:
-        if connection.end_element == rail.name and connection.end_connector.startswith("x_head["):
-            slots[int(connection.end_connector[len("x_head["):-1])] = connection.start_element
+        port, index = split_element(connection.end_connector) or ("", ())
+        if connection.end_element == rail.name and port == "x_head" and len(index) == 1:
+            slots[index[0]] = connection.start_element
     heads = _heads_at(results / "results.csv", time_s, list(slots.values())) if results is not None else {}
     trains = []
     for slot, name in sorted(slots.items()):

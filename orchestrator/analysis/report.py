@@ -26,9 +26,10 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.analysis.verdict import safety_parts, safety_verdict, stop_cells
+from orchestrator.analysis.verdict import RECEIVER_MODEL, safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 from orchestrator.folders import create_file
+from orchestrator.ports import split_element
 
 ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
 ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
@@ -290,12 +291,11 @@ def restrictions_drawn(line, components, ato: Optional[str], events) -> List[tup
     category = params.get("train_category") or None
     drawn = [(r.start_m / 1000.0, r.end_m / 1000.0, r.speed_mps * 3.6, r.name or "restriction")
              for r in (line.restrictions_for(category) if category else line.restrictions)]
-    slots: Dict[str, dict] = {}
+    slots: Dict[Tuple[int, ...], dict] = {}
     for event in events:
-        variable = str(event.get("variable", ""))
-        if event.get("model") != ato or not variable.startswith("tsr_") or "[" not in variable:
+        name, slot = split_element(str(event.get("variable", ""))) or ("", ())
+        if event.get("model") != ato or not name.startswith("tsr_") or not slot:
             continue
-        name, slot = variable.split("[", 1)
         entry = slots.setdefault(slot, {"t": event.get("t", 0.0)})
         entry[name] = event.get("value") if event.get("action") == "set" else None
         if entry.get("tsr_start") is not None and entry.get("tsr_end") is not None and entry.get("tsr_speed"):
@@ -393,7 +393,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
                         "run wrote)")
     t = capture["time"]
     emf = capture[columns[0]]
-    receiver = next((n for n, c in components.items() if c.get("model_identifier") == "LocoReceiver"), None)
+    receiver = next((n for n, c in components.items() if c.get("model_identifier") == RECEIVER_MODEL), None)
     params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
     filtered = sosfilt(band.sos, emf) if band is not None else None

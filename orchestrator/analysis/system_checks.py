@@ -28,19 +28,21 @@ from typing import Callable, Dict, FrozenSet, Iterable, List, Optional, Tuple
 import numpy as np
 
 import fmus
+from fmus import traction
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
 from fmus.signalling import alsn, alsu, tvm430
 from orchestrator.errors import RefusedComponents, UserError, print_warning
 from orchestrator.graph import SystemGraph
+from orchestrator.ports import split_element
 
 #: a relative data file the graph did not resolve in the system is one of the FMU's own
 #: resources/, which mirror the source tree (resources/fmus/data/shipped/…)
 FMU_RESOURCES_ROOT = Path(fmus.__file__).resolve().parent.parent
 SECTION_GAP_TOLERANCE_M = 1e-6
 LENGTH_TOLERANCE_M = 0.5        # a rail line's train_length against the rolling-stock file's
-TRAIN_MODEL = "Traction"
+TRAIN_MODEL = traction.MODEL_IDENTIFIER
 
 
 def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> None:
@@ -154,7 +156,7 @@ def placement_problems(graph: SystemGraph, lines: Dict[str, Line], stocks: Dict[
                 f"(0..{line.length_m:g} m): {where}; place its head (x0) from {length_m:g} m to "
                 f"{line.length_m:g} m"), frozenset()))
     for rail, node in graph.nodes.items():
-        slots = sorted((int(e.target_var.name[len("x_head["):-1]), e.source) for e in graph.edges
+        slots = sorted((split_element(e.target_var.name)[1][0], e.source) for e in graph.edges
                        if e.target == rail and e.target_var.name.startswith("x_head[") and e.source in spans)
         for slot, train in slots:
             given = _parameter(node, f"train_length[{slot}]", None)

@@ -16,6 +16,7 @@ import numpy as np
 
 from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line,
                               load_rolling_stock, load_timetable)
+from fmus import ato_controller, loco_receiver, traction
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
 from fmus.loco_receiver import tvm430 as tvm430_receiver
@@ -29,10 +30,11 @@ from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.units import J_PER_KWH, KMH_PER_MPS
 from orchestrator.errors import print_warning
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
+from orchestrator.ports import element_name, split_element
 from orchestrator.protocols import MasterView, StepRecord, SummaryObserver
 
-TRAIN_MODEL = "Traction"
-ATO_MODEL = "AtoController"
+TRAIN_MODEL = traction.MODEL_IDENTIFIER
+ATO_MODEL = ato_controller.MODEL_IDENTIFIER
 TRAIN_OUTPUTS = ("energy", "x")
 ATO_OUTPUTS = ("stop_index", "arrival_time", "stop_error", "atp_aspect", "max_overspeed", "atp_interventions",
                "emergency_brakings", "vigilance_brakings", "signals_passed_at_danger", "departure_hold")
@@ -250,9 +252,11 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
 
     lengths = {}
     for edge in graph.edges:
-        if edge.source_var.name == "x" and edge.target_var.name.startswith("x_head["):
-            slot = edge.target_var.name[len("x_head"):]
-            lengths[edge.source] = float(_parameter(graph, edge.target, f"train_length{slot}", 0.0))
+        if edge.source_var.name != "x":
+            continue
+        port, slot = split_element(edge.target_var.name) or ("", ())
+        if port == "x_head" and slot:
+            lengths[edge.source] = float(_parameter(graph, edge.target, element_name("train_length", slot), 0.0))
     for name in graph.order:
         if graph.nodes[name].interface.model_identifier == TRAIN_MODEL:
             try:
@@ -376,7 +380,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 
 
 # ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
-RECEIVER_MODEL = "LocoReceiver"
+RECEIVER_MODEL = loco_receiver.MODEL_IDENTIFIER
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
 TVM430_OUTPUTS = ("target_distance", "gradient")
 SPEED_TOLERANCE_KMH = 0.5
@@ -447,7 +451,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         if feed is None:
             continue
         rail = feed.source
-        slot = int(feed.source_var.name.split("[")[1].split(",")[0])
+        slot = split_element(feed.source_var.name)[1][0]
         train = next((e.source for e in graph.edges if e.target == rail and e.target_var.name == f"x_head[{slot}]"), None)
         coder = next((e.source for e in graph.edges if e.target == rail and e.target_var.name.startswith("u_tx[")), None)
         if train is None or coder is None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from orchestrator.conformance.judges import JUDGES
 from orchestrator.errors import UserError
+from orchestrator.ports import base_of
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
 FORMAT = 1
@@ -110,10 +111,6 @@ def _check_vector(path: Path, where: str, vector: Any, have_arrays: bool) -> Non
             _require(key in check, path, f"{at}.{key}", "missing")
 
 
-def _base(port: str) -> str:
-    return port.split("[", 1)[0]
-
-
 def _check_ports(path: Path, where: str, vector: Mapping, required: List[str]) -> None:
     """Every port a vector uses is one of the role's required ports, so that a target lacking
     it is refused before anything runs."""
@@ -122,7 +119,7 @@ def _check_ports(path: Path, where: str, vector: Mapping, required: List[str]) -
     used = [*vector.get("parameters", {}), *vector.get("inputs", {}), *vector.get("record_frames", [])]
     used += [p for check in vector["checks"] for p in ports_of(check) if not p.startswith("plant.")]
     used += [check["port"] for check in vector["checks"] if check["kind"] in FRAME_KINDS]
-    missing = sorted({_base(p) for p in used} - set(required))
+    missing = sorted({base_of(p) for p in used} - set(required))
     _require(not missing, path, f"{where}", f"uses ports not in required_ports: {', '.join(missing)}")
 
 

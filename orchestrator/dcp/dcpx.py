@@ -10,7 +10,6 @@ travels as one entry of a DAT payload and is configured with one CFG_input/CFG_o
 """
 from __future__ import annotations
 
-import re
 import uuid as uuidlib
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -21,6 +20,7 @@ from lxml import etree
 
 from orchestrator.dcp.pdu import DCP_MAJOR_VERSION, DCP_MINOR_VERSION, UDP_MAX_PDU_SIZE, DataType, OpMode
 from orchestrator.errors import UserError
+from orchestrator.ports import split_element
 
 SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
 _SCHEMA: Optional[etree.XMLSchema] = None
@@ -38,6 +38,8 @@ FMI_TO_DCP: Dict[str, DataType] = {"Real": DataType.float64, "Integer": DataType
                                     "String": DataType.string}
 _CAUSALITIES = ("Input", "Output", "Parameter", "StructuralParameter")
 UINT32_MAX = 0xFFFFFFFF
+#: where a variable's fail-safe value is annotated (as in the FMU's modelDescription)
+_FAIL_SAFE = "Annotations/Tool[@name='railcosim']/FailSafe"
 #: ticks of 1 ns per second: the orchestrator's own clock counts integer nanoseconds
 NS_PER_SECOND = 1_000_000_000
 #: the step assumed for an FMU that declares none (its DefaultExperiment has no stepSize)
@@ -62,6 +64,9 @@ class DcpVariable:
     max_consec_missed_pdus: Optional[int] = None
     #: FMI variable names of the elements (row-major) when the description comes from an FMU
     fmi_names: Tuple[str, ...] = ()
+    #: a scalar output: what a master shows in its place while it is lost (our annotation
+    #: ``<Annotations><Tool name="railcosim"><FailSafe value="…"/>``, the FMU's own; docs/hil.md)
+    fail_safe: Optional[float] = None
 
     @property
     def count(self) -> int:
@@ -291,6 +296,13 @@ def _parse(root) -> SlaveDescription:
             start=_start_values(data_type, typed.get("start")),
             variability=node.get("variability", "continuous"), description=node.get("description"),
             max_consec_missed_pdus=_opt_int(node.get("maxConsecMissedPdus")))
+        fail_safe = node.find(_FAIL_SAFE)
+        if fail_safe is not None:
+            try:
+                var.fail_safe = float(fail_safe.get("value"))
+            except (TypeError, ValueError):
+                raise ValueError(f"variable {var.name!r}: fail-safe value {fail_safe.get('value')!r} is not a "
+                                 "number") from None
         if kind.tag == "Output":
             var.default_steps = int(kind.get("defaultSteps", "1"))
             var.fixed_steps = _bool(kind.get("fixedSteps"), True)
@@ -390,6 +402,10 @@ def to_xml(desc: SlaveDescription) -> etree._Element:
                 kind.set("minSteps", str(var.min_steps))
             if var.max_steps is not None:
                 kind.set("maxSteps", str(var.max_steps))
+        if var.fail_safe is not None:
+            tool = etree.SubElement(etree.SubElement(node, "Annotations"), "Tool", name="railcosim")
+            real = var.data_type in (DataType.float32, DataType.float64)
+            etree.SubElement(tool, "FailSafe", value=_fmt(float(var.fail_safe) if real else int(var.fail_safe)))
     return root
 
 
@@ -403,9 +419,6 @@ def write_dcpx(desc: SlaveDescription, path) -> None:
 
 
 # ---- an FMU as a DCP slave ---------------------------------------------------------------------
-
-_INDEXED = re.compile(r"^(?P<base>[^\[]+)\[(?P<index>[0-9]+(?:,[0-9]+)*)\]$")
-
 
 def slave_uuid(fmu_guid: str) -> uuidlib.UUID:
     """The DCP uuid of the slave serving an FMU: its GUID when that is a UUID (pythonfmu's
@@ -434,9 +447,7 @@ def _fmu_arrays(interface) -> Dict[str, list]:
     for fmi_var in interface.variables.values():
         if fmi_var.causality not in ("input", "output", "parameter") or fmi_var.type not in FMI_TO_DCP:
             continue
-        match = _INDEXED.match(fmi_var.name)
-        base, index = (match.group("base"), tuple(int(i) for i in match.group("index").split(","))) \
-            if match else (fmi_var.name, ())
+        base, index = split_element(fmi_var.name) or (fmi_var.name, ())
         groups.setdefault(base, []).append((index, fmi_var))
     for members in groups.values():
         members.sort(key=lambda m: m[0])
@@ -490,7 +501,8 @@ def description_from_fmu(interface, host: str = "127.0.0.1", port: Optional[int]
         variability = first.variability if first.variability in ("fixed", "tunable", "discrete") else "continuous"
         var = DcpVariable(name=base, vr=first.vr, causality=first.causality, data_type=data_type, dims=dims,
                           start=starts, variability=variability,
-                          fmi_names=tuple(m[1].name for m in members))
+                          fmi_names=tuple(m[1].name for m in members),
+                          fail_safe=None if dims else interface.fail_safe.get(base))
         if first.causality == "output":     # steps in the recommended resolution: one FMU step
             var.default_steps, var.fixed_steps, var.min_steps, var.max_steps = 1, False, 1, UINT32_MAX
         variables.append(var)

@@ -20,8 +20,8 @@ Loss: outputs that do not arrive are *lost* — in non-real-time mode, those not
 ``deadline_ms`` after the slave announced it sent them (RUNNING after STC_send_outputs); in soft
 real time, when the newest outputs arrived more than ``deadline_ms`` before the step that needs
 them (arrival times from the kernel's receive timestamps where it gives them). The component's
-outputs then go to their fail-safe values at once (:data:`FAIL_SAFE`; never a permissive value
-held past the deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are
+outputs then go to their fail-safe values at once (the component's, ``Interface.fail_safe``: the
+FMU declares them, docs/hil.md; never a permissive value held past the deadline), counted in summary.json ``hil``. Outputs arriving out of sequence are
 counted as *late* and dropped. A slave that does not answer a control request within
 ``timeout_s`` ends the run with one line naming it (results so far kept, exit 2).
 """
@@ -46,6 +46,7 @@ from orchestrator.dcp.pdu import (UDP_MAX_PDU_SIZE, DataType, OpMode, PayloadCod
 from orchestrator.errors import SimulationError, UserError
 from orchestrator.fmu import Interface, ValueBuffer, make_buffers
 from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.ports import element_names, split_element
 from orchestrator.protocols import Slave
 
 P = PduType
@@ -65,15 +66,6 @@ DEFAULT_TIMEOUT_S = 2.0
 #: [U] the longest a slave may take to reach the state a set-up request leads to once it has
 #: acknowledged it (a model's initialisation: the ATO plans its whole trajectory there)
 SETTLE_S = 120.0
-
-#: fail-safe output values by model identifier (docs/interfaces.md: the receiver's no-code
-#: indication, the ATO's emergency brake); an output not listed keeps its last value (diagnostics)
-FAIL_SAFE: Dict[str, Dict[str, float]] = {
-    "LocoReceiver": {"aspect": 0.0, "code": 0.0, "code_valid": 0.0, "v_permitted": 0.0, "v_target": 0.0,
-                     "free_blocks": 0.0, "relay": 0.0},
-    "AtoController": {"emergency_brake": 1.0, "command": -1.0, "mode": 5.0, "atp_intervention": 2.0},
-}
-
 
 # ---- where the slave is ------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -374,7 +366,9 @@ class RemoteDcpSlave(Slave):
         (``e_coil[3]`` → element 3 of ``e_coil``, row-major); one payload entry per variable."""
         self.inputs, self.outputs = make_buffers(dict(inputs)), make_buffers(dict(outputs))
         by_vr = {var.vr: var for var in self.interface.variables.values()}
-        fail_safe = FAIL_SAFE.get(self.interface.model_identifier, {})
+        # the component's own fail-safe values (its FMU's, or its .dcpx's); an output without
+        # one keeps its last value (counters, diagnostics)
+        fail_safe = self.interface.fail_safe
         for direction, buffers, causality in (("in", self.inputs, "input"), ("out", self.outputs, "output")):
             entries: Dict[str, int] = {}
             remotes: List[DcpVariable] = []
@@ -399,13 +393,12 @@ class RemoteDcpSlave(Slave):
 
     def _remote(self, name: str, causality: str) -> Tuple[DcpVariable, int]:
         remote, element = self.description.by_name(name), 0
-        if remote is None and name.endswith("]") and "[" in name:
-            base, _, index = name[:-1].partition("[")
+        base, index = split_element(name) or (name, ())
+        if remote is None and index:
             remote = self.description.by_name(base)
             if remote is not None and remote.dims:
                 try:
-                    position = tuple(int(i) - 1 for i in index.split(","))
-                    element = int(np.ravel_multi_index(position, remote.dims))
+                    element = int(np.ravel_multi_index(tuple(i - 1 for i in index), remote.dims))
                 except ValueError:
                     remote = None
         if remote is None or remote.causality != causality:
@@ -677,10 +670,11 @@ def dcpx_interface(path: Path) -> Interface:
     from orchestrator.fmu import Variable
 
     description = read_description(path)
-    variables = {}
+    variables, fail_safe = {}, {}
     for variable in description.variables:
-        names = [variable.name] if not variable.dims else \
-            [f"{variable.name}[{','.join(str(i + 1) for i in index)}]" for index in np.ndindex(*variable.dims)]
+        names = element_names(variable.name, variable.dims)
+        if variable.fail_safe is not None and not variable.dims:
+            fail_safe[variable.name] = variable.fail_safe
         fmi_type = _FMI_TYPES.get(variable.data_type.name, "Integer")
         for name in names:
             # value references of their own: an array's elements share the slave's one
@@ -689,7 +683,7 @@ def dcpx_interface(path: Path) -> Interface:
                                        "fixed" if parameter else "discrete" if fmi_type != "Real" else "continuous",
                                        None, None)
     return Interface(description.name or Path(path).stem, variables, {}, None, str(description.uuid),
-                     "DCP slave", None)
+                     "DCP slave", None, fail_safe=fail_safe)
 
 
 def component_interface(source: str) -> Interface:
