@@ -19,6 +19,10 @@ Directives (each ``name`` or ``name: value``):
   OPTIONS`` to the commands whose program or script is NAME (``add to bench_ato.py: --repeats 1``);
 * ``setup: COMMAND`` — a shell command run before the block (what a reader has already made);
 * ``timeout: S`` — seconds the block may take (default 600);
+* ``full: REASON`` — a long block (whole systems in full): run, with the output or verdict
+  table that checks it, only when ``RAILCOSIM_DOCS_FULL=1`` is set (``FULL_RUNS``); the default
+  suite skips both and prints REASON, so that it stays within its time (the command that runs
+  them: docs/architecture.md#docs-that-run-teststest_docs_runpy);
 * ``output`` — the block is what the command block above it prints: compared line by line;
 * ``tolerance: 0.5 s, 0.01 m`` — a figure with that unit may differ from the run's by that
   much (figures of other units: as printed);
@@ -37,12 +41,15 @@ checked as a synopsis and run without them.
 """
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 ROOT = Path(__file__).resolve().parent.parent
+#: whether the blocks annotated ``full`` run (and the checks of their results)
+FULL_RUNS = os.environ.get("RAILCOSIM_DOCS_FULL", "") == "1"
 ANNOTATION = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<body>.*?)\s*-->\s*$")
 COMMAND_WORDS = ("railcosim", "python", "python3", "pip", "cmp", "cd", "mkdir", "cp", "ls", "for", "do", "done",
                  "dask", "export", "echo", "ngspice", "PYTHONPATH=")

@@ -249,9 +249,17 @@ def _run_page(page: Path, folder: Path) -> List[str]:
     problems: List[str] = []
     last_output: List[str] = []
     timings = []
+    unchecked = False      # after a ``full`` block not run: its output and verdict table too
     for block in (b for b in BLOCKS if b.page == page):
         d = block.directives
         timeout_s = float(d.get("timeout", docs.DEFAULT_TIMEOUT_S))
+        if block.kind in ("shell", "python", "transcript"):
+            unchecked = "full" in d and not docs.FULL_RUNS
+            if unchecked:
+                timings.append(f"{block.where}: not run (RAILCOSIM_DOCS_FULL=1 runs it): {d['full']}")
+                continue
+        elif unchecked and block.kind in ("output", "verdict table"):
+            continue
         if "setup" in d and block.kind in RUN_KINDS + CHECK_KINDS:
             done = _shell(d["setup"], folder, env, timeout_s)
             if done["code"] != 0:

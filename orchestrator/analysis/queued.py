@@ -270,8 +270,8 @@ class TrialPlan:
         return line
 
     def _with_holding_tracks(self, line: dict) -> dict:
-        """The base line shifted by ``offset_m``, the holding circuits laid before it (level,
-        straight, ``HOLDING_KMH``), each a copy of the base line's first circuit."""
+        """The base line shifted by ``offset_m``, the holding circuits laid before it (straight,
+        on the line's first grade, ``HOLDING_KMH``), each a copy of the base line's first circuit."""
         offset = self.offset_m
         for key, fields in _POSITIONS.items():
             for item in line.get(key, []):
@@ -292,7 +292,8 @@ class TrialPlan:
         if any("high_speed_kmh" in item for item in line["speed_limits"]):
             limit["high_speed_kmh"] = HOLDING_KMH
         line["speed_limits"] = [{"start_m": 0, **limit}] + line["speed_limits"]
-        line["gradients"] = [{"start_m": 0, "permille": 0.0}] + line["gradients"]
+        # the holding tracks lie on the grade the line starts with (one entry: no repeated grade)
+        min(line["gradients"], key=lambda g: g["start_m"])["start_m"] = 0
         return line
 
     def timetable(self, slot: TrainSlot, shift_s: float) -> dict:
