@@ -48,6 +48,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from orchestrator.errors import UserError
+from orchestrator.folders import replace_file
 from orchestrator.analysis import queued
 from orchestrator.headway import blocking, trials
 from orchestrator.headway.blocking import BlockingTime, Trajectory
@@ -251,5 +252,6 @@ def capacity(system_path: Path, fmu_dirs: Sequence[Path], output_dir: Path, wind
     out = {"system": trains[0].base.name, "cab_signal": trains[0].base.cab_system}
     out.update(consumption(stairways, [t.train for t in trains], [t.departure_s for t in trains], window_s))
     out["stairways"] = {t.train: [b.as_dict() for b in steps] for t, steps in zip(trains, stairways)}
-    (output_dir / "capacity.json").write_text(json.dumps(out, indent=1, ensure_ascii=False) + "\n")
+    replace_file(output_dir / "capacity.json", json.dumps(out, indent=1, ensure_ascii=False) + "\n")
     return out
+
