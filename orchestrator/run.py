@@ -24,7 +24,7 @@ from orchestrator import interrupts
 from orchestrator.errors import UserError, print_warning, shown_paths
 from orchestrator.folders import FolderLock, refuse_link, replace_file
 from orchestrator.fmu import extractions_kept, make_slave, new_workdir, remove_workdir
-from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
+from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.dcp.pdu import OpMode
 from orchestrator.dcp.master import (DcpTarget, RemoteDcpSlave, component_interface,
@@ -41,9 +41,6 @@ from orchestrator.ssp import SystemDescription, load_parameter_set, open_system
 
 DEFAULT_OUTPUT_INTERVAL_S = 0.1
 DEFAULT_SCENARIO = "scenario.json"           # a shipped system's own timed events
-#: the longest time a run may name (--stop-time, --output-interval): 11.6 days of simulated
-#: time; integer-nanosecond sample instants of the longest frames stay within 64 bits
-MAX_TIME_S = 1e6
 
 
 @dataclass
