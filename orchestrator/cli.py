@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, print_warning
 from orchestrator.interrupts import Interrupted
 
 # A checkout (the README's editable install) runs its committed ssp/ and builds into its own
@@ -186,14 +186,13 @@ def _run_options(args, overrides: dict, **more):
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
-    options = RunOptions(
+    # the railway checks' warnings (a rail line's train length) go where the run's own go: stderr
+    return RunOptions(
         stop_time=args.stop_time, overrides=overrides, param_sets=args.param_set or [],
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
-        scenario=args.scenario, default_scenario=not args.no_scenario, **more)
-    # the railway checks' warnings (a rail line's train length) go where the run's own go
-    options.summaries = partial(railway_verdicts, warn=options.warn)
-    return options
+        scenario=args.scenario, default_scenario=not args.no_scenario,
+        summaries=partial(railway_verdicts, warn=print_warning), **more)
 
 
 def _run_command(args) -> int:
@@ -272,13 +271,13 @@ def cmd_inspect(args) -> int:
             var = by_base[label.partition("[")[0]][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
-    from orchestrator.dcp.master import component_interface
+    from orchestrator.components import interface_of
     from orchestrator.graph import TICKS_PER_SECOND, build_graph
     from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
-        graph = build_graph(system, interface_of=component_interface)
+        graph = build_graph(system, interface_of=interface_of)
         print(f"{system.name}: base step {graph.base_ticks / TICKS_PER_SECOND:g} s, "
               f"order {' → '.join(graph.order)}")
         for name, node in graph.nodes.items():
