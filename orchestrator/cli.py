@@ -30,8 +30,6 @@ DEFAULT_SYSTEM = "free_run"
 #: build sizes the CLI accepts (fmus/sizes.py has no limit of its own): a frame of 4096 samples
 #: is 1 s at 4 kHz, and every FMU holds K×M×N-sized arrays, so larger sizes only build for ages
 MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
-#: the units whose arrays the build sizes shape (the others are the same at every size)
-SIZED_UNITS = ("wayside_coder", "rail_line", "loco_receiver")
 #: the largest local Dask cluster `study --workers` makes: each worker is a Python process of its
 #: own with its FMUs loaded (about 0.1 GB), and runs are CPU-bound, so beyond this on one machine
 #: a study only thrashes; a larger cluster is a --scheduler of its own
@@ -366,12 +364,9 @@ def cmd_study(args) -> int:
             build_sized_for(_build_dir(), [system.parent if system.is_file() else system])
         check_against_system(spec, system, [_build_dir()])
     if spec.data.get("build_sizes") and not args.no_build:     # what a function study's runs name
-        from fmus.sizes import BuildConfig
-        from orchestrator.packaging.builder import build_all
+        from orchestrator.packaging.builder import build_sizes
 
-        for size in spec.data["build_sizes"]:
-            config = BuildConfig(size["sections"], size["trains"], size["frame"])
-            build_all(_build_dir() / config.folder_name, config, units=SIZED_UNITS)
+        build_sizes(_build_dir(), spec.data["build_sizes"])
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:
         from orchestrator.study.runner import import_function
@@ -386,14 +381,10 @@ def cmd_study(args) -> int:
     result = run_study(spec, output, system, [_build_dir().resolve()], workers=args.workers,
                        scheduler=args.scheduler, resume=args.resume, progress=sys.stderr,
                        python_path=python_path)
-    counts = result.counts
-    print(f"study {spec.name}: {counts['runs']} run(s) of {counts['points']} point(s): {counts['ok']} ok, "
-          f"{counts['failed']} failed, {counts['timeout']} timed out, {counts['lost']} lost"
-          + (f" ({result.skipped} done before)" if result.skipped else "") + f"; results in {result.output}")
-    for record in result.records:
-        if record["status"] != "ok":
-            print(f"  {record['id']} {record['status']}: {record['error']}")
-    return 0 if counts["ok"] == counts["runs"] else 1
+    from orchestrator.study.report import outcome_lines
+
+    print("\n".join(outcome_lines(spec.name, result)))
+    return 0 if result.counts["ok"] == result.counts["runs"] else 1
 
 
 def cmd_headway(args) -> int:
@@ -425,15 +416,14 @@ def cmd_headway(args) -> int:
     else:
         from orchestrator.headway.report import text_lines
 
-        print("\n".join(text_lines(document)))
-        print(f"results in {output} (headway.json, stairway.png, report.html)")
+        print("\n".join([*text_lines(document), f"results in {output} (headway.json, stairway.png, report.html)"]))
     return 0
 
 
 def cmd_capacity(args) -> int:
     """``railcosim capacity SYSTEM``: UIC 406 capacity consumption of a multi-train system by
     compressing its trains' blocking-time stairways (docs/capacity.md#compression)."""
-    from orchestrator.headway.capacity import capacity
+    from orchestrator.headway.capacity import capacity, text_lines
 
     system = _system_path(args.system).resolve()
     output = Path(args.output) if args.output else Path("results") / f"capacity_{system.name}"
@@ -444,15 +434,8 @@ def cmd_capacity(args) -> int:
     result = capacity(system, [_build_dir().resolve()], output)
     if args.format == "json":
         print(json.dumps({k: v for k, v in result.items() if k != "stairways"}, indent=1, ensure_ascii=False))
-        return 0
-    critical = result["critical_section"]
-    print(f"capacity of {result['system']} ({result['cab_signal']}), {len(result['trains'])} trains: "
-          f"{100 * result['consumption_line']:.1f} % of {result['window_s']:.0f} s "
-          f"({result['compressed_s']:.0f} s compressed); critical section {critical['name']}")
-    for section in result["sections"]:
-        print(f"  {section['name']:>6} {section['entry_m']:8.0f}-{section['exit_m']:<8.0f} m "
-              f"{section['occupied_s']:7.1f} s  {100 * section['consumption']:5.1f} %")
-    print(f"results in {output} (capacity.json)")
+    else:
+        print("\n".join([*text_lines(result), f"results in {output} (capacity.json)"]))
     return 0
 
 

@@ -312,6 +312,20 @@ def build_sized_for(dest: Path, system_folders: Iterable[Path], force: bool = Fa
     return results
 
 
+#: the units whose arrays the build sizes shape (the others are the same at every size)
+SIZED_UNITS = ("wayside_coder", "rail_line", "loco_receiver")
+
+
+def build_sizes(dest: Path, sizes: Iterable[dict]) -> List[BuildResult]:
+    """The sized units built at each of ``sizes`` (``{"sections", "trains", "frame"}``: a function
+    study's ``build_sizes``, docs/studies.md), each size into its folder of ``dest``."""
+    results = []
+    for size in sizes:
+        config = BuildConfig(size["sections"], size["trains"], size["frame"])
+        results += build_all(dest / config.folder_name, config, units=SIZED_UNITS)
+    return results
+
+
 def default_build_dir(repo_root: Optional[Path] = None) -> Path:
     root = repo_root if repo_root is not None else FMUS_ROOT.parent
     return root / "build" / "fmus"
