@@ -24,7 +24,7 @@ observer's work are timed per tick, and their medians printed for the ticks of t
 periodic causes (the slow components' step; a results row with the verdicts' checks) and for
 the rest.
 
---gc-frozen-off runs without what `railcosim run` does around stepping (orchestrator/run.py:
+--gc-frozen-off runs without what `railcosim run` does around stepping (orchestrator/process_policy.py:
 the garbage collector frozen and off while the master steps), to compare. --real-time S
 also runs S simulated seconds paced at real time (`railcosim run --real-time`) in process and
 prints the pacer's count of late ticks per minute and the worst lateness. --floor S paces S
@@ -54,11 +54,11 @@ from fmus.rail_line import circuit_bank, network_models, relays  # noqa: E402
 from fmus.rail_line import parking as parking_module  # noqa: E402
 from fmus.sizes import BuildConfig  # noqa: E402
 from orchestrator import master as master_module  # noqa: E402
-from orchestrator import run as run_module  # noqa: E402
 from orchestrator.analysis.verdict import railway_verdicts  # noqa: E402
 from orchestrator.graph import TICKS_PER_SECOND  # noqa: E402
 from orchestrator.pacing import Pacer  # noqa: E402
 from orchestrator.packaging.builder import build_all  # noqa: E402
+from orchestrator.process_policy import ProcessPolicy  # noqa: E402
 from orchestrator.run import RunOptions, run_system  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
@@ -220,18 +220,15 @@ class Events:
         return found
 
 
-def _set_gc_frozen(enabled: bool) -> None:
-    """Turn the run's freezing of the collector around stepping on or off (for comparison)."""
-    run_module.FREEZE_GC_WHILE_STEPPING = enabled
-
-
-def measure(system: Path, fmus: Path, stop_time: float, in_process: bool) -> dict:
+def measure(system: Path, fmus: Path, stop_time: float, in_process: bool, collector_off: bool = True) -> dict:
+    """``collector_off`` False: without the run's freezing of the collector around stepping
+    (for comparison)."""
     ticks = round(stop_time / TICK_S)
     clock = TickClock(ticks)
     with tempfile.TemporaryDirectory() as folder, Events(clock) as events:
         options = RunOptions(summaries=railway_verdicts, stop_time=stop_time, output_dir=Path(folder),
                              in_process=in_process, fmu_dirs=[fmus], record=["train.x", "train.v", "rx.aspect"],
-                             manipulators=[clock])
+                             manipulators=[clock], process=ProcessPolicy(collector_off=collector_off))
         summary = run_system(system, options).summary
         stamps = clock.stamps[:clock.index].copy()
         cpu_us = np.diff(clock.cpu[:clock.index]) / 1e3
@@ -365,11 +362,7 @@ def main(argv=None) -> None:
         system = sample_by_sample_system(Path(folder), fmus)
         for in_process in ([True, False] if args.fmi else [True]):
             for frozen in variants:
-                _set_gc_frozen(frozen)
-                try:
-                    result = measure(system, fmus, args.stop_time, in_process)
-                finally:
-                    _set_gc_frozen(True)
+                result = measure(system, fmus, args.stop_time, in_process, collector_off=frozen)
                 where = "in process" if in_process else "through FMI"
                 report(f"{where}{'' if frozen else ', collector not frozen'}", result, args.stop_time)
                 if median_tick_us is None:

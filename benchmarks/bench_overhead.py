@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from _systems import build_test_fmus, trivial_system
-import orchestrator.run
+import orchestrator.components
 from orchestrator.fmu import make_buffers
 from orchestrator.analysis.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
@@ -46,12 +46,12 @@ class NullSlave:
 
 
 def run_null(folder: Path) -> float:
-    real = orchestrator.run.make_slave
-    orchestrator.run.make_slave = lambda name, *a: NullSlave(name)
+    real = orchestrator.components.make_slave
+    orchestrator.components.make_slave = lambda name, *a: NullSlave(name)
     try:
         return run_master(folder, in_process=False)
     finally:
-        orchestrator.run.make_slave = real
+        orchestrator.components.make_slave = real
 
 
 def run_master(folder: Path, in_process: bool) -> float:

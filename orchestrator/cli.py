@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, print_warning
 from orchestrator.interrupts import Interrupted
 
 # A checkout (the README's editable install) runs its committed ssp/ and builds into its own
@@ -30,8 +30,6 @@ DEFAULT_SYSTEM = "free_run"
 #: build sizes the CLI accepts (fmus/sizes.py has no limit of its own): a frame of 4096 samples
 #: is 1 s at 4 kHz, and every FMU holds K×M×N-sized arrays, so larger sizes only build for ages
 MAX_SECTIONS, MAX_TRAINS, MAX_FRAME = 64, 16, 4096
-#: the units whose arrays the build sizes shape (the others are the same at every size)
-SIZED_UNITS = ("wayside_coder", "rail_line", "loco_receiver")
 #: the largest local Dask cluster `study --workers` makes: each worker is a Python process of its
 #: own with its FMUs loaded (about 0.1 GB), and runs are CPU-bound, so beyond this on one machine
 #: a study only thrashes; a larger cluster is a --scheduler of its own
@@ -186,14 +184,13 @@ def _run_options(args, overrides: dict, **more):
     from orchestrator.analysis.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
-    options = RunOptions(
+    # the railway checks' warnings (a rail line's train length) go where the run's own go: stderr
+    return RunOptions(
         stop_time=args.stop_time, overrides=overrides, param_sets=args.param_set or [],
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
-        scenario=args.scenario, default_scenario=not args.no_scenario, **more)
-    # the railway checks' warnings (a rail line's train length) go where the run's own go
-    options.summaries = partial(railway_verdicts, warn=options.warn)
-    return options
+        scenario=args.scenario, default_scenario=not args.no_scenario,
+        summaries=partial(railway_verdicts, warn=print_warning), **more)
 
 
 def _run_command(args) -> int:
@@ -274,13 +271,13 @@ def cmd_inspect(args) -> int:
             var = by_base[base_of(label)][0]
             print(f"  {label:28s} {var.causality:9s} {var.type:8s} {var.unit or '':6s} start={var.start}")
         return 0
-    from orchestrator.dcp.master import component_interface
+    from orchestrator.components import interface_of
     from orchestrator.graph import TICKS_PER_SECOND, build_graph
     from orchestrator.ssp import open_system
 
     system = open_system(_system_path(args.target), [_build_dir()])
     try:
-        graph = build_graph(system, interface_of=component_interface)
+        graph = build_graph(system, interface_of=interface_of)
         print(f"{system.name}: base step {graph.base_ticks / TICKS_PER_SECOND:g} s, "
               f"order {' → '.join(graph.order)}")
         for name, node in graph.nodes.items():
@@ -369,12 +366,9 @@ def cmd_study(args) -> int:
             build_sized_for(_build_dir(), [system.parent if system.is_file() else system])
         check_against_system(spec, system, [_build_dir()])
     if spec.data.get("build_sizes") and not args.no_build:     # what a function study's runs name
-        from fmus.sizes import BuildConfig
-        from orchestrator.packaging.builder import build_all
+        from orchestrator.packaging.builder import build_sizes
 
-        for size in spec.data["build_sizes"]:
-            config = BuildConfig(size["sections"], size["trains"], size["frame"])
-            build_all(_build_dir() / config.folder_name, config, units=SIZED_UNITS)
+        build_sizes(_build_dir(), spec.data["build_sizes"])
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:
         from orchestrator.study.runner import import_function
@@ -389,14 +383,10 @@ def cmd_study(args) -> int:
     result = run_study(spec, output, system, [_build_dir().resolve()], workers=args.workers,
                        scheduler=args.scheduler, resume=args.resume, progress=sys.stderr,
                        python_path=python_path)
-    counts = result.counts
-    print(f"study {spec.name}: {counts['runs']} run(s) of {counts['points']} point(s): {counts['ok']} ok, "
-          f"{counts['failed']} failed, {counts['timeout']} timed out, {counts['lost']} lost"
-          + (f" ({result.skipped} done before)" if result.skipped else "") + f"; results in {result.output}")
-    for record in result.records:
-        if record["status"] != "ok":
-            print(f"  {record['id']} {record['status']}: {record['error']}")
-    return 0 if counts["ok"] == counts["runs"] else 1
+    from orchestrator.study.report import outcome_lines
+
+    print("\n".join(outcome_lines(spec.name, result)))
+    return 0 if result.counts["ok"] == result.counts["runs"] else 1
 
 
 def cmd_headway(args) -> int:
@@ -428,15 +418,14 @@ def cmd_headway(args) -> int:
     else:
         from orchestrator.headway.report import text_lines
 
-        print("\n".join(text_lines(document)))
-        print(f"results in {output} (headway.json, stairway.png, report.html)")
+        print("\n".join([*text_lines(document), f"results in {output} (headway.json, stairway.png, report.html)"]))
     return 0
 
 
 def cmd_capacity(args) -> int:
     """``railcosim capacity SYSTEM``: UIC 406 capacity consumption of a multi-train system by
     compressing its trains' blocking-time stairways (docs/capacity.md#compression)."""
-    from orchestrator.headway.capacity import capacity
+    from orchestrator.headway.capacity import capacity, text_lines
 
     system = _system_path(args.system).resolve()
     output = Path(args.output) if args.output else Path("results") / f"capacity_{system.name}"
@@ -447,15 +436,8 @@ def cmd_capacity(args) -> int:
     result = capacity(system, [_build_dir().resolve()], output)
     if args.format == "json":
         print(json.dumps({k: v for k, v in result.items() if k != "stairways"}, indent=1, ensure_ascii=False))
-        return 0
-    critical = result["critical_section"]
-    print(f"capacity of {result['system']} ({result['cab_signal']}), {len(result['trains'])} trains: "
-          f"{100 * result['consumption_line']:.1f} % of {result['window_s']:.0f} s "
-          f"({result['compressed_s']:.0f} s compressed); critical section {critical['name']}")
-    for section in result["sections"]:
-        print(f"  {section['name']:>6} {section['entry_m']:8.0f}-{section['exit_m']:<8.0f} m "
-              f"{section['occupied_s']:7.1f} s  {100 * section['consumption']:5.1f} %")
-    print(f"results in {output} (capacity.json)")
+    else:
+        print("\n".join([*text_lines(result), f"results in {output} (capacity.json)"]))
     return 0
 
 

@@ -65,6 +65,11 @@ class SimulationError(UserError):
     """A component failed during a run; results computed so far have been written."""
 
 
+def os_error(error: OSError) -> UserError:
+    """An OSError as one line naming its file (a .ssp extracted into a full temp folder)."""
+    return UserError(f"{error.filename or 'a file'}: {error.strerror or error}")
+
+
 def print_warning(message: str) -> None:
     """One warning line on stderr (the message's line breaks and runs of spaces made one space)."""
     print(f"railcosim: warning: {' '.join(str(message).split())}", file=sys.stderr)

@@ -11,12 +11,14 @@ line naming it.
 """
 from __future__ import annotations
 
+import contextlib
 import errno
 import fcntl
 import os
+import secrets
 import stat
 from pathlib import Path
-from typing import Optional, Tuple
+from typing import Optional, Tuple, Union
 
 from orchestrator.errors import UserError
 
@@ -67,19 +69,30 @@ def create_file(path: Path, binary: bool = False):
     return os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
 
 
-def replace_file(path: Path, text: str) -> None:
-    """Write ``text`` beside ``path`` (``.NAME.tmp``, created new: O_EXCL, O_NOFOLLOW) and
-    rename it over ``path``: a reader sees the old file or the new one, never half of one, and a
-    link planted at either name is replaced, never written through."""
-    temp = path.with_name(f".{path.name}.tmp")
-    try:
-        os.unlink(temp)                 # an earlier run's, killed mid-write (a link: the link only)
-    except FileNotFoundError:
-        pass
-    try:
+@contextlib.contextmanager
+def replacing(path: Path, binary: bool = False, concurrent: bool = False):
+    """A file to write ``path``'s new content into, written beside it and renamed over it when
+    the block ends (removed if the block fails): a reader sees the old file or the new one,
+    never half of one, and a link planted at either name is replaced, never written through.
+
+    The file beside is created new (O_EXCL, O_NOFOLLOW): ``.NAME.tmp``, an earlier one (a
+    writer killed mid-write) removed first, where the writer holds the folder (a run's or a
+    study's lock, the build lock); ``concurrent``: other processes may replace the same file
+    at the same time (the shipped systems' refresh, the packer), so it gets a name of its own,
+    ``.NAME.<random>.tmp``, and no writer renames another's half-written file. Text is UTF-8."""
+    path = Path(path)
+    if concurrent:
+        fd, temp = _created_beside(path)
+    else:
+        temp = path.with_name(f".{path.name}.tmp")
+        try:
+            os.unlink(temp)             # an earlier writer's, killed mid-write (a link: the link only)
+        except FileNotFoundError:
+            pass
         fd = open_without_link(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL)
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
+    try:
+        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8")) as handle:
+            yield handle
         os.replace(temp, path)
     except BaseException:
         try:
@@ -87,6 +100,23 @@ def replace_file(path: Path, text: str) -> None:
         except OSError:
             pass
         raise
+
+
+def _created_beside(path: Path) -> Tuple[int, Path]:
+    """A new file ``.NAME.<random>.tmp`` beside ``path`` (O_EXCL: never an existing name, nor a
+    link) and its descriptor."""
+    while True:
+        temp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return open_without_link(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL), temp
+        except FileExistsError:
+            continue
+
+
+def replace_file(path: Path, data: Union[str, bytes], concurrent: bool = False) -> None:
+    """``path`` replaced whole by ``data`` (text, UTF-8, or bytes), through :func:`replacing`."""
+    with replacing(path, binary=isinstance(data, bytes), concurrent=concurrent) as handle:
+        handle.write(data)
 
 
 class FolderLock:

@@ -17,11 +17,16 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 from orchestrator.errors import UserError
 from orchestrator.fmu import Interface, Variable, read_interface
 from orchestrator.ports import base_of
-from orchestrator.protocols import TRANSITIONS, Transition
-from orchestrator.ssp import Connection, SystemDescription, check_connectors, convert_unit
+from orchestrator.protocols import TRANSITIONS, Transition, UnitDef
+from orchestrator.ssp import Component, Connection, SystemDescription
 
 TICKS_PER_SECOND = 1_000_000_000  # the master's clock: integer nanoseconds
-MAX_TIME_S = (2 ** 63 - 1) / TICKS_PER_SECOND   # the master's clock: int64 nanoseconds (292 years)
+#: the longest time a run may reach or name, its one bound (the stop time, the output interval,
+#: a capture window, a scenario event): 10⁶ s, 11.6 days of simulated time. The master's clock
+#: (int64 nanoseconds) alone would hold 292 years, but a frame's sample instants are computed
+#: as the integers start·N + k·h (orchestrator/observers.py sample_times), within int64 up to
+#: 10⁶ s for frames of up to 9223 samples (the build's largest frame is 4096)
+MAX_TIME_S = 1e6
 
 
 def seconds_to_ticks(seconds: float, what: str) -> int:
@@ -31,6 +36,41 @@ def seconds_to_ticks(seconds: float, what: str) -> int:
     if ticks <= 0 or abs(ticks - seconds * TICKS_PER_SECOND) > 1e-3:
         raise UserError(f"{what}: {seconds!r} s is not a positive whole number of nanoseconds")
     return ticks
+
+
+def convert_unit(from_unit: Optional[str], to_unit: Optional[str],
+                 units: Dict[str, UnitDef], origin: str) -> Tuple[float, float]:
+    """(factor, offset) mapping a value in ``from_unit`` to ``to_unit``; identity when equal."""
+    if not from_unit or not to_unit or from_unit == to_unit:
+        return 1.0, 0.0
+    src, dst = units.get(from_unit), units.get(to_unit)
+    if src is None or dst is None:
+        missing = from_unit if src is None else to_unit
+        raise UserError(f"{origin}: unit {missing!r} has no definition; cannot convert "
+                        f"{from_unit!r} to {to_unit!r}")
+    if src.exponents != dst.exponents:
+        raise UserError(f"{origin}: units {from_unit!r} and {to_unit!r} are of different kinds")
+    factor = src.factor / dst.factor
+    return factor, (src.offset - dst.offset) / dst.factor
+
+
+def check_connectors(component: Component, variables: Dict[str, Tuple[str, str, Optional[str]]]) -> None:
+    """A component's declared connectors against its FMU's variables (name → causality, type,
+    unit): a connector the FMU lacks, of another kind (causality) or type, or in another unit
+    (we convert units along connections from the FMUs' units, not at connectors) is an error
+    naming the SSD line and the component. A component without connectors is not checked."""
+    for name, (kind, ctype, cunit) in component.connectors.items():
+        what = f"{component.origin}: component {component.name!r}: connector {name!r}"
+        if name not in variables:
+            raise UserError(f"{what} does not exist in {component.fmu_path}")
+        causality, vtype, vunit = variables[name]
+        if kind != causality:
+            raise UserError(f"{what} is declared kind={kind!r} but the FMU has causality {causality!r}")
+        if ctype and ctype != vtype:
+            raise UserError(f"{what} is declared {ctype} but the FMU has {vtype}")
+        if cunit and vunit and cunit != vunit:
+            raise UserError(f"{what} is declared in {cunit!r} but the FMU's unit is {vunit!r} "
+                            "(conversion at a connector is not supported)")
 
 
 @dataclass

@@ -151,10 +151,10 @@ class CaptureRequest:
             t0, t1 = float(match.group("t0")), float(match.group("t1"))
         except ValueError:
             raise UserError(f"--capture {text}: T0 and T1 must be numbers of seconds") from None
-        # (float() takes nan and inf; the master's clock is int64 nanoseconds)
+        # (float() takes nan and inf; a run's times are bounded: orchestrator/graph.py)
         if not all(math.isfinite(t) and abs(t) <= MAX_TIME_S for t in (t0, t1)):
             raise UserError(f"--capture {text}: T0 and T1 must be finite numbers of seconds "
-                            f"within the master's clock (±{MAX_TIME_S / 3.15576e7:.0f} years)")
+                            f"within ±{MAX_TIME_S:g} s, a run's longest time")
         if t1 <= t0:
             raise UserError(f"--capture {text}: T1 must be after T0")
         return cls(match.group("comp"), match.group("port"), t0, t1)

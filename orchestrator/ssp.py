@@ -187,22 +187,6 @@ def read_units(units_element, path: Path) -> Dict[str, UnitDef]:
     return units
 
 
-def convert_unit(from_unit: Optional[str], to_unit: Optional[str],
-                 units: Dict[str, UnitDef], origin: str) -> Tuple[float, float]:
-    """(factor, offset) mapping a value in ``from_unit`` to ``to_unit``; identity when equal."""
-    if not from_unit or not to_unit or from_unit == to_unit:
-        return 1.0, 0.0
-    src, dst = units.get(from_unit), units.get(to_unit)
-    if src is None or dst is None:
-        missing = from_unit if src is None else to_unit
-        raise UserError(f"{origin}: unit {missing!r} has no definition; cannot convert "
-                        f"{from_unit!r} to {to_unit!r}")
-    if src.exponents != dst.exponents:
-        raise UserError(f"{origin}: units {from_unit!r} and {to_unit!r} are of different kinds")
-    factor = src.factor / dst.factor
-    return factor, (src.offset - dst.offset) / dst.factor
-
-
 # ---- parameter values and mappings -------------------------------------------------------------
 def _read_parameter_set(parameter_set, path: Path, prefix: str) -> Tuple[List[ParameterValue], Dict[str, UnitDef]]:
     values = []
@@ -362,25 +346,6 @@ def _base_step(experiment, ssd_path: Path) -> Optional[float]:
                 fixed = [a for a in child if _local(a) == "FixedStepAlgorithm" and a.get("baseStepSize")]
                 osp = _annotation_seconds(fixed[0], ssd_path, "baseStepSize")[0] if fixed else osp
     return ours if ours is not None else osp
-
-
-def check_connectors(component: Component, variables: Dict[str, Tuple[str, str, Optional[str]]]) -> None:
-    """A component's declared connectors against its FMU's variables (name → causality, type,
-    unit): a connector the FMU lacks, of another kind (causality) or type, or in another unit
-    (we convert units along connections from the FMUs' units, not at connectors) is an error
-    naming the SSD line and the component. A component without connectors is not checked."""
-    for name, (kind, ctype, cunit) in component.connectors.items():
-        what = f"{component.origin}: component {component.name!r}: connector {name!r}"
-        if name not in variables:
-            raise UserError(f"{what} does not exist in {component.fmu_path}")
-        causality, vtype, vunit = variables[name]
-        if kind != causality:
-            raise UserError(f"{what} is declared kind={kind!r} but the FMU has causality {causality!r}")
-        if ctype and ctype != vtype:
-            raise UserError(f"{what} is declared {ctype} but the FMU has {vtype}")
-        if cunit and vunit and cunit != vunit:
-            raise UserError(f"{what} is declared in {cunit!r} but the FMU's unit is {vunit!r} "
-                            "(conversion at a connector is not supported)")
 
 
 # ---- system ------------------------------------------------------------------------------------

@@ -1,12 +1,12 @@
 """``railcosim validate``: every problem a run of a system would meet before its first step, as a
 list of one-line problems (empty: the run would start), in FMPy's style of validation.
 
-The options, the system and its parameter sets, the scenario and the data files are checked
-through the run's own planning (orchestrator/run.py ``plan_run``), each problem noted and the
-next part checked with what is still known; then every component is instantiated, given its
-parameters and initialised together as a run does, a failing one noted and skipped, nothing
-stepped and nothing written. A DCP component is checked against its description without
-contacting the rig.
+The options are checked when they are made (orchestrator/plan.py ``RunOptions``); the system and
+its parameter sets, the scenario and the data files through the run's own planning
+(orchestrator/plan.py ``plan_run``), each problem noted and the next part checked with what is
+still known; then every component is instantiated, given its parameters and initialised
+together as a run does, a failing one noted and skipped, nothing stepped and nothing written.
+A DCP component is checked against its description without contacting the rig.
 """
 from __future__ import annotations
 
@@ -14,21 +14,20 @@ from pathlib import Path
 from typing import Dict, List, Set
 
 from orchestrator import interrupts
-from orchestrator.dcp.master import OfflineRemoteDcpSlave
-from orchestrator.errors import RefusedComponents, UserError
-from orchestrator.fmu import make_slave, new_workdir, remove_workdir
+from orchestrator.errors import RefusedComponents, UserError, os_error
+from orchestrator.fmu import new_workdir, remove_workdir
 from orchestrator.master import shutdown_slaves
 from orchestrator.protocols import Slave
-from orchestrator.run import (RunOptions, RunPlan, blas_threads_limited, check_options, os_error, plan_run,
-                              start_master, warn_beyond_stop, warn_rounded_stop)
-from orchestrator.ssp import SystemDescription, open_system
+from orchestrator.plan import RunOptions, RunPlan, plan_run
+from orchestrator.run import start_master
+from orchestrator.ssp import open_system
 
 
 def problems_of(system_path, options: RunOptions) -> List[str]:
     """Every problem a run of this system with these options would meet before its first step
-    (``railcosim validate``): the options, the system and its parameter sets, the scenario,
-    the data files, and each component instantiated, given its parameters and initialised
-    together as a run does. One line per problem; empty when the run would start."""
+    (``railcosim validate``): the system and its parameter sets, the scenario, the data files,
+    and each component instantiated, given its parameters and initialised together as a run
+    does. One line per problem; empty when the run would start."""
     problems: List[str] = []
     refused: Set[str] = set()           # components whose problem is said already: not initialised
 
@@ -44,7 +43,6 @@ def problems_of(system_path, options: RunOptions) -> List[str]:
             _note(problems, error)
             return None
 
-    attempt(lambda: check_options(options))
     try:
         system = open_system(Path(system_path), list(options.fmu_dirs))
     except (UserError, OSError) as error:
@@ -54,10 +52,8 @@ def problems_of(system_path, options: RunOptions) -> List[str]:
             plan = plan_run(system, options, attempt)
         except UserError as error:          # no graph: nothing further can be checked
             return _note(problems, error)
-        if plan.stop_s is not None:         # what a run would warn about, said the same way
-            warn_beyond_stop(options, plan.scenario, plan.captures, plan.stop_s)
-            warn_rounded_stop(options, plan)
-        _initialise_only(plan, system, options, problems, refused)
+        plan.warn_before_start()            # what a run would warn about, said the same way
+        _initialise_only(plan, problems, refused)
     finally:
         system.close()
     return problems
@@ -134,28 +130,25 @@ class CheckedSlave:
         self._slave.free()
 
 
-def _initialise_only(plan: RunPlan, system: SystemDescription, options: RunOptions, problems: List[str],
-                     refused: Set[str]) -> None:
+def _initialise_only(plan: RunPlan, problems: List[str], refused: Set[str]) -> None:
     """Instantiate every component, then bind and initialise them together as a run does
-    (:func:`_start`), noting each component's failure; nothing is stepped, nothing written.
-    The ``refused`` components (their problem noted by the checks before) are only
-    instantiated and bound."""
+    (orchestrator/run.py ``start_master``), noting each component's failure; nothing is
+    stepped, nothing written, a remote DCP slave checked against its description with the rig
+    not contacted. The ``refused`` components (their problem noted by the checks before) are
+    only instantiated and bound."""
     workdir = new_workdir()
     slaves: Dict[str, Slave] = {}
     try:
         def make(name, node):
-            if name in plan.hil:          # a DCP slave: its description checked, the rig not contacted
-                made = OfflineRemoteDcpSlave(name, node.interface, plan.targets[name], plan.hil[name], node.step_ticks)
-            else:
-                made = make_slave(name, Path(node.fmu_path), node.interface, workdir, options.in_process)
-            slave = CheckedSlave(made, problems, refused=name in refused)
+            slave = CheckedSlave(plan.components.make(name, node, workdir, contact=False), problems,
+                                 refused=name in refused)
             slave.instantiate()
             return slave
 
         try:
-            with blas_threads_limited(options.blas_threads):
-                start_master(plan.graph, options, slaves, make, list(plan.judges), plan.scenario, interrupts.NEVER,
-                       system.start_time, plan.stop_s, ready=lambda: not any(s.failed for s in slaves.values()))
+            with plan.options.process.blas_limited():
+                start_master(plan, slaves, make, list(plan.judges), interrupts.NEVER,
+                             ready=lambda: not any(s.failed for s in slaves.values()))
         except Exception as error:
             _note(problems, error)
     finally:

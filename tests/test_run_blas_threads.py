@@ -1,6 +1,6 @@
-"""A run's BLAS libraries run with `RunOptions.blas_threads` threads (one by default), also a
-library an FMU loads while the run makes its components (orchestrator/run.py
-blas_threads_limited): two threads would only spin on the cores' small matrices and, summing
+"""A run's BLAS libraries run with `ProcessPolicy.blas_threads` threads (one by default), also a
+library an FMU loads while the run makes its components (orchestrator/process_policy.py
+`ProcessPolicy.blas_limited`): two threads would only spin on the cores' small matrices and, summing
 in another order, change results in their last digit."""
 import json
 import os
@@ -22,7 +22,8 @@ def test_a_blas_library_loaded_during_the_run_is_limited_too():
         from threadpoolctl import threadpool_info
         from orchestrator.analysis.verdict import railway_verdicts
         from orchestrator.packaging.builder import default_build_dir
-        from orchestrator.run import BLAS_THREAD_VARIABLES, RunOptions, run_system
+        from orchestrator.process_policy import BLAS_THREAD_VARIABLES
+        from orchestrator.run import RunOptions, run_system
         assert 'scipy.linalg' not in sys.modules       # scipy's OpenBLAS comes with the rail line
         blas = lambda: {i['filepath']: i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas'}
         loaded = blas()

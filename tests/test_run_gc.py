@@ -1,4 +1,4 @@
-"""The garbage collector while the master steps (orchestrator/run.py collector_off_while_stepping):
+"""The garbage collector while the master steps (orchestrator/process_policy.py `ProcessPolicy.stepping`):
 frozen and off during stepping, as it was afterwards, and stepping makes no cyclic garbage, so
 that nothing can pile up while it is off (docs/performance.md#one-sample-per-frame-as-a-deadline)."""
 import gc

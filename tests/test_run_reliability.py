@@ -135,17 +135,17 @@ def test_a_second_and_third_signal_change_nothing(tmp_path, test_fmus, private_t
 
 def test_a_signal_during_initialisation(tmp_path, test_fmus, private_tmp, monkeypatch):
     """The signal arrives once the first FMU is loaded, before the FMUs are initialised."""
-    import orchestrator.run
+    import orchestrator.components
 
     out = tmp_path / "out"
-    make_slave = orchestrator.run.make_slave
+    make_slave = orchestrator.components.make_slave
 
     def make_slave_then_signal(*args, **kwargs):
         slave = make_slave(*args, **kwargs)
         os.kill(os.getpid(), signal.SIGINT)
         return slave
 
-    monkeypatch.setattr(orchestrator.run, "make_slave", make_slave_then_signal)
+    monkeypatch.setattr(orchestrator.components, "make_slave", make_slave_then_signal)
     with pytest.raises(Interrupted) as stop:
         run_system(_pair(tmp_path, test_fmus), RunOptions(output_dir=out))
     assert stop.value.exit_code == 130 and "during initialisation" in str(stop.value)

@@ -34,13 +34,13 @@ orchestrator/analysis/system_checks.py). Train lengths come from the rolling-sto
 from __future__ import annotations
 
 import json
-import os
 import tempfile
 from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from fmus.sizes import BuildConfig
+from orchestrator.folders import replace_file
 from orchestrator.analysis.chain import (  # noqa: F401 — the building blocks, re-exported for their users
     TRAIN_STEP_S, ATO_STEP_S, committed_ports, write_ssd, _shipped_json, stock_length_m, check_placements, _stop_m,
     _with_station, train_and_ato, SIGNAL_FS_HZ, CHAIN_PORTS, TVM430_PORTS, signal_chain, cab_settings, ALSU_BLOCK_ASPECTS)
@@ -476,9 +476,10 @@ def refresh_shipped(root: Path, names: Optional[Iterable[str]] = None) -> List[P
     """Make ``root/<name>`` exactly what :func:`write_shipped` writes, for an installed package.
 
     The systems are written into a scratch folder first and only files whose bytes differ are
-    moved in, each with one atomic rename, so runs started at once in one folder never read a
-    half-written file. Files in a shipped system's folder that it does not write are removed:
-    ``railcosim run free_run`` always runs the shipped free_run (copy a folder to change it).
+    replaced, each written beside and renamed (orchestrator/folders.py ``replacing``), so runs
+    started at once in one folder never read a half-written file. Files in a shipped system's
+    folder that it does not write are removed: ``railcosim run free_run`` always runs the
+    shipped free_run (copy a folder to change it).
     """
     names = list(SHIPPED if names is None else names)
     root.mkdir(parents=True, exist_ok=True)
@@ -493,9 +494,10 @@ def refresh_shipped(root: Path, names: Optional[Iterable[str]] = None) -> List[P
                 path.unlink()
             for relative in sorted(wanted):
                 target = folder / relative
-                if not target.is_file() or target.read_bytes() != (fresh / relative).read_bytes():
+                data = (fresh / relative).read_bytes()
+                if not target.is_file() or target.read_bytes() != data:
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    os.replace(fresh / relative, target)
+                    replace_file(target, data, concurrent=True)
     return [root / name / "SystemStructure.ssd" for name in names]
 
 

@@ -686,14 +686,6 @@ def dcpx_interface(path: Path) -> Interface:
                      "DCP slave", None, fail_safe=fail_safe)
 
 
-def component_interface(source: str) -> Interface:
-    """A component's ports from its source: a DCP slave's .dcpx (:func:`dcpx_interface`) or an
-    FMU's modelDescription (the graph's ``interface_of`` for systems that may hold DCP slaves)."""
-    from orchestrator.fmu import read_interface
-
-    return dcpx_interface(Path(source)) if Path(source).suffix == ".dcpx" else read_interface(source)
-
-
 def swapped_descriptions(swaps: Mapping[str, DcpTarget], graph) -> Dict[str, SlaveDescription]:
     """Each swap's slave description, checked against the system before anything starts: the
     component exists, the .dcpx reads, a time resolution fits the component's step."""

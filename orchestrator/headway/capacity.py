@@ -49,6 +49,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from orchestrator.errors import UserError
+from orchestrator.folders import replace_file
 from orchestrator.analysis import queued
 from orchestrator.headway import blocking, trials
 from orchestrator.headway.blocking import BlockingTime, Trajectory
@@ -259,5 +260,17 @@ def capacity(system_path: Path, fmu_dirs: Sequence[Path], output_dir: Path, wind
     out = {"system": trains[0].base.name, "cab_signal": trains[0].base.cab_system}
     out.update(consumption(stairways, [t.train for t in trains], [t.departure_s for t in trains], window_s))
     out["stairways"] = {t.train: [b.as_dict() for b in steps] for t, steps in zip(trains, stairways)}
-    (output_dir / "capacity.json").write_text(json.dumps(out, indent=1, ensure_ascii=False) + "\n")
+    replace_file(output_dir / "capacity.json", json.dumps(out, indent=1, ensure_ascii=False) + "\n")
     return out
+
+
+def text_lines(result: dict) -> List[str]:
+    """What `railcosim capacity` prints: the line's consumption, then each section's."""
+    critical = result["critical_section"]
+    lines = [f"capacity of {result['system']} ({result['cab_signal']}), {len(result['trains'])} trains: "
+             f"{100 * result['consumption_line']:.1f} % of {result['window_s']:.0f} s "
+             f"({result['compressed_s']:.0f} s compressed); critical section {critical['name']}"]
+    lines += [f"  {section['name']:>6} {section['entry_m']:8.0f}-{section['exit_m']:<8.0f} m "
+              f"{section['occupied_s']:7.1f} s  {100 * section['consumption']:5.1f} %"
+              for section in result["sections"]]
+    return lines

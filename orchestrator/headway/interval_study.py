@@ -153,9 +153,12 @@ def _run_judged(system: Path, run_dir: Path, stop_s: float, fmu_dirs: Sequence[P
     from orchestrator.study.collect import DERIVED
     from orchestrator.headway.search import OUTPUT_INTERVAL_S
 
+    def silent(line: str) -> None:          # a trial run's warnings are not the user's
+        pass
+
     options = RunOptions(stop_time=stop_s, output_dir=run_dir, output_interval=OUTPUT_INTERVAL_S, in_process=True,
-                         fmu_dirs=list(fmu_dirs), default_scenario=False, progress=False, warn=lambda line: None)
-    options.summaries = partial(railway_verdicts, warn=options.warn)
+                         fmu_dirs=list(fmu_dirs), default_scenario=False, progress=False, warn=silent,
+                         summaries=partial(railway_verdicts, warn=silent))
     run_system(system, options)
     summary = json.loads((run_dir / "summary.json").read_text())
     return {key: derive(summary) for key, derive in DERIVED.items()

@@ -6,11 +6,10 @@ from __future__ import annotations
 import base64
 import html
 import json
-import os
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from orchestrator.folders import replace_file
+from orchestrator.folders import replace_file, replacing
 
 
 def stairway_picture(path: Path, result: dict, paths: Dict[str, tuple], headway_s: float, title: str) -> Path:
@@ -50,10 +49,11 @@ def stairway_picture(path: Path, result: dict, paths: Dict[str, tuple], headway_
     axes.grid(alpha=0.3)
     figure.tight_layout()
     path = Path(path)
-    temp = path.with_name(f".{path.name}.tmp.png")
-    figure.savefig(temp, dpi=110)
-    plt.close(figure)
-    os.replace(temp, path)
+    try:
+        with replacing(path, binary=True) as handle:
+            figure.savefig(handle, dpi=110, format="png")
+    finally:
+        plt.close(figure)
     return path
 
 

@@ -16,7 +16,6 @@ import functools
 import hashlib
 import importlib
 import json
-import os
 import shutil
 import sys
 import tempfile
@@ -26,6 +25,7 @@ from pathlib import Path
 from typing import Iterable, List, Optional
 
 from fmus.sizes import BuildConfig
+from orchestrator.folders import replacing
 from orchestrator.packaging import forwarder as fwd
 
 import fmus
@@ -263,10 +263,9 @@ def _build_into(spec: UnitSpec, config: BuildConfig, extra_packages: List[Path],
             _say_once(f"railcosim build: {forwarder.reason}: building plain pythonfmu FMUs "
                       "(non-Python hosts then need LD_PRELOAD, docs/third_party.md)")
         # copied beside and renamed into place: a run reading the FMU meanwhile sees the old
-        # file or the new one, never half of it
-        partial = target.with_name(f".{target.name}.partial")
-        shutil.copyfile(built, partial)
-        os.replace(partial, target)
+        # file or the new one, never half of it (the build lock is held: one name beside will do)
+        with open(built, "rb") as source, replacing(target, binary=True) as copy:
+            shutil.copyfileobj(source, copy)
 
 
 def validate_built(fmu_path: Path) -> List[str]:
@@ -310,6 +309,20 @@ def build_sized_for(dest: Path, system_folders: Iterable[Path], force: bool = Fa
     for unit, sizes in sorted(wanted, key=lambda item: (item[0], item[1].folder_name)):
         spec = next(s for s in by_identifier.values() if s.unit == unit)
         results.append(build_unit(spec, dest / sizes.folder_name, sizes, force=force))
+    return results
+
+
+#: the units whose arrays the build sizes shape (the others are the same at every size)
+SIZED_UNITS = ("wayside_coder", "rail_line", "loco_receiver")
+
+
+def build_sizes(dest: Path, sizes: Iterable[dict]) -> List[BuildResult]:
+    """The sized units built at each of ``sizes`` (``{"sections", "trains", "frame"}``: a function
+    study's ``build_sizes``, docs/studies.md), each size into its folder of ``dest``."""
+    results = []
+    for size in sizes:
+        config = BuildConfig(size["sections"], size["trains"], size["frame"])
+        results += build_all(dest / config.folder_name, config, units=SIZED_UNITS)
     return results
 
 

@@ -1,5 +1,5 @@
 """Pack a shipped system folder and the FMUs it names into one .ssp archive (atomically:
-written to a temporary file in the same folder, then renamed over the old archive).
+written beside the old archive, then renamed over it: orchestrator/folders.py ``replacing``).
 
 A system's own data files (its ``resources/``) are also copied into the ``resources/`` of each
 FMU inside the archive. Our runner resolves a relative data-file parameter against the system
@@ -19,6 +19,7 @@ from typing import List, Optional
 
 from lxml import etree
 
+from orchestrator.folders import replacing
 from orchestrator.packaging.builder import stored_hash
 from orchestrator.ssp import NS, in_build_folder
 
@@ -86,11 +87,8 @@ def _pack(folder: Path, sources: List[str], fmu_dir: Path, dest: Path, force: bo
     dest.mkdir(parents=True, exist_ok=True)
     # written beside and renamed into place: a reader of the .ssp (a run started meanwhile)
     # sees the old archive or the new one, never a half-written zip
-    handle, temp_name = tempfile.mkstemp(prefix=f".{folder.name}.", suffix=".ssp.tmp", dir=dest)
-    os.close(handle)
-    temp = Path(temp_name)
-    try:
-        with zipfile.ZipFile(temp, "w", zipfile.ZIP_DEFLATED) as archive:
+    with replacing(target, binary=True, concurrent=True) as handle:
+        with zipfile.ZipFile(handle, "w", zipfile.ZIP_DEFLATED) as archive:
             archive.comment = stamp
             for path in _system_files(folder):
                 archive.write(path, path.relative_to(folder).as_posix())
@@ -99,11 +97,7 @@ def _pack(folder: Path, sources: List[str], fmu_dir: Path, dest: Path, force: bo
             for source in sorted(set(sources)):
                 if not (folder / source).is_file():
                     _write_fmu(archive, fmu_dir / in_build_folder(source), source, data_files)
-        os.chmod(temp, 0o644)             # mkstemp makes it private; an archive is for everyone
-        os.replace(temp, target)
-    except BaseException:
-        temp.unlink(missing_ok=True)
-        raise
+        os.fchmod(handle.fileno(), 0o644)       # an archive is for everyone, whatever the umask
     return target, True
 
 

@@ -183,6 +183,18 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
     return written
 
 
+def outcome_lines(name: str, result) -> List[str]:
+    """What `railcosim study` prints once the runs are done: the counts of a study's runs
+    (orchestrator/study/runner.py ``StudyResult``) and one line per run not ``ok``."""
+    counts = result.counts
+    lines = [f"study {name}: {counts['runs']} run(s) of {counts['points']} point(s): {counts['ok']} ok, "
+             f"{counts['failed']} failed, {counts['timeout']} timed out, {counts['lost']} lost"
+             + (f" ({result.skipped} done before)" if result.skipped else "") + f"; results in {result.output}"]
+    lines += [f"  {record['id']} {record['status']}: {record['error']}"
+              for record in result.records if record["status"] != "ok"]
+    return lines
+
+
 def make_study_report(folder: Path, stream: Optional[TextIO] = None) -> List[Path]:
     """report.txt (a Markdown table) and the plots in ``folder``; the table is also written to ``stream``."""
     study, rows = _read(folder)

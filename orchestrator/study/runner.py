@@ -115,7 +115,7 @@ def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
         try:    # the run's plan as far as it goes without the run's values: the FMUs' interfaces
             # read and the data files' schema checks done (both kept for the forked runs)
             from orchestrator.analysis.verdict import railway_verdicts
-            from orchestrator.run import RunOptions, plan_run
+            from orchestrator.plan import RunOptions, plan_run
 
             plan_run(description, RunOptions(fmu_dirs=[Path(p) for p in fmu_dirs], summaries=railway_verdicts,
                                              warn=lambda line: None))
@@ -158,12 +158,15 @@ def _opened_system(system: str, fmu_dirs: Sequence[str]):
     return description
 
 
-def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool = False) -> dict:
+def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool = False,
+                     host_keeps_frozen: bool = False) -> dict:
     """The job's system run here; ``opened``: the system read once per process
-    (:func:`_opened_system`)."""
+    (:func:`_opened_system`); ``host_keeps_frozen``: in a run process, whose objects stay frozen
+    (:func:`_serve`)."""
     from functools import partial
 
     from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.process_policy import ProcessPolicy
     from orchestrator.run import RunOptions, run_system
 
     opts = job["options"]
@@ -178,8 +181,9 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool
         captures=opts.get("captures", []), record=opts.get("record"),
         algorithm=opts.get("algorithm", "gauss-seidel"), in_process=opts.get("in_process", False),
         fmu_dirs=[Path(p) for p in job["fmu_dirs"]], scenario=Path(scenario) if scenario else None,
-        default_scenario=not opts.get("no_scenario", False), progress=False, warn=warnings.append)
-    options.summaries = partial(railway_verdicts, warn=options.warn)
+        default_scenario=not opts.get("no_scenario", False), progress=False, warn=warnings.append,
+        summaries=partial(railway_verdicts, warn=warnings.append),
+        process=ProcessPolicy(host_keeps_frozen=host_keeps_frozen))
     system = _opened_system(job["system"], job["fmu_dirs"]) if opened else job["system"]
     return run_system(system, options).summary
 
@@ -227,16 +231,17 @@ def _run_function_here(job: dict, run_dir: Path) -> dict:
     return summary
 
 
-def _outcome_of(job: dict, caught=BaseException, opened: bool = False) -> dict:
+def _outcome_of(job: dict, caught=BaseException, opened: bool = False, host_keeps_frozen: bool = False) -> dict:
     """Run ``job`` here: its outcome (status, error, warnings); any failure of the ``caught``
-    kinds is the run's. ``opened``: a system read once per process."""
+    kinds is the run's. ``opened``: a system read once per process; ``host_keeps_frozen``: this
+    process's objects stay frozen (a run process)."""
     outcome = {"status": "ok", "error": None, "warnings": []}
     run_dir = Path(job["output"]) / "runs" / job["id"]
     try:
         if job.get("function"):
             _run_function_here(job, run_dir)
         else:
-            _run_system_here(job, run_dir, outcome["warnings"], opened)
+            _run_system_here(job, run_dir, outcome["warnings"], opened, host_keeps_frozen)
     except UserError as error:
         outcome.update(status="failed", error=" ".join(str(error).split()))
     except caught as error:                            # noqa: B902 — any failure is the run's
@@ -269,15 +274,11 @@ def _serve(job_fd: int, outcome_fd: int, one_shot: bool) -> None:
     try:
         if _LIBC:                # die with the worker: a lost worker leaves no run behind (Linux)
             _LIBC.prctl(1, signal.SIGKILL)                 # PR_SET_PDEATHSIG
-        # the worker's objects were frozen before the fork and stay so; each run's own garbage
-        # is collected after it (below). A function's worker has not imported the run module
-        # and its run processes need not (half a second each)
-        run_module = sys.modules.get("orchestrator.run")
-        if run_module is not None:
-            run_module.HOST_KEEPS_FROZEN = True
+        # the worker's objects were frozen before the fork and stay so (its runs freeze
+        # nothing); each run's own garbage is collected after it (below)
         with os.fdopen(job_fd, "rb") as jobs:
             for line in jobs:
-                outcome = _outcome_of(json.loads(line), opened=not one_shot)
+                outcome = _outcome_of(json.loads(line), opened=not one_shot, host_keeps_frozen=True)
                 data = (json.dumps(outcome, default=str)[:60000] + "\n").encode()
                 while data:
                     data = data[os.write(outcome_fd, data):]
@@ -576,7 +577,7 @@ def _is_run_folder(path: Path) -> bool:
     """A folder a study's run made: empty (made, the run not begun) or holding a run's own
     files (its record, a function's summary, a system run's lock and results)."""
     from orchestrator.folders import LOCK_FILE
-    from orchestrator.run import RUN_FILES
+    from orchestrator.results import RUN_FILES
 
     if path.is_symlink() or not path.is_dir():
         return False
