@@ -209,7 +209,7 @@ def _check_data(block: Block, folder: Path, env) -> List[str]:
         load_line(path)
         return []
     if "railml sidecar" in d:
-        from orchestrator.analysis.railml import _load_sidecar
+        from orchestrator.railml.railml import _load_sidecar
 
         path = folder / "example_sidecar.json"
         path.write_text(block.text, encoding="utf-8")

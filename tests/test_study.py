@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.cli import main
 from orchestrator.run import RunOptions, run_system
 from orchestrator.study.runner import run_study

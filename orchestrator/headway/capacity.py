@@ -48,7 +48,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from orchestrator.errors import UserError
-from orchestrator.analysis import queued
+from orchestrator.systems import queued
 from orchestrator.headway import blocking, trials
 from orchestrator.headway.blocking import BlockingTime, Trajectory
 

@@ -121,7 +121,7 @@ def run_alone(base: trials.BaseSystem, folder: Path, fmu_dirs: Sequence[Path], l
     as ``ato_only``) on the line ``line_text`` (a line file's text) to ``timetable``: its
     trajectory. The ATO keeps the base's planned deceleration (its default depends on the cab
     mode: TVM-430's is harder), so that it drives as it does in the chain."""
-    from orchestrator.analysis.chain import train_and_ato, write_ssd
+    from orchestrator.systems.chain import train_and_ato, write_ssd
 
     system = Path(folder) / "system"
     resources = system / "resources"

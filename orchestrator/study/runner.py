@@ -69,7 +69,7 @@ def prepare_worker() -> Path:
 
         import fmpy.fmi2  # noqa: F401 — imported here once rather than in every run
         import jsonschema  # noqa: F401 — the data files' schema check
-        import orchestrator.analysis.verdict  # noqa: F401
+        import orchestrator.verdicts.verdict  # noqa: F401
         import orchestrator.run  # noqa: F401
         from orchestrator.fmu import keep_extractions
 
@@ -114,7 +114,7 @@ def prepare_system(system: str, fmu_dirs: Sequence[str]) -> None:
                     pass
         try:    # the run's plan as far as it goes without the run's values: the FMUs' interfaces
             # read and the data files' schema checks done (both kept for the forked runs)
-            from orchestrator.analysis.verdict import railway_verdicts
+            from orchestrator.verdicts.verdict import railway_verdicts
             from orchestrator.run import RunOptions, plan_run
 
             plan_run(description, RunOptions(fmu_dirs=[Path(p) for p in fmu_dirs], summaries=railway_verdicts,
@@ -163,7 +163,7 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool
     (:func:`_opened_system`)."""
     from functools import partial
 
-    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
 
     opts = job["options"]

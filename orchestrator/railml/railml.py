@@ -15,7 +15,7 @@
 
 Bad input is a :class:`~orchestrator.errors.UserError` of one line naming the file and the
 railML element's ``id``. Data conversion on the host side only: no FMU needs railML, so this
-lives in orchestrator/analysis, not in the ``fmus`` package every FMU bundles
+lives in orchestrator/railml, not in the ``fmus`` package every FMU bundles
 (docs/architecture.md).
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ RAILML_NS = {"3.1": "https://www.railml.org/schemas/3.1", "3.2": "https://www.ra
 VERSION_OF_NS = {ns: version for version, ns in RAILML_NS.items()}
 #: our extension namespace: what railML has no place for (docs/railml.md#our-extension)
 EXTENSION_NS = "urn:railcosim:railml:1"
-SCHEMA_DIR = Path(__file__).resolve().parent / "railml_schema"
+SCHEMA_DIR = Path(__file__).resolve().parent / "schema"
 EXTENSION_XSD = SCHEMA_DIR / "railcosim_extension.xsd"
 DUBLIN_CORE_XSD = SCHEMA_DIR / "dublin_core_stand_in.xsd"
 SIDECAR_SCHEMA = "railml_sidecar.schema.json"
@@ -1629,7 +1629,7 @@ def system_line_file(system_path) -> Path:
     """The line file the components of a system (folder or .ssp) read: the one every
     ``line_file`` parameter names, else the bundled default line."""
     from fmus.data.loader import DEFAULT_LINE
-    from orchestrator.analysis.system_checks import FMU_RESOURCES_ROOT
+    from orchestrator.verdicts.system_checks import FMU_RESOURCES_ROOT
     from orchestrator.graph import resolve_data_file
     from orchestrator.ssp import open_system
 
