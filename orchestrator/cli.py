@@ -525,7 +525,8 @@ def cmd_export(args) -> int:
     """``railcosim export railml SYSTEM -o FILE``: a system's line as railML (docs/railml.md)."""
     import json
 
-    from orchestrator.railml.railml import export_railml, system_line_file, validate_railml
+    from orchestrator.railml.validate import validate_railml
+    from orchestrator.railml.write import export_railml, system_line_file
     from fmus.data.loader import load_line
     from fmus.errors import FmuInputError
 

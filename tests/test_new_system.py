@@ -221,7 +221,7 @@ def test_a_tvm430_system_takes_the_smallest_standard_section_count_that_holds_th
 
 
 def test_a_tvm430_system_from_railml_gets_the_high_speed_set_and_its_timetable(tmp_path):
-    from orchestrator.railml.railml import export_railml
+    from orchestrator.railml.write import export_railml
 
     railml = tmp_path / "lgv.xml"
     railml.write_bytes(export_railml(json.loads(TVM_LINE.read_text())))

@@ -298,13 +298,14 @@ def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Seq
                            sidecar=None, schema_dir=None, rolling_stock_file=None, system: str = "ALSN",
                            trains=None, traction=None, fmu_dir=None):
     """``railcosim new NAME --railml FILE``: the railML line imported (orchestrator/railml/
-    railml.py), written as a line file into the system's resources/, and the system made from it
+    read.py), written as a line file into the system's resources/, and the system made from it
     as from a line file; without --timetable one timetable is made (:func:`timetable_for`).
     Returns (SSD path, the import's notes)."""
     import json
     import tempfile
 
-    from orchestrator.railml.railml import import_railml, validate_railml
+    from orchestrator.railml.read import import_railml
+    from orchestrator.railml.validate import validate_railml
 
     folder, railml_file = Path(folder), Path(railml_file)
     _refuse_existing(folder)
