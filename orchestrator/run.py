@@ -27,8 +27,8 @@ from orchestrator.fmu import extractions_kept, make_slave, new_workdir, remove_w
 from orchestrator.graph import TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.dcp.pdu import OpMode
-from orchestrator.dcp.master import (DcpTarget, RemoteDcpSlave, component_interface,
-                                     declared_targets, swapped_descriptions)
+from orchestrator.dcp.master import DcpTarget, component_interface, declared_targets, swapped_descriptions
+from orchestrator.dcp.remote_slave import RemoteDcpSlave
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
 from orchestrator.observers import (CaptureRequest, ProgressBar, Recorder, WaveformCapture, cannot_write,

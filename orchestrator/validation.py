@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Dict, List, Set
 
 from orchestrator import interrupts
-from orchestrator.dcp.master import OfflineRemoteDcpSlave
+from orchestrator.dcp.remote_slave import OfflineRemoteDcpSlave
 from orchestrator.errors import RefusedComponents, UserError
 from orchestrator.fmu import make_slave, new_workdir, remove_workdir
 from orchestrator.master import shutdown_slaves
