@@ -375,7 +375,7 @@ def cmd_study(args) -> int:
             build_all(_build_dir() / config.folder_name, config, units=SIZED_UNITS)
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:
-        from orchestrator.study.runner import import_function
+        from orchestrator.study.worker import import_function
 
         import_function(spec.data["function"], [str(spec.path.parent.resolve()), *python_path],
                         f"study {spec.path}: field function")

@@ -90,7 +90,7 @@ class RunResult:
 def run_system(system_path, options: RunOptions) -> RunResult:
     """Load a system, run it and write its results. ``system_path`` is a system folder or
     .ssp, or a system already opened (a :class:`SystemDescription` of a folder: a study's run
-    process reads its system once, orchestrator/study/runner.py), which the run may change
+    process reads its system once, orchestrator/study/worker.py), which the run may change
     (a parameter set's units) and does not close.
 
     While it runs, SIGINT, SIGTERM and SIGHUP only set a flag (orchestrator/interrupts.py);
@@ -535,7 +535,7 @@ def blas_threads_limited(threads: int):
 #: that benchmarks/bench_deadline.py can compare without)
 FREEZE_GC_WHILE_STEPPING = True
 #: set by a process that froze what it holds for good and then makes run after run (a study's
-#: run process, orchestrator/study/runner.py): its runs turn the collector off while stepping
+#: run process, orchestrator/study/worker.py): its runs turn the collector off while stepping
 #: and freeze nothing — what a run froze would stay frozen after it, its cyclic garbage never
 #: collected — nor count what is frozen (gc.get_freeze_count walks every frozen object:
 #: 5–20 ms in a study's worker)
