@@ -6,7 +6,7 @@ import tempfile
 from pathlib import Path
 from typing import Optional, Sequence
 
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, RunResult, run_system
 
 #: what the free_run benchmarks record (the recorder's cost as a user's run has it)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from orchestrator import fmu, master
 from orchestrator.cli import SSP_ROOT, _build_dir
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 FRAME_S = 0.01

@@ -54,7 +54,7 @@ from fmus.rail_line import circuit_bank, network_models, relays  # noqa: E402
 from fmus.rail_line import parking as parking_module  # noqa: E402
 from fmus.sizes import BuildConfig  # noqa: E402
 from orchestrator import master as master_module  # noqa: E402
-from orchestrator.analysis.verdict import railway_verdicts  # noqa: E402
+from orchestrator.verdicts.verdict import railway_verdicts  # noqa: E402
 from orchestrator.graph import TICKS_PER_SECOND  # noqa: E402
 from orchestrator.pacing import Pacer  # noqa: E402
 from orchestrator.packaging.builder import build_all  # noqa: E402

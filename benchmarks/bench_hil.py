@@ -43,7 +43,7 @@ def _emulator(fmu: Path, dcpx: Path, *options: str) -> tuple:
 
 def free_run_srt(sim_s: float) -> dict:
     """The receiver's emulator in soft real time: what the run counts lost, and the outputs' age."""
-    from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
+    from orchestrator.verdicts.verdict import railway_verdicts, safety_verdict
 
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
@@ -61,7 +61,7 @@ def free_run_srt(sim_s: float) -> dict:
 
 
 def free_run(sim_s: float, component: str = "rx", unit: str = "LocoReceiver") -> dict:
-    from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
+    from orchestrator.verdicts.verdict import railway_verdicts, safety_verdict
 
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)

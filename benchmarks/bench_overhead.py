@@ -20,7 +20,7 @@ from pathlib import Path
 from _systems import build_test_fmus, trivial_system
 import orchestrator.components
 from orchestrator.fmu import make_buffers
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 

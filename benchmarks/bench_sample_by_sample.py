@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from fmus.sizes import BuildConfig
-from orchestrator.analysis.systems import cab_settings, signal_chain, train_and_ato
+from orchestrator.systems.chain import cab_settings, signal_chain, train_and_ato
 from orchestrator import master
 from orchestrator.packaging.builder import build_all
 from orchestrator.sspgen import write_ssd

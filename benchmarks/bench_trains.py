@@ -37,8 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benc
 from fmus.ato_controller import planner  # noqa: E402
 from harness.queued_trains import Queue, write_queued_trains  # noqa: E402
 from harness.suburban import EMU, SUBURBAN_LINE  # noqa: E402
-from orchestrator.analysis.report import read_results  # noqa: E402
-from orchestrator.analysis.verdict import railway_verdicts  # noqa: E402
+from orchestrator.reports.report import read_results  # noqa: E402
+from orchestrator.verdicts.verdict import railway_verdicts  # noqa: E402
 from orchestrator.packaging.builder import build_all, build_sized_for, default_build_dir  # noqa: E402
 from orchestrator.run import RunOptions, run_system  # noqa: E402
 

@@ -48,7 +48,7 @@ def fingerprint(run_dir: Path) -> dict:
 
 
 def record(out: Path, fmi: bool, stop_time: float | None, only: list[str]) -> None:
-    from orchestrator.analysis.systems import SHIPPED
+    from orchestrator.systems.shipped import SHIPPED
     names = only or list(SHIPPED)
     prints = {}
     with tempfile.TemporaryDirectory() as scratch:

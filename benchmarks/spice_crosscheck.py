@@ -26,7 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
 
 from fmus.data.loader import DATA, load_line  # noqa: E402
-from orchestrator.analysis.crosscheck import (BALLASTS_OHM_KM, TRAN_BOUND, AC_BOUND, WHEELSET_BOUND, ac_rows,  # noqa: E402
+from orchestrator.circuits.crosscheck import (BALLASTS_OHM_KM, TRAN_BOUND, AC_BOUND, WHEELSET_BOUND, ac_rows,  # noqa: E402
                                               ac_table, documented_trains, shipped_train, tran_check, tran_table,
                                               wheelset_rows)
 

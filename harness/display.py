@@ -1,5 +1,5 @@
 """What every receiver of a running system displays, against what is sent under its coils: an
-observer sampling each judged receiver at its own step (orchestrator.analysis.verdict's
+observer sampling each judged receiver at its own step (orchestrator.verdicts.verdict's
 receivers, the same pairing of receiver, rail line slot and coder), and the measures of
 docs/loco_receiver.md taken from those samples: display dropouts at joints, how long each
 restrictive change of the code sent took to show, and how long the display stayed more
@@ -13,7 +13,7 @@ from typing import Dict, List
 import numpy as np
 
 from fmus.signalling import aspects as sig
-from orchestrator.analysis.verdict import _OutputJudge, receivers_of, transmitted_indication, railway_verdicts
+from orchestrator.verdicts.verdict import _OutputJudge, receivers_of, transmitted_indication, railway_verdicts
 
 SENT_NONE = -1          # the coil outside every section
 

@@ -2,7 +2,7 @@
 benchmarks of many trains (benchmarks/bench_trains.py, tests/test_many_trains.py): each train
 stands at a stopping point of its own added to a copy of the line, the foremost departs first,
 the others at a fixed interval after it, front to back, and every train runs to the line's last
-station. The signal chain is the shipped systems' (orchestrator/analysis/systems.py
+station. The signal chain is the shipped systems' (orchestrator/systems/chain.py
 ``signal_chain``: coder → rail line → one receiver per train → its ATO), in a build of K
 sections and M = the number of trains (a sized folder ``resources/k{K}m{M}n40/``, which
 ``railcosim run`` builds on demand, fmus/sizes.py).
@@ -16,8 +16,8 @@ from typing import List, Optional, Tuple
 
 from fmus.data.loader import DATA
 from fmus.sizes import BuildConfig
-from orchestrator.analysis.systems import (cab_settings, check_placements, signal_chain, stock_length_m,
-                                           train_and_ato, write_ssd)
+from orchestrator.systems.chain import (cab_settings, check_placements, signal_chain, stock_length_m, train_and_ato,
+                                        write_ssd)
 
 
 @dataclass(frozen=True)

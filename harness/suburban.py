@@ -13,8 +13,9 @@ from typing import List, Sequence, Tuple
 from fmus.data.loader import DATA
 from fmus.sizes import BuildConfig
 from harness.queued_trains import _write_json, sections_for
-from orchestrator.analysis.systems import cab_settings, check_placements, signal_chain, stock_length_m, train_and_ato, write_ssd
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.systems.chain import (cab_settings, check_placements, signal_chain, stock_length_m, train_and_ato,
+                                        write_ssd)
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 SUBURBAN_LINE, SUBURBAN_TIMETABLE, EMU = "suburban_line.json", "suburban_timetable.json", "emu_er2.json"

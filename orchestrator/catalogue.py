@@ -16,7 +16,7 @@ import fmus
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.vectors import DATA_DIR
 
-#: one line per shipped system (orchestrator/analysis/systems.py writes them; docs/scenarios.md
+#: one line per shipped system (orchestrator/systems/shipped.py writes them; docs/scenarios.md
 #: describes each and its verdict)
 SYSTEM_DESCRIPTIONS: Dict[str, str] = {
     "free_run": "one passenger train on the default 20 km line A-B-C (DC 3 kV, ALSN 50 Hz), "

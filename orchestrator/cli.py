@@ -98,7 +98,7 @@ def _build_dir() -> Path:
 def _write_shipped_systems(names: Optional[List[str]] = None) -> None:
     """Installed package only: (re)write the shipped systems under SSP_ROOT."""
     if not IN_CHECKOUT:
-        from orchestrator.analysis.systems import refresh_shipped
+        from orchestrator.systems.shipped import refresh_shipped
 
         refresh_shipped(SSP_ROOT, names)
 
@@ -106,7 +106,7 @@ def _write_shipped_systems(names: Optional[List[str]] = None) -> None:
 def _shipped_names() -> List[str]:
     if IN_CHECKOUT:
         return sorted(p.name for p in SSP_ROOT.iterdir() if (p / "SystemStructure.ssd").is_file())
-    from orchestrator.analysis.systems import SHIPPED
+    from orchestrator.systems.shipped import SHIPPED
 
     return sorted(SHIPPED)
 
@@ -181,7 +181,7 @@ def _run_options(args, overrides: dict, **more):
     --set overrides parsed (:func:`_overrides`)."""
     from functools import partial
 
-    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
     # the railway checks' warnings (a rail line's train length) go where the run's own go: stderr
@@ -216,7 +216,7 @@ def _run_command(args) -> int:
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
           f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
           f"results in {result.output_dir}")
-    from orchestrator.analysis.verdict import stop_text
+    from orchestrator.verdicts.verdict import stop_text
 
     for train in summary["trains"]:
         stops = ", ".join(stop_text(s) for s in train.get("stops", []))
@@ -225,7 +225,7 @@ def _run_command(args) -> int:
         print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
               + (f"; arrivals {stops}" if stops else "") + atp)
     if summary.get("receivers"):
-        from orchestrator.analysis.verdict import safety_verdict
+        from orchestrator.verdicts.verdict import safety_verdict
 
         print(f"  {safety_verdict(summary)[1]}")
     return 0
@@ -248,7 +248,7 @@ def _collapse(names: List[str]) -> List[str]:
 
 
 def cmd_report(args) -> int:
-    from orchestrator.analysis.report import make_report
+    from orchestrator.reports.report import make_report
 
     for path in make_report(Path(args.run_dir), Path(args.output) if args.output else None, args.at):
         print(f"wrote {path}")
@@ -371,7 +371,7 @@ def cmd_study(args) -> int:
         build_sizes(_build_dir(), spec.data["build_sizes"])
     python_path = [str(PACKAGE_PARENT)] if IN_CHECKOUT else []
     if spec.is_function:
-        from orchestrator.study.runner import import_function
+        from orchestrator.study.worker import import_function
 
         import_function(spec.data["function"], [str(spec.path.parent.resolve()), *python_path],
                         f"study {spec.path}: field function")
@@ -444,7 +444,7 @@ def cmd_capacity(args) -> int:
 def cmd_new(args) -> int:
     """``railcosim new NAME``: a system folder of one's own (docs/your_own_system.md), from a line
     file or from a railML 3 file (docs/railml.md)."""
-    from orchestrator.analysis.new_system import new_system, new_system_from_railml
+    from orchestrator.systems.new_system import new_system, new_system_from_railml
 
     if (args.line is None) == (args.railml is None):
         raise UserError("new: give the line as --line FILE (JSON) or as --railml FILE (railML 3), one of them")
@@ -509,7 +509,8 @@ def cmd_export(args) -> int:
     """``railcosim export railml SYSTEM -o FILE``: a system's line as railML (docs/railml.md)."""
     import json
 
-    from orchestrator.analysis.railml import export_railml, system_line_file, validate_railml
+    from orchestrator.railml.validate import validate_railml
+    from orchestrator.railml.write import export_railml, system_line_file
     from fmus.data.loader import load_line
     from fmus.errors import FmuInputError
 
@@ -634,7 +635,7 @@ def cmd_dcp_slave(args) -> int:
 
 def _rail_setup(args):
     """The rail line of ``args.system`` (or ``--line``) with ``--train``s added: (setup, system)."""
-    from orchestrator.analysis.rail_setup import add_train, line_setup, rail_setup
+    from orchestrator.circuits.rail_setup import add_train, line_setup, rail_setup
     from orchestrator.ssp import open_system
 
     system = None
@@ -652,7 +653,7 @@ def _rail_setup(args):
 
 def cmd_netlist(args) -> int:
     """``railcosim netlist``: a section as a SPICE netlist (docs/rail_line.md#checked-against-ngspice)."""
-    from orchestrator.analysis.rail_setup import section_netlist
+    from orchestrator.circuits.rail_setup import section_netlist
 
     if args.time and not args.results:
         raise UserError(f"--time {args.time:g}: the trains' positions then come from a run: add --results RUN_DIR")
@@ -677,7 +678,7 @@ def cmd_netlist(args) -> int:
 def cmd_crosscheck(args) -> int:
     """``railcosim crosscheck spice``: the system's track circuits against ngspice; exit 1 when a
     comparison is outside its bound."""
-    from orchestrator.analysis.crosscheck import crosscheck_system
+    from orchestrator.circuits.crosscheck import crosscheck_system
 
     if args.tool != "spice":
         raise UserError(f"crosscheck {args.tool}: the one cross-check is `spice` (ngspice)")

@@ -57,7 +57,7 @@ class Components:
         process keeps its extractions). ``contact`` False (validation): a remote slave checked
         against its description, nothing sent to the rig."""
         if self.kind(name) == DCP_SLAVE:
-            from orchestrator.dcp.master import OfflineRemoteDcpSlave, RemoteDcpSlave
+            from orchestrator.dcp.remote_slave import OfflineRemoteDcpSlave, RemoteDcpSlave
 
             remote = self.remote[name]
             made = RemoteDcpSlave if contact else OfflineRemoteDcpSlave

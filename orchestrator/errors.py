@@ -43,7 +43,7 @@ class UserError(Exception):
 
 
 class RefusedComponents(UserError):
-    """Problems found before the components are made (orchestrator/analysis/system_checks.py),
+    """Problems found before the components are made (orchestrator/verdicts/system_checks.py),
     each with the components that would refuse the same problem at their initialisation.
 
     The message is the first problem (a run stops there, in one line); ``problems`` holds every

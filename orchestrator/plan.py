@@ -48,7 +48,7 @@ class RunOptions:
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
     #: observers that judge the run and contribute sections to summary.json, made from the
-    #: graph once it is built (the railway verdicts: orchestrator.analysis.verdict.railway_verdicts,
+    #: graph once it is built (the railway verdicts: orchestrator.verdicts.verdict.railway_verdicts,
     #: bound to ``warn`` with functools.partial for its warnings to go there too)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
     #: one line per suspicious thing that still runs: a capture window or scenario event beyond
@@ -159,7 +159,7 @@ def plan_run(system: SystemDescription, options: RunOptions,
     plan.captures = attempt(lambda: _captures(graph, options.captures)) or []
     plan.components = plan_components(system, graph, options.swaps, options.in_process, attempt)
     # the judges before the folder and the FMUs: making them checks the system's data files
-    # (orchestrator/analysis/system_checks.py), a UserError that leaves the folder untouched
+    # (orchestrator/verdicts/system_checks.py), a UserError that leaves the folder untouched
     if options.summaries is not None:
         plan.judges = attempt(lambda: list(options.summaries(graph))) or []
     return plan

@@ -42,7 +42,7 @@ class RunResult:
 def run_system(system_path, options: RunOptions) -> RunResult:
     """Load a system, run it and write its results. ``system_path`` is a system folder or
     .ssp, or a system already opened (a :class:`SystemDescription` of a folder: a study's run
-    process reads its system once, orchestrator/study/runner.py), which the run may change
+    process reads its system once, orchestrator/study/worker.py), which the run may change
     (a parameter set's units) and does not close.
 
     While it runs, SIGINT, SIGTERM and SIGHUP only set a flag (orchestrator/interrupts.py);

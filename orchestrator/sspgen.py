@@ -102,7 +102,7 @@ def fmu_ports(folder: Path, source: str) -> Optional[Ports]:
     """The variables of the FMU at ``folder / source`` (its modelDescription), or None when no
     FMU is there (the SSD then declares no connectors: they are optional for our loader). The
     shipped systems are written from the committed contract manifests instead
-    (orchestrator/analysis/systems.py), so their bytes do not depend on a build."""
+    (orchestrator/systems/chain.py ``committed_ports``), so their bytes do not depend on a build."""
     from orchestrator.ports import manifest_of
 
     path = Path(folder) / source

@@ -267,7 +267,7 @@ def test_track_circuits_without_signals_are_coded_as_one_block():
     at its ends). Occupancy anywhere in it closes the signal before it; its track circuits carry
     the code of the block's exit signal, except behind the occupied circuit (no code: the block
     rules, tests/test_block_rules.py), and show no signal of their own."""
-    from orchestrator.analysis.systems import SSP_ROOT
+    from orchestrator.systems.shipped import SSP_ROOT
 
     line = load_line(SSP_ROOT / "joints_at_speed" / "resources" / "throat_line.json")
     assert line.block_of_section == [0, 1, 2, 3, 3, 3, 4, 5]

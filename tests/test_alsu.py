@@ -19,7 +19,8 @@ from fmus.signalling import aspects as sig
 from fmus.signalling.block_rules import block_codes
 from fmus.wayside_coder.alsu import AlsuCoderCore
 from fmus.wayside_coder.core import CoderSettings
-from orchestrator.analysis.systems import alsu_line, _shipped_json
+from orchestrator.systems.chain import _shipped_json
+from orchestrator.systems.shipped import alsu_line
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, write_ssd
 from tests.helpers import railcosim, read_csv
 
@@ -96,7 +97,7 @@ def test_the_block_sends_1_6_9_on_3_aspect_and_adds_4_on_4_aspect():
     assert _codes(line, [5], 3) == [9, 9, 9, 6, 1, 9, 9, 9]
     assert _codes(line, [5], 4) == [9, 9, 6, 4, 1, 9, 9, 9]
     # no code behind an occupied circuit of the same block (the station throat line)
-    from orchestrator.analysis.systems import THROAT_LINE
+    from orchestrator.systems.shipped import THROAT_LINE
     throat = load_line_from(THROAT_LINE)
     assert _codes(throat, [4], 3)[3] == alsu.NO_CODE
 
@@ -374,7 +375,7 @@ def test_the_ato_brakes_gently_for_a_permanent_restriction_and_harder_towards_a_
     deceleration of the signal's."""
     from harness.closed_loop import run_closed_loop
     from fmus.ato_controller.core import AtoSettings
-    from orchestrator.analysis.systems import THROAT_LINE, THROAT_TIMETABLE
+    from orchestrator.systems.shipped import THROAT_LINE, THROAT_TIMETABLE
 
     (tmp_path / "line.json").write_text(json.dumps(THROAT_LINE))
     (tmp_path / "timetable.json").write_text(json.dumps(THROAT_TIMETABLE))

@@ -1,5 +1,5 @@
 """The package walls of docs/architecture.md, checked on the source: who may import what,
-and that the model cores, the data layer, the signalling library and the railway analysis
+and that the model cores, the data layer, the signalling library and the railway rooms
 import with pythonfmu unavailable (a core runs in process without any FMI library)."""
 import ast
 import subprocess
@@ -40,6 +40,10 @@ def _imports(path: Path):
                 yield f"{name}.{alias.name}", node.lineno
 
 
+#: the rooms of railway knowledge applied to runs (docs/architecture.md): on the engine, beneath the front ends
+RAILWAY_ROOMS = ("verdicts", "reports", "railml", "circuits", "systems")
+
+
 def _within(name: str, prefixes) -> bool:
     return any(name == p or name.startswith(p + ".") for p in prefixes)
 
@@ -62,13 +66,13 @@ def _forbidden_for(module: str):
         return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
                 *(f"fmus.{u}.facade" for u in UNITS)), set()
     if parts[0] == "orchestrator":
-        if len(parts) > 1 and parts[1] in ("analysis", "conformance", "study", "headway"):   # railway knowledge on the engine
+        if len(parts) > 1 and parts[1] in (*RAILWAY_ROOMS, "conformance", "study", "headway"):   # railway knowledge on the engine
             return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
         if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__", "catalogue"):   # the front ends
             return ("benchmarks",), set()
         # the engine: FMU-agnostic, knows no railway
-        return ("fmus", "pythonfmu", "benchmarks", "orchestrator.analysis", "orchestrator.packaging",
-                "orchestrator.cli"), set()
+        return ("fmus", "pythonfmu", "benchmarks", *(f"orchestrator.{room}" for room in RAILWAY_ROOMS),
+                "orchestrator.packaging", "orchestrator.cli"), set()
     return (), set()
 
 
@@ -107,11 +111,11 @@ def test_the_bundled_package_holds_no_build_tooling_or_harness():
     assert not names & {"build", "builder", "packaging", "packing", "contract", "loop", "closed_loop", "channel"}
 
 
-def test_cores_data_signalling_and_analysis_import_without_any_fmi_library():
+def test_cores_data_signalling_and_railway_rooms_import_without_any_fmi_library():
     modules = [f"fmus.{unit}.core" for unit in UNITS]
     modules += [_module_name(p) for p in _product_files()
                 if _module_name(p).startswith(("fmus.data", "fmus.signalling", "fmus.dsp",
-                                               "orchestrator.analysis"))
+                                               *(f"orchestrator.{room}" for room in RAILWAY_ROOMS)))
                 or (p.parent.name in UNITS and p.name not in ("facade.py",))]
     script = textwrap.dedent(f"""
         import importlib, importlib.abc, sys
@@ -195,9 +199,10 @@ ENGINE = ("orchestrator.ssp", "orchestrator.graph", "orchestrator.master", "orch
           "orchestrator.ports")
 
 
-def test_the_engine_imports_no_dcp_analysis_study_or_conformance():
+def test_the_engine_imports_no_dcp_railway_study_or_conformance():
     graph = _import_graph()
-    above = ("orchestrator.dcp", "orchestrator.analysis", "orchestrator.study", "orchestrator.conformance")
+    above = ("orchestrator.dcp", *(f"orchestrator.{room}" for room in RAILWAY_ROOMS), "orchestrator.study",
+             "orchestrator.conformance")
     offending = {module: sorted(name for name in graph[module] if _within(name, above)) for module in ENGINE}
     assert {m: names for m, names in offending.items() if names} == {}
 
@@ -209,7 +214,7 @@ def test_a_run_without_filters_imports_no_filter_design_library():
     script = textwrap.dedent("""
         import sys, tempfile
         from pathlib import Path
-        from orchestrator.analysis.verdict import railway_verdicts
+        from orchestrator.verdicts.verdict import railway_verdicts
         from orchestrator.packaging.builder import default_build_dir
         from orchestrator.run import RunOptions, run_system
         with tempfile.TemporaryDirectory() as folder:

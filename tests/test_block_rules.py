@@ -11,7 +11,7 @@ from fmus.signalling import aspects as sig
 from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, block_codes
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
-from orchestrator.analysis.systems import SSP_ROOT
+from orchestrator.systems.shipped import SSP_ROOT
 
 N = 40
 THROAT = SSP_ROOT / "joints_at_speed" / "resources" / "throat_line.json"

@@ -1,7 +1,7 @@
 """FMUs of other build sizes beside the default ones (docs/architecture.md#build-sizes): a
 system names them by a folder in its component sources, the build folder keeps them there."""
 from fmus.sizes import BuildConfig, sizes_of_source
-from orchestrator.analysis.systems import committed_ports
+from orchestrator.systems.chain import committed_ports
 from orchestrator.ssp import in_build_folder
 
 
@@ -27,7 +27,7 @@ def test_the_committed_ports_take_the_sizes_of_the_source():
 
 
 def test_a_system_naming_other_sizes_gets_them_built_and_resolved(tmp_path):
-    from orchestrator.analysis.systems import write_ssd
+    from orchestrator.systems.chain import write_ssd
     from orchestrator.packaging.builder import build_sized_for
     from orchestrator.sspgen import ComponentSpec
     from orchestrator.ssp import open_system

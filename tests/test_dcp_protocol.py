@@ -220,9 +220,7 @@ def test_slave_engine_survives_mutated_requests(test_fmus):
     workdir = new_workdir()
     logged = []
     slave = DcpSlaveServer(desc, lambda: make_slave("s", fmu, interface, workdir, False), Socket(), log=logged.append)
-    slave.fmu = slave.make_fmu()
-    slave.fmu.instantiate()
-    slave._bind_fmu()
+    slave.load_fmu()
     master = ("127.0.0.1", 2)
     seq = [0]
 

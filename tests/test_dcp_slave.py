@@ -779,7 +779,7 @@ def test_a_slave_serving_every_interface_takes_as_its_own_only_senders_of_this_m
     machine; another host sending from the same port number is foreign, not the slave."""
     import types
 
-    from orchestrator.dcp.slave import DcpSlaveServer
+    from orchestrator.dcp.slave_data import DataExchange
 
     data_socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     data_socket.bind(("127.0.0.1", 0))
@@ -788,8 +788,8 @@ def test_a_slave_serving_every_interface_takes_as_its_own_only_senders_of_this_m
         for host in ("0.0.0.0", "127.0.0.1"):
             slave = types.SimpleNamespace(port=port + 1, data_sockets={1: data_socket}, host=host,
                                           _local_addresses={})
-            assert DcpSlaveServer._is_own(slave, ("127.0.0.1", port))
-            assert not DcpSlaveServer._is_own(slave, ("203.0.113.9", port))     # a remote host, same port
-            assert not DcpSlaveServer._is_own(slave, ("127.0.0.1", port + 2))   # not one of its ports
+            assert DataExchange.is_own(slave, ("127.0.0.1", port))
+            assert not DataExchange.is_own(slave, ("203.0.113.9", port))     # a remote host, same port
+            assert not DataExchange.is_own(slave, ("127.0.0.1", port + 2))   # not one of its ports
     finally:
         data_socket.close()

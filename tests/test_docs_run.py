@@ -209,11 +209,11 @@ def _check_data(block: Block, folder: Path, env) -> List[str]:
         load_line(path)
         return []
     if "railml sidecar" in d:
-        from orchestrator.analysis.railml import _load_sidecar
+        from orchestrator.railml.read import load_sidecar
 
         path = folder / "example_sidecar.json"
         path.write_text(block.text, encoding="utf-8")
-        _load_sidecar(path)                   # checked against its schema; a UserError says why not
+        load_sidecar(path)                   # checked against its schema; a UserError says why not
         return []
     if "ssd fragment" in d:
         from lxml import etree

@@ -476,8 +476,8 @@ def test_a_data_file_found_valid_is_checked_again_once_it_changes(tmp_path):
 
 
 def test_the_verdict_skips_a_bad_data_file_like_any_other(tmp_path):
-    """orchestrator/analysis/verdict.py catches FmuInputError (the FMU reports the file itself)."""
-    from orchestrator.analysis import verdict
+    """orchestrator/verdicts/verdict.py catches FmuInputError (the FMU reports the file itself)."""
+    from orchestrator.verdicts import verdict
 
     _, path = _bad_files(tmp_path)[0]
 

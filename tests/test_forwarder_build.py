@@ -38,9 +38,9 @@ def test_the_content_hash_follows_the_forwarder_source_and_python_settings(monke
     before = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], plan)
     other_settings = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE],
                                   dataclasses.replace(plan, settings=plan.settings + "X=1\n"))
-    source = tmp_path / "fmi2_forward.c"
-    source.write_text(fwd.SOURCE.read_text() + "/* changed */\n")
-    monkeypatch.setattr(fwd, "SOURCE", source)
+    source = tmp_path / "fmi2_direct.c"
+    source.write_text(fwd.SOURCES[1].read_text() + "/* changed */\n")
+    monkeypatch.setattr(fwd, "SOURCES", (fwd.SOURCES[0], source))
     after = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], plan)
     plain = content_hash(COUNTER, BuildConfig(), [FIXTURE_PACKAGE], fwd.NoForwarder("test"))
     assert len({before, other_settings, after, plain}) == 4

@@ -18,7 +18,8 @@ from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
 from fmus.wayside_coder.tvm430 import Tvm430CoderCore
 from fmus.signalling import cab_systems
-from orchestrator.analysis.systems import TVM430_FS_HZ, TVM430_LINE, TVM430_STOCK, cab_settings
+from orchestrator.systems.chain import cab_settings
+from orchestrator.systems.shipped import TVM430_FS_HZ, TVM430_LINE, TVM430_STOCK
 from orchestrator.errors import UserError
 from orchestrator.headway.approach import (_dv_sbi_mps, approach_blocks, cab_setup, indications_behind,
                                            permitted_speed_mps)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from helpers import REPO, ComponentSpec, ConnectionSpec, cli_environment, railcosim, read_csv, write_ssd
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.dcp import pdu as P
 from orchestrator.errors import UserError
 from orchestrator.dcp.master import parse_swap

@@ -11,9 +11,9 @@ from fmus.data.loader import DATA, load_line
 from harness.queued_trains import Queue, origins, write_queued_trains
 from harness.suburban import SUBURBAN_TIMETABLE, fastest_stage_times, write_suburban_emu
 from helpers import read_csv
-from orchestrator.analysis.report import make_report, train_styles
-from orchestrator.analysis.systems import stock_length_m
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.reports.report import make_report, train_styles
+from orchestrator.systems.chain import stock_length_m
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.packaging.builder import build_sized_for
 from orchestrator.run import RunOptions, run_system
 

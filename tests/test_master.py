@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from helpers import ComponentSpec, ConnectionSpec, frame_connections, read_csv, write_ssd
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 

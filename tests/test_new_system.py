@@ -108,7 +108,7 @@ def test_two_concurrent_news_into_one_folder_give_one_system_and_one_refusal(tmp
 def test_a_folder_made_while_new_writes_is_not_written_into(tmp_path, monkeypatch):
     """The folder appears (another `new`, a user) after the first check: this `new` is refused in
     one line, leaves the other's files as they are and no half-written folder of its own."""
-    from orchestrator.analysis import new_system as module
+    from orchestrator.systems import new_system as module
     from orchestrator.errors import UserError
 
     folder = tmp_path / "branch"
@@ -221,7 +221,7 @@ def test_a_tvm430_system_takes_the_smallest_standard_section_count_that_holds_th
 
 
 def test_a_tvm430_system_from_railml_gets_the_high_speed_set_and_its_timetable(tmp_path):
-    from orchestrator.analysis.railml import export_railml
+    from orchestrator.railml.write import export_railml
 
     railml = tmp_path / "lgv.xml"
     railml.write_bytes(export_railml(json.loads(TVM_LINE.read_text())))

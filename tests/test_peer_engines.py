@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from helpers import railcosim
-from orchestrator.analysis.systems import SSP_ROOT
+from orchestrator.systems.shipped import SSP_ROOT
 
 pytest.importorskip("libcosimpy")
 

@@ -8,7 +8,8 @@ import pytest
 
 from fmus.data.loader import DATA
 from helpers import railcosim
-from orchestrator.analysis.systems import SSP_ROOT, signal_chain, stock_length_m, train_and_ato
+from orchestrator.systems.chain import signal_chain, stock_length_m, train_and_ato
+from orchestrator.systems.shipped import SSP_ROOT
 from orchestrator.sspgen import write_ssd
 
 FREIGHT = {"rolling_stock_file": str(DATA / "freight_vl80.json")}

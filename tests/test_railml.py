@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from helpers import REPO, railcosim
-from orchestrator.analysis.railml import export_railml, import_railml, validate_railml
+from orchestrator.railml.read import import_railml
+from orchestrator.railml.validate import validate_railml
+from orchestrator.railml.write import export_railml
 from orchestrator.errors import UserError
 
 DATA = REPO / "tests" / "data" / "railml"

@@ -70,7 +70,7 @@ def test_report_html_lists_every_stop_missed_ones_included(tmp_path):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from orchestrator.analysis.report import write_html
+    from orchestrator.reports.report import write_html
 
     fig, ax = plt.subplots()
     ax.plot([0, 1], [1, 0])
@@ -92,7 +92,7 @@ def test_report_html_lists_every_stop_missed_ones_included(tmp_path):
 
 def test_static_speed_profile_follows_the_line_file_with_tail_hold_and_braking_curves():
     from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, load_line, load_rolling_stock
-    from orchestrator.analysis.report import static_speed_profile
+    from orchestrator.reports.report import static_speed_profile
 
     line, stock = load_line(DEFAULT_LINE), load_rolling_stock(DEFAULT_ROLLING_STOCK)
     x = np.arange(0.0, line.length_m + 1.0, 1.0)

@@ -20,7 +20,7 @@ def test_a_blas_library_loaded_during_the_run_is_limited_too():
         import json, os, sys, tempfile
         from pathlib import Path
         from threadpoolctl import threadpool_info
-        from orchestrator.analysis.verdict import railway_verdicts
+        from orchestrator.verdicts.verdict import railway_verdicts
         from orchestrator.packaging.builder import default_build_dir
         from orchestrator.process_policy import BLAS_THREAD_VARIABLES
         from orchestrator.run import RunOptions, run_system

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 

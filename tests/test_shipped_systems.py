@@ -1,11 +1,11 @@
-"""The committed ssp/ is exactly what orchestrator/analysis/systems.py writes: a change to a
+"""The committed ssp/ is exactly what orchestrator/systems/shipped.py writes: a change to a
 shipped system is made in the generator (and ssp/ regenerated), never by hand, and an installed
 package, which writes its systems from the generator, runs the same systems as a checkout."""
 import subprocess
 import sys
 from pathlib import Path
 
-from orchestrator.analysis.systems import SHIPPED, SSP_ROOT, refresh_shipped
+from orchestrator.systems.shipped import SHIPPED, SSP_ROOT, refresh_shipped
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -16,10 +16,10 @@ def _files(root: Path):
 
 
 def test_committed_systems_are_what_the_generator_writes(tmp_path):
-    subprocess.run([sys.executable, "-m", "orchestrator.analysis.systems", str(tmp_path)],
+    subprocess.run([sys.executable, "-m", "orchestrator.systems.shipped", str(tmp_path)],
                    check=True, cwd=REPO, capture_output=True)
     generated, committed = _files(tmp_path), _files(SSP_ROOT)
-    assert sorted(generated) == sorted(committed), "regenerate: python -m orchestrator.analysis.systems"
+    assert sorted(generated) == sorted(committed), "regenerate: python -m orchestrator.systems.shipped"
     differing = [name for name in committed if committed[name] != generated[name]]
     assert not differing, f"differ from the generator (regenerate ssp/): {differing}"
     assert {name.split("/")[0] for name in committed} == set(SHIPPED)

@@ -12,9 +12,9 @@ import pytest
 from fmus.data.loader import load_line
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit, rail_impedance
-from orchestrator.analysis.netlist import (ac_source, axle_netlist, lumped_netlist, staircase_points,
+from orchestrator.circuits.netlist import (ac_source, axle_netlist, lumped_netlist, staircase_points,
                                            tran_source)
-from orchestrator.analysis.ngspice import read_raw
+from orchestrator.circuits.ngspice import read_raw
 from helpers import REPO, railcosim
 
 NGSPICE = shutil.which("ngspice")
@@ -168,7 +168,7 @@ def test_netlist_from_a_results_folder_that_no_run_wrote_is_one_line(tmp_path, r
 # ---- against the real ngspice -------------------------------------------------------------------------
 @needs_ngspice
 def test_ngspice_solves_the_rail_lines_network_as_we_do():
-    from orchestrator.analysis.crosscheck import ac_rows
+    from orchestrator.circuits.crosscheck import ac_rows
     rows = ac_rows(load_line(THROAT_LINE), "throat_line", [50.0], [1.0, 200.0], only=3)
     assert rows and all(row.passed() for row in rows), rows
     assert max(max(row.worst.values()) for row in rows) < 1e-9          # the same network: solver precision
@@ -176,7 +176,7 @@ def test_ngspice_solves_the_rail_lines_network_as_we_do():
 
 @needs_ngspice
 def test_ngspice_transient_agrees_with_our_discretised_model():
-    from orchestrator.analysis.crosscheck import TRAN_BOUND, tran_check
+    from orchestrator.circuits.crosscheck import TRAN_BOUND, tran_check
     result = tran_check(load_line(THROAT_LINE), "throat_line", 3, seconds=0.3, change_s=0.05, enter_s=0.15)
     assert result.samples == 1200 and result.passed(), result
     assert max(result.worst.values()) < TRAN_BOUND / 10
@@ -184,7 +184,7 @@ def test_ngspice_transient_agrees_with_our_discretised_model():
 
 @needs_ngspice
 def test_the_wheelset_chain_is_every_axle_in_ngspice_and_the_lumping_is_not():
-    from orchestrator.analysis.crosscheck import Train, shipped_train, wheelset_rows
+    from orchestrator.circuits.crosscheck import Train, shipped_train, wheelset_rows
     follower = shipped_train("passenger_chs7.json")
     rows = wheelset_rows(load_line(THROAT_LINE), "throat_line", [Train("light engine", 17.22, LIGHT_ENGINE)],
                          follower, ballasts=[1.0], places=1, only=3)

@@ -6,7 +6,7 @@ import pytest
 from lxml import etree
 
 from helpers import ComponentSpec, ConnectionSpec, railcosim, read_csv, write_ssd
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 from orchestrator.sspgen import write_ssv
 

@@ -22,7 +22,7 @@ def test_a_run_ending_before_the_arrivals_lists_every_stop_as_not_reached(tmp_pa
 
 def test_stops_reached_and_missed_keep_timetable_order():
     from fmus.data.loader import TimetableStop
-    from orchestrator.analysis.verdict import TrainVerdict, _Train, missed_stops, stop_text
+    from orchestrator.verdicts.verdict import TrainVerdict, _Train, missed_stops, stop_text
 
     train = _Train("train", "ato", [TimetableStop("A", 400.0, None, 60.0), TimetableStop("B", 10300.0, 515.0, 575.0),
                                     TimetableStop("C", 19600.0, 1015.0, None)])

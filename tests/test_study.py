@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.cli import main
 from orchestrator.run import RunOptions, run_system
 from orchestrator.study.runner import run_study
@@ -117,7 +117,8 @@ def test_runs_on_a_warm_worker_equal_fresh_runs_bit_for_bit(grid_study, product_
 WARM_WORKER = """
 import json, os, sys, zipfile
 from pathlib import Path
-from orchestrator.study.runner import execute_run, jobs_of, prepare_worker
+from orchestrator.study.runner import jobs_of
+from orchestrator.study.worker import execute_run, prepare_worker
 from orchestrator.study.spec import load_study
 
 study, system, fmus, out = map(Path, sys.argv[1:5])
@@ -166,16 +167,17 @@ def test_a_worker_extracts_each_fmu_once_and_removes_its_folder_at_exit(product_
 RUN_PROCESS_WORKER = """
 import json, os, signal, sys, threading, time
 from pathlib import Path
-import orchestrator.study.runner as runner
+import orchestrator.study.worker as worker
+from orchestrator.study.runner import jobs_of
 from orchestrator.study.spec import load_study
 
 study, system, fmus, out = map(Path, sys.argv[1:5])
-jobs = runner.jobs_of(load_study(study), out, system, [fmus])
+jobs = jobs_of(load_study(study), out, system, [fmus])
 seen = []
 
 def run(job):
-    record = runner.execute_run(job)
-    process = getattr(runner._RUN_PROCESSES, "process", None)
+    record = worker.execute_run(job)
+    process = getattr(worker._RUN_PROCESSES, "process", None)
     seen.append({"id": job["id"], "status": record["status"], "error": record["error"],
                  "pid": process.pid if process is not None else None})
 
@@ -191,7 +193,7 @@ run(jobs[3])                                                         # a new one
 run({**jobs[4], "stop_time": 100000.0, "timeout_s": 2})              # stopped at its timeout
 run(jobs[5])                       # the process killed below is this run's, kept for the next
 killer = threading.Thread(target=kill_when_running, args=(
-    runner._RUN_PROCESSES.process.pid, out / "runs" / jobs[6]["id"] / "results.csv"))
+    worker._RUN_PROCESSES.process.pid, out / "runs" / jobs[6]["id"] / "results.csv"))
 killer.start()
 run({**jobs[6], "stop_time": 100000.0})                              # its process killed mid-run
 killer.join()

@@ -12,9 +12,9 @@ from fmus.signalling import aspects as sig
 from fmus.signalling.alsn import STATED_LATENCY_S
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
 from helpers import read_csv
-from orchestrator.analysis.systems import stock_length_m
+from orchestrator.systems.chain import stock_length_m
 from orchestrator.cli import SSP_ROOT
-from orchestrator.analysis.verdict import railway_verdicts
+from orchestrator.verdicts.verdict import railway_verdicts
 from orchestrator.run import RunOptions, run_system
 
 

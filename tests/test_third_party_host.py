@@ -219,7 +219,7 @@ RELOAD_RUNNER = Path(__file__).resolve().parent / "host" / "reload_run.py"
 @pytest.fixture(scope="module")
 def packed(product_fmus, tmp_path_factory):
     """The shipped systems packed as .ssp archives (what `railcosim build` writes to build/)."""
-    from orchestrator.analysis.systems import SSP_ROOT
+    from orchestrator.systems.shipped import SSP_ROOT
     from orchestrator.packaging.packing import pack_systems
 
     dest = tmp_path_factory.mktemp("ssp")

@@ -4,8 +4,8 @@ indication, even when it shows exactly what the coder sent (then it is no wrong-
 import pytest
 
 from harness.broken_rail import run_with_broken_rail
-from orchestrator.analysis.systems import signal_chain, train_and_ato
-from orchestrator.analysis.verdict import safety_verdict
+from orchestrator.systems.chain import signal_chain, train_and_ato
+from orchestrator.verdicts.verdict import safety_verdict
 from orchestrator.sspgen import write_ssd
 
 BROKEN_RAIL_M = 3000.0          # in section 2 (2.6-5.2 km), ahead of the train standing at A (400 m)
@@ -40,7 +40,7 @@ def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus):
 def test_the_verdict_judges_the_real_train_length_not_a_shorter_one_given_to_the_rail_line(tmp_path, product_fmus):
     """A 944 m freight train whose rail line keeps its 400 m default: the verdict's occupancy uses
     the rolling-stock file's length, so it does not share the rail line's blind spot."""
-    from orchestrator.analysis.verdict import train_lengths
+    from orchestrator.verdicts.verdict import train_lengths
     from orchestrator.graph import build_graph
     from orchestrator.ssp import open_system
 

@@ -279,7 +279,7 @@ def _traction_system(tmp_path, product_fmus, test_fmus, step, params=None, name=
 
 
 def test_step_size_robustness_through_the_orchestrator(tmp_path, product_fmus, test_fmus):
-    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     finals = {}
     for step in (0.1, 1.0):
@@ -308,7 +308,7 @@ def test_a_rejected_data_file_ends_the_process_cleanly(tmp_path, product_fmus, t
     its library unloaded, and pythonfmu's interpreter state must still be released before its
     library's exit-time destructor (or the process aborts now and then at exit: SIGABRT seen
     in CI). The FMUs' forwarding binary does it (docs/architecture.md): every run exits 2.
-    A bad data file is refused before any FMU is loaded (orchestrator/analysis/system_checks.py),
+    A bad data file is refused before any FMU is loaded (orchestrator/verdicts/system_checks.py),
     so a parameter below its minimum makes the facade refuse exitInitializationMode instead."""
     folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"mass_scale": 0.05})
     for run in range(5):
@@ -317,7 +317,7 @@ def test_a_rejected_data_file_ends_the_process_cleanly(tmp_path, product_fmus, t
 
 
 def test_relative_data_file_resolves_against_the_system_folder(tmp_path, product_fmus, test_fmus):
-    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     folder = _traction_system(tmp_path, product_fmus, test_fmus, 1.0, {"rolling_stock_file": "resources/emu.json"})
     (folder / "resources").mkdir()

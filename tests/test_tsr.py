@@ -206,7 +206,7 @@ def test_a_bad_restrict_event_names_the_field(tmp_path, event, field):
 # ---- through the FMUs, the CLI and the report ----------------------------------------------------
 def test_a_restrict_event_through_the_fmu_is_kept_and_drawn_in_the_report(tmp_path, product_fmus):
     from helpers import railcosim, read_csv
-    from orchestrator.analysis.report import _line_of, restrictions_drawn
+    from orchestrator.reports.report import _line_of, restrictions_drawn
 
     scenario = tmp_path / "tsr.json"
     scenario.write_text(json.dumps({"events": [

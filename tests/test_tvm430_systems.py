@@ -8,8 +8,8 @@ import json
 import pytest
 
 from harness.broken_rail import run_with_broken_rail
-from orchestrator.analysis.systems import signal_chain, train_and_ato
-from orchestrator.analysis.verdict import railway_verdicts, safety_verdict
+from orchestrator.systems.chain import signal_chain, train_and_ato
+from orchestrator.verdicts.verdict import railway_verdicts, safety_verdict
 from orchestrator.run import RunOptions, run_system
 
 BLOCK_M, BLOCKS = 1500.0, 8
@@ -77,7 +77,7 @@ def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus):
 
 
 def test_the_shipped_tvm430_runs_on_its_build_sizes_and_departs_under_its_words(tmp_path, product_fmus):
-    from orchestrator.analysis.systems import SSP_ROOT
+    from orchestrator.systems.shipped import SSP_ROOT
 
     result = run_system(SSP_ROOT / "tvm430", RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out",
                                                         in_process=True, fmu_dirs=[product_fmus], stop_time=130.0,

@@ -2,7 +2,7 @@
 each block signal and the code each track circuit may carry (no FMI here).
 
 One function, :func:`block_codes`, used by the ALSN coder, the digital coder and the run's
-verdict against the track (orchestrator/analysis/verdict.py), so that what the coders send and
+verdict against the track (orchestrator/verdicts/verdict.py), so that what the coders send and
 what the verdict allows are one rule (docs/wayside_coder.md#block-rules).
 
 * A **block** is the run of track circuits from one block signal to the next: circuits whose

@@ -14,8 +14,12 @@ What to import for what (docs/hil.md describes the protocol as railcosim speaks 
   resolutions, variables; ``resolution_for`` a step), ``description_from_fmu`` (what our
   emulator offers for an FMU), ``serve_over_fmu`` (a device's description served by an FMU).
 * The slave role — ``orchestrator.dcp.slave``: ``DcpSlaveServer`` (the protocol engine around
-  an FMU) and ``serve`` (``railcosim dcp-slave``).
-* The master role — ``orchestrator.dcp.master``: ``RemoteDcpSlave`` (a remote slave as a
-  component of a system), ``parse_swap`` (``--swap NAME=dcp://…``), ``declared_targets``,
-  ``dcpx_interface`` (a component's ports from its .dcpx).
+  an FMU) and ``serve`` (``railcosim dcp-slave``); its parts: ``slave_checks`` (whether a
+  request is taken), ``slave_config`` (what a master configured), ``slave_data`` (the data
+  exchange with the FMU, the counters), ``slave_fmu`` (the FMU served), ``slave_real_time``
+  (soft real time).
+* The master role — ``orchestrator.dcp.remote_slave``: ``RemoteDcpSlave`` (a remote slave as a
+  component of a system, over its ``SlaveLink``); ``orchestrator.dcp.master``: ``parse_swap``
+  (``--swap NAME=dcp://…``), ``declared_targets``, ``dcpx_interface`` (a component's ports
+  from its .dcpx).
 """

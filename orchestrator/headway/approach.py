@@ -74,7 +74,7 @@ from fmus.signalling.block_rules import block_codes
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.traction.brake_pipeline import brake_lead_s
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH, STANDARD_GRAVITY_MPS2
-from orchestrator.analysis.systems import cab_settings
+from orchestrator.systems.chain import cab_settings
 from orchestrator.errors import UserError
 
 #: the ALSN codes by the letters of the cab signal (З green, Ж yellow, КЖ red-yellow, Б white: no code)
@@ -137,7 +137,7 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
               receiver_parameters: Optional[Mapping[str, object]] = None) -> CabSetup:
     """The setup of ``system`` on a line for a train. ``ato_parameters`` and
     ``receiver_parameters`` by FMU port name; one not given takes the FMU's default, except the
-    ATO's ``cab_signal``, which follows the system (orchestrator/analysis/systems.py
+    ATO's ``cab_signal``, which follows the system (orchestrator/systems/chain.py
     ``cab_settings``, whose ATO parameters give the shipped systems' decoding latency). Read: the
     ATO's ``train_category`` (empty: the stock's), ``atp_decel`` (0: 0.7 × the stock's service
     deceleration), ``decoding_latency``; the receiver's ``train_category`` and ``v_max``."""

@@ -50,7 +50,7 @@ import numpy as np
 
 from orchestrator.errors import UserError
 from orchestrator.folders import replace_file
-from orchestrator.analysis import queued
+from orchestrator.systems import queued
 from orchestrator.headway import blocking, trials
 from orchestrator.headway.blocking import BlockingTime, Trajectory
 

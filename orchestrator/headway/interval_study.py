@@ -148,7 +148,7 @@ def _run_judged(system: Path, run_dir: Path, stop_s: float, fmu_dirs: Sequence[P
     """The run with the railway verdicts in its summary.json (as ``railcosim run``)."""
     from functools import partial
 
-    from orchestrator.analysis.verdict import railway_verdicts
+    from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     from orchestrator.study.collect import DERIVED
     from orchestrator.headway.search import OUTPUT_INTERVAL_S

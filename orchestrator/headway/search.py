@@ -125,7 +125,7 @@ def run_alone(base: trials.BaseSystem, folder: Path, fmu_dirs: Sequence[Path], l
     trajectory. The ATO keeps the base's planned deceleration (its default depends on the cab
     mode: TVM-430's is harder), so that it drives as it does in the chain. Positions read back
     less ``offset_m`` (a trial's line against its base line)."""
-    from orchestrator.analysis.chain import train_and_ato, write_ssd
+    from orchestrator.systems.chain import train_and_ato, write_ssd
 
     system = Path(folder) / "system"
     resources = system / "resources"

@@ -1,5 +1,5 @@
 """Judging a headway trial (docs/capacity.md#co-simulated-headway): the trains of a system of
-queued trains (orchestrator/analysis/queued.py) against their references.
+queued trains (orchestrator/systems/queued.py) against their references.
 
 Each train's **reference** is the same train alone on the same line, with the same timetable
 — the trial's own, shifted as in the trial: one single-train system (the base system's chain)
@@ -23,7 +23,7 @@ from typing import Dict, Sequence
 import numpy as np
 
 from fmus.units import MPS_PER_KMH
-from orchestrator.analysis.queued import (  # noqa: F401 — the plan and the systems, for the search
+from orchestrator.systems.queued import (  # noqa: F401 — the plan and the systems, for the search
     QUEUE_GAP_M, BaseSystem, TrainSlot, TrialPlan, read_base, write_system, write_timetable)
 from orchestrator.headway.blocking import Trajectory
 

@@ -1,8 +1,9 @@
 """Studies: many runs of a system (or of a function) over grids, random draws, scenarios and
 seeds, on Dask distributed (docs/studies.md).
 
-spec.py reads and expands a study file, runner.py runs it, report.py sums it up; the study files
-shipped with railcosim are in studies/ here, found by name (:func:`shipped_studies`).
+spec.py reads and expands a study file, runner.py runs it (worker.py on each worker), report.py
+sums it up; the study files shipped with railcosim are in studies/ here, found by name
+(:func:`shipped_studies`).
 """
 from pathlib import Path
 from typing import Dict

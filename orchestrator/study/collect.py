@@ -14,7 +14,7 @@ from typing import Dict, List, Optional
 
 
 def _verdict(summary: dict):
-    from orchestrator.analysis.verdict import safety_parts
+    from orchestrator.verdicts.verdict import safety_parts
 
     return safety_parts(summary)[1].split(" (")[0]
 
@@ -24,7 +24,7 @@ def _total(group: str, key: str):
 
 
 def _missed(summary: dict) -> int:
-    from orchestrator.analysis.verdict import missed_stops
+    from orchestrator.verdicts.verdict import missed_stops
 
     return len(missed_stops(summary))
 

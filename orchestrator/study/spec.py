@@ -3,7 +3,7 @@ into its runs — every combination of the axes (cases × grid × random draws �
 each repeated for every seed.
 
 Everything here is decided on the machine that submits the study; the runs themselves
-(orchestrator/study/runner.py) only receive plain dictionaries.
+(orchestrator/study/worker.py) only receive plain dictionaries.
 """
 from __future__ import annotations
 

@@ -1,5 +1,7 @@
-"""The FMU's own FMI binary: fmi2_forward.c compiled at `railcosim build` with the system C
-compiler and put in front of pythonfmu's library (docs/architecture.md, "Forwarding binary").
+"""The FMU's own FMI binary: fmi2_forward.c (the forwarder) and fmi2_direct.c (the slave's
+objects through the Python C API: the references held, the direct value route), sharing
+fmi2_forward.h, compiled at `railcosim build` with the system C compiler and put in front of
+pythonfmu's library (docs/architecture.md, "Forwarding binary").
 
 ``plan()`` decides once per build whether FMUs get it: a C compiler and this Python's headers
 are needed (else the FMUs stay plain pythonfmu FMUs and the build says so on stderr); this
@@ -25,7 +27,10 @@ from typing import Optional, Union
 
 from orchestrator.errors import UserError
 
-SOURCE = Path(__file__).resolve().with_name("fmi2_forward.c")
+HERE = Path(__file__).resolve().parent
+#: the C files compiled into one library, and the header they share
+SOURCES = (HERE / "fmi2_forward.c", HERE / "fmi2_direct.c")
+HEADER = HERE / "fmi2_forward.h"
 SETTINGS_MEMBER = "resources/railcosim_python.txt"
 VALUE_REFERENCES_MEMBER = "resources/railcosim_value_references.txt"
 DESCRIPTION_MEMBER = "resources/railcosim_description.txt"
@@ -43,10 +48,11 @@ class Forwarder:
     settings: str          # the text of resources/railcosim_python.txt
 
     def fingerprint(self) -> bytes:
-        """What an FMU's content hash must change with: the forwarder's source, this module
+        """What an FMU's content hash must change with: the forwarder's sources, this module
         (it writes the value-reference table) and the Python settings. The table's content is
         the modelDescription's, which the hashed sources already determine."""
-        return SOURCE.read_bytes() + Path(__file__).read_bytes() + self.settings.encode()
+        return b"".join(path.read_bytes() for path in (*SOURCES, HEADER)) + Path(__file__).read_bytes() \
+            + self.settings.encode()
 
 
 @dataclass(frozen=True)
@@ -93,11 +99,12 @@ def plan() -> Union[Forwarder, NoForwarder]:
 def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
     command = [forwarder.compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
                f"-I{_fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
-               "-o", str(output), str(SOURCE), "-ldl", "-lpthread"]
+               "-o", str(output), *map(str, SOURCES), "-ldl", "-lpthread"]
     proc = subprocess.run(command, capture_output=True, text=True)
     if proc.returncode != 0:
         first = (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[0]
-        raise UserError(f"compiling {SOURCE} with {forwarder.compiler} failed: {first}")
+        raise UserError(f"compiling {' and '.join(p.name for p in SOURCES)} in {HERE} with {forwarder.compiler} "
+                        f"failed: {first}")
 
 
 def value_reference_text(model_description: bytes) -> str:

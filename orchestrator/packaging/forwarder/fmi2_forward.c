@@ -36,7 +36,8 @@
  * instance is untouched. Without the file the calls are forwarded unchecked
  * (docs/interfaces.md, "Bad parameters, inputs and calls").
  *
- * Direct values: pythonfmu's wrapper turns every fmi2Get/fmi2Set of Reals, Integers and
+ * Direct values (fmi2_direct.c, with our references to the slave's objects): pythonfmu's
+ * wrapper turns every fmi2Get/fmi2Set of Reals, Integers and
  * Booleans into Python lists built value by value (about 0.1 us per value) and a Python call.
  * For an instance whose references are checked here, the forwarder claims the slave's store
  * resolvers at fmi2Instantiate (fmus/fmi/bulk.py, registered by the generated slave script).
@@ -69,7 +70,8 @@
  * (docs/architecture.md). Build with -DRAILCOSIM_FINALIZE_AT_UNLOAD to finalise anyway.
  */
 #define _GNU_SOURCE
-#include <Python.h>
+#include "fmi2_forward.h"
+
 #include <dlfcn.h>
 #include <pthread.h>
 #include <ctype.h>
@@ -81,8 +83,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
-
 /* marker checked by tests/test_third_party_host.py */
 FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 5";
 
@@ -91,6 +91,7 @@ FMI2_Export const char railcosim_forwarder[] = "railcosim fmi2 forwarder 5";
 #define DESCRIPTION_FILE "railcosim_description.txt"
 
 /* ---- the Python C API, resolved at run time (libpython is not a link-time dependency) ---- */
+/* (what starting Python needs; the functions that reach the slave's objects: fmi2_direct.c) */
 static int (*py_IsInitialized)(void);
 static void (*pyConfig_InitPythonConfig)(PyConfig *);
 static PyStatus (*pyConfig_SetBytesString)(PyConfig *, wchar_t **, const char *);
@@ -98,23 +99,6 @@ static PyStatus (*py_InitializeFromConfig)(const PyConfig *);
 static void (*pyConfig_Clear)(PyConfig *);
 static int (*pyStatus_Exception)(PyStatus);
 static PyThreadState *(*pyEval_SaveThread)(void);
-/* bulk Real values (resolved once Python runs; all NULL: no bulk access) */
-static PyGILState_STATE (*pyGILState_Ensure)(void);
-static void (*pyGILState_Release)(PyGILState_STATE);
-static PyObject *(*pyImport_ImportModule)(const char *);
-static PyObject *(*pyObject_CallMethod)(PyObject *, const char *, const char *, ...);
-static PyObject *(*pyObject_CallFunctionObjArgs)(PyObject *, ...);
-static PyObject *(*pyMemoryView_FromMemory)(char *, Py_ssize_t, int);
-static PyObject *(*pyTuple_GetItem)(PyObject *, Py_ssize_t);
-static Py_ssize_t (*pyTuple_Size)(PyObject *);
-static void *(*pyLong_AsVoidPtr)(PyObject *);
-static Py_ssize_t (*pyLong_AsSsize_t)(PyObject *);
-static PyObject *(*pyErr_Occurred)(void);
-static void (*py_IncRef)(PyObject *);
-static void (*py_DecRef)(PyObject *);
-static void (*pyErr_Clear)(void);
-static int python_api;                 /* the functions above are resolved */
-static int bulk_enabled;
 #ifdef RAILCOSIM_FINALIZE_AT_UNLOAD
 static void (*pyEval_RestoreThread)(PyThreadState *);
 static int (*py_FinalizeEx)(void);
@@ -266,35 +250,12 @@ static int ensure_python(const char *folder) {
     return 1;
 }
 
-/* the Python functions the instance references and bulk access need, from the process's Python
- * (ours is RTLD_GLOBAL) */
-static void resolve_bulk(void) {
-#define RESOLVE_BULK(var, name) if (!(*(void **)&var = dlsym(RTLD_DEFAULT, name))) return;
-    RESOLVE_BULK(pyGILState_Ensure, "PyGILState_Ensure")
-    RESOLVE_BULK(pyGILState_Release, "PyGILState_Release")
-    RESOLVE_BULK(pyImport_ImportModule, "PyImport_ImportModule")
-    RESOLVE_BULK(pyObject_CallMethod, "PyObject_CallMethod")
-    RESOLVE_BULK(pyObject_CallFunctionObjArgs, "PyObject_CallFunctionObjArgs")
-    RESOLVE_BULK(pyMemoryView_FromMemory, "PyMemoryView_FromMemory")
-    RESOLVE_BULK(pyTuple_GetItem, "PyTuple_GetItem")
-    RESOLVE_BULK(pyTuple_Size, "PyTuple_Size")
-    RESOLVE_BULK(pyLong_AsVoidPtr, "PyLong_AsVoidPtr")
-    RESOLVE_BULK(pyLong_AsSsize_t, "PyLong_AsSsize_t")
-    RESOLVE_BULK(pyErr_Occurred, "PyErr_Occurred")
-    RESOLVE_BULK(py_IncRef, "Py_IncRef")
-    RESOLVE_BULK(py_DecRef, "Py_DecRef")
-    RESOLVE_BULK(pyErr_Clear, "PyErr_Clear")
-    python_api = 1;
-    const char *off = getenv("RAILCOSIM_NO_BULK");
-    bulk_enabled = !(off && *off && strcmp(off, "0") != 0);
-}
-
 static int load(void) {
     char folder[4096], stem[512], library[4800];
     own_folder(folder, sizeof folder);
     own_stem(stem, sizeof stem);
     if (!ensure_python(folder)) return 0;
-    resolve_bulk();
+    resolve_python_api();
     snprintf(library, sizeof library, "%s/%s_pythonfmu.so", folder, stem);
     pythonfmu_library = dlopen(library, RTLD_NOW | RTLD_LOCAL);
     if (!pythonfmu_library) { fail("cannot load pythonfmu's library: %s", dlerror()); return 0; }
@@ -386,14 +347,6 @@ static int resource_folder(const char *uri, char *out, size_t size, char *why, s
     return 0;
 }
 
-/* what fmi2Instantiate checks and the calls a host may make: the modelDescription's, copied by
- * `railcosim build` into resources/railcosim_description.txt (a host need not extract
- * modelDescription.xml: fmpy.simulate_fmu extracts binaries/ and resources/ only) */
-typedef struct {
-    char guid[128];
-    int co_simulation, fmu_state, serialize, directional, interpolate_inputs, output_derivatives;
-} Description;
-
 static int description_number(const char *path, const char *key) {
     char value[32];
     return key_value(path, key, value, sizeof value) ? atoi(value) : 0;
@@ -449,50 +402,9 @@ static int instantiation_refused(fmi2String instanceName, fmi2Type fmuType, fmi2
 }
 
 /* ---- per instance: its name, the host's callbacks and its valid value references ---------- */
-enum { REAL, INTEGER, BOOLEAN, STRING, TYPES, DIRECT_TYPES = STRING };  /* direct: the number types */
+/* (the record itself: fmi2_forward.h) */
 static const char *const type_names[TYPES] = {"Real", "Integer", "Boolean", "String"};
 static const char *const articles[TYPES] = {"a", "an", "a", "a"};
-
-typedef struct { unsigned char *bits; size_t size; } Bitmap;  /* size in bits */
-/* a host may repeat a reference in one list, so the bound is not the FMU's variable count: it
- * is far above any list of ours (the largest FMU has a few thousand values) */
-#define MAX_VALUES_PER_CALL (1 << 20)
-#define BULK_LISTS 32                  /* reference lists kept per instance; beyond: pythonfmu's route */
-
-/* a list of value references of one number type, checked for a get or for a set, resolved by
- * the slave to where its values live in the slave's store (the store's elements: double,
- * int64_t, one byte 0/1), consecutive from `first` or at `slots` */
-typedef struct {
-    int type;
-    int setting;                       /* checked as settable */
-    size_t n;
-    fmi2ValueReference *vr;
-    char *store;
-    Py_ssize_t first;
-    const int64_t *slots;
-} DirectList;
-
-typedef struct Instance {
-    struct Instance *next;
-    fmi2Component component;
-    char name[256];
-    fmi2CallbackFunctions callbacks;   /* a copy: the host's struct need not outlive the call */
-    int checked;                       /* 0: the table was not read, calls are forwarded as they are */
-    Bitmap valid[TYPES];               /* every variable of the type */
-    Bitmap settable[TYPES];            /* those fmi2Set<Type> may write */
-    Description description;           /* the calls the FMU offers */
-    /* the slave's store resolvers per number type (fmus/fmi/bulk.py), or NULL; the reference
-     * lists they resolved */
-    PyObject *resolvers[DIRECT_TYPES];
-    DirectList lists[BULK_LISTS];
-    int list_count;
-    int direct;                        /* the resolvers are held */
-    /* what pythonfmu holds of the slave (the slave, its class, its log queue), one reference
-     * each of our own, or NULL (after fmi2Fatal they stand for pythonfmu's, see the top) */
-    PyObject *held[3];
-    int fatal;                         /* the instance returned fmi2Fatal */
-    int leak;                          /* ... from fmi2Reset: pythonfmu's release would be one too many */
-} Instance;
 
 static Instance *instances;            /* a short list, guarded by table_lock */
 static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -513,35 +425,6 @@ static int bitmap_add(Bitmap *map, unsigned long vr) {
 
 static int bitmap_has(const Bitmap *map, fmi2ValueReference vr) {
     return vr < map->size && (map->bits[vr / 8] >> (vr % 8)) & 1;
-}
-
-/* the resolvers and lists released (with the GIL held, or taken here) */
-static void release_bulk(Instance *entry) {
-    for (int t = 0; t < DIRECT_TYPES; t++) {
-        py_DecRef(entry->resolvers[t]);
-        entry->resolvers[t] = NULL;
-    }
-    for (int k = 0; k < entry->list_count; k++) free(entry->lists[k].vr);
-    entry->list_count = 0;
-    entry->direct = 0;
-}
-
-static void drop_bulk(Instance *entry) {
-    if (!entry->direct) return;
-    PyGILState_STATE gil = pyGILState_Ensure();
-    release_bulk(entry);
-    pyGILState_Release(gil);
-}
-
-/* our references to what pythonfmu holds of the slave, released (taking the GIL) */
-static void release_held(Instance *entry) {
-    if (!entry->held[0] && !entry->held[1] && !entry->held[2]) return;
-    PyGILState_STATE gil = pyGILState_Ensure();
-    for (int k = 0; k < 3; k++) {
-        py_DecRef(entry->held[k]);
-        entry->held[k] = NULL;
-    }
-    pyGILState_Release(gil);
 }
 
 static void free_instance_entry(Instance *entry) {
@@ -608,8 +491,8 @@ static void log_error(const Instance *entry, const char *text) {
  * MAX_VALUES_PER_CALL values (n = SIZE_MAX: never read, never allocated), or at the first
  * value reference that is not a variable of `type` (or, setting, one that cannot be set); fmi2OK
  * when all are good. Without the table only the arrays are checked. */
-static fmi2Status check_references(const Instance *entry, const fmi2ValueReference vr[], size_t n, const void *value,
-                                   int type, int setting) {
+fmi2Status check_references(const Instance *entry, const fmi2ValueReference vr[], size_t n, const void *value,
+                            int type, int setting) {
     if (n == 0) return fmi2OK;
     char text[600];
     const char *call = setting ? "Set" : "Get";
@@ -648,130 +531,6 @@ static fmi2Status check_references(const Instance *entry, const fmi2ValueReferen
         }
     }
     return fmi2OK;
-}
-
-/* right after pythonfmu created the slave (fmus/fmi/bulk.py `take`): our references to what pythonfmu
- * holds of it, and its store resolvers when the instance may use them */
-static void claim_instance(Instance *entry) {
-    if (!python_api) return;
-    int want_resolvers = bulk_enabled && entry->checked;
-    PyGILState_STATE gil = pyGILState_Ensure();
-    PyObject *module = pyImport_ImportModule("fmus.fmi.bulk");
-    PyObject *taken = module ? pyObject_CallMethod(module, "take", "si", entry->name, want_resolvers) : NULL;
-    Py_ssize_t size = taken ? pyTuple_Size(taken) : -1;
-    if (size == 3 || size == 3 + DIRECT_TYPES) {
-        for (int k = 0; k < 3; k++) {
-            entry->held[k] = pyTuple_GetItem(taken, k);
-            py_IncRef(entry->held[k]);
-        }
-        if (want_resolvers && size == 3 + DIRECT_TYPES) {
-            for (int t = 0; t < DIRECT_TYPES; t++) {
-                entry->resolvers[t] = pyTuple_GetItem(taken, 3 + t);
-                py_IncRef(entry->resolvers[t]);
-            }
-            entry->direct = 1;
-        }
-    }
-    pyErr_Clear();  /* not one of ours, or an older build: pythonfmu's path, no references held */
-    py_DecRef(taken);
-    py_DecRef(module);
-    pyGILState_Release(gil);
-}
-
-/* the list of value references of `type` the instance checked (for a get, or for a set) and
- * resolved before, or -1 (no GIL needed: a host does not call one instance from two threads at
- * once) */
-static int known_list(const Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n) {
-    for (int k = 0; k < entry->list_count; k++)
-        if (entry->lists[k].type == type && entry->lists[k].setting == setting && entry->lists[k].n == n &&
-            memcmp(entry->lists[k].vr, vr, n * sizeof *vr) == 0)
-            return k;
-    return -1;
-}
-
-/* a checked list resolved by the slave and kept: its index, or -1 when the instance keeps
- * BULK_LISTS lists already or the resolver failed (its resolvers are then dropped with a
- * warning, for this and later calls) */
-static int resolve_list(Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n) {
-    if (entry->list_count == BULK_LISTS) return -1;
-    fmi2ValueReference *copy = malloc(n * sizeof *vr);
-    if (!copy) return -1;
-    memcpy(copy, vr, n * sizeof *vr);
-    PyGILState_STATE gil = pyGILState_Ensure();
-    PyObject *refs = pyMemoryView_FromMemory((char *)copy, (Py_ssize_t)(n * sizeof *vr), PyBUF_READ);
-    PyObject *where = refs ? pyObject_CallFunctionObjArgs(entry->resolvers[type], refs, NULL) : NULL;
-    char *store = NULL;
-    Py_ssize_t first = 0;
-    const int64_t *slots = NULL;
-    if (where && pyTuple_Size(where) == 3) {
-        store = pyLong_AsVoidPtr(pyTuple_GetItem(where, 0));
-        first = pyLong_AsSsize_t(pyTuple_GetItem(where, 1));
-        slots = pyLong_AsVoidPtr(pyTuple_GetItem(where, 2));
-    }
-    int failed = !store || pyErr_Occurred() != NULL;
-    py_DecRef(where);
-    py_DecRef(refs);
-    if (failed) {
-        pyErr_Clear();
-        release_bulk(entry);
-    }
-    pyGILState_Release(gil);
-    if (failed) {
-        free(copy);
-        if (entry->callbacks.logger)
-            entry->callbacks.logger(entry->callbacks.componentEnvironment, entry->name, fmi2Warning,
-                                    "logStatusWarning", "direct value access failed; values go through pythonfmu from now on");
-        return -1;
-    }
-    int k = entry->list_count++;
-    entry->lists[k].type = type;
-    entry->lists[k].setting = setting;
-    entry->lists[k].n = n;
-    entry->lists[k].vr = copy;
-    entry->lists[k].store = store;
-    entry->lists[k].first = first;
-    entry->lists[k].slots = slots;
-    return k;
-}
-
-#define COPY_VALUES(store_type, get_expression, set_expression) { \
-        store_type *base = (store_type *)list->store + list->first; \
-        for (size_t i = 0; i < list->n; i++) { \
-            store_type *slot = list->slots ? (store_type *)list->store + list->slots[i] : base + i; \
-            if (setting) { set_expression; } else { get_expression; } \
-        } \
-    }
-
-/* a get or set of `type` straight between the host's array and the slave's store: 1 done
- * (*status the answer: fmi2Error for a reference the checks refuse), 0 not (pythonfmu's route) */
-static int direct_values(Instance *entry, int type, int setting, const fmi2ValueReference vr[], size_t n,
-                         void *value, fmi2Status *status) {
-    if (!bulk_enabled || n == 0 || !vr || !value || !entry->direct) return 0;
-    int k = known_list(entry, type, setting, vr, n);
-    if (k < 0) {
-        if (check_references(entry, vr, n, value, type, setting) != fmi2OK) {
-            *status = fmi2Error;
-            return 1;
-        }
-        if ((k = resolve_list(entry, type, setting, vr, n)) < 0) return 0;
-    }
-    const DirectList *list = &entry->lists[k];
-    if (type == REAL && !list->slots) {
-        double *run = (double *)list->store + list->first;
-        if (setting) memcpy(run, value, n * sizeof *run);
-        else memcpy(value, run, n * sizeof *run);
-    } else if (type == REAL) {
-        fmi2Real *values = value;
-        COPY_VALUES(double, values[i] = *slot, *slot = values[i])
-    } else if (type == INTEGER) {
-        fmi2Integer *values = value;
-        COPY_VALUES(int64_t, values[i] = (fmi2Integer)*slot, *slot = values[i])
-    } else {
-        fmi2Boolean *values = value;
-        COPY_VALUES(unsigned char, values[i] = *slot ? fmi2True : fmi2False, *slot = values[i] != fmi2False)
-    }
-    *status = fmi2OK;
-    return 1;
 }
 
 /* an instance that returned fmi2Fatal: the call refused with fmi2Error and a logged message (1), or 0 */

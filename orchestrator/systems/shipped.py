@@ -1,5 +1,5 @@
 """The shipped systems (ssp/<name>/), written from Python so they stay consistent with the
-FMUs' ports. ``python -m orchestrator.analysis.systems [FOLDER]`` rewrites them (default: the
+FMUs' ports. ``python -m orchestrator.systems.shipped [FOLDER]`` rewrites them (default: the
 checkout's ssp/); the files are committed, and tests/test_shipped_systems.py checks that they are
 what this module writes. An installed package has no ssp/: ``railcosim`` writes the systems it
 needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
@@ -28,7 +28,7 @@ needs with :func:`refresh_shipped` (docs/architecture.md, "Installed package").
 
 Every train's initial placement is checked here (:func:`check_placements`): on the line, tail
 included, and no two trains overlapping (checked again before every run:
-orchestrator/analysis/system_checks.py). Train lengths come from the rolling-stock files
+orchestrator/verdicts/system_checks.py). Train lengths come from the rolling-stock files
 (:func:`stock_length_m`).
 """
 from __future__ import annotations
@@ -41,9 +41,8 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 from fmus.sizes import BuildConfig
 from orchestrator.folders import replace_file
-from orchestrator.analysis.chain import (  # noqa: F401 — the building blocks, re-exported for their users
-    TRAIN_STEP_S, ATO_STEP_S, committed_ports, write_ssd, _shipped_json, stock_length_m, check_placements, _stop_m,
-    _with_station, train_and_ato, SIGNAL_FS_HZ, CHAIN_PORTS, TVM430_PORTS, signal_chain, cab_settings, ALSU_BLOCK_ASPECTS)
+from orchestrator.systems.chain import (_shipped_json, _stop_m, _with_station, cab_settings, check_placements,
+                                        signal_chain, stock_length_m, train_and_ato, write_ssd)
 
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 # ALSU: 4-aspect block (code 4 before a yellow), the route into B onto a diverging track
@@ -429,9 +428,9 @@ def write_suburban(root: Path = SSP_ROOT, name: str = "suburban") -> Path:
 def write_queued(root: Path, name: str, base: Callable[[Path], Path], trains: int, headway_s: float,
                  stop_time_s: Optional[float] = None) -> Path:
     """``trains`` copies of the train of the single-train system ``base`` writes, queued at its
-    start and departing ``headway_s`` apart (orchestrator/analysis/queued.py: the headway
+    start and departing ``headway_s`` apart (orchestrator/systems/queued.py: the headway
     trials' layout, with sidings beyond the line where the cab system allows them)."""
-    from orchestrator.analysis import queued
+    from orchestrator.systems import queued
 
     with tempfile.TemporaryDirectory() as scratch:
         plan = queued.TrialPlan(queued.read_base(base(Path(scratch)).parent), trains)

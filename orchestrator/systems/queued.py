@@ -1,6 +1,6 @@
 """Systems of N identical trains following at an interval, made from a single-train system: the
 headway trials (orchestrator/headway/) and the shipped systems of many trains
-(orchestrator/analysis/systems.py; docs/capacity.md#co-simulated-headway).
+(orchestrator/systems/shipped.py; docs/capacity.md#co-simulated-headway).
 
 What a trial holds, built from the base system's own line, rolling stock, timetable and cab
 signalling (its SSD's parameters, read by :func:`read_base`):
@@ -48,9 +48,9 @@ import numpy as np
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock
 from fmus.sizes import BuildConfig, DEFAULT_SAMPLE_RATE_HZ, sizes_of_source
 from fmus.units import MPS_PER_KMH
-from orchestrator.analysis.chain import (ATO_FMU, CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, signal_chain, train_and_ato,
-                                         write_ssd)
-from orchestrator.analysis.verdict import ATO_MODEL, TRAIN_MODEL
+from orchestrator.systems.chain import (ATO_FMU, CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, signal_chain,
+                                        train_and_ato, write_ssd)
+from orchestrator.verdicts.verdict import ATO_MODEL, TRAIN_MODEL
 from orchestrator.errors import UserError
 
 #: clear space between the tail of one queued train and the head of the next (m) [U]

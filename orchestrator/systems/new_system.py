@@ -5,7 +5,7 @@ The folder holds what ``railcosim run NAME`` needs:
 
 * ``SystemStructure.ssd`` — the signal chain (wayside coder → rail line → one locomotive receiver
   per train) and per train its Traction and ATO, written with orchestrator/sspgen.py the way the
-  shipped systems are (orchestrator/analysis/systems.py);
+  shipped systems are (orchestrator/systems/shipped.py);
 * ``line.ssv`` — one SSP parameter set holding ``line_file``, bound by every component that
   reads the line (coder, rail line, every train and ATO): one line for the whole system;
 * ``resources/`` — copies of the data files (the line, each train's timetable, the rolling stock).
@@ -16,7 +16,7 @@ line's ALSN carrier and to the stock's category. Everything a run would refuse i
 first, in one line naming the file and the field.
 
 ``--system TVM430`` (a line of UM71 track circuits, docs/rail_line.md#tvm-430-track-circuits)
-writes the chain the shipped tvm430 system has (orchestrator/analysis/systems.py): 12 kHz, 10 ms
+writes the chain the shipped tvm430 system has (orchestrator/systems/shipped.py): 12 kHz, 10 ms
 frames of 120 samples, its signal FMUs named in a sized folder of the sources
 (``resources/k32m2n120/RailLine.fmu``, docs/architecture.md#build-sizes) that ``railcosim run``
 builds; the high-speed set is its default stock.
@@ -37,10 +37,10 @@ from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, TVM_TRANSMITTER, Line
 from fmus.errors import FmuInputError
 from fmus.signalling.cab_systems import DIGITAL
 from fmus.sizes import BuildConfig, sizes_of_source
-from orchestrator.analysis.chain import RAIL_FMU
-from orchestrator.analysis.system_checks import check_sections_contiguous, load_data_file
-from orchestrator.analysis.systems import (TVM430_BUILD, TVM430_FS_HZ, TVM430_STOCK, cab_settings,
-                                           check_placements, committed_ports, signal_chain, train_and_ato)
+from orchestrator.verdicts.system_checks import check_sections_contiguous, load_data_file
+from orchestrator.systems.chain import (RAIL_FMU, cab_settings, check_placements, committed_ports, signal_chain,
+                                        train_and_ato)
+from orchestrator.systems.shipped import TVM430_BUILD, TVM430_FS_HZ, TVM430_STOCK
 from orchestrator.errors import UserError
 from orchestrator.sspgen import fmu_ports, write_ssd, write_ssv
 
@@ -297,14 +297,15 @@ def timetable_for(line_path: Path, stock_path: Path) -> dict:
 def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Sequence[Path], line_id=None,
                            sidecar=None, schema_dir=None, rolling_stock_file=None, system: str = "ALSN",
                            trains=None, traction=None, fmu_dir=None):
-    """``railcosim new NAME --railml FILE``: the railML line imported (orchestrator/analysis/
-    railml.py), written as a line file into the system's resources/, and the system made from it
+    """``railcosim new NAME --railml FILE``: the railML line imported (orchestrator/railml/
+    read.py), written as a line file into the system's resources/, and the system made from it
     as from a line file; without --timetable one timetable is made (:func:`timetable_for`).
     Returns (SSD path, the import's notes)."""
     import json
     import tempfile
 
-    from orchestrator.analysis.railml import import_railml, validate_railml
+    from orchestrator.railml.read import import_railml
+    from orchestrator.railml.validate import validate_railml
 
     folder, railml_file = Path(folder), Path(railml_file)
     _refuse_existing(folder)

@@ -1,7 +1,7 @@
 """The rail line's track circuits checked by ngspice (docs/rail_line.md#checked-against-ngspice):
 ``railcosim crosscheck spice SYSTEM`` and benchmarks/spice_crosscheck.py.
 
-Three comparisons, each against a netlist of orchestrator/analysis/netlist.py run by ngspice:
+Three comparisons, each against a netlist of orchestrator/circuits/netlist.py run by ngspice:
 
 * **.ac, the network**: the rail line's own network (a shunt per node a train covers) at a
   frequency, our phasor solution (modified nodal analysis, fmus/rail_line/network.py) against
@@ -33,8 +33,8 @@ from fmus.rail_line.geometry import LineGeometry
 from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import Faults, TrackCircuit
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-from orchestrator.analysis import ngspice
-from orchestrator.analysis.netlist import (Netlist, ac_source, axle_netlist, lumped_netlist, switched_shunts,
+from orchestrator.circuits import ngspice
+from orchestrator.circuits.netlist import (Netlist, ac_source, axle_netlist, lumped_netlist, switched_shunts,
                                            tran_source)
 
 AC_BOUND = 1e-3            # .ac: the same network, solver precision

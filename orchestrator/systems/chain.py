@@ -1,6 +1,6 @@
 """The building blocks of every system railcosim writes (the shipped ones,
-orchestrator/analysis/systems.py; ``railcosim new``; the headway trials,
-orchestrator/analysis/queued.py): one train and its ATO, the signal chain for any number of
+orchestrator/systems/shipped.py; ``railcosim new``; the headway trials,
+orchestrator/systems/queued.py): one train and its ATO, the signal chain for any number of
 trains, each cab system's settings, train lengths from the rolling-stock files, placements
 checked, and SSDs written from the committed contract manifests."""
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import fmus
 from fmus import ato_controller, loco_receiver, rail_line, traction, wayside_coder
 from fmus.sizes import BuildConfig, sizes_of_source
-from orchestrator.analysis.system_checks import span_defects
+from orchestrator.verdicts.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
 from orchestrator.sspgen import write_ssd as _write_ssd
@@ -76,7 +76,7 @@ def stock_length_m(stock_file=None) -> float:
 def check_placements(line: dict, trains: Sequence[Tuple[str, float, float]]) -> None:
     """Refuse (ValueError) initial placements (name, head position, length) with a tail before
     the line start or two trains overlapping: the rail line refuses them at initialisation
-    (the rule: orchestrator/analysis/system_checks.py ``span_defects``)."""
+    (the rule: orchestrator/verdicts/system_checks.py ``span_defects``)."""
     off, overlaps = span_defects(line["length_m"], trains)
     if off:
         name, tail, head = off[0]

@@ -68,7 +68,7 @@ def _load(loader, path, what: str):
 def _heads_at(results: Path, time_s: float, names: List[str]) -> Dict[str, float]:
     """Each component's ``x`` in a run's results.csv at the row nearest ``time_s``, which must
     lie within the rows' span (one output interval either side at most)."""
-    from orchestrator.analysis.report import results_rows
+    from orchestrator.reports.report import results_rows
 
     if not results.is_file():
         raise UserError(f"--results: {results}: no results.csv there")
@@ -195,7 +195,7 @@ def section_netlist(setup: RailSetup, k: int, wheelsets: str = "nodes", segment_
     from fmus.rail_line.core import RailLineCore
     from fmus.rail_line.track_circuit import Faults
     from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
-    from orchestrator.analysis.netlist import (MAX_AXLE_PIECES, ac_source, axle_netlist, lumped_netlist,
+    from orchestrator.circuits.netlist import (MAX_AXLE_PIECES, ac_source, axle_netlist, lumped_netlist,
                                                print_probes, tran_source)
 
     settings = settings_with_trains(setup)

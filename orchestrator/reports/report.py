@@ -26,7 +26,7 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from orchestrator.analysis.verdict import RECEIVER_MODEL, safety_parts, safety_verdict, stop_cells
+from orchestrator.verdicts.verdict import RECEIVER_MODEL, safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 from orchestrator.folders import create_file
 from orchestrator.ports import split_element

@@ -710,8 +710,8 @@ def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_war
     ``RunOptions.summaries`` (``functools.partial(railway_verdicts, warn=options.warn)`` to send
     its warnings where the run's go). The system's railway data are checked first (a bad one is
     a UserError before the run starts, what is suspicious goes to ``warn``:
-    orchestrator/analysis/system_checks.py)."""
-    from orchestrator.analysis.system_checks import check_railway_data
+    orchestrator/verdicts/system_checks.py)."""
+    from orchestrator.verdicts.system_checks import check_railway_data
 
     check_railway_data(graph, warn)
     return [TrainVerdict(graph), ReceiverVerdict(graph)]
