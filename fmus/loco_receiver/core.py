@@ -61,6 +61,7 @@ from fmus.dsp.filter_design import SampleSosFilter, SosFilter, sos_frame
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
 from fmus.reductions import largest, smallest
@@ -171,9 +172,9 @@ class LocoReceiverCore:
         s = settings
         carrier_hz, bandwidth, order = filters.band_pass_design(s)
         alsn.check_carrier_and_rate(carrier_hz, s.fs_hz, "parameter ")
-        if s.train_category not in sig.TRAIN_CATEGORIES:
+        if s.train_category not in TRAIN_CATEGORIES:
             raise FmuInputError(f"parameter train_category: {s.train_category!r} is not one of "
-                                f"{', '.join(sig.TRAIN_CATEGORIES)}")
+                                f"{', '.join(TRAIN_CATEGORIES)}")
         if not 1 <= s.filter_order <= 8:
             raise FmuInputError(f"parameter filter_order: {s.filter_order} (1..8)")
         for name, value in (("agc_limit", s.agc_limit_v), ("agc_recovery", s.agc_recovery_db_per_s),

@@ -70,6 +70,7 @@ from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import receiver_settings
 from fmus.signalling import alsn, alsu, cab_systems, tvm430
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.signalling.block_rules import block_codes
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.traction.brake_pipeline import brake_lead_s
@@ -158,8 +159,8 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
     except FmuInputError as error:
         raise UserError(str(error)) from None
     category = str(ato.get("train_category") or stock.category)
-    if category not in sig.TRAIN_CATEGORIES:
-        raise UserError(f"parameter train_category: {category!r} is not one of {', '.join(sig.TRAIN_CATEGORIES)}")
+    if category not in TRAIN_CATEGORIES:
+        raise UserError(f"parameter train_category: {category!r} is not one of {', '.join(TRAIN_CATEGORIES)}")
     # as fmus/ato_controller/core.py AtoCore builds its ATP (its facade has no brake_lead port:
     # the stock's brake lead always)
     defaults = AtoSettings()
@@ -173,9 +174,9 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
     except FmuInputError as error:
         raise UserError(str(error)) from None
     rx_category = getattr(rx, "train_category", category)
-    if rx_category not in sig.TRAIN_CATEGORIES:
+    if rx_category not in TRAIN_CATEGORIES:
         raise UserError(f"parameter train_category (receiver): {rx_category!r} is not one of "
-                        f"{', '.join(sig.TRAIN_CATEGORIES)}")
+                        f"{', '.join(TRAIN_CATEGORIES)}")
     return CabSetup(system, block_aspects, line, stock, category, rx_category, float(getattr(rx, "v_max_mps", 0.0)),
                     atp, coding)
 
