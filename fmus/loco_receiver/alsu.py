@@ -237,11 +237,6 @@ class AlsuReceiverCore:
         0 when not exactly two tones are present."""
         return int(self._pair_of_word[self._word])
 
-    @property
-    def tones_present(self) -> np.ndarray:
-        """Diagnostics: which of the six tones are present now."""
-        return self._present.copy()
-
     def _supports(self, kind: int) -> bool:
         """Whether hearing ``kind`` keeps the code shown alive: the code itself or a more
         permissive one (the code sent may have become more permissive; ALSN's rule too)."""
