@@ -16,16 +16,17 @@ from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
 from fmus.data.loader import load_line
 from fmus.signalling.digital_messages import Message, stated_latency_s
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
-FS = 4000.0
+FS = DEFAULT_SAMPLE_RATE_HZ
 AMPLITUDE_V = 0.2
 # the squelch the study's figures were taken with: 20x below the coil level, as a receiver at a
 # normal code level sees it (the receiver is scale-free apart from squelch and limiter)
 SQUELCH_V = 0.01
-CHUNK = 40000                       # 10 s of signal per receiver step (the core is frame-length invariant)
+CHUNK = int(10 * FS)                # 10 s of signal per receiver step (the core is frame-length invariant)
 GRID_S = 0.01
 HOLD = 6
 

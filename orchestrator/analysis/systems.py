@@ -43,7 +43,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 from fmus.sizes import BuildConfig
 from orchestrator.analysis.chain import (  # noqa: F401 — the building blocks, re-exported for their users
     TRAIN_STEP_S, ATO_STEP_S, committed_ports, write_ssd, _shipped_json, stock_length_m, check_placements, _stop_m,
-    _with_station, train_and_ato, SIGNAL_FS_HZ, CHAIN_PORTS, TVM430_PORTS, signal_chain, cab_settings, ALSU_BLOCK_ASPECTS)
+    _with_station, train_and_ato, CHAIN_PORTS, TVM430_PORTS, signal_chain, cab_settings, ALSU_BLOCK_ASPECTS)
 
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
 # ALSU: 4-aspect block (code 4 before a yellow), the route into B onto a diverging track

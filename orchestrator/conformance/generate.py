@@ -25,10 +25,11 @@ from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.rail_line.track_circuit import cascade_shunt_current
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from orchestrator.conformance import ROLES
 from orchestrator.conformance.vectors import DATA_DIR, FORMAT
 
-FS_HZ = 4000.0
+FS_HZ = DEFAULT_SAMPLE_RATE_HZ   # the units' default rate: the vectors hold for a default build
 FRAME = 40                  # the generator's own frame; the runner steps with the target's
 GENERATOR = "python -m orchestrator.conformance.generate"
 
