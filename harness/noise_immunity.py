@@ -190,12 +190,12 @@ def alsn_chain(cycles: int, noise, seed: int) -> dict:
 
     channel = CodeChannel(0, coupling=AMPLITUDE_V / 4.0)       # the coder's 4 V → 0.2 V at the coil
     cycles_seen = []
-    original = channel.receiver._cycle
+    original = channel.receiver.decoder._cycle
 
     def spy(short, length, time_s):
         original(short, length, time_s)
         cycles_seen.append((time_s, channel.receiver.out.code))
-    channel.receiver._cycle = spy
+    channel.receiver.decoder._cycle = spy
     def disturb(t, e):
         return e + noise(int(round(t[0] * FS)), t.size)
     rows = channel.run(seconds, occupancy, disturb if noise is not None else None)
