@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Optional, Union
 
 from orchestrator.errors import UserError
+from orchestrator.library_shortcuts import fmi_headers
 
 SOURCE = Path(__file__).resolve().with_name("fmi2_forward.c")
 SETTINGS_MEMBER = "resources/railcosim_python.txt"
@@ -66,12 +67,6 @@ def find_compiler() -> Optional[str]:
     return None
 
 
-def _fmi_headers() -> Path:
-    import fmpy
-
-    return Path(fmpy.__file__).resolve().parent / "c-code"
-
-
 def plan() -> Union[Forwarder, NoForwarder]:
     import platform
     import sys
@@ -92,7 +87,7 @@ def plan() -> Union[Forwarder, NoForwarder]:
 
 def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
     command = [forwarder.compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
-               f"-I{_fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
+               f"-I{fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
                "-o", str(output), str(SOURCE), "-ldl", "-lpthread"]
     proc = subprocess.run(command, capture_output=True, text=True)
     if proc.returncode != 0:
