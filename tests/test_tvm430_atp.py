@@ -296,7 +296,7 @@ def test_a_train_at_300_closing_on_an_occupied_block_slows_by_the_steps_and_stop
     loop = run_closed_loop(900.0, 0.5, AtoSettings(cab_signal="TVM430", strategy="flat_out"),
                            line_file=line_file, stock_file=TGV, timetable_file=_timetable(tmp_path, 1000.0),
                            cab_signal=words)
-    t, x, v, mode = loop.column("t"), loop.column("x"), loop.column("v"), loop.column("mode")
+    x, v, mode = loop.column("x"), loop.column("v"), loop.column("mode")
     target_m = (occupied - 1) * BLOCK_M
     steps = _steps_shown(words)
     assert v.max() >= 295.0 * MPS_PER_KMH                          # it ran at 300 first

@@ -26,11 +26,15 @@ docs/performance.md#start-up-of-a-run.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy        # scipy.signal loads at its first use (SciPy loads submodules lazily)
 
 from fmus.library_shortcuts import linear_filter, sections_filter
+
+if TYPE_CHECKING:       # imported at the first design, not on import (module docstring)
+    import control
 
 
 def filter_frame(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray, axis: int = -1):

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -34,7 +33,7 @@ from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import Faults, TrackCircuit
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from orchestrator.analysis import ngspice
-from orchestrator.analysis.netlist import (Netlist, ac_source, axle_netlist, lumped_netlist, switched_shunts,
+from orchestrator.analysis.netlist import (ac_source, axle_netlist, lumped_netlist, switched_shunts,
                                            tran_source)
 
 AC_BOUND = 1e-3            # .ac: the same network, solver precision
