@@ -291,7 +291,7 @@ def _cycles(graph):
 
 def test_no_import_circle_in_the_product():
     """An import circle makes a module's meaning depend on import order and hides which layer
-    is below which (docs/architecture.md, 'Import rules'); none may come back."""
+    is below which (docs/architecture.md, 'Layout'); none may come back."""
     assert _cycles(_import_graph()) == []
 
 
