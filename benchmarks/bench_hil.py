@@ -9,9 +9,13 @@
 * ``free_run_srt``: the same swap with the emulator in soft real time (its own clock; the run is
   paced to the wall clock): lost outputs, fail-safe steps and the age of the outputs used;
 * ``counter``: the exchange alone, with the test suite's counter slave (tests/test_hil.py, a
-  foreign .dcpx) stepping every 10 ms beside a test FMU.
+  foreign .dcpx) stepping every 10 ms beside a test FMU;
+* ``sine_srt``: the test suite's sine slave in soft real time (tests/test_hil.py, the run paced
+  to the wall clock): whether over a minute any output is lost or late, any step falls back to
+  the fail-safe values, and the outputs' age against the deadline (the test asserts only what
+  the wall clock does not decide).
 
-    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|free_run_srt|ato|counter] [SIM_SECONDS]
+    PYTHONPATH=. python benchmarks/bench_hil.py [free_run|free_run_srt|ato|counter|sine_srt] [SIM_SECONDS]
 
 Needs `railcosim build` first. Record the machine's load with the figures: on a shared machine
 the exchange (eight datagrams per step, two processes) waits for the scheduler.
@@ -112,6 +116,17 @@ def counter(sim_s: float) -> dict:
             **{k: result.summary["hil"]["dut"][k] for k in _KEYS}}
 
 
+def sine_srt(sim_s: float) -> dict:
+    from conftest import build_test_fmus
+    from test_hil import soft_real_time_run
+
+    with tempfile.TemporaryDirectory() as folder:
+        hil, counts = soft_real_time_run(Path(folder), build_test_fmus(4), sim_s)
+    return {"sim_time_s": sim_s, "load_average": os.getloadavg(), "slave_sent": counts["sent"],
+            "slave_dropped": counts["dropped"], "late": hil["late"], "deadline_ms": hil["deadline_ms"],
+            **{k: hil[k] for k in _KEYS}}
+
+
 def serve() -> None:
     """The counter slave's process: say the port, then answer until killed."""
     from test_hil import CounterSlave
@@ -128,6 +143,6 @@ if __name__ == "__main__":
         kind = sys.argv[1] if len(sys.argv) > 1 else "free_run"
         seconds = float(sys.argv[2]) if len(sys.argv) > 2 else None    # ato: the whole run
         runs = {"free_run": lambda: free_run(seconds or 120.0), "counter": lambda: counter(seconds or 60.0),
-                "free_run_srt": lambda: free_run_srt(seconds or 60.0),
+                "free_run_srt": lambda: free_run_srt(seconds or 60.0), "sine_srt": lambda: sine_srt(seconds or 60.0),
                 "ato": lambda: free_run(seconds, "ato", "AtoController")}
         print(json.dumps(runs[kind](), indent=2))

@@ -39,12 +39,12 @@ def measure(section, code_name, snr_db, seconds, seed):
     code, ahead = CODES[code_name]
     channel = CodeChannel(section, coupling=0.1)
     cycles = []
-    original = channel.receiver._cycle
+    original = channel.receiver.decoder._cycle
 
     def spy(short, length, time_s):
         original(short, length, time_s)
         cycles.append(channel.receiver.out.code)
-    channel.receiver._cycle = spy
+    channel.receiver.decoder._cycle = spy
     rows = channel.run(seconds, occupancy(section, ahead), white_noise_and_hum(snr_db, 0.4, HARMONICS, seed))
     settled = rows[rows[:, 0] > 4.0]
     cycles = np.array(cycles)

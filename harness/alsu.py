@@ -18,10 +18,11 @@ from fmus.data.loader import Line, load_line
 from fmus.loco_receiver.alsu import AlsuReceiverCore, AlsuReceiverSettings
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.signalling import alsu
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.wayside_coder.alsu import AlsuCoderCore
 from fmus.wayside_coder.core import CoderSettings
 
-FS, N = 4000.0, 40
+FS, N = DEFAULT_SAMPLE_RATE_HZ, 40
 FRAME_S = N / FS
 TONE_BAND_HZ = (125.0, 375.0)
 # a train standing with its head this far into a section: the coils over its entry end, where

@@ -9,8 +9,9 @@ from scipy.signal import hilbert
 from fmus.data.loader import load_line
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.traction_interference import REFERENCE_TRACTION_A
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
-FS, N = 4000.0, 40                   # sample rate [Hz] and frame length [samples] of the runs
+FS, N = DEFAULT_SAMPLE_RATE_HZ, 40                   # sample rate [Hz] and frame length [samples] of the runs
 JOINT_M = 2600.0                     # the default lines' joint between sections 1 and 2
 COIL_OFFSET_M = 1.5                  # the coils ahead of the first wheelset (RailSettings' default)
 

@@ -21,6 +21,7 @@ from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.traction_interference import REFERENCE_TRACTION_A
 from fmus.signalling import aspects as sig
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 
 SECTION = {"KPT-5": 0, "KPT-7": 1}     # the default line's sections 1 and 2
@@ -138,7 +139,7 @@ def table(phases: Iterable[float], kpts=("KPT-5", "KPT-7"), carrier_hz: float = 
 
 
 # ---- a change of code at an insulated joint -----------------------------------------------------
-FS_HZ, FRAME = 4000.0, 40
+FS_HZ, FRAME = DEFAULT_SAMPLE_RATE_HZ, 40
 WEAK_CODE_V = 0.28          # the code at a section's entry end past a joint (joints paper, docs/sources.md#interference-at-insulated-joints)
 NOISE_SNR_DB = 10.0         # white noise over the whole band against WEAK_CODE_V (30 dB in the filter band)
 CROSS_S = 7.0               # the coils cross the joint: the code behind it shown for 3 s before (acquired within 3.82 s)

@@ -16,16 +16,17 @@ from fmus.signalling import als_en, cab_systems, dqpsk
 from fmus.signalling import aspects as sig
 from fmus.data.loader import load_line
 from fmus.signalling.digital_messages import Message, stated_latency_s
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
 from fmus.wayside_coder.core import CoderSettings
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
 
-FS = 4000.0
+FS = DEFAULT_SAMPLE_RATE_HZ
 AMPLITUDE_V = 0.2
 # the squelch the study's figures were taken with: 20x below the coil level, as a receiver at a
 # normal code level sees it (the receiver is scale-free apart from squelch and limiter)
 SQUELCH_V = 0.01
-CHUNK = 40000                       # 10 s of signal per receiver step (the core is frame-length invariant)
+CHUNK = int(10 * FS)                # 10 s of signal per receiver step (the core is frame-length invariant)
 GRID_S = 0.01
 HOLD = 6
 
@@ -189,12 +190,12 @@ def alsn_chain(cycles: int, noise, seed: int) -> dict:
 
     channel = CodeChannel(0, coupling=AMPLITUDE_V / 4.0)       # the coder's 4 V → 0.2 V at the coil
     cycles_seen = []
-    original = channel.receiver._cycle
+    original = channel.receiver.decoder._cycle
 
     def spy(short, length, time_s):
         original(short, length, time_s)
         cycles_seen.append((time_s, channel.receiver.out.code))
-    channel.receiver._cycle = spy
+    channel.receiver.decoder._cycle = spy
     def disturb(t, e):
         return e + noise(int(round(t[0] * FS)), t.size)
     rows = channel.run(seconds, occupancy, disturb if noise is not None else None)

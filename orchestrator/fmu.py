@@ -22,6 +22,7 @@ import numpy as np
 
 from orchestrator.archives import MAX_UNPACKED_VARIABLE, max_unpacked_bytes, safe_extract, shown_size
 from orchestrator.errors import SimulationError, UserError
+from orchestrator.library_shortcuts import count_nonzero, library_function, raw_function
 from orchestrator.protocols import Causality, Slave, UnitDef
 
 FMI_TYPES = ("Real", "Integer", "Boolean", "String")
@@ -290,7 +291,7 @@ class FmuSlave(_ExtractedComponent):
         self._fatal = False
         # a plain pythonfmu binary (a foreign FMU, or ours built without a C compiler) exports
         # this; our forwarding binary does not need it (see free)
-        self._finalize = getattr(self._fmu.dll, "finalizePythonInterpreter", None)
+        self._finalize = library_function(self._fmu, "finalizePythonInterpreter")
         if self._finalize is not None:
             _claim_library(self.unzip_dir)
         self.messages: List[str] = []
@@ -362,9 +363,7 @@ class FmuSlave(_ExtractedComponent):
         self._unchanged = {id(b): np.zeros(b.count, dtype=bool) for b in self.inputs.values()}
 
     def _raw(self, name: str):
-        function = self._fmu.dll[name]       # a new function object: fmpy's argtypes are on its own
-        function.restype = ctypes.c_int
-        return name, function
+        return name, raw_function(self._fmu, name)
 
     def write_inputs(self) -> None:
         component = self._component_arg
@@ -375,7 +374,7 @@ class FmuSlave(_ExtractedComponent):
                 # a ufunc and a count of the equal values (np.array_equal's Python layer costs
                 # more than the test); NaN never equals, as there
                 unchanged = np.equal(last, buffer.values, out=self._unchanged[id(buffer)])
-                if np.count_nonzero(unchanged) == unchanged.size:
+                if count_nonzero(unchanged) == unchanged.size:
                     continue
                 last[:] = buffer.values
             status = setter(component, buffer.vr, count, buffer.raw)

@@ -22,6 +22,7 @@ from lxml import etree
 
 from orchestrator.archives import safe_extract
 from orchestrator.errors import UserError, forget_archive, register_archive, where
+from orchestrator.library_shortcuts import ssp_schema
 from orchestrator.protocols import TRANSITIONS, UnitDef
 
 NS = {
@@ -112,10 +113,7 @@ def _unpack_archive(path: Path) -> str:
 # ---- schema validation -------------------------------------------------------------------------
 def _schema(name: str) -> etree.XMLSchema:
     if name not in _SCHEMAS:
-        import fmpy.ssp
-
-        path = Path(fmpy.ssp.__file__).parent / "schema" / name
-        _SCHEMAS[name] = etree.XMLSchema(file=str(path))
+        _SCHEMAS[name] = etree.XMLSchema(file=str(ssp_schema(name)))
     return _SCHEMAS[name]
 
 

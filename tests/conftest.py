@@ -43,3 +43,14 @@ def product_fmus():
     build_all(dest)
     build_sized_for(dest, [p for p in (REPO / "ssp").iterdir() if p.is_dir()])     # TVM-430's 32 sections
     return dest
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The doc blocks tests/test_docs_run.py does not run, each with its reason (recorded by
+    test_block_not_run_says_why, which passes when the block says why and fails when not)."""
+    reasons = sorted(value for report in terminalreporter.stats.get("passed", [])
+                     for name, value in getattr(report, "user_properties", ()) if name == "doc block not run")
+    if reasons:
+        terminalreporter.section("doc blocks not run")
+        for reason in reasons:
+            terminalreporter.write_line(reason)

@@ -40,7 +40,7 @@ class TestMaster:
         self.slave_id = slave_id
         self.seq = 0
         self.states: List[State] = []
-        self.data: List[DatInputOutput] = []
+        self.data: List[Pdu] = []
         self.others: list = []
 
     @property

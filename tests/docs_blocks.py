@@ -8,9 +8,9 @@ annotation line right above it, an HTML comment a reader sees in the page's sour
 
 Directives (each ``name`` or ``name: value``):
 
-* ``skip: REASON`` — not run; the test is reported skipped with REASON;
+* ``skip: REASON`` — not run; listed with REASON at the end of the run;
 * ``needs dcp-slave: REASON``, ``needs hardware: REASON`` — not run: it needs a DCP slave or a
-  bench device the test does not have; reported skipped with REASON;
+  bench device the test does not have; listed with REASON;
 * ``text: REASON`` — not a command though it looks like one (an illustration);
 * ``synopsis`` — usage lines: every option they name must exist, every option of each railcosim
   command they show must be named (checked with the CLI's own parser, or a script's ``--help``);

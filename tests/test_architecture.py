@@ -2,16 +2,17 @@
 and that the model cores, the data layer, the signalling library and the railway rooms
 import with pythonfmu unavailable (a core runs in process without any FMI library)."""
 import ast
+import re
 import subprocess
 import sys
 import textwrap
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 UNITS = ("wayside_coder", "rail_line", "loco_receiver", "traction", "ato_controller")
-FMI_LIBRARIES = ("pythonfmu", "fmpy")
 
 
 def _module_name(path: Path) -> str:
@@ -48,62 +49,174 @@ def _within(name: str, prefixes) -> bool:
     return any(name == p or name.startswith(p + ".") for p in prefixes)
 
 
-def _forbidden_for(module: str):
-    """What a module may not import, by where it lives (docs/architecture.md, 'Import rules')."""
-    parts = module.split(".")
-    if module in ("fmus.errors", "fmus.sizes", "fmus.units"):
-        return ("fmus", "orchestrator", "benchmarks", "numpy", "scipy", "control", *FMI_LIBRARIES), \
-            {"fmus.errors", "fmus.sizes", "fmus.units"}
-    if parts[0] == "fmus":
-        if len(parts) > 1 and parts[1] == "fmi":
-            return ("orchestrator", "benchmarks", "fmpy", *(f"fmus.{u}" for u in UNITS)), set()
-        if len(parts) > 2 and parts[1] in UNITS and parts[2] == "facade":
-            return ("orchestrator", "benchmarks", "fmpy"), set()
-        if len(parts) > 1 and parts[1] in ("data", "signalling", "dsp"):
-            return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
-                    *(f"fmus.{u}" for u in UNITS)), set()
-        # a unit's core and its parts, the package roots
-        return ("orchestrator", "benchmarks", "fmus.fmi", *FMI_LIBRARIES,
-                *(f"fmus.{u}.facade" for u in UNITS)), set()
-    if parts[0] == "orchestrator":
-        if len(parts) > 1 and parts[1] in (*RAILWAY_ROOMS, "conformance", "study", "headway"):   # railway knowledge on the engine
-            return ("fmus.fmi", "pythonfmu", "benchmarks", "orchestrator.packaging", "orchestrator.cli"), set()
-        if len(parts) > 1 and parts[1] in ("packaging", "cli", "__main__", "catalogue"):   # the front ends
-            return ("benchmarks",), set()
-        # the engine: FMU-agnostic, knows no railway
-        return ("fmus", "pythonfmu", "benchmarks", *(f"orchestrator.{room}" for room in RAILWAY_ROOMS),
-                "orchestrator.packaging", "orchestrator.cli"), set()
-    return (), set()
+# --- The may-import table of docs/architecture.md ("Layout"), as data -----------------------
+#
+# One Row per row of the table: ``cell`` is the row's first column as written there (its
+# backticked paths say which files the row holds: a ``.py`` file, a folder and all below it, or
+# with "(top level)" the folder's own files; the most specific path holds a file), ``may`` what
+# the row's modules may import besides the standard library and each other: another Row (its
+# modules, and the libraries that row may import), a product module or package by name, or a
+# library by its import name. ``never`` is refused even where ``may`` is ANYTHING. To add a row,
+# add it to the page and here, in the page's order (test_the_table_rows_are_the_pages_rows).
+
+ANYTHING = ("*",)
+
+
+@dataclass(frozen=True)
+class Row:
+    cell: str
+    may: tuple = ()
+    never: tuple = ()
+
+
+LEAVES = Row("`fmus/errors.py`, `fmus/sizes.py`, `fmus/units.py`, `fmus/train_categories.py`")
+FAST_PATHS = Row("`fmus/reductions.py`, `fmus/library_shortcuts.py`", ("numpy", "scipy"))
+DATA = Row("`fmus/data/`", ("numpy", "jsonschema", "fmus.errors", "fmus.units", "fmus.train_categories"))
+SIGNALLING = Row("`fmus/signalling/`", ("numpy", "scipy", "fmus.errors", "fmus.units", "fmus.train_categories",
+                                        "fmus.dsp", "fmus.data"))
+DSP = Row("`fmus/dsp/`", ("numpy", "scipy", "control", "fmus.library_shortcuts"))
+FMUS_LIBRARIES = (LEAVES, FAST_PATHS, DATA, SIGNALLING, DSP)
+FMI = Row("`fmus/fmi/`", ("pythonfmu", *FMUS_LIBRARIES))
+CORES = Row("`fmus/<unit>/`", FMUS_LIBRARIES)                  # their own row: other units' cores
+FACADES = Row("`fmus/<unit>/facade.py`", (CORES, FMI, *FMUS_LIBRARIES))
+ENGINE = Row("`orchestrator/` (top level)", ("fmpy", "lxml", "numpy"))
+RUN = Row("`orchestrator/plan.py`, `orchestrator/run.py`, `orchestrator/components.py`, `orchestrator/results.py`, "
+          "`orchestrator/process_policy.py`, `orchestrator/validation.py`", (ENGINE, "orchestrator.dcp", "threadpoolctl"))
+VERDICTS = Row("`orchestrator/verdicts/`", (ENGINE, *FMUS_LIBRARIES, CORES))
+REPORTS = Row("`orchestrator/reports/`", (ENGINE, VERDICTS, *FMUS_LIBRARIES, CORES, "matplotlib"))
+RAILML = Row("`orchestrator/railml/` (+ `schema/`)",
+             ("lxml", "jsonschema", "fmus.data", "fmus.errors", "orchestrator.errors", "orchestrator.ssp",
+              "orchestrator.graph", "orchestrator.verdicts.system_checks"))
+CIRCUITS = Row("`orchestrator/circuits/`", (ENGINE, REPORTS, *FMUS_LIBRARIES, CORES))
+SYSTEM_WRITERS = Row("`orchestrator/systems/`", (ENGINE, VERDICTS, RAILML, *FMUS_LIBRARIES, CORES))
+DCP = Row("`orchestrator/dcp/`", (ENGINE, "lxml", "numpy"))
+CONFORMANCE = Row("`orchestrator/conformance/`", (ENGINE, *FMUS_LIBRARIES, CORES))
+STUDY = Row("`orchestrator/study/`", (ENGINE, RUN, VERDICTS, "dask", "distributed", "jsonschema", "matplotlib"))
+HEADWAY = Row("`orchestrator/headway/`", (ENGINE, RUN, VERDICTS, SYSTEM_WRITERS, STUDY, *FMUS_LIBRARIES, CORES,
+                                           "matplotlib"))
+PACKAGING = Row("`orchestrator/packaging/`", ANYTHING)
+CLI = Row("`orchestrator/cli.py`, `orchestrator/__main__.py`", ANYTHING)
+CATALOGUE = Row("`orchestrator/catalogue.py`", ANYTHING, never=("benchmarks",))
+SYSTEMS = Row("`ssp/<name>/`")
+HARNESS = Row("`harness/`", ("fmus", "orchestrator", "numpy", "scipy"), never=("benchmarks", "tests", "conftest"))
+BENCHMARKS = Row("`benchmarks/`", ANYTHING)
+TESTS = Row("`tests/`", ANYTHING, never=("benchmarks",))
+
+TABLE = (LEAVES, FAST_PATHS, DATA, SIGNALLING, DSP, FMI, CORES, FACADES, ENGINE, RUN, VERDICTS, REPORTS, RAILML,
+         CIRCUITS, SYSTEM_WRITERS, DCP, CONFORMANCE, STUDY, HEADWAY, PACKAGING, CLI, CATALOGUE, SYSTEMS, HARNESS,
+         BENCHMARKS, TESTS)
+#: the folders whose Python files the table places
+CHECKED = ("fmus", "orchestrator", "harness", "benchmarks", "tests")
+#: package roots: a docstring, no imports of their own; importing one is importing into it
+ROOTS = ("fmus", "orchestrator")
+
+
+def _page_rows():
+    """The first column of every row of the Layout table in docs/architecture.md."""
+    text = (REPO / "docs" / "architecture.md").read_text()
+    section = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    cells = [line.split(" | ", 1)[0][2:] for line in section.splitlines() if line.startswith("| ")]
+    return [cell for cell in cells if cell not in ("package",)]
+
+
+def _placements(row: Row):
+    """(path, kind) for each path the row's cell names: kind 'file', 'tree' or 'top'."""
+    top_level = "(top level)" in row.cell
+    for path in re.findall(r"`([^`]+)`", row.cell):
+        for unit_path in ([path.replace("<unit>", unit) for unit in UNITS] if "<unit>" in path else [path]):
+            kind = "file" if unit_path.endswith(".py") else "top" if top_level else "tree"
+            yield unit_path, kind
+
+
+def _row_of(relative: str) -> Row:
+    """The row that holds a file (its path relative to the repository): the most specific."""
+    best = []
+    for row in TABLE:
+        for path, kind in _placements(row):
+            if kind == "file" and relative == path:
+                best.append(((2, len(path)), row))
+            elif kind == "tree" and relative.startswith(path):
+                best.append(((1, len(path)), row))
+            elif kind == "top" and relative.startswith(path) and "/" not in relative[len(path):]:
+                best.append(((1, len(path)), row))
+    if not best:
+        return None
+    best.sort(key=lambda found: found[0])
+    assert len(best) < 2 or best[-1][0] != best[-2][0], f"{relative}: two rows hold it equally"
+    return best[-1][1]
 
 
 def _product_files():
-    for package in ("fmus", "orchestrator"):
+    for package in ROOTS:
         yield from sorted((REPO / package).rglob("*.py"))
 
 
-def test_every_product_module_keeps_its_import_rules():
+def _checked_files():
+    for folder in CHECKED:
+        yield from sorted((REPO / folder).rglob("*.py"))
+
+
+def _is_root(path: Path) -> bool:
+    return path.relative_to(REPO).as_posix() in (f"{root}/__init__.py" for root in ROOTS)
+
+
+def _allowed(name: str, target: Row, row: Row) -> bool:
+    """May a module of ``row`` import ``name`` (a product module of row ``target``, or None)?"""
+    if _within(name, row.never):
+        return False
+    if row.may == ANYTHING or target is row:
+        return True
+    for entry in row.may:
+        if isinstance(entry, Row):
+            if target is entry or (target is None and _within(name, _libraries(entry))):
+                return True
+        elif _within(name, (entry,)):
+            return True
+    if name in ROOTS:      # ``import fmus`` (its folder): allowed wherever something inside it is
+        return any(path.startswith(name + "/") for entry in row.may if isinstance(entry, Row)
+                   for path, _ in _placements(entry)) \
+            or any(isinstance(entry, str) and _within(entry, (name,)) for entry in row.may)
+    return False
+
+
+def _libraries(row: Row):
+    """The libraries a row may import (what another row that may import it may use too)."""
+    return tuple(e for e in row.may if isinstance(e, str) and e.split(".")[0] not in (*ROOTS, *CHECKED))
+
+
+def test_the_table_rows_are_the_pages_rows():
+    """Each row of docs/architecture.md's table is a Row here, in its order, and back."""
+    assert _page_rows() == [row.cell for row in TABLE]
+
+
+def test_every_module_imports_only_what_its_row_may():
+    """The may-import table, checked exactly, at the level of its rows: every import of every
+    module (at the top, inside functions, under TYPE_CHECKING) must be the standard library,
+    its own row, a package above it, or what its row's "may import" names."""
+    modules = {_module_name(path): path for path in _checked_files()}
+    row_of_module = {}
+    for module, path in modules.items():
+        if not _is_root(path):
+            row = _row_of(path.relative_to(REPO).as_posix())
+            assert row is not None, f"{path.relative_to(REPO)}: no row of docs/architecture.md holds it"
+            row_of_module[module] = row
     broken = []
-    for path in _product_files():
-        module = _module_name(path)
-        forbidden, allowed = _forbidden_for(module)
+    for module, path in modules.items():
+        row = row_of_module.get(module)
         for name, line in _imports(path):
-            if name in allowed or name == module:
+            top = name.split(".")[0]
+            if name == module or top in sys.stdlib_module_names or top == "__future__":
                 continue
-            if _within(name, forbidden):
-                broken.append(f"{path.relative_to(REPO)}:{line} imports {name}")
-    assert not broken, "import rules (docs/architecture.md) broken:\n" + "\n".join(broken)
-
-
-def test_tests_and_the_harness_import_no_benchmark():
-    """Tests rely on the product and on harness/, never on a benchmark; the harness serves both
-    and imports neither (docs/architecture.md)."""
-    broken = []
-    for folder, forbidden in (("tests", ("benchmarks",)), ("harness", ("benchmarks", "tests", "conftest"))):
-        for path in sorted((REPO / folder).rglob("*.py")):
-            for name, line in _imports(path):
-                if _within(name, forbidden):
-                    broken.append(f"{path.relative_to(REPO)}:{line} imports {name}")
-    assert not broken, "\n".join(broken)
+            if module.startswith(name + "."):         # a package above it: imported by Python anyway
+                continue
+            if name not in modules and top in CHECKED and name.rpartition(".")[0] in modules:
+                continue                              # ``from module import name``: the module counts
+            where = f"{path.relative_to(REPO)}:{line} imports {name}"
+            if row is None:                           # a package root imports nothing of its own
+                broken.append(where + " (a package root)")
+            elif not _allowed(name, row_of_module.get(name), row):
+                broken.append(f"{where}, which the row {row.cell} may not")
+    assert not broken, "the may-import table of docs/architecture.md is broken:\n" + "\n".join(broken)
 
 
 def test_the_bundled_package_holds_no_build_tooling_or_harness():
@@ -187,24 +300,8 @@ def _cycles(graph):
 
 def test_no_import_circle_in_the_product():
     """An import circle makes a module's meaning depend on import order and hides which layer
-    is below which (docs/architecture.md, 'Import rules'); none may come back."""
+    is below which (docs/architecture.md, 'Layout'); none may come back."""
     assert _cycles(_import_graph()) == []
-
-
-#: the engine: loading, graph, master, slaves, observers and what they share; it knows neither
-#: the railway, nor DCP, nor studies or conformance
-ENGINE = ("orchestrator.ssp", "orchestrator.graph", "orchestrator.master", "orchestrator.algorithms",
-          "orchestrator.fmu", "orchestrator.observers", "orchestrator.protocols", "orchestrator.archives",
-          "orchestrator.errors", "orchestrator.interrupts", "orchestrator.scenario", "orchestrator.pacing",
-          "orchestrator.ports")
-
-
-def test_the_engine_imports_no_dcp_railway_study_or_conformance():
-    graph = _import_graph()
-    above = ("orchestrator.dcp", *(f"orchestrator.{room}" for room in RAILWAY_ROOMS), "orchestrator.study",
-             "orchestrator.conformance")
-    offending = {module: sorted(name for name in graph[module] if _within(name, above)) for module in ENGINE}
-    assert {m: names for m, names in offending.items() if names} == {}
 
 
 def test_a_run_without_filters_imports_no_filter_design_library():

@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp, dv_ebi_mps
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, SERVICE_INTERVENTION, Atp
+from fmus.ato_controller.supervision import dv_ebi_mps
 from fmus.ato_controller.core import AtoCore, AtoSettings
 from harness.closed_loop import red_signal_ahead, run_closed_loop, timetable_with_supplement
 from fmus.ato_controller.planner import StagePlanner

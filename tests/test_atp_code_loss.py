@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp,
-                                     dv_ebi_mps)
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
+from fmus.ato_controller.supervision import dv_ebi_mps
 from fmus.data.loader import DATA, load_line
 from fmus.signalling import aspects as sig
 from fmus.units import MPS_PER_KMH

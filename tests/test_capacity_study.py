@@ -2,7 +2,6 @@
 a real co-simulation, a late leader holding its follower through the signal chain."""
 import csv
 
-import numpy as np
 import pytest
 
 from orchestrator.headway import interval_study

@@ -22,7 +22,6 @@ from pathlib import Path
 import pytest
 
 from dcp_test_master import start_slave
-from orchestrator.dcp import dcpx
 from orchestrator.dcp.pdu import DataType, PayloadCodec, Pdu, PduType, State, decode
 
 DATA = Path(__file__).resolve().parent / "data" / "dcp"

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from fmus.ato_controller.atp import Atp, dv_sbi_mps
+from fmus.ato_controller.atp import Atp
+from fmus.ato_controller.supervision import dv_sbi_mps
 from fmus.data.loader import DATA
 from fmus.signalling import aspects as sig
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
@@ -211,9 +212,9 @@ def fresh_atp(setup):
     of approach.py leaves them out)."""
     atp = setup.atp
     fresh = Atp(setup.line, setup.category, setup.stock.length_m, atp.mode, atp.decel, atp.latency_s,
-                emergency_decel_mps2=atp.emergency_decel, brake_lead_s=atp.brake_lead_s)
+                emergency_decel_mps2=atp.tvm.emergency_decel, brake_lead_s=atp.tvm.brake_lead_s)
     fresh.limits = [math.inf] * len(fresh.limits)
-    fresh.line_restrictions = ()
+    fresh.restrictions.of_line = ()
     return fresh
 
 

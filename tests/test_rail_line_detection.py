@@ -111,8 +111,7 @@ def _lumped_current(core, heads):
     net = circuit.network(None, Faults(), core.settings.transformer_ratio, 50.0)
     family = PhasorFamily(net, 2 * np.pi * 50.0, [1.0])
     nodes = [net.node_index[f"n{n}"] for n in shunts]
-    volts = family.free - family.impedance[:, nodes] @ np.linalg.solve(
-        np.eye(len(nodes)) * 0.06 + family.impedance[np.ix_(nodes, nodes)], family.free[nodes])
+    volts = family.with_shunts(nodes, 1.0 / 0.06)
     node = head_nodes[rows[3][1]]
     a, b = net.node_index[f"n{node}"], net.node_index[f"n{node + 1}"]
     return abs((volts[a] - volts[b]) / family.z_branch[node])

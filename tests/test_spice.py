@@ -4,15 +4,13 @@ numerical cross-checks run the real ngspice and are skipped, saying how to insta
 is not on PATH (CI installs it: .ci/run)."""
 import re
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fmus.data.loader import load_line
-from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.track_circuit import CircuitParameters, Faults, TrackCircuit, rail_impedance
-from orchestrator.circuits.netlist import (ac_source, axle_netlist, lumped_netlist, staircase_points,
+from orchestrator.circuits.netlist import (axle_netlist, lumped_netlist, staircase_points,
                                            tran_source)
 from orchestrator.circuits.ngspice import read_raw
 from helpers import REPO, railcosim

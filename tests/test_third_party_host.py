@@ -16,10 +16,10 @@ import sys
 import zipfile
 from pathlib import Path
 
-import fmpy
 import pytest
 from fmpy import read_model_description
 
+from orchestrator.library_shortcuts import fmi_headers
 from orchestrator.packaging.forwarder import DESCRIPTION_MEMBER, MARKER_SYMBOL, SETTINGS_MEMBER
 
 HOST_SOURCE = Path(__file__).resolve().parent / "host" / "fmi2_host.c"
@@ -42,7 +42,7 @@ def compile_host(dest: Path) -> Path:
     compiler = shutil.which("gcc") or shutil.which("cc")
     assert compiler, "a C compiler is part of this machine kind (docs/third_party.md)"
     binary = dest / "fmi2_host"
-    headers = Path(fmpy.__file__).parent / "c-code"
+    headers = fmi_headers()
     subprocess.run([compiler, "-O1", f"-I{headers}", "-o", str(binary), str(HOST_SOURCE), "-ldl"], check=True)
     return binary
 
@@ -397,7 +397,7 @@ BAD_INSTANTIATIONS = ("null_name", "empty_name", "model_exchange", "unknown_type
 def bad_calls_binary(tmp_path_factory):
     compiler = shutil.which("gcc") or shutil.which("cc")
     binary = tmp_path_factory.mktemp("bad_calls") / "fmi2_bad_calls"
-    headers = Path(fmpy.__file__).parent / "c-code"
+    headers = fmi_headers()
     subprocess.run([compiler, "-O1", f"-I{headers}", "-o", str(binary), str(BAD_CALLS_SOURCE), "-ldl", "-lm"],
                    check=True)
     return binary

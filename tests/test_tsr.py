@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from harness.closed_loop import run_closed_loop
-from fmus.ato_controller.atp import NO_INTERVENTION, Atp, dv_ebi_mps
+from fmus.ato_controller.atp import NO_INTERVENTION, Atp
+from fmus.ato_controller.supervision import dv_ebi_mps
 from fmus.ato_controller.core import MODE_COAST, RESTRICTION_BAND_MPS, AtoCore, AtoSettings
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, TemporaryRestriction, load_line, load_rolling_stock,
                               load_timetable)

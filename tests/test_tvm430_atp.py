@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION,
-                                     TVM_CONTROL_MARGIN_MPS, Atp)
+from fmus.ato_controller.atp import EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION, Atp
+from fmus.ato_controller.atp_tvm430 import TVM_CONTROL_MARGIN_MPS
 from fmus.ato_controller.core import AtoCore, AtoSettings, MODE_ATP_EMERGENCY, MODE_ATP_SERVICE
 from fmus.data.loader import load_line, load_rolling_stock, load_timetable
 from fmus.signalling import aspects as sig
@@ -231,7 +231,7 @@ def test_a_word_still_from_the_previous_block_puts_the_target_where_it_belongs(t
         atp = _atp(line_file)
         result = atp.supervise(0.0, x, v, word["aspect"], True, word["v_permitted"], word["v_target"], 0,
                                target_distance_m=word["target_distance"], word_carrier_hz=word["word_carrier"])
-        assert atp.word_block(x, word["word_carrier"]) == k
+        assert atp.tvm.word_block(x, word["word_carrier"]) == k
         stops[k] = [tg.position_m for tg in result.constraints.targets if tg.signal]
         assert result.intervention == NO_INTERVENTION
     assert stops[5] == stops[6] == [9 * BLOCK_M]
@@ -248,7 +248,7 @@ def test_a_word_still_from_the_previous_block_puts_the_target_where_it_belongs(t
                       target_distance_m=NO_TARGET_M, word_carrier_hz=CARRIERS_HZ[1])
     result = foreign.supervise(0.5, x, v, word["aspect"], True, word["v_permitted"], word["v_target"], 0,
                                target_distance_m=word["target_distance"], word_carrier_hz=2000.0)
-    assert foreign.word_block(x, 2000.0) is None and result.intervention == EMERGENCY_INTERVENTION
+    assert foreign.tvm.word_block(x, 2000.0) is None and result.intervention == EMERGENCY_INTERVENTION
 
 
 def test_a_lost_word_at_speed_is_step_0_and_applies_the_emergency_brake(tmp_path):
@@ -296,7 +296,7 @@ def test_a_train_at_300_closing_on_an_occupied_block_slows_by_the_steps_and_stop
     loop = run_closed_loop(900.0, 0.5, AtoSettings(cab_signal="TVM430", strategy="flat_out"),
                            line_file=line_file, stock_file=TGV, timetable_file=_timetable(tmp_path, 1000.0),
                            cab_signal=words)
-    t, x, v, mode = loop.column("t"), loop.column("x"), loop.column("v"), loop.column("mode")
+    x, v, mode = loop.column("x"), loop.column("v"), loop.column("mode")
     target_m = (occupied - 1) * BLOCK_M
     steps = _steps_shown(words)
     assert v.max() >= 295.0 * MPS_PER_KMH                          # it ran at 300 first

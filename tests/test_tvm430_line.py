@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from helpers import REPO, railcosim
+from helpers import railcosim
 
 from fmus.data.loader import DATA, load_line
 from fmus.errors import FmuInputError

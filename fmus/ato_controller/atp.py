@@ -17,7 +17,7 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
   target point (the word's block start + ``target_distance``) on a continuous curve from the
   transmitted ``gradient`` and the train's braking; the word's block is found by its carrier
-  (``word_carrier``, :meth:`Atp.word_block`). See "TVM-430 supervision" below.
+  (``word_carrier``, atp_tvm430.py ``Tvm430Supervision.word_block``). See "TVM-430 supervision" below.
   ``"off"``: line limits only (plant studies without a signalling chain).
 
 Fail-safe rules (never more permissive than the last valid code):
@@ -61,18 +61,20 @@ once; the last valid word's targets stay where they were.
 from __future__ import annotations
 
 import bisect
-import functools
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import Optional
 
+from fmus.ato_controller.atp_tvm430 import Tvm430Supervision
+from fmus.ato_controller.speed_restrictions import SpeedRestrictions
+from fmus.ato_controller.supervision import Constraints, Target, dv_ebi_mps, dv_sbi_mps
 from fmus.signalling import alsu
 from fmus.signalling import aspects as sig
-from fmus.data.loader import Line, TemporaryRestriction
+from fmus.data.loader import Line
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
 from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.units import KMH_PER_MPS, MPS_PER_KMH, STANDARD_GRAVITY_MPS2
+from fmus.units import MPS_PER_KMH
 
 CAB_SIGNAL_MODES = ("ALSN", "ALSU", "digital", "TVM430", "off")
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
@@ -86,53 +88,6 @@ STANDSTILL_MPS = 1e-3
 # driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
 # curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
 T_DRIVER_S = 4.0
-# TVM-430: the control (trip) level lies this far above the cab's speed step (300 → 315 km/h,
-# docs/ato.md#tvm-430) [U]
-TVM_CONTROL_MARGIN_MPS = 15.0 * MPS_PER_KMH
-# TVM-430: a word is looked for in the head's block and at most this many blocks behind it (the
-# receiver shows the previous block's word only just after a boundary, until it has decoded the
-# new one); a carrier found in neither is no word of ours: treated as lost
-TVM_WORD_BLOCKS_BACK = 1
-
-
-def dv_ebi_mps(v_mps: float) -> float:
-    """Emergency-brake intervention margin (ETCS dV_ebi, docs/sources.md#atp-margins-etcs)."""
-    v_kmh = v_mps * KMH_PER_MPS
-    if v_kmh <= 110.0:
-        return 7.5 * MPS_PER_KMH
-    return min(7.5 + 7.5 * (v_kmh - 110.0) / 100.0, 15.0) * MPS_PER_KMH
-
-
-def dv_sbi_mps(v_mps: float) -> float:
-    """Service-brake intervention margin: 5.5 km/h up to 110 km/h, rising to 10 km/h at
-    210 km/h (ETCS national-value defaults as commonly quoted [U])."""
-    v_kmh = v_mps * KMH_PER_MPS
-    if v_kmh <= 110.0:
-        return 5.5 * MPS_PER_KMH
-    return min(5.5 + 4.5 * (v_kmh - 110.0) / 100.0, 10.0) * MPS_PER_KMH
-
-
-@dataclass(frozen=True)
-class Target:
-    position_m: float
-    speed_mps: float
-    signal: bool = False          # a stop target at a signal (the ATO stops short of it)
-    braking_share: float = 1.0    # of the supervision deceleration (ALSU: a permanent restriction's is gentler)
-    # TVM430: the speed of the trip curve at the target (its control level; a stop: 0), and the
-    # transmitted gradient (‰, + uphill) the curves are computed on; None: an ETCS-like target
-    trip_speed_mps: Optional[float] = None
-    gradient_permille: float = 0.0
-    trip_position_m: Optional[float] = None   # TVM430: where the trip curve ends; None: position_m
-
-
-@dataclass
-class Constraints:
-    ceiling_mps: float = _INF
-    targets: List[Target] = field(default_factory=list)
-
-    def add(self, other: "Constraints") -> None:
-        self.ceiling_mps = min(self.ceiling_mps, other.ceiling_mps)
-        self.targets.extend(other.targets)
 
 
 @dataclass
@@ -188,8 +143,6 @@ class VigilanceDevice:
 class Atp:
     #: the vigilance device (attach_vigilance); None: no periodic check
     vigilance: Optional[VigilanceDevice] = None
-    #: temporary restrictions set while running (set_event_restrictions), besides the line file's
-    event_restrictions: Tuple[TemporaryRestriction, ...] = ()
 
     def __init__(self, line: Line, category: str, train_length_m: float, cab_signal: str,
                  supervision_decel_mps2: float, decoding_latency_s: float,
@@ -231,16 +184,13 @@ class Atp:
         self.emergency_brakings = 0
         self.signals_passed_at_danger = 0
         self.max_overspeed_mps = 0.0
-        # TVM430: trip curves, the stop point of the last valid word, the head at the last step
-        self.emergency_decel = emergency_decel_mps2 if emergency_decel_mps2 > 0 else supervision_decel_mps2
-        self.brake_lead_s = max(brake_lead_s, 0.0)
-        self.tvm_stop_m: Optional[float] = None
-        self._x_before: Optional[float] = None
+        self.restrictions = SpeedRestrictions(line, category, train_length_m, supervision_decel_mps2)
+        # TVM430: the words' blocks and the trip curves
+        self.tvm = Tvm430Supervision(line, supervision_decel_mps2,
+                                     emergency_decel_mps2 if emergency_decel_mps2 > 0 else supervision_decel_mps2,
+                                     max(brake_lead_s, 0.0))
         self.trip_mps = _INF                     # TVM430: the trip level at the head, last step
         self.code_shown = False                  # a valid code at the last step (TVM430: a word of ours)
-        self.section_carriers = [sec.carrier_hz for sec in line.sections]
-        self.circuit_starts = [sec.start_m for sec in line.sections]
-        self.circuit_ends = [sec.end_m for sec in line.sections]
 
     # ---- geometry ---------------------------------------------------------------------------
     def section_of(self, x: float) -> Optional[int]:
@@ -296,72 +246,6 @@ class Atp:
                                     braking_share=alsu.BRAKING_SHARE[self.alsu.braking(code)]))
         return c
 
-    def word_block(self, x: float, word_carrier_hz: float) -> Optional[int]:
-        """The track circuit (TVM block) the shown word comes from: the latest one at or behind
-        the head whose line-file carrier is the word's, looking back at most
-        TVM_WORD_BLOCKS_BACK circuits; None when no such circuit (then the word is not ours)."""
-        k = bisect.bisect_right(self.circuit_starts, x) - 1
-        if k < 0 or x >= self.circuit_ends[-1] or word_carrier_hz <= 0.0:
-            return None
-        for j in range(k, max(k - TVM_WORD_BLOCKS_BACK, 0) - 1, -1):
-            if abs(self.section_carriers[j] - word_carrier_hz) < 0.5:
-                return j
-        return None
-
-    def _tvm430(self, v_step: float, v_next: float, target_distance_m: float, gradient_permille: float,
-                block: int) -> Constraints:
-        """The constraints of a TVM-430 word from track circuit ``block``: the step from now on
-        (trip at its control level), the next step at the block's exit (trip at the next
-        control level), and — when a lower step is announced or the step is 0 — a stop at the
-        target point, the block's start + ``target_distance_m`` (the block rules put it at the
-        entry of the buffer section before the occupied block)."""
-        v_step, v_next = max(v_step, 0.0), max(v_next, 0.0)
-        c = Constraints(v_step)
-        grade = min(gradient_permille, 0.0)        # only a falling gradient lengthens the braking
-        exit_m = self.circuit_ends[block]
-        if v_next < v_step:
-            c.targets.append(Target(exit_m, v_next, trip_speed_mps=v_next + TVM_CONTROL_MARGIN_MPS,
-                                    gradient_permille=grade))
-        if v_next < v_step or v_step == 0.0:
-            stop_m = self.circuit_starts[block] + max(target_distance_m, 0.0)
-            c.targets.append(Target(stop_m, 0.0, signal=True, trip_speed_mps=0.0, gradient_permille=grade,
-                                    trip_position_m=self.danger_point_m(stop_m)))
-        return c
-
-    def danger_point_m(self, stop_m: float) -> float:
-        """Where a TVM430 stop's trip curve ends: the end of the track circuit that begins at
-        (or holds) the stop point — the buffer section before the occupied block is the overlap
-        the emergency brake may use; the service curve ends at the stop point itself."""
-        k = bisect.bisect_right(self.circuit_starts, stop_m) - 1
-        if k < 0 or stop_m >= self.circuit_ends[-1]:
-            return stop_m
-        return self.circuit_ends[k]
-
-    def is_block_marker(self, position_m: float) -> bool:
-        """A TVM430 stop point at a block boundary (its marker board), within 0.5 m."""
-        k = bisect.bisect_left(self.circuit_starts, position_m - 0.5)
-        return k < len(self.circuit_starts) and abs(self.circuit_starts[k] - position_m) <= 0.5
-
-    def _tvm_decel(self, decel: float, gradient_permille: float) -> float:
-        """A deceleration less what a falling gradient (‰, negative) takes from it; at least a tenth
-        of it, so a curve always exists (a steeper line is refused by the line schema anyway)."""
-        return max(decel + STANDARD_GRAVITY_MPS2 * gradient_permille / 1000.0, 0.1 * decel)
-
-    def tvm_trip_curve(self, target: Target, x: float) -> float:
-        """Trip speed at ``x`` for a TVM430 target: the highest speed v with
-        v·T_lead + (v² − v_t²)/(2·a_e) ≤ x_t − x, so the emergency brake applied now, effective
-        after the brake's lead time, brings the train to the target's trip speed v_t at x_t; v_t
-        beyond the target. The lead counts towards a stop only: at a block exit the next step's
-        control level takes over and trips at once."""
-        v_t = target.trip_speed_mps
-        end = target.position_m if target.trip_position_m is None else target.trip_position_m
-        distance = end - x
-        if distance <= 0.0:
-            return v_t
-        a = self._tvm_decel(self.emergency_decel, target.gradient_permille)
-        lead = self.brake_lead_s if v_t == 0.0 else 0.0
-        return -a * lead + math.sqrt(a * a * lead * lead + v_t * v_t + 2.0 * a * distance)
-
     def permits_departure(self, aspect: int, code_valid: bool, v_permitted_mps: float) -> bool:
         """A standing train may start only on a valid permissive cab code (docs/ato.md,
         departure hold): what the receiver shows now, not a remembered code. ``off`` (no cab
@@ -386,9 +270,9 @@ class Atp:
         if self.mode == "ALSU":
             return self._alsu(code, k)
         if self.mode == "TVM430":
-            block = self.word_block(x, word_carrier_hz)
+            block = self.tvm.word_block(x, word_carrier_hz)
             return self._no_code() if block is None else \
-                self._tvm430(v_permitted, v_target, target_distance_m, gradient_permille, block)
+                self.tvm.constraints(v_permitted, v_target, target_distance_m, gradient_permille, block)
         if self.mode == "digital":
             return self._digital(v_permitted, v_target, free_blocks, k)
         return Constraints()
@@ -407,12 +291,14 @@ class Atp:
         result = AtpResult()
         word_block = None
         if self.mode == "TVM430":
-            word_block = self.word_block(x, word_carrier_hz) if code_valid else None
+            word_block = self.tvm.word_block(x, word_carrier_hz) if code_valid else None
             code_valid = word_block is not None       # a word from no block behind us is none
-            self._check_stop_point(x)
+            if self.tvm.passes_stop_point(x):         # a stop at a block marker passed: at danger
+                self.signals_passed_at_danger += 1
+                self._emergency()
         self.code_shown = code_valid
         c = self.line_constraints(x, v)
-        c.add(self.restriction_constraints(x, v))
+        c.add(self.restrictions.constraints(x, v))
         k = self.section_of(x)
         acted_aspect = sig.GREEN
         if self.mode != "off":
@@ -425,7 +311,7 @@ class Atp:
             elif self.mode == "ALSU":
                 shown = self._alsu(code, k) if code_valid else self._no_code()
             elif self.mode == "TVM430":
-                shown = self._tvm430(v_permitted, v_target, target_distance_m, gradient_permille, word_block) \
+                shown = self.tvm.constraints(v_permitted, v_target, target_distance_m, gradient_permille, word_block) \
                     if code_valid else self._no_code()
             else:
                 shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
@@ -435,10 +321,7 @@ class Atp:
                 self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
                 self.last_valid_code = int(code)
                 if self.mode == "TVM430":
-                    # a stop at a block's marker board is a signal to pass at danger; a station's
-                    # stop point inside a block is not (a precise stop may end a little past it)
-                    self.tvm_stop_m = next((tg.position_m for tg in shown.targets
-                                            if tg.signal and self.is_block_marker(tg.position_m)), None)
+                    self.tvm.remember_stop(shown)
             elif self.last_valid is not None:
                 # no code displayed (the receiver's hold is over): the last valid code's
                 # constraints stay where they were, with the no-code ones
@@ -462,42 +345,12 @@ class Atp:
                 permitted = min(permitted, target.speed_mps)
         trip = _INF
         if self.mode == "TVM430":
-            trip, permitted = self._tvm_levels(c, x, v, permitted)
+            trip, permitted = self.tvm.levels(c, x, v, permitted, self.cab_ceiling_mps)
         self.trip_mps = trip
         result.permitted_mps = permitted
         self.max_overspeed_mps = max(self.max_overspeed_mps, v - c.ceiling_mps)
         result.intervention = self._intervene(v, permitted, trip)
         return result
-
-    def _tvm_levels(self, c: Constraints, x: float, v: float, permitted: float) -> Tuple[float, float]:
-        """(trip level, permitted speed) at the head in TVM430 mode. The trip is the control
-        level of the cab's step (+ 15 km/h; of the step shown, not of a higher one held while a
-        fall is braked for) and the targets' trip curves. The permitted speed is the ceiling and
-        the service curves (supervision deceleration less the gradient); towards a stop, where
-        the trip curve's brake lead brings it down to the service curve, it stays 2·dV_sbi under
-        the trip curve, so the service intervention always comes first."""
-        trip = min(c.ceiling_mps, self.cab_ceiling_mps) + TVM_CONTROL_MARGIN_MPS
-        for target in c.targets:
-            if target.trip_speed_mps is None:
-                continue
-            curve = self.tvm_trip_curve(target, x)
-            trip = min(trip, curve)
-            if target.position_m >= x:
-                decel = self._tvm_decel(self.decel, target.gradient_permille)
-                service = math.sqrt(target.speed_mps ** 2 + 2.0 * decel * (target.position_m - x))
-                if target.trip_speed_mps == 0.0:
-                    service = min(service, curve - 2.0 * dv_sbi_mps(v))
-                permitted = min(permitted, max(service, 0.0))
-        return trip, permitted
-
-    def _check_stop_point(self, x: float) -> None:
-        """TVM430: the head passing the stop point of the last valid word at a block marker (the
-        entry of the buffer section) is a signal passed at danger: counted, emergency brake."""
-        before, self._x_before = self._x_before, x
-        stop = self.tvm_stop_m
-        if stop is not None and before is not None and before < stop <= x:
-            self.signals_passed_at_danger += 1
-            self._emergency()
 
     def _ceiling_on_a_curve(self, cab: Constraints, x: float, v: float) -> Constraints:
         """The cab-signal constraints with a fall of their ceiling below the speed supervised
@@ -564,7 +417,7 @@ class Atp:
         elif self.mode == "TVM430":
             # the word's targets lie where they are on the line (carrier matching), so the last
             # valid word's constraints hold as they are until the new block's word shows; passing
-            # a stop point is counted where it lies (_check_stop_point), not at a block exit
+            # a stop point is counted where it lies (Tvm430Supervision.passes_stop_point), not at a block exit
             self.assumed_aspect = active
             self.assumed = self.last_valid
         else:
@@ -626,31 +479,3 @@ class Atp:
         checked = self.mode != "off" and shown in sig.VIGILANCE_ASPECTS
         if self.vigilance.step(t, checked, pressed, ato_answers):
             self._emergency()
-
-    # ---- temporary speed restrictions -------------------------------------------------------
-    def set_event_restrictions(self, restrictions) -> None:
-        """The restrictions set while running (the FMU's ``tsr_*`` inputs), replacing the last set."""
-        self.event_restrictions = tuple(restrictions)
-
-    @functools.cached_property
-    def line_restrictions(self) -> Tuple[TemporaryRestriction, ...]:
-        """The line file's temporary restrictions for this train's category."""
-        return tuple(self.line.restrictions_for(self.category))
-
-    def restrictions(self) -> Tuple[TemporaryRestriction, ...]:
-        """Every temporary restriction this train keeps: the line file's, then those set while running."""
-        return self.line_restrictions + self.event_restrictions
-
-    def restriction_speed_at(self, x: float) -> float:
-        """The lowest restriction in force at the head (held until the tail clears its end); inf: none."""
-        tail = x - self.length_m
-        return min((r.speed_mps for r in self.restrictions() if r.start_m <= x and tail < r.end_m), default=_INF)
-
-    def restriction_constraints(self, x: float, v: float) -> Constraints:
-        """A restriction is a ceiling from the head reaching its start until the tail has cleared
-        its end (the tail rule of the line's limits), and a target at its start when ahead."""
-        c = Constraints(self.restriction_speed_at(x))
-        reach = x + v * v / (2.0 * self.decel) + 200.0
-        c.targets.extend(Target(r.start_m, r.speed_mps) for r in self.restrictions() if x < r.start_m <= reach)
-        return c
-

@@ -21,21 +21,22 @@ from fmus.signalling import aspects as sig
 from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
 from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION,
-                                     STANDSTILL_MPS, Atp, AtpResult, Constraints)
+                                     STANDSTILL_MPS, Atp, AtpResult)
+from fmus.ato_controller.braking import BrakingTarget, TargetBraking
+from fmus.ato_controller.supervision import Constraints
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
 from fmus.ato_controller.planner import InfeasibleStage, StagePlanner
 from fmus.ato_controller.stopping import StopApproach
 from fmus.ato_controller.train_model import NominalTrain
 from fmus.traction.brake_pipeline import brake_lead_s
 from fmus.traction.core import MAX_SPEED_MPS  # noqa: F401  (the facade's declared bound of speed_margin)
-from fmus.units import MPS_PER_KMH, STANDARD_GRAVITY_MPS2
+from fmus.units import MPS_PER_KMH
 
 _INF = math.inf
 
 # mode output (Integer)
 MODE_STANDSTILL, MODE_TRACTION, MODE_COAST, MODE_BRAKE, MODE_ATP_SERVICE, MODE_ATP_EMERGENCY = range(6)
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
-ACCEL_FILTER_S = 1.0
 # no train brakes harder: the adhesion limit is about 0.35 g (declared maximum of the decelerations)
 MAX_DECEL_MPS2 = 5.0
 # a measured speed below −this is impossible, not noise at standstill (docs/ato.md, "Measurement faults")
@@ -53,18 +54,6 @@ BRAKE_ONSET_SHARE = 0.97
 # a target is braked for at most this multiple of the planned deceleration (the ATP's curve
 # lies between the two)
 TARGET_DECEL_CAP = 2.0
-# an immediate stop (the ATP's stop_now) is a target this far beyond the planned stopping point
-STOP_NOW_SLACK_M = 0.5
-# the predicted (dead-time compensated) deceleration is used only while the target lies more
-# than this beyond the predicted position; nearer, the measured one
-PREDICTION_MIN_DISTANCE_M = 0.5
-# a target nearer than this is reached: brake fully if still too fast, else release
-AT_TARGET_M = 0.05
-# a speed target counts as reached within this of its speed (then it is held, not braked for)
-TARGET_SPEED_REACHED_MPS = 0.05
-# a target held is the same as a target offered when they are this close in place and speed
-SAME_TARGET_M = 1.0
-SAME_TARGET_MPS = 0.01
 # coasting in a restriction's band starts this close below the set speed
 BAND_TOP_MPS = 0.05
 # speeds that differ by float rounding only compare equal
@@ -91,13 +80,63 @@ DIGITAL_CODE_LOSS_GRACE_S = 3.0
 
 def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
     """The measurements whose impossible values the ATP answers with the emergency brake
-    (AtoCore.measurement_fault) in a cab-signal mode: position and speed always, the aspect
+    (measurement_fault) in a cab-signal mode: position and speed always, the aspect
     with a cab signal, the digital speeds and free blocks with a digital one. The others the
     controller does not read in that mode."""
     return ("x", "v") + {"off": (), "ALSN": ("aspect",), "ALSU": ("aspect", "cab_code"),
                          "digital": ("aspect", "v_permitted", "v_target", "free_blocks"),
                          "TVM430": ("aspect", "v_permitted", "v_target", "target_distance", "gradient",
                                     "word_carrier")}.get(cab_signal, ())
+
+
+def measurement_fault(cab_signal: str, alsu_system, x: float, v: float, aspect: int, v_permitted: float,
+                      v_target: float, free_blocks: int, cab_code: int = 0, code_valid: bool = False,
+                      target_distance: float = 0.0, gradient: float = 0.0,
+                      word_carrier: float = 0.0) -> Optional[Tuple[str, str]]:
+    """(input, why) when a measurement the ATP relies on cannot be true in mode ``cab_signal``
+    (``alsu_system``: the ALSU code table under ALSU), else None. Which measurements it judges:
+    :func:`judged_measurements`."""
+    if not math.isfinite(x):
+        return "x", f"measured position x = {x:g} m is not finite"
+    if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
+        return "v", f"measured speed v = {v:g} m/s is impossible"
+    if cab_signal == "off":
+        return None
+    if not sig.WHITE <= aspect <= sig.GREEN:
+        return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
+    if cab_signal == "ALSU" and code_valid and alsu_system.command_of_code(cab_code) is None:
+        return "cab_code", f"cab_code = {cab_code} is not an ALSU code a wayside sends"
+    if cab_signal == "digital":
+        for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
+            if not (math.isfinite(value) and value >= 0.0):
+                return name, f"cab-signal speed {name} = {value:g} m/s is impossible"
+        if free_blocks < 0:
+            return "free_blocks", f"free_blocks = {free_blocks} is negative"
+    if cab_signal == "TVM430":
+        for name, value, lowest in (("v_permitted", v_permitted, 0.0), ("v_target", v_target, 0.0),
+                                    ("target_distance", target_distance, 0.0), ("gradient", gradient, -_INF),
+                                    ("word_carrier", word_carrier, 0.0)):
+            if not (math.isfinite(value) and value >= lowest):
+                return name, f"TVM-430 {name} = {value:g} is impossible"
+    return None
+
+
+def plan_stages(planner: StagePlanner, timetable: List[TimetableStop], timetable_path) -> list:
+    """The programme of every stage of the timetable (planner.py), planned at initialisation; a
+    stage whose scheduled running time is shorter than the minimum is the timetable's error."""
+    plans = []
+    for k in range(len(timetable) - 1):
+        origin, destination = timetable[k], timetable[k + 1]
+        scheduled = destination.arrival_s - origin.departure_s
+        try:
+            plans.append(planner.plan(origin.stop_m, destination.stop_m, scheduled))
+        except InfeasibleStage as infeasible:
+            raise FmuInputError(
+                f"{timetable_path}: field stops[{k + 1}].arrival_s: scheduled running time {scheduled:g} s "
+                f"from {origin.station} to {destination.station} is shorter than the minimum running time "
+                f"{infeasible.minimum_time_s:.1f} s (earliest arrival "
+                f"{origin.departure_s + infeasible.minimum_time_s:.1f} s)") from None
+    return plans
 
 
 def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestriction]:
@@ -119,18 +158,6 @@ def default_plan_decel_mps2(stock, cab_signal: str) -> float:
 def default_atp_decel_mps2(stock) -> float:
     """The ATP's supervision deceleration when parameter ``atp_decel`` is 0: 0.7 × the stock's service deceleration."""
     return ATP_DECEL_SHARE * stock.service_decel
-
-
-@dataclass(frozen=True, slots=True)
-class BrakingTarget:
-    """A point ahead the ATO brakes for: the train's head at ``position_m`` at no more than
-    ``speed_mps`` (the timetable's stop point, a stop short of a signal at danger, a lower
-    limit, a stop on red)."""
-
-    position_m: float
-    speed_mps: float
-    is_stop_point: bool = False     # the timetable's stop point: arrival, precise stopping
-    braking_share: float = 1.0      # of the planned deceleration (ALSU: gentler for a permanent restriction)
 
 
 @dataclass
@@ -215,22 +242,10 @@ class AtoCore:
         self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s,
                        emergency_decel_mps2=stock.emergency_decel, brake_lead_s=self.brake_lead_s)
         self.atp.attach_vigilance(s.vigilance_period_s, s.vigilance_answer_s)
-        planner = StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps)
-        self.plans = []
-        for k in range(len(timetable) - 1):
-            origin, destination = timetable[k], timetable[k + 1]
-            scheduled = destination.arrival_s - origin.departure_s
-            try:
-                self.plans.append(planner.plan(origin.stop_m, destination.stop_m, scheduled))
-            except InfeasibleStage as infeasible:
-                raise FmuInputError(
-                    f"{timetable_path}: field stops[{k + 1}].arrival_s: scheduled running time {scheduled:g} s "
-                    f"from {origin.station} to {destination.station} is shorter than the minimum running time "
-                    f"{infeasible.minimum_time_s:.1f} s (earliest arrival "
-                    f"{origin.departure_s + infeasible.minimum_time_s:.1f} s)") from None
+        self.plans = plan_stages(StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps),
+                                 timetable, timetable_path)
         self.controllers = Controllers(self.train, s.speed_gain, s.hysteresis_mps)
-        # the stop point of each stage, a target every step of it (built once)
-        self._stop_targets = [BrakingTarget(stop.stop_m, 0.0, is_stop_point=True) for stop in timetable[1:]]
+        self.braking = TargetBraking(s, category, self.a_plan, self.brake_lead_s, self.atp, timetable)
         self.phase = WAITING
         self.stage = 0
         self.strategy = None
@@ -241,7 +256,6 @@ class AtoCore:
         self.band_coasting = False            # coasting down through a restriction's band
         self.code_lost_s: Optional[float] = None   # when the digital code was lost, while it is
         self._last_regime = None
-        self._t_prev, self._v_prev, self._accel = None, 0.0, 0.0
         # a driver releases the train brake before the departure time: its delay + build-down
         self.release_lead_s = stock.brake_delay_s + stock.brake_time_constant_s
         # a slow brake: the ATO follows its pipeline every step and predicts the stopping point
@@ -260,84 +274,6 @@ class AtoCore:
             earliest = max(earliest, self.arrivals[-1]["arrival_s"] + self.settings.min_dwell_s)
         return earliest
 
-    def _targets(self, x: float, v: float, atp_result) -> List[BrakingTarget]:
-        """What the ATO brakes for, ahead of the head: the stop point and the ATP's targets
-        with the ATO's margins."""
-        s = self.settings
-        stop_point = self._stop_targets[self.stage]
-        targets = [stop_point]
-        for target in atp_result.constraints.targets:
-            if target.signal and self.settings.cab_signal == "TVM430" \
-                    and target.position_m >= stop_point.position_m - s.stop_window_m:
-                continue        # a TVM stop at the station's stop point (or beyond): the stop point itself
-            share = target.braking_share * self._gradient_share(target)
-            if target.signal:
-                targets.append(BrakingTarget(target.position_m - s.stop_margin_m, 0.0, braking_share=share))
-            else:
-                targets.append(BrakingTarget(target.position_m, max(target.speed_mps - s.speed_margin_mps, 0.0),
-                                             braking_share=share))
-        if atp_result.stop_now:
-            targets.append(BrakingTarget(x + v * v / (2.0 * self.a_plan) + STOP_NOW_SLACK_M, 0.0))
-        targets.extend(self._aspect_driving(x, atp_result)[1])
-        return targets
-
-    def _gradient_share(self, target) -> float:
-        """TVM430: the ATP's curves take a falling transmitted gradient's pull off the braking
-        (atp.py); the ATO's planned curve for the same target gives up as much, so it stays under
-        them on a falling grade (else its curve, braking on the level, crosses theirs and the ATP
-        intervenes). 1 for every other target."""
-        if target.trip_speed_mps is None or target.gradient_permille >= 0.0:
-            return 1.0
-        pull = STANDARD_GRAVITY_MPS2 * -target.gradient_permille / 1000.0
-        return max(self.a_plan - pull, 0.1 * self.a_plan) / self.a_plan
-
-    def _aspect_driving(self, x: float, atp_result) -> Tuple[float, List[BrakingTarget]]:
-        """How the ATO itself drives under the ALSN aspect the ATP acts upon (the book's МИИТ
-        reactions, fmus/signalling/aspects.py ``ALSN_DRIVING_KMH``): the top of its band and its
-        own target at the exit signal, below the supervised speeds."""
-        if self.settings.cab_signal != "ALSN":
-            return _INF, []
-        band, at_signal = sig.alsn_driving_mps(self.category, atp_result.aspect)
-        targets = []
-        if at_signal is not None and at_signal > 0.0:
-            k = self.atp.section_of(x)
-            if k is not None:
-                targets.append(BrakingTarget(self.atp.exit_signal_m(k), at_signal))
-        return (_INF if band is None else band), targets
-
-    def _predict(self, x: float, v: float):
-        """Head position and speed one brake lead time ahead at the measured acceleration: the
-        pneumatic brake answers a new demand only after its delay and build-up, so demands
-        are computed for where the train will be when they take effect (dead-time compensation)."""
-        lead = self.brake_lead_s
-        a = self._accel
-        if v + a * lead <= 0.0:
-            return x, v
-        return x + v * lead + 0.5 * a * lead * lead, v + a * lead
-
-    def _decel_to(self, x: float, v: float, position: float, speed: float) -> float:
-        xp, vp = self._predict(x, v)
-        if vp > speed and position - xp > PREDICTION_MIN_DISTANCE_M:
-            return (vp * vp - speed * speed) / (2.0 * (position - xp))
-        distance = position - x
-        if distance <= AT_TARGET_M:
-            return _INF if v > speed else 0.0
-        return max((v * v - speed * speed) / (2.0 * distance), 0.0)
-
-    def _required_decel(self, x: float, v: float,
-                        targets: List[BrakingTarget]) -> Tuple[float, Optional[BrakingTarget]]:
-        """The highest deceleration the targets ask for now, each relative to its braking share
-        (a gentle target's need counts as if the planned deceleration were its share of it),
-        and which one asks for it."""
-        best, which = 0.0, None
-        for target in targets:
-            if v <= target.speed_mps:
-                continue
-            need = self._decel_to(x, v, target.position_m, target.speed_mps) / target.braking_share
-            if need > best:
-                best, which = need, target
-        return best, which
-
     # ---- step ------------------------------------------------------------------------------
     def step(self, t: float, h: float, x: float, v: float, aspect: int = sig.WHITE, code_valid: bool = False,
              v_permitted: float = 0.0, v_target: float = 0.0, free_blocks: int = 0,
@@ -345,17 +281,17 @@ class AtoCore:
              gradient: float = 0.0, word_carrier: float = 0.0) -> AtoOutputs:
         """One ATO step; ``target_distance`` (m), ``gradient`` (‰) and ``word_carrier`` (Hz) are
         the TVM-430 receiver's outputs, read in TVM430 mode."""
-        self.fault = self.measurement_fault(x, v, aspect, v_permitted, v_target, free_blocks, cab_code, code_valid,
-                                            target_distance, gradient, word_carrier)
+        self.fault = measurement_fault(self.settings.cab_signal, self.atp.alsu, x, v, aspect, v_permitted, v_target, free_blocks,
+                                       cab_code, code_valid, target_distance, gradient, word_carrier)
         if self.fault is not None:
             return self._fail_safe(t)
-        self._measure_acceleration(t, v)
+        self.braking.measure(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code,
                                  target_distance, gradient, word_carrier)
-        # TVM430: a word on a carrier of no block of ours is no word (atp.word_block)
+        # TVM430: a word on a carrier of no block of ours is no word (Tvm430Supervision.word_block)
         permissive = self.atp.permits_departure(aspect, self.atp.code_shown, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
@@ -388,55 +324,17 @@ class AtoCore:
         return replace(atp, constraints=Constraints(atp.constraints.ceiling_mps, targets),
                        aspect=self.atp.last_valid_aspect)
 
-    def measurement_fault(self, x: float, v: float, aspect: int, v_permitted: float, v_target: float,
-                          free_blocks: int, cab_code: int = 0, code_valid: bool = False,
-                          target_distance: float = 0.0, gradient: float = 0.0,
-                          word_carrier: float = 0.0) -> Optional[Tuple[str, str]]:
-        """(input, why) when a measurement the ATP relies on cannot be true, else None. Which
-        measurements it judges: :func:`judged_measurements`."""
-        if not math.isfinite(x):
-            return "x", f"measured position x = {x:g} m is not finite"
-        if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
-            return "v", f"measured speed v = {v:g} m/s is impossible"
-        if self.settings.cab_signal == "off":
-            return None
-        if not sig.WHITE <= aspect <= sig.GREEN:
-            return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
-        if self.settings.cab_signal == "ALSU" and code_valid and self.atp.alsu.command_of_code(cab_code) is None:
-            return "cab_code", f"cab_code = {cab_code} is not an ALSU code a wayside sends"
-        if self.settings.cab_signal == "digital":
-            for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
-                if not (math.isfinite(value) and value >= 0.0):
-                    return name, f"cab-signal speed {name} = {value:g} m/s is impossible"
-            if free_blocks < 0:
-                return "free_blocks", f"free_blocks = {free_blocks} is negative"
-        if self.settings.cab_signal == "TVM430":
-            for name, value, lowest in (("v_permitted", v_permitted, 0.0), ("v_target", v_target, 0.0),
-                                        ("target_distance", target_distance, 0.0), ("gradient", gradient, -_INF),
-                                        ("word_carrier", word_carrier, 0.0)):
-                if not (math.isfinite(value) and value >= lowest):
-                    return name, f"TVM-430 {name} = {value:g} is impossible"
-        return None
-
     def _fail_safe(self, t: float) -> AtoOutputs:
         """A measurement cannot be true: nothing computed from it is trusted. The ATP applies
         the emergency brake, held until the train stands with valid measurements again."""
         self.atp.apply_emergency()
         if self.stop_approach is not None:
-            self.stop_approach.brake.advance(t, self._v_prev)
+            self.stop_approach.brake.advance(t, self.braking.v_prev)
             self.stop_approach.brake.command(t, -1.0, True)
         self.out.v_ref_mps, self.out.v_ceiling_mps = 0.0, 0.0
         atp = AtpResult(intervention=EMERGENCY_INTERVENTION, permitted_mps=0.0, ceiling_mps=0.0,
                         aspect=self.out.aspect)
         return self._publish(-1.0, MODE_ATP_EMERGENCY, True, atp)
-
-    def _measure_acceleration(self, t: float, v: float) -> None:
-        if self._t_prev is not None and t > self._t_prev:
-            # measured acceleration, low-pass filtered (1 s) so the prediction does not depend
-            # on the step size nor chatter when the electric brake steps in
-            dt = t - self._t_prev
-            self._accel += (dt / (ACCEL_FILTER_S + dt)) * ((v - self._v_prev) / dt - self._accel)
-        self._t_prev, self._v_prev = t, v
 
     def _publish(self, command: float, mode: int, emergency: bool, atp) -> AtoOutputs:
         out = self.out
@@ -515,10 +413,10 @@ class AtoCore:
         deviation = t_run - guide.t_ref_s
         out.schedule_deviation_s = deviation
         out.v_ref_mps = guide.v_ref_mps
-        flat_out = self._drive_flat_out(atp, deviation, self.atp.restriction_speed_at(x) < _INF)
+        flat_out = self._drive_flat_out(atp, deviation, self.atp.restrictions.speed_at(x) < _INF)
 
         ceiling = min(float(np.interp(x, plan.s, plan.ceiling_mps)), atp.ceiling_mps - s.speed_margin_mps,
-                      self._aspect_driving(x, atp)[0])
+                      self.braking.aspect_driving(x, atp)[0])
         out.v_ceiling_mps = max(ceiling, 0.0)
         braking = self._brake_for_targets(t, x, v, atp, stop.stop_m)
         if braking is not None:
@@ -534,7 +432,7 @@ class AtoCore:
         window = self.settings.stop_window_m
         return atp.stop_now or any(
             target.speed_mps <= 0.0 and not target.is_stop_point and target.position_m - x <= window
-            for target in self._targets(x, v, atp))
+            for target in self.braking.targets(self.stage, x, v, atp))
 
     def _drive_flat_out(self, atp, deviation: float, in_restriction: bool = False) -> bool:
         """The book's recovery rule: late by more than the threshold, or late when a restrictive
@@ -551,9 +449,10 @@ class AtoCore:
 
     def _brake_for_targets(self, t: float, x: float, v: float, atp, stop_m: float):
         """(command, mode) while braking for a target; None when no target binds."""
-        targets = self._targets(x, v, atp)
-        need, candidate = self._required_decel(x, v, targets)
-        self._release_braking_target(v, targets)
+        targets = self.braking.targets(self.stage, x, v, atp)
+        need, candidate = self.braking.required_decel(x, v, targets)
+        if self.braking.lets_go(self.braking_target, v, targets):
+            self.braking_target = None
         if need >= BRAKE_ONSET_SHARE * self.a_plan and candidate is not None:
             self.braking_target = candidate
         target = self.braking_target
@@ -567,23 +466,9 @@ class AtoCore:
             # the stop point: the brake share whose predicted stopping point it is
             return -self.stop_approach.share(t, x, v, target.position_m), MODE_BRAKE
         # the brake stays applied until the target is reached (no release/re-apply)
-        decel = min(self._decel_to(x, v, target.position_m, target.speed_mps),
+        decel = min(self.braking.decel_to(x, v, target.position_m, target.speed_mps),
                     TARGET_DECEL_CAP * self.a_plan * target.braking_share)
         return min(self.controllers.brake(x, v, decel), -MIN_BRAKE_SHARE), MODE_BRAKE
-
-    def _release_braking_target(self, v: float, targets: List[BrakingTarget]) -> None:
-        """A speed target is let go once its speed is reached (then held) or when it is lifted;
-        the stop point only by arriving or creeping on."""
-        held = self.braking_target
-        if held is None or held.is_stop_point:
-            return
-        if v <= held.speed_mps + TARGET_SPEED_REACHED_MPS:
-            self.braking_target = None          # target speed reached: hold it
-        elif not any(abs(other.position_m - held.position_m) < SAME_TARGET_M
-                     and other.speed_mps <= held.speed_mps + SAME_TARGET_MPS for other in targets):
-            # the target was lifted (a better code, or the ATP's assumption after passing a
-            # signal expired once the new section was decoded): release the brake
-            self.braking_target = None
 
     def _follow(self, x: float, v: float, atp, guide, deviation: float, ceiling: float, flat_out: bool):
         """No target binds: the strategy's cruise speed or coasting, under the ceiling."""
@@ -616,7 +501,7 @@ class AtoCore:
         """Inside a temporary restriction, or under an aspect with a driving band (КЖ), that
         binds the set speed: traction up to the ceiling, then coast down to the band's bottom
         (v_limit − 8 km/h; КЖ 42 km/h: the book's traction–coast bands); None otherwise."""
-        limit = self.atp.restriction_speed_at(x)
+        limit = self.atp.restrictions.speed_at(x)
         bottom = limit - RESTRICTION_BAND_MPS
         if self.settings.cab_signal == "ALSN":
             top, aspect_bottom = sig.alsn_driving_mps(self.category, atp.aspect)[0], \
@@ -638,7 +523,7 @@ class AtoCore:
     def set_restrictions(self, restrictions) -> None:
         """Temporary restrictions set while running (the FMU's ``tsr_*`` inputs, scenario
         events): the ATP supervises them and the ATO brakes for them; not in the programmes."""
-        self.atp.set_event_restrictions(restrictions)
+        self.atp.restrictions.set_events(restrictions)
 
     def _hold(self, x: float, v: float, v_set: float, may_brake: bool):
         command = self.controllers.hold(x, v, v_set, may_brake=may_brake)

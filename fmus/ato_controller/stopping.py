@@ -3,7 +3,7 @@
 A freight train's pneumatic brake answers a new demand only after its application delay
 (ВЛ80 + 62 wagons: 8 s) and builds up or releases with a time constant (25 s), and the
 locomotive's electric brake fades below 10 km/h. A controller that maps the distance left to
-a deceleration now (``AtoCore._decel_to``) then keeps braking on the force it asked for
+a deceleration now (braking.py ``TargetBraking.decel_to``) then keeps braking on the force it asked for
 20–30 s earlier and stops metres short. The ATO instead keeps its own copy of the brake
 pipeline (the demands it sent, their delay and the build-up, from the nominal stock data:
 the traction unit's model, fmus/traction/brake_pipeline.py, docs/traction.md#physics-fmustractioncorepy) and, braking for a station stop below 30 km/h,

@@ -18,7 +18,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from fmus.errors import FmuInputError, non_finite_number
-from fmus.signalling.aspects import TRAIN_CATEGORIES
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.units import MPS_PER_KMH
 
 HERE = Path(__file__).resolve().parent

@@ -26,11 +26,15 @@ docs/performance.md#start-up-of-a-run.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy        # scipy.signal loads at its first use (SciPy loads submodules lazily)
 
 from fmus.library_shortcuts import linear_filter, sections_filter
+
+if TYPE_CHECKING:       # imported at the first design, not on import (module docstring)
+    import control
 
 
 def filter_frame(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray, axis: int = -1):
@@ -43,10 +47,10 @@ def filter_frame(b: np.ndarray, a: np.ndarray, x: np.ndarray, state: np.ndarray,
 
 @dataclass(frozen=True)
 class DiscreteFilter:
+    """A discretised filter as one transfer function: b / a, a[0] = 1 (lfilter's layout)."""
+
     b: np.ndarray
     a: np.ndarray
-    analog: control.TransferFunction
-    discrete: control.TransferFunction
 
     def initial_state(self) -> np.ndarray:
         return np.zeros(max(self.a.size, self.b.size) - 1)
@@ -183,21 +187,7 @@ def discretise(normalised: control.TransferFunction, scale_rad_s: float, fs_hz: 
                                      prewarp_frequency=2 * np.pi * prewarp_hz / scale_rad_s)
     num = np.asarray(discrete.num[0][0], dtype=float)
     den = np.asarray(discrete.den[0][0], dtype=float)
-    b, a = num / den[0], den / den[0]
-    analog_num = np.asarray(normalised.num[0][0], dtype=float)
-    analog_den = np.asarray(normalised.den[0][0], dtype=float)
-    # the same filters in physical units, for plots and checks
-    n = analog_den.size
-    analog = control.tf(_rescale(analog_num, scale_rad_s, n), _rescale(analog_den, scale_rad_s, n))
-    return DiscreteFilter(b, a, analog, control.tf(b, a, 1.0 / fs_hz))
-
-
-def _rescale(coefficients: np.ndarray, scale: float, order_plus_one: int) -> np.ndarray:
-    """Coefficients of P(s/scale)·scale^(order), highest power first, for H(s) = Hn(s/scale)."""
-    n = order_plus_one - 1
-    padded = np.concatenate([np.zeros(order_plus_one - coefficients.size), coefficients])
-    powers = np.arange(n, -1, -1)                      # power of s of each coefficient
-    return padded * scale ** (n - powers)
+    return DiscreteFilter(num / den[0], den / den[0])
 
 
 

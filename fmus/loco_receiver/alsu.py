@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import Optional
 
 import numpy as np
 import scipy        # scipy.signal loads at its first use, a design (SciPy loads submodules lazily)
@@ -236,11 +236,6 @@ class AlsuReceiverCore:
         """Diagnostics: the code number of the two tones present now (reserved codes included),
         0 when not exactly two tones are present."""
         return int(self._pair_of_word[self._word])
-
-    @property
-    def tones_present(self) -> np.ndarray:
-        """Diagnostics: which of the six tones are present now."""
-        return self._present.copy()
 
     def _supports(self, kind: int) -> bool:
         """Whether hearing ``kind`` keeps the code shown alive: the code itself or a more

@@ -1,5 +1,5 @@
 """Locomotive ALSN receiver: coil EMF frame → band-pass → gain control → envelope → impulse
-relay → decoder (no FMI here).
+relay → decoder (alsn_decoder.py, with the display hold and rule below; no FMI here).
 
 Signal chain, vectorised over the frame with carried state (so any frame length gives the
 same result, docs/loco_receiver.md#signal-chain-corepy-filterspy):
@@ -54,28 +54,21 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
 
 import numpy as np
 from fmus.dsp.filter_design import SampleSosFilter, SosFilter, sos_frame
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.errors import FmuInputError
 from fmus.loco_receiver import filters
+from fmus.loco_receiver.alsn_decoder import RELAY_MARGIN, AlsnDecoder
 from fmus.reductions import largest, smallest
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.units import MPS_PER_KMH
 
 LEVEL_RELEASE_S = 1.0
-# a cycle whose pulses differ in level by more than this straddles an insulated joint (the
-# feed end of one section against the entry end of the next, ≈ 10× apart, docs/sources.md#interference-at-insulated-joints)
-LEVEL_SPREAD = 2.5
-# a pulse whose relay input peaked below this × pick-up while the code itself (input-referred)
-# was above it was marginal through the reduced gain: its cycle is not decoded
-RELAY_MARGIN = 1.5
-# how long into the pulse after a cycle its level is awaited (the envelope settles in ~30 ms)
-PENDING_S = 0.05
 # the carrier step simulated for the pick-up delay (s): longer than any chain's delay
 COLD_START_PROBE_S = 0.5
 # display hold of a digital receiver whose `inertia` is 0: none [U] (docs/loco_receiver.md). The
@@ -171,9 +164,9 @@ class LocoReceiverCore:
         s = settings
         carrier_hz, bandwidth, order = filters.band_pass_design(s)
         alsn.check_carrier_and_rate(carrier_hz, s.fs_hz, "parameter ")
-        if s.train_category not in sig.TRAIN_CATEGORIES:
+        if s.train_category not in TRAIN_CATEGORIES:
             raise FmuInputError(f"parameter train_category: {s.train_category!r} is not one of "
-                                f"{', '.join(sig.TRAIN_CATEGORIES)}")
+                                f"{', '.join(TRAIN_CATEGORIES)}")
         if not 1 <= s.filter_order <= 8:
             raise FmuInputError(f"parameter filter_order: {s.filter_order} (1..8)")
         for name, value in (("agc_limit", s.agc_limit_v), ("agc_recovery", s.agc_recovery_db_per_s),
@@ -192,45 +185,30 @@ class LocoReceiverCore:
         self.dt = 1.0 / s.fs_hz
         self.band_pass = filters.band_pass(carrier_hz, bandwidth, order, s.fs_hz)
         self.envelope_lp = filters.envelope_low_pass(filters.default_envelope_corner(carrier_hz), s.fs_hz)
-        self._short_min_s = alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz))
-        self.cold_start_off_s = cold_start_off_s(pick_up_delay_s(self.band_pass, self.envelope_lp, carrier_hz,
-                                                                 s.fs_hz, s.pick_up_v))
         self._bp_state = self.band_pass.initial_state()
         self._env_state = self.envelope_lp.initial_state()
         # a build with one sample per frame filters in floats (the same samples as sosfilt)
         self._sample_filters = (SampleSosFilter(self.band_pass.sos),
                                 SampleSosFilter(self.envelope_lp.sos)) if frame == 1 else None
         self._gain_db = 0.0
-        self._relay = False
         self._ramp = (np.arange(frame) + 1) * (s.agc_recovery_db_per_s * self.dt)
         self._index = np.arange(frame)
         self._level_step = float(np.exp(-self.dt / LEVEL_RELEASE_S))
         self._level_growth = self._level_step ** -np.arange(frame, dtype=float)   # d^-m
         self._held = 0.0
-        self.inertia_s = resolve_inertia_s(s.inertia_s, digital=False)
-        self.v_max = s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH
-        # decoder state
-        self._last_edge_s: Optional[float] = None
-        self._last_rise_s: Optional[float] = None
-        self._last_fall_s: Optional[float] = None
-        self._cycle_start_s: Optional[float] = None
-        self._short = 0
-        self._implausible = False
-        self._pulse_peak = 0.0
-        self._pulse_drive = 0.0                          # peak of the relay's own (gain-controlled) input
-        self._cycle_peaks = []
-        self._after_gap = False
-        self._boundary_peak: Optional[float] = None
-        self._pending = None                             # (code, decide at, lowest, highest level)
-        self._previous_cycle = alsn.NO_CODE
-        self._previous_level = 0.0                       # pulse level of the previous valid cycle
-        self._last_shown: Optional[int] = None          # last valid code shown, kept through a loss
-        self._last_valid_s: Optional[float] = None
-        self._supported_s: Optional[float] = None   # last cycle no more restrictive than the code shown
-        self._contradictions = 0        # valid more restrictive cycles since then (not shown yet)
-        self._started_s: Optional[float] = None
         self.out = ReceiverOutputs()
-        self._publish_speeds()
+        self.decoder = AlsnDecoder(
+            s, short_min_s=alsn.short_interval_min_s(filters.default_envelope_corner(carrier_hz)),
+            cold_start_off_s=cold_start_off_s(pick_up_delay_s(self.band_pass, self.envelope_lp, carrier_hz,
+                                                              s.fs_hz, s.pick_up_v)),
+            inertia_s=resolve_inertia_s(s.inertia_s, digital=False),
+            v_max_mps=s.v_max_mps if s.v_max_mps > 0 else sig.CATEGORY_MAX_KMH[s.train_category] * MPS_PER_KMH,
+            out=self.out)
+
+    @property
+    def inertia_s(self) -> float:
+        """The display hold in force (s): the `inertia` parameter, or the equipment's."""
+        return self.decoder.inertia_s
 
     # ---- signal chain -------------------------------------------------------------------------
     def _gain_control(self, x: np.ndarray):
@@ -261,12 +239,12 @@ class LocoReceiverCore:
         self._held = d ** (n - 1) * max(self._held * d, largest(input_envelope * self._level_growth[:n]))
         return self._held
 
-    def _relay_states(self, envelope: np.ndarray):
-        """(relay state per sample or None when it stays as it is for the whole frame, the
-        envelope's maximum)."""
+    def _relay_states(self, envelope: np.ndarray, relay_up: bool):
+        """(relay state per sample or None when it stays as it is (``relay_up``) for the whole
+        frame, the envelope's maximum)."""
         s = self.settings
         low, high = smallest(envelope), largest(envelope)
-        if self._relay:
+        if relay_up:
             if low >= s.drop_out_v:
                 return None, high
         elif high <= s.pick_up_v:
@@ -274,14 +252,15 @@ class LocoReceiverCore:
         decided = np.where(envelope > s.pick_up_v, 1, np.where(envelope < s.drop_out_v, 0, -1))
         where = np.where(decided >= 0, self._index[:envelope.size], -1)
         last = np.maximum.accumulate(where)
-        return np.where(last >= 0, decided[np.maximum(last, 0)] == 1, self._relay), high
+        return np.where(last >= 0, decided[np.maximum(last, 0)] == 1, relay_up), high
 
     def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
         """One frame of coil EMF. ``channel_faults`` is the digital receiver's per-channel fault
         input (digital_receiver.py); the ALSN receiver is one channel without it, so it is ignored."""
         s = self.settings
-        if self._started_s is None:
-            self._started_s = t
+        decoder = self.decoder
+        if decoder.started_s is None:
+            decoder.started_s = t
         x = np.asarray(e_coil, dtype=float)
         if self._sample_filters is not None:
             if x.size != 1:
@@ -293,42 +272,42 @@ class LocoReceiverCore:
                                               self._env_state)
         envelope *= np.pi / 2.0
         # the relay compares the gain-controlled envelope; thresholds are input-referred at 0 dB
-        relay, drive_max = self._relay_states(envelope)
+        relay, drive_max = self._relay_states(envelope, decoder.relay)
         constant_gain = isinstance(gain, float)
         level = envelope / gain if not constant_gain else envelope   # input-referred: comparable across gains
-        if relay is not None and (relay[0] != self._relay or not (relay[0] == relay).all()):
-            changes = np.flatnonzero(relay != np.concatenate([[self._relay], relay[:-1]]))
+        if relay is not None and (relay[0] != decoder.relay or not (relay[0] == relay).all()):
+            changes = np.flatnonzero(relay != np.concatenate([[decoder.relay], relay[:-1]]))
             first = round(t * s.fs_hz)
             starts = np.concatenate([[0], changes]) if changes[0] > 0 else changes
             peaks = np.maximum.reduceat(level, starts)
             drives = np.maximum.reduceat(envelope, starts)
             segment = 0 if changes[0] > 0 else -1            # peaks[segment] = the stretch before an edge
             for n in changes:
-                if segment >= 0 and self._relay:
-                    self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
-                    self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
-                self._edge((first + n) * self.dt, bool(relay[n]))
-                self._relay = bool(relay[n])
+                if segment >= 0 and decoder.relay:
+                    decoder.pulse_peak = max(decoder.pulse_peak, float(peaks[segment]))
+                    decoder.pulse_drive = max(decoder.pulse_drive, float(drives[segment]))
+                decoder.edge((first + n) * self.dt, bool(relay[n]))
+                decoder.relay = bool(relay[n])
                 segment += 1
-            if self._relay:
-                self._pulse_peak = max(self._pulse_peak, float(peaks[segment]))
-                self._pulse_drive = max(self._pulse_drive, float(drives[segment]))
-        elif self._relay:
-            self._pulse_peak = max(self._pulse_peak, drive_max / gain if constant_gain else largest(level))
-            self._pulse_drive = max(self._pulse_drive, drive_max)
-        if self._pending is not None:
-            self._settle_pending(t + x.size * self.dt)
-        self._watchdog(t + x.size * self.dt)
+            if decoder.relay:
+                decoder.pulse_peak = max(decoder.pulse_peak, float(peaks[segment]))
+                decoder.pulse_drive = max(decoder.pulse_drive, float(drives[segment]))
+        elif decoder.relay:
+            decoder.pulse_peak = max(decoder.pulse_peak, drive_max / gain if constant_gain else largest(level))
+            decoder.pulse_drive = max(decoder.pulse_drive, drive_max)
+        if decoder.pending is not None:
+            decoder.settle_pending(t + x.size * self.dt)
+        decoder.watchdog(t + x.size * self.dt)
         out = self.out
         out.level_v = self._level(level)
-        out.relay = self._relay
+        out.relay = decoder.relay
         return out
 
-    # ---- decoder ------------------------------------------------------------------------------
     def _step_sample(self, t: float, e_coil_v: float) -> ReceiverOutputs:
         """``step`` for a build with one sample per frame, in Python floats: the frame path's
         operations on its one sample, without two dozen numpy calls on one-element arrays."""
         s = self.settings
+        decoder = self.decoder
         band_pass, envelope_lp = self._sample_filters
         band = band_pass(e_coil_v)
         magnitude = abs(band)
@@ -346,187 +325,24 @@ class LocoReceiverCore:
             gain = 10.0 ** (self._gain_db / 20.0)
             envelope = envelope_lp(abs(band * gain)) * (np.pi / 2.0)
             level = envelope / gain
-        relay = self._relay
+        relay = decoder.relay
         if relay:
             if envelope < s.drop_out_v:
                 relay = envelope > s.pick_up_v
         elif envelope > s.pick_up_v:
             relay = True
-        if relay != self._relay:
-            self._edge(round(t * s.fs_hz) * self.dt, relay)
-            self._relay = relay
+        if relay != decoder.relay:
+            decoder.edge(round(t * s.fs_hz) * self.dt, relay)
+            decoder.relay = relay
         if relay:
-            self._pulse_peak = max(self._pulse_peak, level)
-            self._pulse_drive = max(self._pulse_drive, envelope)
+            decoder.pulse_peak = max(decoder.pulse_peak, level)
+            decoder.pulse_drive = max(decoder.pulse_drive, envelope)
         end_s = t + self.dt
-        if self._pending is not None:
-            self._settle_pending(end_s)
-        self._watchdog(end_s)
+        if decoder.pending is not None:
+            decoder.settle_pending(end_s)
+        decoder.watchdog(end_s)
         self._held = max(self._held * self._level_step, level)     # _level of one sample
         out = self.out
         out.level_v = self._held
         out.relay = relay
         return out
-
-    def _edge(self, time_s: float, rising: bool) -> None:
-        self._last_edge_s = time_s
-        if not rising:
-            self._last_fall_s = time_s
-            self._cycle_peaks.append(self._pulse_peak)
-            marginal = RELAY_MARGIN * self.settings.pick_up_v
-            if self._pulse_drive < marginal <= self._pulse_peak:
-                # the code is strong enough but the gain, still reduced after a strong feed end,
-                # left the relay only just moving: its neighbours may have been lost, so the
-                # cycle may under-count — never decode it (113 km/h past a joint: З read as КЖ).
-                # A code that is itself weak is the relay's ordinary business.
-                self._implausible = True
-            self._pulse_peak = 0.0
-            if self._last_rise_s is not None and not (alsn.PULSE_S[0] <= time_s - self._last_rise_s <= alsn.PULSE_S[1]):
-                self._implausible = True          # a pulse split by noise, or carrier without keying
-            self._pulse_drive = 0.0
-            return
-        if self._last_fall_s is None and self._started_s is not None \
-                and time_s - self._started_s > self.cold_start_off_s:
-            # relay off since reception began, for longer than a short interval can reach the
-            # relay after a pulse's tail (cold_start_off_s): the tail of a long interval, so
-            # this rise starts a cycle (saves one cycle of latency on a cold start; a cycle
-            # begun mid-pattern could only under-count short intervals, but then showed З as
-            # КЖ and made З wait two more cycles)
-            self._cycle_start_s = time_s
-            self._short = 0
-            self._implausible = False
-            self._cycle_peaks = []
-        elif self._last_fall_s is not None:
-            interval = time_s - self._last_fall_s
-            if interval > alsn.LONG_INTERVAL_S:
-                if self._cycle_start_s is not None:
-                    self._cycle(-1 if self._implausible else self._short, time_s - self._cycle_start_s, time_s)
-                self._cycle_start_s = time_s
-                self._short = 0
-                self._implausible = False
-                # the level of the pulse before the boundary: a cycle whose pulses jump from it
-                # (≈ 10× at a joint) began in another track circuit, possibly mid-pattern
-                self._boundary_peak = self._cycle_peaks[-1] if self._cycle_peaks else None
-                self._cycle_peaks = []
-                # longer than any code's long interval: pulses were missed (a joint, the gain
-                # recovering), so the cycle now starting may begin mid-pattern
-                self._after_gap = interval > alsn.LONG_INTERVAL_MAX_S
-            else:
-                self._short += 1
-                if interval < self._short_min_s:
-                    self._implausible = True      # a dropout inside a pulse, not a code interval
-        self._last_rise_s = time_s
-
-    def _cycle(self, short_intervals: int, length_s: float, time_s: float) -> None:
-        out = self.out
-        code, kind = alsn.classify_cycle(short_intervals, length_s)
-        out.code = code
-        if code == alsn.NO_CODE:
-            out.errors += 1
-            self._previous_cycle = alsn.NO_CODE
-            return
-        out.decoded_codes += 1
-        transmitter = 5 if kind == "KPT-5" else 7
-        previous_transmitter = out.transmitter
-        if out.transmitter and transmitter != out.transmitter:
-            out.joints += 1
-        out.transmitter = transmitter
-        self._last_valid_s = time_s
-        if out.code_valid and sig.restrictiveness(code) >= sig.restrictiveness(out.aspect):
-            self._supported_s = time_s        # a cycle no more restrictive than the code shown
-            self._contradictions = 0
-        elif out.code_valid and not self._after_gap:
-            # (a cycle begun after a gap may start mid-pattern and under-count: not news)
-            self._contradictions += 1
-        # compare with what is shown, or after a loss of code with the last code shown (as the
-        # ATP does): only a cold start, with no code seen yet, takes a code after one cycle
-        reference = out.aspect if out.code_valid else self._last_shown
-        peaks = self._cycle_peaks
-        # A cycle with a short interval and a valid period began at its pattern's first pulse:
-        # begun at a later one it lacks at least the first pulse and interval (0.47 s) and is
-        # shorter than any period window (KPT-7 З, the longest, 1.36 s, 1.43 s with 5 % drift,
-        # against 1.47 s; tests/test_alsn.py). So it is whole however it began — after a gap, or
-        # after the pulse of another track circuit at a joint — and only its own pulses (and the
-        # one that ends it) must agree in level. Only a cycle without a short interval (КЖ) may
-        # be a mid-pattern remnant (a З's last pulse and long interval): it keeps both rules.
-        # Waiting for a second cycle after every joint would make a restrictive change met at a
-        # joint up to 5.2 s late (docs/loco_receiver.md#latency-of-a-change).
-        whole = short_intervals >= 1
-        levels = peaks + ([self._boundary_peak] if self._boundary_peak is not None and not whole else [])
-        clean = bool(peaks) and max(levels) <= LEVEL_SPREAD * max(min(levels), 1e-12) and (whole or not self._after_gap)
-        # two identical cycles confirm each other only from the same track circuit: the same
-        # transmitter type and levels within the spread (at 113 km/h a З cut by a joint read as
-        # КЖ, and the next section's first, partly missed З read as КЖ too)
-        level = max(peaks) if peaks else 0.0
-        same_circuit = transmitter == previous_transmitter and self._previous_level > 0 and \
-            max(level, self._previous_level) <= LEVEL_SPREAD * max(min(level, self._previous_level), 1e-12)
-        confirmed = code == self._previous_cycle and same_circuit
-        self._previous_level = level
-        self._pending = None
-        if confirmed:
-            self._show(code)
-        elif clean and (reference is None or sig.restrictiveness(code) <= sig.restrictiveness(reference)):
-            # one cycle is enough, unless the pulse that ended it is from another track circuit
-            # (the coils crossed a joint and the dropout passed for the long interval): decide
-            # once that pulse's level is known
-            self._pending = (code, time_s + PENDING_S, min(levels), max(levels))
-        self._previous_cycle = code
-
-    def _show(self, code: int) -> None:
-        out = self.out
-        if not (out.code_valid and out.aspect == code):
-            self._supported_s = self._last_valid_s
-            self._contradictions = 0
-        out.aspect = code
-        out.code_valid = True
-        self._last_shown = code
-        self._publish_speeds()
-
-    def _settle_pending(self, now_s: float) -> None:
-        code, due, low, high = self._pending
-        if self._relay and now_s < due:
-            return
-        level = self._pulse_peak if self._relay else (self._cycle_peaks[0] if self._cycle_peaks else 0.0)
-        self._pending = None
-        if max(high, level) <= LEVEL_SPREAD * max(min(low, level), 1e-12):
-            self._show(code)
-
-    def _watchdog(self, now_s: float) -> None:
-        out = self.out
-        quiet = now_s - (self._last_edge_s if self._last_edge_s is not None else self._started_s)
-        stale = now_s - (self._last_valid_s if self._last_valid_s is not None else self._started_s)
-        # the decoder loses the code after 2 s without an edge or a valid cycle (kpt.h) and
-        # starts afresh; the display holds what it shows (the equipment's inertia) until no
-        # cycle has supported it for `inertia` — then no code: white, or red after red-yellow
-        lost = quiet > alsn.CODE_TIMEOUT_S or stale > alsn.CODE_TIMEOUT_S
-        if lost:
-            self._pending = None
-            if quiet > alsn.CODE_TIMEOUT_S:
-                self._cycle_start_s = None
-                self._short = 0
-            self._previous_cycle = alsn.NO_CODE
-        unsupported_s = now_s - self._supported_s if self._supported_s is not None else 0.0
-        # the hold: no pulse for `inertia` (a loss of code), or pulses without a cycle of the
-        # code shown for `inertia` + one cycle (after a loss the decoder needs a whole cycle:
-        # at the wrong cam phase a short loss costs three KPT-7 cycles, 5.6 s, from the last
-        # one); and valid cycles of a more restrictive code that cannot be shown yet (not
-        # clean, not confirmed; two of them, as one may be cut by a joint) end it 2 s after
-        # the last supporting cycle: without this an impulse-noise study run showed З for
-        # 3.4 s after the code sent had turned КЖ (beyond the stated latency)
-        cycle_s = (alsn.KPT5_WINDOW_S if out.transmitter == 5 else alsn.KPT7_WINDOW_S)[1]
-        expired = quiet > self.inertia_s or unsupported_s > self.inertia_s + cycle_s \
-            or (self._contradictions >= 2 and unsupported_s > alsn.CODE_TIMEOUT_S)
-        # a clean cycle no more permissive than the code shown waits (PENDING_S at most) for the
-        # level of the pulse that ends it: the code shown holds until that is settled, so the
-        # display goes from the old code to the new one without white between (after a joint,
-        # two restrictive cycles end the hold just as the second one is pending)
-        if out.code_valid and expired and self._pending is None:
-            out.aspect = sig.RED if out.aspect == sig.RED_YELLOW else sig.WHITE
-            out.code_valid = False
-            self._contradictions = 0
-            self._publish_speeds()
-
-    def _publish_speeds(self) -> None:
-        out = self.out
-        out.v_permitted_mps, out.v_target_mps, out.free_blocks = alsn.speeds_for(
-            self.settings.train_category, out.aspect, self.v_max)

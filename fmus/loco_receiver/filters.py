@@ -20,7 +20,7 @@ the run report (``railcosim report``) both design it through :func:`band_pass_de
 """
 from __future__ import annotations
 
-from typing import Optional, Tuple
+from typing import Tuple
 
 import numpy as np
 import scipy        # scipy.signal loads at its first use, a design (SciPy loads submodules lazily)

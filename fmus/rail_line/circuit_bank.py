@@ -28,40 +28,28 @@ The bank composes its parts, one concern each:
 * geometry.py — where the sections, their feed points, nodes and joints lie;
 * calibration.py — each relay's reference from the design regimes, the relay-end levels;
 * network_models.py — the network model per configuration, cached and shared by design;
-* axle_chain.py — the wheelset chain of a section at one frequency;
+* axle_chain.py — the wheelset chain of a section at one frequency, and wheelset_amplitudes.py —
+  its solutions: the trains' amplitude factors, the entry-end current's, the relay levels;
 * parking.py — sections no train or coil needs are not advanced, and caught up when needed;
 * relays.py — the track relays: levels against pick-up / drop-out with delays → occupancy.
 """
 from __future__ import annotations
 
 import bisect
-import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from fmus.data.loader import Line
-from fmus.rail_line.axle_chain import SectionChain
 from fmus.rail_line.calibration import RelayCalibration
 from fmus.rail_line.geometry import LineGeometry
 from fmus.rail_line.network_models import NO_TRAIN, Config, NetworkModel, NetworkModels
 from fmus.rail_line.parking import Parking, settle_frames
 from fmus.rail_line.relays import TrackRelays
-from fmus.library_shortcuts import interp
 from fmus.rail_line.track_circuit import Faults
+from fmus.rail_line.wheelset_amplitudes import WheelsetAmplitudes
 
 
-
-
-def _interp_one(x: float, xp: List[float], fp: List[float]) -> float:
-    """np.interp at one point in floats (xp ascending; clipped at the ends as np.interp is)."""
-    i = bisect.bisect_right(xp, x) - 1
-    if i < 0:
-        return fp[0]
-    if i >= len(xp) - 1:
-        return fp[-1]
-    slope = (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i])
-    return slope * (x - xp[i]) + fp[i]
 
 
 # the wheelsets are solved again once a train has moved this far since its last solution (or
@@ -94,7 +82,7 @@ class FrameCurrents:
         bank = self.bank
         if bank.parking.parked_at[k] is not None:
             bank._wake_in_frame(k)
-        return (bank._active[k][1].padded[2] @ self.start[k]) * bank._entry_factor[k]
+        return (bank._active[k][1].padded[2] @ self.start[k]) * bank.amplitudes.entry_factor[k]
 
 
 class TrackCircuitBank:
@@ -113,27 +101,12 @@ class TrackCircuitBank:
         self.faults = [Faults() for _ in range(self.count)]
         self.broken_rail_m = -1.0
         self._train_lengths = [float(length) for length in s.train_length_m]
-        # per train its wheelsets, ascending from its last one (0) to its first (the head, ``span``)
-        self._wheelsets = [np.asarray(offsets[-1] - offsets[::-1], dtype=float) for offsets in s.wheelset_offsets_m]
-        self._offset_lists = [np.asarray(offsets, dtype=float).tolist() for offsets in s.wheelset_offsets_m]
-        self._spans = [float(positions[-1]) for positions in self._wheelsets]
         self._zeros = np.zeros(frame)
-        # the wheelset chain per section and frequency, under the section's faults
-        self._chains: List[Dict[float, SectionChain]] = [{} for _ in range(self.count)]
-        self._carriers = [float(f) for f in geometry.carriers]
-        self._track_frequencies = [float(f) for f in geometry.track_frequencies]
-        self._nodes_lists = [nodes.tolist() for nodes in geometry.nodes_m]
-        # per section: each head's amplitude (scale: e before and now, the tick, |r|, the head at
-        # the tick, the standing value), the entry-end current's factor; the heads at the last tick
-        self._factors: List[Dict[int, tuple]] = [{} for _ in range(self.count)]
-        self._entry_factor = [1.0] * self.count
-        self._log_amplitude: List[Optional[np.ndarray]] = [None] * self.count
-        self._log_amplitude_lists: List[Optional[List[float]]] = [None] * self.count
+        # the trains' amplitudes: the wheelset chains and their factors; the heads at the last tick
+        self.amplitudes = WheelsetAmplitudes(geometry, self.calibration, s, tick_s)
         self._tick_heads: Optional[List[float]] = None
         self._solved_heads: Optional[List[float]] = None    # each train's head at its last solution
         self._tick_s: Optional[float] = None
-        self._passing: Dict[int, float] = {}      # sections whose factors pass to a new solution: its tick
-        self._per_tick = 1.0 / tick_s            # the factors pass from one tick's solution to the next over a tick
         size = self._size = self.models.size
         # per section and frame: its states at the frame start (padded to one size) followed by
         # the frame's code input, so one product [Φᴺ | Ψ]·[x; u] advances it and one gives the
@@ -184,29 +157,7 @@ class TrackCircuitBank:
         self._rows: List[Dict[int, int]] = [{} for _ in range(self.count)]
         self._node_bounds = [(0.0, 0.0)] * self.trains
         self._tick_heads = self._solved_heads = None   # every section's chain solved again
-        self._chains = [{} for _ in range(self.count)]
-        # taken at once: the network's own transient shows a fault change, not a passing factor
-        self._factors = [{} for _ in range(self.count)]
-        self._passing = {}
-
-    # ---- the trains' amplitudes ------------------------------------------------------------------
-    def scale(self, k: int, head: np.ndarray, j: int, times: np.ndarray, standing_at: Optional[float] = None):
-        """What the network model's current arriving at train j's head node in section k is
-        multiplied by, at the sample ``times`` with the head at ``head``: the chain's amplitude
-        over the model's, e·A₁(x)/|r|. A₁ is the one-shunt amplitude table along the track (its
-        shape between ticks: the current varies continuously as the train moves), r the model's
-        response at the head, e the chain's amplitude over A₁ at the tick positions, passing
-        linearly over one tick from the last tick's to this one's (so it never steps: one tick,
-        < 0.5 m, late). A train standing where the factor was last solved gets it as a float."""
-        entry = self._factors[k].get(j)
-        if entry is None:
-            return 1.0
-        before, now, tick, response, standing_head, standing_value = entry
-        if standing_at is not None and standing_at == standing_head and before == now:
-            return standing_value
-        weight = np.minimum(np.maximum((times - tick) * self._per_tick, 0.0), 1.0)
-        return (before + (now - before) * weight) * np.exp(interp(head, self.geometry.nodes_m[k],
-                                                                    self._log_amplitude[k])) / response
+        self.amplitudes.reset(self._effective_faults)
 
     @property
     def states(self) -> np.ndarray:
@@ -223,9 +174,10 @@ class TrackCircuitBank:
             return                         # this tick's, taken already (frames shorter than a tick)
         previous, self._tick_heads, self._tick_s = self._tick_heads, list(heads), tick_s
         moving = heads != previous
+        amplitudes = self.amplitudes
         if not moving and heads == self._solved_heads:       # nothing moved, nothing left to solve
-            if self._passing:
-                self._settle(tick_s, ())
+            if amplitudes.passing:
+                amplitudes.settle(tick_s, ())
             return
         changed = set()
         if moving:
@@ -245,25 +197,18 @@ class TrackCircuitBank:
                 # a metre on since its last solution, or at rest elsewhere: the sections under its
                 # wheelsets then and now
                 if head != last and (abs(head - last) >= SOLVE_STEP_M or head == previous[j]):
-                    lo, hi = min(head, last) - self._spans[j], max(head, last)
+                    lo, hi = min(head, last) - amplitudes.spans[j], max(head, last)
                     touched.update(range(bisect.bisect_right(geometry.ends_list, lo),
                                          bisect.bisect_right(geometry.starts_list, hi)))
                     solved[j] = head
-        if self._passing:
-            self._settle(tick_s, touched)
+        if amplitudes.passing:
+            amplitudes.settle(tick_s, touched)
+        relays = self.relays
         for k in sorted(touched):
-            self._solve_wheelsets(k, heads, tick_s)
-
-    def _settle(self, tick_s: float, solving) -> None:
-        """A tick after its solution a section's factors have passed to it (the weight is 1
-        from then on): they are taken as they are, so a standing train's is a float again (the
-        sections ``solving`` now are left to their new solution)."""
-        for k, solved in list(self._passing.items()):
-            if tick_s > solved and k not in solving:
-                del self._passing[k]
-                factors = self._factors[k]
-                for j, (_, now, tick, response, head, standing) in list(factors.items()):
-                    factors[j] = (now, now, tick, response, head, standing)
+            level = amplitudes.solve(k, heads, tick_s, self._rows[k], self._active[k][1])
+            relays.levels[k] = level
+            if relays.settled and relays.would_move(k, level):
+                relays.settled = False     # a relay starts to pick up or drop out
 
     def _follow_nodes(self, heads: List[float], tick_s: float) -> set:
         """The configurations from the heads; the sections whose configuration changed
@@ -287,70 +232,6 @@ class TrackCircuitBank:
         self.parking.wanted = wanted
         self.parking.review = True
         return changed
-
-    def _chain(self, k: int, frequency_hz: float) -> SectionChain:
-        """Section k's wheelset chain at a frequency under its faults, per unit code input."""
-        chain = self._chains[k].get(frequency_hz)
-        if chain is None:
-            chain = self._chains[k][frequency_hz] = SectionChain(self.geometry.circuits[k], self._effective_faults[k],
-                                                                 frequency_hz, self.settings.transformer_ratio)
-        return chain
-
-    def _wheelset_runs(self, k: int, chain: SectionChain, heads: List[float]) -> List[tuple]:
-        """Section k's wheelsets as runs for the chain: per train the axles between the joints,
-        split at the feed leads (beyond them they stand on the overhang up to the exit joint). The
-        axles are found by their distance behind the head (a head exactly on a joint is on it)."""
-        geometry = self.geometry
-        start, feed, end = geometry.starts_list[k], geometry.feed_list[k], geometry.ends_list[k]
-        runs = []
-        for j, head in enumerate(heads):
-            offsets = self._offset_lists[j]             # behind the head, ascending from 0
-            if head < start or head - offsets[-1] > end:
-                continue
-            last = len(offsets) - 1
-            # offsets within [head − end, head − start]: the overhang's (before head − feed), the rails'
-            first = bisect.bisect_left(offsets, head - end)
-            to_feed = bisect.bisect_left(offsets, head - feed)
-            behind = bisect.bisect_right(offsets, head - start) - 1
-            table = chain.table(j, self._wheelsets[j])
-            for near, far in ((to_feed, behind), (first, to_feed - 1)):      # rails, then the overhang
-                if near <= far:          # offsets near…far → table indices (ascending positions)
-                    runs.append((head - offsets[far], head - offsets[near], table, last - far, last - near))
-        runs.sort(key=lambda run: run[0])
-        return runs
-
-    def _solve_wheelsets(self, k: int, heads: List[float], tick_s: float) -> None:
-        """Section k's wheelset chain at the tick: each head's amplitude factor, the entry-end
-        current's factor (at the carrier) and the relay level (at the track circuit's frequency)."""
-        carrier, track = self._carriers[k], self._track_frequencies[k]
-        chain = self._chain(k, carrier)
-        runs = self._wheelset_runs(k, chain, heads)
-        rows = self._rows[k]
-        model = self._active[k][1]
-        trains = sorted(rows)
-        currents, entry, relay = chain.solve(runs, [heads[j] for j in trains])
-        nodes, log_amplitude = self._nodes_lists[k], self._log_amplitude_lists[k]
-        factors, previous = {}, self._factors[k]
-        for j, current in zip(trains, currents):
-            response = abs(model.head_responses[rows[j]])
-            one_shunt = math.exp(_interp_one(heads[j], nodes, log_amplitude))
-            now = current / one_shunt if response > 0.0 else 0.0
-            before = previous[j][1] if j in previous else now
-            response = response if response > 0.0 else 1.0
-            factors[j] = (before, now, tick_s, response, heads[j], now * one_shunt / response)
-        self._factors[k] = factors
-        self._passing[k] = tick_s
-        response = abs(model.entry_response)
-        self._entry_factor[k] = entry / response if response > 0.0 else 1.0
-        if track != carrier:               # the relay reads the track circuit's own frequency
-            relay_chain = self._chain(k, track)
-            relay = relay_chain.solve(self._wheelset_runs(k, relay_chain, heads))[2]
-        # per unit feed (the chain's is per unit code input, × the transformer ratio)
-        level = relay / self.settings.transformer_ratio / self.calibration.reference[k]
-        relays = self.relays
-        relays.levels[k] = level
-        if relays.settled and relays.would_move(k, level):
-            relays.settled = False         # a relay starts to pick up or drop out
 
     def configuration(self, heads: List[float]):
         """Per section: (its shunt nodes, the head nodes of the trains whose head is in it, front
@@ -390,8 +271,7 @@ class TrackCircuitBank:
         if previous is not None and previous[1].phi.shape == model.phi.shape and previous[1] is not model \
                 and self.geometry.band_hz is None:
             self._carry_over.append((k, previous[1], model))
-        self._log_amplitude[k] = self.models.one_shunt_table(k, self._effective_faults[k])[1]
-        self._log_amplitude_lists[k] = self._log_amplitude[k].tolist()
+        self.amplitudes.one_shunt(k, self.models.one_shunt_table(k, self._effective_faults[k])[1])
         self._active[k] = (config, model)
         size = model.phi_n.shape[0]
         if model.padded is None:
@@ -479,9 +359,9 @@ class TrackCircuitBank:
         relay-end voltage, V) — the amplitudes the rail line gives its outputs and relays."""
         geometry = self.geometry
         frequency = float(geometry.carriers[k]) if frequency_hz is None else float(frequency_hz)
-        chain = self._chain(k, frequency)
+        chain = self.amplitudes.chain(k, frequency)
         trains = [j for j, head in enumerate(heads) if geometry.starts_list[k] <= head < geometry.ends_list[k]]
-        currents, entry, relay = chain.solve(self._wheelset_runs(k, chain, heads), [heads[j] for j in trains])
+        currents, entry, relay = chain.solve(self.amplitudes.wheelset_runs(k, chain, heads), [heads[j] for j in trains])
         return dict(zip(trains, currents)), entry, relay
 
     def minimum_code_current(self, k: int, ballast_ohm_km: float) -> float:

@@ -32,7 +32,8 @@ class CoilPickup:
     def __init__(self, line_length_m: float, settings, trains: int, bank: TrackCircuitBank,
                  interference: TractionInterference):
         s = settings
-        self.settings, self.trains, self.bank, self.interference = s, trains, bank, interference
+        self.settings, self.trains, self.interference = s, trains, interference
+        self.amplitudes = bank.amplitudes
         self.geometry = geometry = bank.geometry
         self.line_length_m = line_length_m
         self._coil_spread = (np.linspace(0.0, 1.0, _COIL_POINTS) - 0.5) * s.coil_length_m
@@ -62,7 +63,7 @@ class CoilPickup:
         off-line flag for the frame of sample index ``first`` (``times`` its sample times,
         ``heads`` the trains' first-wheelset positions per sample, ``standing_at`` the position
         of each train that stands over the whole frame, else None); written into ``out``."""
-        s, bank, geometry, interference = self.settings, self.bank, self.geometry, self.interference
+        s, amplitudes, geometry, interference = self.settings, self.amplitudes, self.geometry, self.interference
         n = times.size
         ends, feeds = geometry.ends_list, geometry.feed_list
         for j in range(self.trains):
@@ -86,7 +87,7 @@ class CoilPickup:
                 if n == 1:
                     self._usual_sample(out, j, k, first, times, head, currents, standing_at[j])
                     continue
-                shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times, standing_at[j])
+                shunt_current = currents.ahead(k, j) * amplitudes.scale(k, head, j, times, standing_at[j])
                 current = shunt_current + interference.asymmetry[k] * interference.wave(j, first, times)
                 i_axle = shunt_current
             else:
@@ -100,7 +101,7 @@ class CoilPickup:
         the frame path's quantities, the EMF and the rms in Python floats instead of numpy
         calls on one-element arrays."""
         interference = self.interference
-        scale = self.bank.scale(k, head, j, times, standing_at)
+        scale = self.amplitudes.scale(k, head, j, times, standing_at)
         shunt_current = currents.ahead(k, j).item(0) * (scale if isinstance(scale, float) else scale.item(0))
         current = shunt_current + interference.asymmetry.item(k) * interference.wave_sample(j, first, times)
         previous = self._last_current[j] if self._sensing[j] else current      # no step at the first sample
@@ -127,7 +128,7 @@ class CoilPickup:
         """Sample by sample, the share of the coil's sensitivity window over each stretch of
         rail: its own section up to the feed leads (shunt current), the dead end from the leads to
         the joint (nothing), the next section's entry end (its unshunted current)."""
-        s, bank, geometry = self.settings, self.bank, self.geometry
+        s, amplitudes, geometry = self.settings, self.amplitudes, self.geometry
         n = times.size
         axle_section = geometry.section_of(head)
         centre = head + s.coil_offset_m
@@ -141,7 +142,7 @@ class CoilPickup:
         i_axle = np.zeros(n)
         for k in set(int(k) for k in np.unique(axle_section) if k >= 0):
             own = axle_section == k
-            shunt_current = currents.ahead(k, j) * bank.scale(k, head, j, times)
+            shunt_current = currents.ahead(k, j) * amplitudes.scale(k, head, j, times)
             i_axle = np.where(own, shunt_current, i_axle)
             view = share(-np.inf, geometry.circuits[k].feed_m) * shunt_current
             if k + 1 < geometry.count:

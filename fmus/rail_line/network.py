@@ -223,32 +223,20 @@ class ShuntFamily:
 
 class PhasorFamily:
     """The same network at one angular frequency: Z = Y⁻¹ and the free node voltages once, then
-    node voltages with any set of shunts (Woodbury) or with one branch opened (Sherman–Morrison),
-    without a new solve of the whole network."""
+    node voltages with any set of shunts (Woodbury), without a new solve of the whole network."""
 
     def __init__(self, net: Network, omega: float, u: Sequence[float]):
-        y, p, self.q, self.z_branch = net._admittance(omega)
+        y, p, _, self.z_branch = net._admittance(omega)
         self.impedance = np.linalg.inv(y)
         self.free = self.impedance @ (p @ np.asarray(u, dtype=complex))
 
-    def with_shunts(self, nodes: Sequence[int], g: float, observe: int) -> complex:
-        """Voltage at node ``observe`` with a conductance g to ground at every node in ``nodes``."""
+    def with_shunts(self, nodes: Sequence[int], g: float) -> np.ndarray:
+        """Every node's voltage with a conductance ``g`` to ground at each node in ``nodes``
+        (the free voltages when there is none)."""
         if not len(nodes):
-            return complex(self.free[observe])
-        idx = np.asarray(nodes, dtype=np.intp)
-        core = np.eye(idx.size) / g + self.impedance[np.ix_(idx, idx)]
-        return complex(self.free[observe] - self.impedance[observe, idx] @ np.linalg.solve(core, self.free[idx]))
-
-    def with_branch_opened(self, branches: Sequence[int], z_open: float, observe: int) -> np.ndarray:
-        """Voltage at node ``observe`` with each branch in ``branches`` in turn replaced by the
-        impedance ``z_open`` (a broken rail), one rank-one update per branch."""
-        k = np.asarray(branches, dtype=np.intp)
-        q = self.q[:, k]                                   # (n, b) incidence columns
-        dy = 1.0 / z_open - 1.0 / self.z_branch[k]         # admittance change per branch
-        zq = self.impedance @ q                            # (n, b)
-        qzq = np.einsum("nb,nb->b", q, zq)
-        qv = q.T @ self.free
-        return self.free[observe] - zq[observe] * dy * qv / (1.0 + dy * qzq)
+            return self.free
+        core = np.eye(len(nodes)) / g + self.impedance[np.ix_(nodes, nodes)]
+        return self.free - self.impedance[:, nodes] @ np.linalg.solve(core, self.free[nodes])
 
 
 def discretise(system: StateSpace, step_s: float):

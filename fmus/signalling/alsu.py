@@ -34,6 +34,7 @@ import numpy as np
 from fmus.data.loader import read_json_file
 from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.signalling.block_rules import SIGNAL_GREEN, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, BlockCodes
 from fmus.signalling.digital_messages import Indication
 
@@ -149,8 +150,8 @@ def load_codes(path=CODES_FILE) -> CodeTable:
         if not isinstance(free, int) or isinstance(free, bool) or free < 0:
             fail(f"{where}.free_blocks", "must be a whole number ≥ 0")
         speeds = entry.get("speeds_kmh")
-        if not isinstance(speeds, dict) or set(speeds) != set(sig.TRAIN_CATEGORIES):
-            fail(f"{where}.speeds_kmh", f"expected one entry per category ({', '.join(sig.TRAIN_CATEGORIES)})")
+        if not isinstance(speeds, dict) or set(speeds) != set(TRAIN_CATEGORIES):
+            fail(f"{where}.speeds_kmh", f"expected one entry per category ({', '.join(TRAIN_CATEGORIES)})")
         read = {}
         for category, pair_kmh in speeds.items():
             if not isinstance(pair_kmh, list) or len(pair_kmh) != 2 or any(
@@ -177,7 +178,7 @@ def _readings(code: Code) -> List[float]:
     """A code's readings compared for permissiveness: per category its permitted speed and its
     speed at the next signal (CATEGORY_MAX_KMH for the line's limit), its aspect and free blocks."""
     values = [float(sig.restrictiveness(code.aspect)), float(code.free_blocks)]
-    for category in sig.TRAIN_CATEGORIES:
+    for category in TRAIN_CATEGORIES:
         ceiling, at_signal = code.speeds_kmh[category]
         permitted = CATEGORY_MAX_KMH[category] if ceiling is None else min(ceiling, CATEGORY_MAX_KMH[category])
         values += [permitted, permitted if at_signal is None else min(at_signal, permitted)]

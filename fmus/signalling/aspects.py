@@ -41,10 +41,10 @@ from __future__ import annotations
 
 from typing import Dict, Optional, Tuple
 
+from fmus.train_categories import TRAIN_CATEGORIES   # the categories the speed tables know
+
 WHITE, RED, RED_YELLOW, YELLOW, GREEN = 0, 1, 2, 3, 4
 
-#: The train categories the speed tables know (the ``train_category`` parameters).
-TRAIN_CATEGORIES = ("passenger", "freight", "high_speed")
 #: Maximum speed of each category (km/h): what green permits unless ``v_max`` says otherwise.
 CATEGORY_MAX_KMH = {"passenger": 160.0, "freight": 90.0, "high_speed": 200.0}
 

@@ -25,6 +25,7 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.errors import FmuInputError
 
 FREE_BLOCKS_OPEN = 6          # "up to 6" (ALS-EN) / "≥ 6" (Table 2.1): no stop known beyond
@@ -147,9 +148,9 @@ class DigitalSystem(ABC):
 
 
 def check_category(category: str) -> None:
-    if category not in sig.TRAIN_CATEGORIES:
+    if category not in TRAIN_CATEGORIES:
         raise FmuInputError(f"parameter train_category: {category!r} is not one of "
-                            f"{', '.join(sig.TRAIN_CATEGORIES)}")
+                            f"{', '.join(TRAIN_CATEGORIES)}")
 
 
 def check_modem_rate(system: DigitalSystem, carrier_hz: float, fs_hz: float, where: str = "parameter ") -> None:

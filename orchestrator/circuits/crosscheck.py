@@ -21,12 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from fmus.data.loader import DATA, DEFAULT_ROLLING_STOCK, Line, load_line, load_rolling_stock
+from fmus.data.loader import DATA, Line, load_rolling_stock
 from fmus.errors import FmuInputError
 from fmus.rail_line.core import RailLineCore, RailSettings
 from fmus.rail_line.geometry import LineGeometry
@@ -34,7 +33,7 @@ from fmus.rail_line.network import PhasorFamily, ShuntFamily, discretise
 from fmus.rail_line.track_circuit import Faults, TrackCircuit
 from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore
 from orchestrator.circuits import ngspice
-from orchestrator.circuits.netlist import (Netlist, ac_source, axle_netlist, lumped_netlist, switched_shunts,
+from orchestrator.circuits.netlist import (ac_source, axle_netlist, lumped_netlist, switched_shunts,
                                            tran_source)
 
 AC_BOUND = 1e-3            # .ac: the same network, solver precision
@@ -86,12 +85,7 @@ def network_phasors(circuit: TrackCircuit, shunt_nodes: Sequence[int], head_node
     net = circuit.network(None, faults, transformer_ratio, frequency_hz)
     family = PhasorFamily(net, 2.0 * math.pi * frequency_hz, [1.0])
     g = 1.0 / circuit.params.shunt_r_ohm
-    index = [net.node_index[f"n{node}"] for node in shunt_nodes]
-    if index:
-        core = np.eye(len(index)) / g + family.impedance[np.ix_(index, index)]
-        v = family.free - family.impedance[:, index] @ np.linalg.solve(core, family.free[index])
-    else:
-        v = family.free
+    v = family.with_shunts([net.node_index[f"n{node}"] for node in shunt_nodes], g)
     volts = np.array([v[net.node_index[f"n{i}"]] for i in range(circuit.segments + 1)])
     segment = (volts[:-1] - volts[1:]) / family.z_branch[:circuit.segments]      # relay → feed
     values = {"relay": complex(volts[0]), "entry": complex(-segment[0])}
@@ -364,36 +358,6 @@ def wheelset_rows(line: Line, name: str, trains: Sequence[Train], follower: Trai
                             row.add("relay voltage under the train", lumped_relay, chain_relay, reference_relay)
             rows.append(row)
     return rows
-
-
-# ---- what a system runs on -------------------------------------------------------------------------
-@dataclass
-class SystemLines:
-    """The distinct line files of a system with the carriers its rail lines use, and its trains."""
-    lines: Dict[str, Tuple[Line, List[float]]]
-    trains: List[Train]
-
-
-def system_lines(graph) -> SystemLines:
-    """From a built system graph: every rail line's line file and carrier, every Traction's
-    rolling stock."""
-    lines: Dict[str, Tuple[Line, List[float]]] = {}
-    trains: Dict[str, Train] = {}
-    for node in graph.nodes.values():
-        params = node.parameters
-        variables = node.interface.variables
-        if "e_coil[1,1]" in variables or any(name.startswith("e_coil[") for name in variables):
-            path = params.get("line_file") or ""
-            line = load_line(path or DATA / "default_line.json")
-            carrier = float(params.get("carrier", 0.0) or 0.0)
-            carriers = sorted({carrier} if carrier else {float(s.carrier_hz) for s in line.sections})
-            known = lines.setdefault(str(line.path), (line, []))
-            known[1].extend(c for c in carriers if c not in known[1])
-        if "rolling_stock_file" in variables:
-            path = params.get("rolling_stock_file") or str(DEFAULT_ROLLING_STOCK)
-            stock = load_rolling_stock(path)
-            trains[str(stock.path)] = Train(stock.name.split(" (")[0], stock.length_m, stock.wheelset_offsets_m)
-    return SystemLines(lines, list(trains.values()))
 
 
 # ---- tables ---------------------------------------------------------------------------------------

@@ -14,7 +14,6 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Tuple
 
-import numpy as np
 
 from orchestrator.dcp import dcpx
 from orchestrator.dcp.dcpx import SlaveDescription

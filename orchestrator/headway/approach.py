@@ -39,8 +39,8 @@ Derivation, for the occupancy "every track circuit of block k occupied, all othe
    ½ for a permanent restriction); TVM-430 besides each target's curve at a less the transmitted
    falling gradient's pull (at least a/10), and towards a stop no higher than its trip curve
    (emergency deceleration less the gradient, the brake's lead time, to the end of the buffer
-   section) less 2·dV_sbi(v). Vectorised here from atp.py's ``supervise``, ``_tvm_levels``,
-   ``tvm_trip_curve``, ``_tvm_decel`` and ``dv_sbi_mps``; the test compares them with
+   section) less 2·dV_sbi(v). Vectorised here from atp.py's ``supervise``, atp_tvm430.py's
+   ``levels``, ``trip_curve`` and ``tvm_decel`` and supervision.py's ``dv_sbi_mps``; the test compares them with
    ``Atp.supervise`` position by position. Without the dV_sbi / dV_ebi intervention margins
    and without the line's static limits (the unhindered run obeys those already).
 
@@ -63,24 +63,27 @@ from typing import List, Mapping, Optional
 
 import numpy as np
 
-from fmus.ato_controller.atp import Atp, Constraints
+from fmus.ato_controller.atp import Atp
+from fmus.ato_controller.atp_tvm430 import tvm_decel
+from fmus.ato_controller.supervision import Constraints
 from fmus.ato_controller.core import AtoSettings, default_atp_decel_mps2
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import receiver_settings
 from fmus.signalling import alsn, alsu, cab_systems, tvm430
 from fmus.signalling import aspects as sig
+from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.signalling.block_rules import block_codes
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.traction.brake_pipeline import brake_lead_s
-from fmus.units import KMH_PER_MPS, MPS_PER_KMH, STANDARD_GRAVITY_MPS2
+from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 from orchestrator.systems.chain import cab_settings
 from orchestrator.errors import UserError
 
 #: the ALSN codes by the letters of the cab signal (З green, Ж yellow, КЖ red-yellow, Б white: no code)
 ALSN_LABELS = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ", sig.WHITE: "Б"}
 NO_OUTPUT = -1             # a digital circuit whose code is cut (the generator sends nothing)
-# atp.dv_sbi_mps, vectorised: 5.5 km/h up to 110 km/h, rising linearly to 10 km/h at 210 km/h
+# supervision.dv_sbi_mps, vectorised: 5.5 km/h up to 110 km/h, rising linearly to 10 km/h at 210 km/h
 _DV_SBI_KMH = ((110.0, 210.0), (5.5, 10.0))
 # the stop curve at the train's own speed: each round cuts the error by 2 × 0.045 (dV_sbi's slope)
 _FIXED_POINT_ROUNDS = 12
@@ -158,8 +161,8 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
     except FmuInputError as error:
         raise UserError(str(error)) from None
     category = str(ato.get("train_category") or stock.category)
-    if category not in sig.TRAIN_CATEGORIES:
-        raise UserError(f"parameter train_category: {category!r} is not one of {', '.join(sig.TRAIN_CATEGORIES)}")
+    if category not in TRAIN_CATEGORIES:
+        raise UserError(f"parameter train_category: {category!r} is not one of {', '.join(TRAIN_CATEGORIES)}")
     # as fmus/ato_controller/core.py AtoCore builds its ATP (its facade has no brake_lead port:
     # the stock's brake lead always)
     defaults = AtoSettings()
@@ -173,9 +176,9 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
     except FmuInputError as error:
         raise UserError(str(error)) from None
     rx_category = getattr(rx, "train_category", category)
-    if rx_category not in sig.TRAIN_CATEGORIES:
+    if rx_category not in TRAIN_CATEGORIES:
         raise UserError(f"parameter train_category (receiver): {rx_category!r} is not one of "
-                        f"{', '.join(sig.TRAIN_CATEGORIES)}")
+                        f"{', '.join(TRAIN_CATEGORIES)}")
     return CabSetup(system, block_aspects, line, stock, category, rx_category, float(getattr(rx, "v_max_mps", 0.0)),
                     atp, coding)
 
@@ -316,12 +319,8 @@ def _dv_sbi_mps(v_mps: np.ndarray) -> np.ndarray:
     return np.interp(v_mps * KMH_PER_MPS, *_DV_SBI_KMH) * MPS_PER_KMH
 
 
-def _tvm_decel(decel: float, gradient_permille: float) -> float:
-    return max(decel + STANDARD_GRAVITY_MPS2 * gradient_permille / 1000.0, 0.1 * decel)
-
-
 def _permitted(atp: Atp, c: Constraints, x: np.ndarray, v: Optional[np.ndarray]) -> np.ndarray:
-    """atp.py's permitted speed for constraints ``c`` at heads ``x`` (Atp.supervise, _tvm_levels)."""
+    """atp.py's permitted speed for constraints ``c`` at heads ``x`` (Atp.supervise, Tvm430Supervision.levels)."""
     permitted = np.full(x.shape, c.ceiling_mps)
     for target in c.targets:
         distance = target.position_m - x
@@ -333,7 +332,7 @@ def _permitted(atp: Atp, c: Constraints, x: np.ndarray, v: Optional[np.ndarray])
             if target.trip_speed_mps is None:
                 continue
             distance = target.position_m - x
-            decel = _tvm_decel(atp.decel, target.gradient_permille)
+            decel = tvm_decel(atp.decel, target.gradient_permille)
             curve = np.sqrt(target.speed_mps ** 2 + 2.0 * decel * np.maximum(distance, 0.0))
             if target.trip_speed_mps == 0.0:
                 stops.append((distance, curve, _trip_curve(atp, target, x)))
@@ -357,11 +356,11 @@ def _permitted(atp: Atp, c: Constraints, x: np.ndarray, v: Optional[np.ndarray])
 
 
 def _trip_curve(atp: Atp, target, x: np.ndarray) -> np.ndarray:
-    """Atp.tvm_trip_curve at heads ``x``."""
+    """Tvm430Supervision.trip_curve at heads ``x``."""
     v_t = target.trip_speed_mps
     end = target.position_m if target.trip_position_m is None else target.trip_position_m
     distance = end - x
-    a = _tvm_decel(atp.emergency_decel, target.gradient_permille)
-    lead = atp.brake_lead_s if v_t == 0.0 else 0.0
+    a = tvm_decel(atp.tvm.emergency_decel, target.gradient_permille)
+    lead = atp.tvm.brake_lead_s if v_t == 0.0 else 0.0
     curve = -a * lead + np.sqrt(a * a * lead * lead + v_t * v_t + 2.0 * a * np.maximum(distance, 0.0))
     return np.where(distance > 0.0, curve, v_t)

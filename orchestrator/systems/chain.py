@@ -11,7 +11,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import fmus
 from fmus import ato_controller, loco_receiver, rail_line, traction, wayside_coder
-from fmus.sizes import BuildConfig, sizes_of_source
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ, BuildConfig, sizes_of_source
 from orchestrator.verdicts.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
@@ -116,7 +116,6 @@ def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict
     return components, connections
 
 
-SIGNAL_FS_HZ = 4000.0
 CHAIN_PORTS = ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")
 TVM430_PORTS = ("target_distance", "gradient", "word_carrier")
 
@@ -124,7 +123,7 @@ TVM430_PORTS = ("target_distance", "gradient", "word_carrier")
 def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sections: int = 8, frame: int = 40,
                  fmu_folder: str = "resources", coder: Dict[str, object] = None, rail: Dict[str, object] = None,
                  receiver: Dict[str, object] = None, stocks: Optional[Sequence] = None,
-                 parameter_file: Optional[str] = None, fs_hz: float = SIGNAL_FS_HZ):
+                 parameter_file: Optional[str] = None, fs_hz: float = DEFAULT_SAMPLE_RATE_HZ):
     """Coder → rail line → one receiver per train (``rx``, or ``rx1``, ``rx2`` … for several) →
     its ATO, and each train's position back into the rail line (train j on slot j). The rail
     line's ``train_length[j]`` is the length in train j's rolling-stock file (``stocks[j-1]``,
@@ -133,7 +132,7 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     ``parameter_file``: an .ssv the coder and the rail line also bind (e.g. the line file);
     ``fs_hz``: the chain's sample rate (set on the three signal FMUs when not the default)."""
     step = frame / fs_hz                         # a signal FMU steps one frame
-    if fs_hz != SIGNAL_FS_HZ:
+    if fs_hz != DEFAULT_SAMPLE_RATE_HZ:
         coder, rail, receiver = ({**(part or {}), "fs": fs_hz} for part in (coder, rail, receiver))
     stocks = list(stocks) if stocks is not None else [None] * len(trains)
     lengths = {f"train_length[{j}]": stock_length_m(stock) for j, stock in enumerate(stocks, start=1)}

@@ -47,7 +47,6 @@ import numpy as np
 
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock
 from fmus.sizes import BuildConfig, DEFAULT_SAMPLE_RATE_HZ, sizes_of_source
-from fmus.units import MPS_PER_KMH
 from orchestrator.systems.chain import (ATO_FMU, CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, signal_chain,
                                         train_and_ato, write_ssd)
 from orchestrator.verdicts.verdict import ATO_MODEL, TRAIN_MODEL

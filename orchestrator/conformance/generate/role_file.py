@@ -13,9 +13,10 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from fmus.signalling import aspects as sig
+from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from orchestrator.conformance.vectors import FORMAT
 
-FS_HZ = 4000.0
+FS_HZ = DEFAULT_SAMPLE_RATE_HZ
 FRAME = 40                  # the generator's own frame; the runner steps with the target's
 GENERATOR = "python -m orchestrator.conformance.generate"
 

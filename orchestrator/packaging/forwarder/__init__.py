@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Optional, Union
 
 from orchestrator.errors import UserError
+from orchestrator.library_shortcuts import fmi_headers
 
 HERE = Path(__file__).resolve().parent
 #: the C files compiled into one library, and the header they share
@@ -72,12 +73,6 @@ def find_compiler() -> Optional[str]:
     return None
 
 
-def _fmi_headers() -> Path:
-    import fmpy
-
-    return Path(fmpy.__file__).resolve().parent / "c-code"
-
-
 def plan() -> Union[Forwarder, NoForwarder]:
     import platform
     import sys
@@ -98,7 +93,7 @@ def plan() -> Union[Forwarder, NoForwarder]:
 
 def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
     command = [forwarder.compiler, "-shared", "-fPIC", "-O2", "-fvisibility=hidden",
-               f"-I{_fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
+               f"-I{fmi_headers()}", f"-I{sysconfig.get_config_var('INCLUDEPY')}",
                "-o", str(output), *map(str, SOURCES), "-ldl", "-lpthread"]
     proc = subprocess.run(command, capture_output=True, text=True)
     if proc.returncode != 0:
