@@ -14,7 +14,6 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Dict, Mapping, Optional, Tuple
 
-
 from orchestrator.dcp import dcpx
 from orchestrator.dcp.dcpx import SlaveDescription
 from orchestrator.errors import UserError
