@@ -393,7 +393,7 @@ def cmd_headway(args) -> int:
     """``railcosim headway SYSTEM``: the minimum headway by blocking-time theory and by
     co-simulation of N trains (docs/capacity.md)."""
     from orchestrator.headway import search
-    from orchestrator.headway.output import write_outputs
+    from orchestrator.headway.output import shown, write_outputs
 
     system = _system_path(args.system).resolve()
     if args.method != "blocking" and args.trains < 2:
@@ -412,13 +412,7 @@ def cmd_headway(args) -> int:
     output = Path(args.output) if args.output else Path("results") / f"headway_{system.name}"
     result = search.headway(system, args.method, args.trains, output, [build_dir], build, args.workers,
                             progress=sys.stderr, resume=args.resume)
-    document = write_outputs(result, output)
-    if args.format == "json":
-        print(json.dumps({k: v for k, v in document.items() if k != "stairway"}, indent=1, ensure_ascii=False))
-    else:
-        from orchestrator.headway.report import text_lines
-
-        print("\n".join([*text_lines(document), f"results in {output} (headway.json, stairway.png, report.html)"]))
+    print(shown(write_outputs(result, output), args.format, output))
     return 0
 
 

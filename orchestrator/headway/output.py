@@ -35,3 +35,10 @@ def write_outputs(result: HeadwayResult, folder: Path) -> dict:
     picture = report.stairway_picture(folder / "stairway.png", document, _paths(document), shown, title)
     report.write_page(folder, document, picture)
     return document
+
+
+def shown(document: dict, output_format: str, folder: Path) -> str:
+    """What ``railcosim headway`` prints: the JSON without the stairway, or the text lines."""
+    if output_format == "json":
+        return json.dumps({k: v for k, v in document.items() if k != "stairway"}, indent=1, ensure_ascii=False)
+    return "\n".join([*report.text_lines(document), f"results in {folder} (headway.json, stairway.png, report.html)"])
