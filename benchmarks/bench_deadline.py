@@ -50,7 +50,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))   # `python benchmarks/X.py` from anywhere
 
 from benchmarks.bench_sample_by_sample import sample_by_sample_system  # noqa: E402
-from fmus.rail_line import circuit_bank, network_models, relays  # noqa: E402
+from fmus.rail_line import circuit_bank, network_models, relays, wheelset_amplitudes  # noqa: E402
 from fmus.rail_line import parking as parking_module  # noqa: E402
 from fmus.sizes import BuildConfig  # noqa: E402
 from orchestrator import master as master_module  # noqa: E402
@@ -184,7 +184,7 @@ class Events:
         self._time_steps()
         bank = circuit_bank.TrackCircuitBank
         self._wrap(bank, "_activate", "network of a new shunt configuration")
-        self._wrap(bank, "_solve_wheelsets", "wheelset chain solved again")
+        self._wrap(wheelset_amplitudes.WheelsetAmplitudes, "solve", "wheelset chain solved again")
         self._wrap(bank, "_wake", "parked section woken")
         self._wrap(bank, "_wake_in_frame", "parked section woken")
         self._wrap(parking_module.Parking, "park", "sections parked")
