@@ -1,6 +1,7 @@
-"""The FMU's own FMI binary: fmi2_forward.c (the forwarder) and fmi2_direct.c (the slave's
-objects through the Python C API: the references held, the direct value route), sharing
-fmi2_forward.h, compiled at `railcosim build` with the system C compiler and put in front of
+"""The FMU's own FMI binary: fmi2_forward.c (the forwarder), fmi2_direct.c (the slave's
+objects through the Python C API: the references held, the direct value route) and
+fmi2_checks.c (a get or set checked against the value references), sharing fmi2_instance.h,
+compiled at `railcosim build` with the system C compiler and put in front of
 pythonfmu's library (docs/architecture.md, "Forwarding binary").
 
 ``plan()`` decides once per build whether FMUs get it: a C compiler and this Python's headers
@@ -30,8 +31,8 @@ from orchestrator.library_shortcuts import fmi_headers
 
 HERE = Path(__file__).resolve().parent
 #: the C files compiled into one library, and the header they share
-SOURCES = (HERE / "fmi2_forward.c", HERE / "fmi2_direct.c")
-HEADER = HERE / "fmi2_forward.h"
+SOURCES = (HERE / "fmi2_forward.c", HERE / "fmi2_direct.c", HERE / "fmi2_checks.c")
+HEADER = HERE / "fmi2_instance.h"
 SETTINGS_MEMBER = "resources/railcosim_python.txt"
 VALUE_REFERENCES_MEMBER = "resources/railcosim_value_references.txt"
 DESCRIPTION_MEMBER = "resources/railcosim_description.txt"
@@ -98,7 +99,7 @@ def compile_forwarder(forwarder: Forwarder, output: Path) -> None:
     proc = subprocess.run(command, capture_output=True, text=True)
     if proc.returncode != 0:
         first = (proc.stderr.strip().splitlines() or [f"exit {proc.returncode}"])[0]
-        raise UserError(f"compiling {' and '.join(p.name for p in SOURCES)} in {HERE} with {forwarder.compiler} "
+        raise UserError(f"compiling {', '.join(p.name for p in SOURCES)} in {HERE} with {forwarder.compiler} "
                         f"failed: {first}")
 
 

@@ -4,7 +4,7 @@
  * and the direct route of Real, Integer and Boolean values between the host's arrays and the
  * slave's stores (fmus/fmi/bulk.py resolves where the values live). */
 #define _GNU_SOURCE
-#include "fmi2_forward.h"
+#include "fmi2_instance.h"
 
 #include <dlfcn.h>
 #include <stdlib.h>

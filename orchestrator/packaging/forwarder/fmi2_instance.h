@@ -1,9 +1,10 @@
-/* What the two C files of railcosim's FMI 2.0 binary share (fmi2_forward.c, the forwarder;
- * fmi2_direct.c, the slave's objects through the Python C API): the per-instance record and the
- * functions each calls in the other. Compiled with -fvisibility=hidden: nothing here is exported
- * from the library. */
-#ifndef RAILCOSIM_FMI2_FORWARD_H
-#define RAILCOSIM_FMI2_FORWARD_H
+/* What the C files of railcosim's FMI 2.0 binary share: the per-instance record and the
+ * functions one calls in another. They call one way: fmi2_forward.c (the forwarder) calls
+ * fmi2_direct.c (the slave's objects through the Python C API) and fmi2_checks.c (a get or set
+ * checked against the value references); fmi2_direct.c calls fmi2_checks.c. Compiled with
+ * -fvisibility=hidden: nothing here is exported from the library. */
+#ifndef RAILCOSIM_FMI2_INSTANCE_H
+#define RAILCOSIM_FMI2_INSTANCE_H
 
 #include <Python.h>
 #include <stddef.h>
@@ -63,8 +64,11 @@ typedef struct Instance {
     int leak;                          /* ... from fmi2Reset: pythonfmu's release would be one too many */
 } Instance;
 
-/* fmi2_forward.c: fmi2Error, logged, for a get or set the checks refuse (its arrays, its size,
- * its value references); fmi2OK when all are good */
+/* fmi2_checks.c: the FMI type names (Real, Integer, Boolean, String); an error line through the
+ * instance's logger; fmi2Error, logged, for a get or set the checks refuse (its arrays, its size,
+ * its value references), fmi2OK when all are good */
+extern const char *const type_names[TYPES];
+void log_error(const Instance *entry, const char *text);
 fmi2Status check_references(const Instance *entry, const fmi2ValueReference vr[], size_t n, const void *value,
                             int type, int setting);
 
