@@ -198,7 +198,7 @@ class TrialPlan:
         stations = {s["name"]: float(s["stop_m"]) for s in line_doc["stations"]}
         self.pitch_m = pitch = self.length_m + QUEUE_GAP_M
         #: sidings beyond the line for the trains to clear it, holding tracks before it (module docstring)
-        self.run_off = self.holding = base.cab_system != "TVM430"
+        self.run_off = base.cab_system != "TVM430"
         self.offset_m = (trains - 1) * pitch if self.holding else 0.0
         line_end = float(line_doc["length_m"]) + self.offset_m
         last_circuit_m = max(float(s["end_m"]) for s in line_doc["block_sections"]) + self.offset_m
@@ -230,6 +230,12 @@ class TrialPlan:
         #: where judging ends: the last stop with a run-off, else set by the caller (the approach
         #: point of the last stop's block: a train standing there holds its followers)
         self.judge_end_m = self.last_stop_m
+
+    @property
+    def holding(self) -> bool:
+        """Followers wait on holding tracks: where a train may move without a code, as for the
+        sidings (``run_off``: every cab system but TVM-430)."""
+        return self.run_off
 
     @property
     def origin_slot(self) -> TrainSlot:
