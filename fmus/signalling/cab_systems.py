@@ -17,6 +17,20 @@ DIGITAL = {als_en.SYSTEM.name: als_en.SYSTEM, fire_dqpsk.SYSTEM.name: fire_dqpsk
 NAMES = (ALSN, ALSU, TVM430) + tuple(DIGITAL)
 
 
+class AtoMode:
+    """The ATO's ``cab_signal`` modes: how its ATP reads the receiver's indication
+    (fmus/ato_controller/atp.py). One mode may serve several systems (``digital``: ALS-EN and
+    FIRE_DQPSK); ``off`` runs without a cab signal."""
+
+    ALSN = "ALSN"
+    ALSU = "ALSU"
+    DIGITAL = "digital"
+    TVM430 = "TVM430"
+    TVM300 = "TVM300"
+    OFF = "off"
+    ALL = (ALSN, ALSU, DIGITAL, TVM430, TVM300, OFF)
+
+
 def check_name(name: str) -> str:
     """The name itself; an unknown name is an input error."""
     if name not in NAMES:
