@@ -19,6 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig
 from orchestrator.systems.chain import cab_settings, signal_chain, train_and_ato
 from orchestrator import master
@@ -32,7 +33,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def sample_by_sample_system(folder: Path, fmus: Path) -> Path:
-    coder, rail, receiver, ato = cab_settings("ALSN")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSN.name)
     components, connections = train_and_ato(ato_parameters=ato)
     chain, links = signal_chain(frame=1, fmu_folder=str(fmus), coder=coder, rail=rail, receiver=receiver)
     return write_ssd(folder / "free_run_n1", "free_run_n1", chain + components, connections + links,

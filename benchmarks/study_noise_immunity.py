@@ -51,6 +51,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: harness
 
+from fmus.signalling import cab_systems  # noqa: E402
 from fmus.signalling import dqpsk  # noqa: E402
 from harness.noise_immunity import ber, run_digital  # noqa: E402
 
@@ -59,7 +60,7 @@ STUDIES = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "stud
 STUDY = STUDIES / "noise_immunity.toml"
 ALSU_STUDY = STUDIES / "noise_immunity_alsu.toml"
 TVM430_STUDY = STUDIES / "noise_immunity_tvm430.toml"
-SYSTEMS = ("ALSN", "ALSU", "ALS-EN", "FIRE_DQPSK", "TVM430")
+SYSTEMS = (cab_systems.ALSN.name, cab_systems.ALSU.name, cab_systems.ALS_EN.name, cab_systems.FIRE_DQPSK.name, cab_systems.TVM430.name)
 NOISE_KINDS = ("white", "impulse", "joint", "inband", "leak")
 
 
@@ -112,7 +113,7 @@ def main():
     unknown = sorted(chosen - set(SYSTEMS))
     if unknown:
         parser.exit(2, f"--systems: unknown {', '.join(unknown)}; choose among {','.join(SYSTEMS)}\n")
-    digital = [name for name in ("FIRE_DQPSK", "ALS-EN") if name in chosen]
+    digital = [name for name in (cab_systems.FIRE_DQPSK.name, cab_systems.ALS_EN.name) if name in chosen]
     output = Path(args.output)
     results = json.loads(output.read_text()) if output.is_file() else {}
     for key in ("ber", "tone", "adjacent", *NOISE_KINDS):

@@ -16,6 +16,7 @@ import numpy as np
 
 from fmus.signalling import aspects as sig
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.signalling import cab_systems
 from fmus.traction.core import TractionCore
 from fmus.ato_controller.core import AtoCore, AtoSettings
 from fmus.ato_controller.planner import StagePlanner
@@ -55,7 +56,7 @@ def run_closed_loop(stop_time_s: float, step_s: float = 0.5, settings: Optional[
     line = load_line(line_file)
     stock = load_rolling_stock(stock_file)
     timetable = load_timetable(timetable_file, line)
-    settings = settings or AtoSettings(cab_signal="off" if cab_signal is None else "ALSN")
+    settings = settings or AtoSettings(cab_signal=cab_systems.AtoMode.OFF if cab_signal is None else cab_systems.AtoMode.ALSN)
     ato = AtoCore(line, stock, timetable, timetable_file, category or stock.category, settings)
     train = TractionCore(stock, line, x0_m=timetable[0].stop_m, mass_scale=mass_scale,
                          resistance_scale=resistance_scale, pantograph_voltage_v=pantograph_voltage_v)

@@ -43,7 +43,7 @@ class DisplayProbe(_OutputJudge):
         self.graph = graph
         self.receivers = receivers_of(graph)
         self.samples: Dict[str, Samples] = {
-            r.name: Samples(r.name, r.train, "ALSN" if r.system is None else r.system.name) for r in self.receivers}
+            r.name: Samples(r.name, r.train, r.cab.name) for r in self.receivers}
 
     def outputs_needed(self):
         needed: Dict[str, List[str]] = {}

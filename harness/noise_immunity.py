@@ -35,7 +35,7 @@ HOLD = 6
 def ber(system_name: str, ebn0_db: float, symbols: int, seed: int) -> float:
     rng = np.random.default_rng(seed)
     dibits = rng.integers(0, 4, symbols)
-    if system_name == "FIRE_DQPSK":
+    if system_name == cab_systems.FIRE_DQPSK.name:
         carrier, baud = 175.0, 15.0
         increments = dqpsk.INCREMENT_OF_DIBIT[dibits]
     else:
@@ -45,7 +45,7 @@ def ber(system_name: str, ebn0_db: float, symbols: int, seed: int) -> float:
     x = dqpsk.modulate_increments(increments, FS, carrier, baud, 1.0, 0.3)
     sigma = np.sqrt(FS / (8.0 * baud * 10 ** (ebn0_db / 10)))      # Eb/N0 = A²·fs / (8·σ²·baud)
     z = dqpsk.correlate(x + sigma * rng.standard_normal(x.size), FS, carrier, baud)
-    decided = dqpsk.decide(z) if system_name == "FIRE_DQPSK" else als_en.dibits_of(z)
+    decided = dqpsk.decide(z) if system_name == cab_systems.FIRE_DQPSK.name else als_en.dibits_of(z)
     errors = np.bitwise_xor(decided[:symbols], dibits)
     return float((np.unpackbits(errors.astype(np.uint8)[:, None], axis=1)[:, -2:].sum()) / (2 * symbols))
 
@@ -514,11 +514,11 @@ IMPULSE_RATES = (0.5, 2.0, 5.0)
 JOINT_SPEEDS_KMH = (40.0, 80.0, 160.0)
 #: the random-number seeds of each (noise, system): (noise generator, messages); ALSN's message
 #: schedule always from seed 5. Replication ``seed`` k adds 1000·k to both (0: the figures below).
-SEEDS = {("white", "FIRE_DQPSK"): (100, 7), ("white", "ALS-EN"): (101, 8), ("white", "ALSN"): (99, 5),
-         ("impulse", "FIRE_DQPSK"): (200, 17), ("impulse", "ALS-EN"): (201, 18), ("impulse", "ALSN"): (199, 5),
-         ("white", "ALSU"): (98, 6), ("impulse", "ALSU"): (198, 16), ("joint", "ALSU"): (298, 26),
-         ("white", "TVM430"): (97, 9), ("impulse", "TVM430"): (197, 19), ("inband", "TVM430"): (397, 29),
-         ("leak", "TVM430"): (497, 39)}
+SEEDS = {("white", cab_systems.FIRE_DQPSK.name): (100, 7), ("white", cab_systems.ALS_EN.name): (101, 8), ("white", cab_systems.ALSN.name): (99, 5),
+         ("impulse", cab_systems.FIRE_DQPSK.name): (200, 17), ("impulse", cab_systems.ALS_EN.name): (201, 18), ("impulse", cab_systems.ALSN.name): (199, 5),
+         ("white", cab_systems.ALSU.name): (98, 6), ("impulse", cab_systems.ALSU.name): (198, 16), ("joint", cab_systems.ALSU.name): (298, 26),
+         ("white", cab_systems.TVM430.name): (97, 9), ("impulse", cab_systems.TVM430.name): (197, 19), ("inband", cab_systems.TVM430.name): (397, 29),
+         ("leak", cab_systems.TVM430.name): (497, 39)}
 
 
 def condition(system: str, noise: str, level: float, seed: int = 0, messages: int = 100000,
@@ -533,19 +533,19 @@ def condition(system: str, noise: str, level: float, seed: int = 0, messages: in
         raise ValueError(f"noise {noise!r} / system {system!r}: choose white or impulse, and ALSN, ALSU, ALS-EN, "
                          f"FIRE_DQPSK or TVM430; or joint and ALSU; or inband or leak and TVM430")
     noise_seed, message_seed = (s + 1000 * seed for s in SEEDS[(noise, system)])
-    if system == "TVM430":
+    if system == cab_systems.TVM430.name:
         rng = np.random.default_rng(noise_seed)
         source = {"white": lambda: white(level, rng, TVM_CARRIER_V), "leak": lambda: white(level, rng, TVM_CARRIER_V),
                   "impulse": lambda: impulses(level, rng, TVM_FS), "inband": lambda: swept_harmonic(level, rng)}[noise]()
         return tvm430_chain(messages, source, message_seed, tvm_leak_ratio() if noise == "leak" else 0.0)
     noise_of = {"white": white, "impulse": impulses, "joint": joints}[noise]
-    if system == "ALSU" and noise == "white":
+    if system == cab_systems.ALSU.name and noise == "white":
         # SNR of the code's power, both tones (A² against σ²), over the whole band
         source = white(level - 10 * np.log10(2 * ALSU_TONE_V ** 2 / AMPLITUDE_V ** 2), np.random.default_rng(noise_seed))
     else:
         source = noise_of(level, np.random.default_rng(noise_seed))
-    if system == "ALSU":
+    if system == cab_systems.ALSU.name:
         return alsu_chain(messages, source, message_seed)
-    if system == "ALSN":
+    if system == cab_systems.ALSN.name:
         return alsn_chain(alsn_cycles, source, message_seed)
     return run_digital(system, messages, source, message_seed)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import List, Optional, Tuple
 
 from fmus.data.loader import DATA
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig
 from orchestrator.systems.chain import (cab_settings, check_placements, signal_chain, stock_length_m, train_and_ato,
                                         write_ssd)
@@ -71,7 +72,7 @@ def sections_for(line: dict) -> int:
     return 8 * -(-len(line["block_sections"]) // 8)
 
 
-def write_queued_trains(folder: Path, queue: Queue, system: str = "ALSN") -> Path:
+def write_queued_trains(folder: Path, queue: Queue, system: str = cab_systems.DEFAULT.name) -> Path:
     """Write the system into ``folder``; its SSD path."""
     line = queued_line(queue)
     terminus = max(line["stations"], key=lambda s: s["stop_m"])

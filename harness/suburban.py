@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import List, Sequence, Tuple
 
 from fmus.data.loader import DATA
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig
 from harness.queued_trains import _write_json, sections_for
 from orchestrator.systems.chain import (cab_settings, check_placements, signal_chain, stock_length_m, train_and_ato,
@@ -21,7 +22,7 @@ from orchestrator.run import RunOptions, run_system
 SUBURBAN_LINE, SUBURBAN_TIMETABLE, EMU = "suburban_line.json", "suburban_timetable.json", "emu_er2.json"
 
 
-def write_suburban_emu(folder: Path, stop_time_s: float, system: str = "ALSN") -> Path:
+def write_suburban_emu(folder: Path, stop_time_s: float, system: str = cab_systems.DEFAULT.name) -> Path:
     """One ЭР2 EMU over the suburban line to its timetable (every station), the ALSN chain on
     the line's 4-aspect block in a build of 32 sections; its SSD path."""
     line = json.loads((DATA / SUBURBAN_LINE).read_text())

@@ -478,6 +478,8 @@ def cmd_list(args) -> int:
 
 
 def add_new_command(sub) -> None:
+    from fmus.signalling import cab_systems      # the systems `new` offers: their registry
+
     new = sub.add_parser("new", help="write a system folder from your line, timetable(s) and rolling stock")
     new.add_argument("name", help="folder to write (must not exist yet)")
     new.add_argument("--line", metavar="FILE", help="line file (JSON, docs/interfaces.md)")
@@ -491,9 +493,13 @@ def add_new_command(sub) -> None:
                           "--railml optional (one is made)")
     new.add_argument("--rolling-stock", metavar="FILE",
                      help="rolling-stock file for every train (default: the bundled passenger train; "
-                          "freight_vl80 for --traction ac; high_speed_tgv for --system TVM430)")
-    new.add_argument("--system", default="ALSN", help="cab signalling: ALSN (default), ALS-EN, FIRE_DQPSK, or "
-                                                      "TVM430 on a line of UM71 track circuits")
+                          "freight_vl80 for --traction ac; the system's own for a system that names one: "
+                          + ", ".join(f"{c.default_stock.removesuffix('.json')} for {c.name}"
+                                      for c in cab_systems.REGISTRY.values() if c.default_stock) + ")")
+    new.add_argument("--system", default=cab_systems.DEFAULT.name,
+                     help="cab signalling, on a line of the track circuits it codes: " + "; ".join(
+                         f"{c.name} ({c.transmitter})" for c in cab_systems.REGISTRY.values())
+                     + f" (default {cab_systems.DEFAULT.name})")
     new.add_argument("--trains", action=_Number, kind=int, minimum=1, help="number of trains (default: one per --timetable)")
     new.add_argument("--traction", help="dc, ac or none (default: the line's electrification; must agree)")
     new.set_defaults(func=cmd_new)

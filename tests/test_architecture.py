@@ -73,7 +73,7 @@ LEAVES = Row("`fmus/errors.py`, `fmus/sizes.py`, `fmus/units.py`, `fmus/train_ca
 FAST_PATHS = Row("`fmus/reductions.py`, `fmus/library_shortcuts.py`", ("numpy", "scipy"))
 DATA = Row("`fmus/data/`", ("numpy", "jsonschema", "fmus.errors", "fmus.units", "fmus.train_categories"))
 SIGNALLING = Row("`fmus/signalling/`", ("numpy", "scipy", "fmus.errors", "fmus.units", "fmus.train_categories",
-                                        "fmus.dsp", "fmus.data"))
+                                        "fmus.sizes", "fmus.dsp", "fmus.data"))
 DSP = Row("`fmus/dsp/`", ("numpy", "scipy", "control", "fmus.library_shortcuts"))
 FMUS_LIBRARIES = (LEAVES, FAST_PATHS, DATA, SIGNALLING, DSP)
 FMI = Row("`fmus/fmi/`", ("pythonfmu", *FMUS_LIBRARIES))

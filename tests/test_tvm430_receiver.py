@@ -28,7 +28,8 @@ LEAK = 0.1                                       # a neighbour's carrier 20 dB d
 
 
 def test_the_system_name_is_known():
-    assert cab_systems.is_tvm430("TVM430") and not cab_systems.is_tvm430("ALSU")
+    assert cab_systems.lookup("TVM430") is cab_systems.TVM430
+    assert cab_systems.TVM430.transmitter == cab_systems.UM71 and cab_systems.ALSU.transmitter == cab_systems.KPT
     assert cab_systems.digital_system("TVM430") is None
 
 

@@ -24,15 +24,15 @@ from fmus.wayside_coder.core import CoderSettings  # noqa: E402
 from fmus.wayside_coder.digital_generator import DigitalCoderCore  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
-SYSTEMS = ("ALSN", "ALSU", "ALS-EN", "FIRE_DQPSK")
-STYLE = {"ALSN": "s-", "ALSU": "d-", "ALS-EN": "o-", "FIRE_DQPSK": "^-"}
+SYSTEMS = (cab_systems.ALSN.name, cab_systems.ALSU.name, cab_systems.ALS_EN.name, cab_systems.FIRE_DQPSK.name)
+STYLE = {cab_systems.ALSN.name: "s-", cab_systems.ALSU.name: "d-", cab_systems.ALS_EN.name: "o-", cab_systems.FIRE_DQPSK.name: "^-"}
 
 
 def ber_and_spectrum(results) -> None:
     fig, (ax, ax_psd) = plt.subplots(1, 2, figsize=(11, 4.2))
     ebn0 = np.linspace(0, 11, 100)
     ax.semilogy(ebn0, dqpsk.theory_ber(ebn0), "k-", label="theory, differential 4-DPSK")
-    for name, marker in (("FIRE_DQPSK", "^"), ("ALS-EN", "o")):
+    for name, marker in ((cab_systems.FIRE_DQPSK.name, "^"), (cab_systems.ALS_EN.name, "o")):
         points = results["ber"][name]
         ax.semilogy([float(e) for e in points], list(points.values()), marker, label=f"{name} (simulated)")
     ax.set_xlabel("Eb/N0 (dB)")
@@ -40,7 +40,7 @@ def ber_and_spectrum(results) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     ax.set_title("Modem BER, ideal timing")
-    for name in ("FIRE_DQPSK", "ALS-EN"):
+    for name in (cab_systems.FIRE_DQPSK.name, cab_systems.ALS_EN.name):
         coder = DigitalCoderCore(cab_systems.DIGITAL[name], load_line(), 8, 4000, CoderSettings(amplitude_v=1.0))
         occupied = np.zeros(8, dtype=bool)
         u = np.concatenate([coder.step(k * 1.0, occupied).u_tx[0].copy() for k in range(60)])

@@ -103,9 +103,11 @@ def line_file_port() -> Port:
     return Port("line_file", "parameter", "String", start="", description="line JSON; empty: the bundled default line")
 
 
-def cab_system_port() -> Port:
-    """The cab-signalling system a coder sends and a receiver decodes."""
-    return Port("system", "parameter", "String", start="ALSN", description="ALSN | ALSU | TVM430 | ALS-EN | FIRE_DQPSK")
+def cab_system_port(names: Sequence[str], default: str) -> Port:
+    """The cab-signalling system a coder sends and a receiver decodes: one of ``names`` (the
+    registry's, fmus/signalling/cab_systems.py, which the facades pass: a unit without a signal
+    chain never loads the signalling library)."""
+    return Port("system", "parameter", "String", start=default, description=" | ".join(names))
 
 
 def sample_rate_port(fs_hz: float, frame: int) -> Port:

@@ -1,14 +1,14 @@
-"""LocoReceiver FMU facade: ports ↔ LocoReceiverCore (ALSN), AlsuReceiverCore (ALSU),
-Tvm430ReceiverCore (TVM430) or DigitalReceiverCore (ALS-EN, FIRE_DQPSK). No logic here (see
-core.py, alsu.py, tvm430.py, digital_receiver.py)."""
+"""LocoReceiver FMU facade: ports ↔ the core of the cab system named by ``system`` (cores.py:
+LocoReceiverCore for ALSN, AlsuReceiverCore, Tvm430ReceiverCore, DigitalReceiverCore for ALS-EN and
+FIRE_DQPSK, …). No logic here."""
 from fmus.errors import FmuInputError
-from fmus.signalling import alsn, alsu, cab_systems, tvm430
+from fmus.signalling import alsn, cab_systems
 from fmus.signalling import aspects as sig
-from fmus.loco_receiver.alsu import AlsuReceiverCore
-from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore, Tvm430ReceiverSettings
+from fmus.loco_receiver.tvm430 import Tvm430ReceiverSettings
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
-from fmus.loco_receiver.core import CHANNELS, LocoReceiverCore, ReceiverSettings
-from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver.core import CHANNELS, ReceiverSettings
+from fmus.loco_receiver.cores import receiver_kind
+from fmus.loco_receiver.digital_receiver import DigitalReceiverSettings
 from fmus.loco_receiver.parameters import receiver_settings
 
 
@@ -24,7 +24,7 @@ class LocoReceiver(FrameFacadeSlave):
         s, d = ReceiverSettings(), DigitalReceiverSettings()     # ALSN and digital-only defaults
         tvm = Tvm430ReceiverSettings()
         return [
-            cab_system_port(),
+            cab_system_port(cab_systems.NAMES, cab_systems.DEFAULT.name),
             Port("codes_file", "parameter", "String", start="",
                  description="ALSU: the code table (tone pairs, readings); TVM430: the word tables; empty: the bundled one"),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
@@ -98,32 +98,15 @@ class LocoReceiver(FrameFacadeSlave):
     def make_default_experiment(self):
         return self.frame_experiment(ReceiverSettings.fs_hz)
 
-    def _tone_core(self, system, own_carriers: str, make):
-        """The core of a system that listens to carriers or tones of its own (ALSU, TVM430): the
-        ``carrier`` parameter must stay 0."""
-        settings = receiver_settings(system, self.scalar_parameters())
-        if self.param("carrier"):
-            raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but {own_carriers}")
-        core = make(settings)
-        self.require_frame_step(settings.fs_hz)
-        return core
-
     def create_core(self):
-        if cab_systems.is_tvm430(self.param("system")):
-            tvm = tvm430.Tvm430System(tvm430.load_codes(self.resource_path(self.param("codes_file")
-                                                                           or str(tvm430.CODES_FILE))))
-            return self._tone_core(tvm, "TVM430 listens to its track's carriers (leave carrier 0, set track)",
-                                   lambda settings: Tvm430ReceiverCore(self.build.frame, settings, tvm))
-        if cab_systems.is_alsu(self.param("system")):
-            table = alsu.load_codes(self.resource_path(self.param("codes_file") or str(alsu.CODES_FILE)))
-            return self._tone_core(alsu.AlsuSystem(table), "ALSU listens to its own six tones (leave carrier 0)",
-                                   lambda settings: AlsuReceiverCore(self.build.frame, settings, table))
-        system = cab_systems.digital_system(self.param("system"))
-        settings = receiver_settings(system, self.scalar_parameters())
-        if system is None:
-            core = LocoReceiverCore(self.build.frame, settings)
-        else:
-            core = DigitalReceiverCore(system, self.build.frame, settings)
+        cab = cab_systems.lookup(self.param("system"))
+        kind = receiver_kind(cab.name)
+        codes_file = self.param("codes_file")
+        system = cab.system(self.resource_path(codes_file) if codes_file and cab.codes_file else None)
+        settings = receiver_settings(cab.name, self.scalar_parameters())
+        if kind.own_carriers and self.param("carrier"):
+            raise FmuInputError(f"parameter carrier: {self.param('carrier'):g} Hz, but {kind.own_carriers}")
+        core = kind.make_core(self.build.frame, settings, system)
         self.require_frame_step(settings.fs_hz)
         return core
 

@@ -53,48 +53,26 @@ from fmus.errors import FmuInputError
 from fmus.loco_receiver.core import ReceiverOutputs
 from fmus.signalling import aspects as sig
 from fmus.signalling import tvm430
+from fmus.signalling.tvm430 import (BASEBAND_RISE_S, HOLD_S, HOP_S, STATED_DECODE_S,  # noqa: F401 (the receiver's timing)
+                                     STATED_LATENCY_S, WINDOW_S)
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 BASEBAND_RATE_HZ = 200.0          # decimated rate: 10× the highest tone, ±100 Hz for the discriminator
 LOW_PASS_ORDER = 4
 LOW_PASS_CORNER_HZ = 50.0         # twice the FM's reach (±25 Hz), 300 Hz below the nearest other carrier
-WINDOW_S = 1.0 / tvm430.TONE_SPACING_HZ      # 1.5625 s: the shortest window resolving 0.64 Hz
-HOP_S = 0.125                     # one decision every 0.125 s
 PRESENT_FRACTION = 0.65           # a tone's fitted amplitude / DEVIATION_HZ_PER_TONE above: present
 ABSENT_FRACTION = 0.35            # below: absent; between: no word
 DOMINANCE_DB = 10.0               # the decoded carrier is this far above every other of the track
 CONFIRMATIONS = 2                 # consecutive decisions a non-restrictive change needs
-#: `inertia` 0: how long the word shown outlives its last support. It bridges a block boundary
-#: at the worst moment: the word of the block being left changes just before it (the windows
-#: straddling the change read nothing, up to a window and a hop), then the new block's carrier
-#: needs a window and two hops of its own; the ATP trips on a lost word (docs/ato.md#tvm-430)
-HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
 #: a carrier below this (coil EMF, peak, V) is not decoded: a third of the weakest carrier the
 #: rail line gives a train, 0.1 V 10 m into a 2300 Hz circuit at 1 Ω·km from the coder's 4 V
 #: (docs/rail_line.md#tvm-430-track-circuits, "Levels"); a carrier that stops falls below it
 #: within the low-pass's settling (a few ms)
 SQUELCH_V = 0.03
 WEAKEST_CARRIER_V = 0.1
-#: the baseband low-pass's rise (s): its step response reaches SQUELCH_V / WEAKEST_CARRIER_V
-#: after 7.2 ms (a third after 7.5 ms), so a carrier that starts is above the squelch that much later
-#: (tests/test_tvm430_receiver.py checks it against the filter at 8 and 12 kHz)
-BASEBAND_RISE_S = 0.0076
 #: the fs needed above the highest carrier: its image fs − f must stay out of the baseband
 #: low-pass (more than its stop band, 5× the corner) — fs ≥ 2·(2600 + 250) = 5.7 kHz for track 2
 IMAGE_GUARD_HZ = 5.0 * LOW_PASS_CORNER_HZ
-#: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
-#: to the restrictive display (s): a window that still holds part of the old word may read it
-#: (a whole window at most), then the hold, then the next decision (5.19 s). Measured: a lost
-#: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
-#: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
-STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
-#: a word is shown within this of the instant it starts at the coils (from cold, on a new
-#: carrier, a change of word): the carrier rises above the squelch through the baseband
-#: low-pass, the window must fill with it, then a decision boundary and one more to confirm
-#: (1.82 s; a restrictive change needs no confirmation); an output read at step ends shows it
-#: by the end of the step. Measured: a carrier starting anywhere in a hop 1.69–1.818 s at
-#: 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
-STATED_DECODE_S = WINDOW_S + 2 * HOP_S + BASEBAND_RISE_S
 
 
 @dataclass

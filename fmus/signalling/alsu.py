@@ -253,6 +253,11 @@ class AlsuSystem:
     def more_restrictive(self, a: int, b: int) -> int:
         return a if self.rank(a) <= self.rank(b) else b
 
+    def block_coding(self, line, block_aspects: int) -> "BlockCoding":
+        """The block rules' ALSU code of every track circuit of ``line`` (the verdicts' and the
+        headway's reading of what the coder sends)."""
+        return BlockCoding(line, block_aspects, self)
+
 
 SYSTEM = None      # the shipped table's system, made on first use (system())
 

@@ -62,6 +62,33 @@ CARRIERS_HZ = (1700.0, 2000.0, 2300.0, 2600.0)
 NO_WORD = 0
 FREE_BLOCKS_OPEN = 6                 # the `free_blocks` reported for "no target in range"
 
+# ---- the receiver's decoder timing (fmus/loco_receiver/tvm430.py; the facts the ATO and the verdicts
+# take its latency from) ----
+WINDOW_S = 1.0 / TONE_SPACING_HZ      # 1.5625 s: the shortest window resolving 0.64 Hz
+HOP_S = 0.125                     # one decision every 0.125 s
+#: `inertia` 0: how long the word shown outlives its last support. It bridges a block boundary
+#: at the worst moment: the word of the block being left changes just before it (the windows
+#: straddling the change read nothing, up to a window and a hop), then the new block's carrier
+#: needs a window and two hops of its own; the ATP trips on a lost word (docs/ato.md#tvm-430)
+HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
+#: the baseband low-pass's rise (s): its step response reaches SQUELCH_V / WEAKEST_CARRIER_V
+#: after 7.2 ms (a third after 7.5 ms), so a carrier that starts is above the squelch that much later
+#: (tests/test_tvm430_receiver.py checks it against the filter at 8 and 12 kHz)
+BASEBAND_RISE_S = 0.0076
+#: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
+#: to the restrictive display (s): a window that still holds part of the old word may read it
+#: (a whole window at most), then the hold, then the next decision (5.19 s). Measured: a lost
+#: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
+#: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
+STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
+#: a word is shown within this of the instant it starts at the coils (from cold, on a new
+#: carrier, a change of word): the carrier rises above the squelch through the baseband
+#: low-pass, the window must fill with it, then a decision boundary and one more to confirm
+#: (1.82 s; a restrictive change needs no confirmation); an output read at step ends shows it
+#: by the end of the step. Measured: a carrier starting anywhere in a hop 1.69–1.818 s at
+#: 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
+STATED_DECODE_S = WINDOW_S + 2 * HOP_S + BASEBAND_RISE_S
+
 
 def check_bits(data: int) -> int:
     """The 6 check bits of the 21 data bits (the word's bits 26–6, ``data`` right-aligned)."""
@@ -303,6 +330,19 @@ class Tvm430System:
         return (read_a.step_kmh <= read_b.step_kmh and read_a.next_kmh <= read_b.next_kmh
                 and read_a.target_distance_m <= read_b.target_distance_m
                 and read_a.gradient_permille <= read_b.gradient_permille)
+
+    def block_coding(self, line, block_aspects: int = 0) -> "BlockWords":
+        """The block rules' word of every track circuit of ``line`` (the verdicts' and the
+        headway's reading of what the coder sends; TVM has no block aspects setting)."""
+        return BlockWords(line, self)
+
+    def shows_beyond(self, word: int, shown) -> bool:
+        """Whether the receiver outputs ``shown`` (``target_distance`` m, ``gradient`` ‰: the
+        descriptor's judged outputs) permit more than ``word`` does in the fields the common
+        checks leave out: a target farther (beyond 1 m of rounding) or a gradient less falling."""
+        read = self.reading(word)
+        return (float(shown["target_distance"]) > read.target_distance_m + 1.0
+                or float(shown["gradient"]) > read.gradient_permille + 1e-6)
 
 
 SYSTEM = None      # the shipped table's system, made on first use (system())

@@ -1,13 +1,11 @@
-"""WaysideCoder FMU facade: ports ↔ WaysideCoderCore (ALSN), AlsuCoderCore (ALSU), Tvm430CoderCore
-(TVM430) or DigitalCoderCore (ALS-EN, FIRE_DQPSK). No logic here (see core.py, alsu.py, tvm430.py,
-digital_generator.py)."""
-from fmus.signalling import alsn, alsu, cab_systems, tvm430
+"""WaysideCoder FMU facade: ports ↔ the core of the cab system named by ``system`` (cores.py:
+WaysideCoderCore for ALSN, AlsuCoderCore, Tvm430CoderCore, DigitalCoderCore for ALS-EN and
+FIRE_DQPSK, …). No logic here."""
+from fmus.signalling import cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
 from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, cab_system_port, sample_rate_port
-from fmus.wayside_coder.alsu import AlsuCoderCore
-from fmus.wayside_coder.core import CoderSettings, WaysideCoderCore, bind_outputs
-from fmus.wayside_coder.digital_generator import DigitalCoderCore
-from fmus.wayside_coder.tvm430 import Tvm430CoderCore
+from fmus.wayside_coder.core import CoderSettings, bind_outputs
+from fmus.wayside_coder.cores import make_coder
 
 
 class WaysideCoder(FrameFacadeSlave):
@@ -23,7 +21,7 @@ class WaysideCoder(FrameFacadeSlave):
             Port("codes_file", "parameter", "String", start="",
                  description="code tables (JSON); empty: the bundled ones (ALSN KPT-5/KPT-7 timings, ALSU tone pairs, "
                              "TVM-430 word tables)"),
-            cab_system_port(),
+            cab_system_port(cab_systems.NAMES, cab_systems.DEFAULT.name),
             sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: ALSN each section's carrier from the line file, digital the system's "
@@ -72,25 +70,16 @@ class WaysideCoder(FrameFacadeSlave):
 
     def create_core(self):
         p = self.param
-        system = cab_systems.digital_system(p("system"))
+        cab_systems.check_name(p("system"))
         line = load_line(self.resource_path(p("line_file") or str(DEFAULT_LINE)))
         settings = CoderSettings(
             fs_hz=p("fs"), carrier_hz=p("carrier"), amplitude_v=p("amplitude"), block_aspects=p("block_aspects"),
             coding=p("coding"), switch_on_delay_s=p("switch_on_delay"), timing_scale=p("timing_scale"),
             relay_time_constant_s=p("relay_time_constant"), seed=p("seed"), track_parity=p("track_parity"),
             generator_bandwidth_hz=p("generator_bandwidth"))
-        if cab_systems.is_alsu(p("system")):
-            table = alsu.load_codes(self.resource_path(p("codes_file") or str(alsu.CODES_FILE)))
-            core = AlsuCoderCore(line, self.build.sections, self.build.frame, settings, table)
-        elif cab_systems.is_tvm430(p("system")):
-            table = tvm430.load_codes(self.resource_path(p("codes_file") or str(tvm430.CODES_FILE)))
-            core = Tvm430CoderCore(line, self.build.sections, self.build.frame, settings, table,
-                                   p("address") or None)
-        elif system is None:
-            codes = alsn.load_transmitters(self.resource_path(p("codes_file") or str(alsn.CODES_FILE)))
-            core = WaysideCoderCore(line, self.build.sections, self.build.frame, settings, codes)
-        else:
-            core = DigitalCoderCore(system, line, self.build.sections, self.build.frame, settings)
+        codes_file = p("codes_file")
+        core = make_coder(p("system"), line, self.build.sections, self.build.frame, settings,
+                          self.resource_path(codes_file) if codes_file else None, p)
         self.require_frame_step(settings.fs_hz)
         bind_outputs(core, self.io["u_tx"], self.io["code_tx"], self.io["signal"])    # written in place
         return core

@@ -70,8 +70,7 @@ from fmus.ato_controller.core import AtoSettings, default_atp_decel_mps2
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, Line, RollingStock, load_line, load_rolling_stock
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import receiver_settings
-from fmus.signalling import alsn, alsu, cab_systems, tvm430
-from fmus.signalling import aspects as sig
+from fmus.signalling import cab_systems
 from fmus.train_categories import TRAIN_CATEGORIES
 from fmus.signalling.block_rules import block_codes
 from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
@@ -80,8 +79,6 @@ from fmus.units import KMH_PER_MPS, MPS_PER_KMH
 from orchestrator.systems.chain import cab_settings
 from orchestrator.errors import UserError
 
-#: the ALSN codes by the letters of the cab signal (З green, Ж yellow, КЖ red-yellow, Б white: no code)
-ALSN_LABELS = {sig.GREEN: "З", sig.YELLOW: "Ж", sig.RED_YELLOW: "КЖ", sig.WHITE: "Б"}
 NO_OUTPUT = -1             # a digital circuit whose code is cut (the generator sends nothing)
 # supervision.dv_sbi_mps, vectorised: 5.5 km/h up to 110 km/h, rising linearly to 10 km/h at 210 km/h
 _DV_SBI_KMH = ((110.0, 210.0), (5.5, 10.0))
@@ -102,7 +99,12 @@ class CabSetup:
     receiver_category: str      # the receiver's train_category (ALSN, ALSU and digital readings)
     receiver_v_max_mps: float   # the receiver's ceiling cap (its v_max; 0: the system's for the category)
     atp: Atp                    # built as fmus/ato_controller/core.py builds it (decelerations, latency)
-    coding: object = field(repr=False)   # the coder's rule: alsu.BlockCoding, tvm430.BlockWords, a DigitalSystem, None (ALSN)
+    coding: object = field(repr=False)   # the coder's rule: the system's block_coding, a DigitalSystem, None (ALSN)
+    reader: object = field(default=None, repr=False)   # the system object the receiver reads with (None: ALSN)
+
+    @property
+    def cab(self) -> cab_systems.CabSystem:
+        return cab_systems.lookup(self.system)
 
     @functools.cached_property
     def free_line_codes(self) -> np.ndarray:
@@ -171,8 +173,8 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
         atp = Atp(line, category, stock.length_m, mode, atp_decel if atp_decel > 0 else default_atp_decel_mps2(stock),
                   float(ato.get("decoding_latency", defaults.decoding_latency_s)),
                   emergency_decel_mps2=stock.emergency_decel, brake_lead_s=brake_lead_s(stock))
-        coding, reader = _coding(system, line, block_aspects)
-        rx = receiver_settings(reader, dict(receiver_parameters or {}))
+        coding, reader = _coding(cab_systems.lookup(system), line, block_aspects)
+        rx = receiver_settings(system, dict(receiver_parameters or {}))
     except FmuInputError as error:
         raise UserError(str(error)) from None
     rx_category = getattr(rx, "train_category", category)
@@ -180,19 +182,15 @@ def cab_setup(system: str, block_aspects: int = 3, line_file=None, rolling_stock
         raise UserError(f"parameter train_category (receiver): {rx_category!r} is not one of "
                         f"{', '.join(TRAIN_CATEGORIES)}")
     return CabSetup(system, block_aspects, line, stock, category, rx_category, float(getattr(rx, "v_max_mps", 0.0)),
-                    atp, coding)
+                    atp, coding, reader)
 
 
-def _coding(system: str, line: Line, block_aspects: int):
-    """(the coder's per-system rule object, the system object the receiver settings are read for)."""
-    if cab_systems.is_alsu(system):
-        table = alsu.system()
-        return alsu.BlockCoding(line, block_aspects, table), table
-    if cab_systems.is_tvm430(system):
-        table = tvm430.system()
-        return tvm430.BlockWords(line, table), table
-    digital = cab_systems.digital_system(system)
-    return digital, digital
+def _coding(cab: cab_systems.CabSystem, line: Line, block_aspects: int):
+    """(the coder's per-system rule object, the system object the receiver reads with)."""
+    system = cab.system()
+    if cab.family == cab_systems.TABLE:
+        return system.block_coding(line, block_aspects), system
+    return system, system
 
 
 def _occupancy(setup: CabSetup, occupied_block: int) -> np.ndarray:
@@ -206,10 +204,10 @@ def _carried(setup: CabSetup, occupied: np.ndarray) -> np.ndarray:
     """What each track circuit's coder sends for this occupancy, in the system's own ids: ALSN
     code (an aspect), ALSU code, digital command (NO_OUTPUT where cut), TVM word."""
     rules = block_codes(occupied, setup.line.block_of_section, setup.block_aspects)
-    system = setup.system
-    if system == cab_systems.ALSN:
+    family = setup.cab.family
+    if family == cab_systems.NUMERIC:
         return rules.alsn_code
-    if cab_systems.is_alsu(system) or cab_systems.is_tvm430(system):
+    if family == cab_systems.TABLE:
         return setup.coding.codes(rules)
     free = np.minimum(np.maximum(rules.free_blocks, 0), FREE_BLOCKS_OPEN)
     commands = np.array([setup.coding.command_for(int(n)) for n in free.tolist()], dtype=np.int64)
@@ -219,47 +217,20 @@ def _carried(setup: CabSetup, occupied: np.ndarray) -> np.ndarray:
 def _received(setup: CabSetup, sent: int, circuit: int) -> dict:
     """The receiver's outputs for a valid code (the keyword arguments of Atp.indication_constraints),
     as each receiver publishes them (fmus/loco_receiver/)."""
-    system, category = setup.system, setup.receiver_category
-    if system == cab_systems.ALSN:
-        v_max = setup.receiver_v_max_mps or sig.CATEGORY_MAX_KMH[category] * MPS_PER_KMH
-        permitted, target, free = alsn.speeds_for(category, sent, v_max)
-        return dict(aspect=int(sent), code=int(sent), v_permitted=permitted, v_target=target, free_blocks=free)
-    if cab_systems.is_tvm430(system):
-        read = setup.coding.tvm.reading(int(sent))
-        return dict(aspect=read.aspect, code=int(sent), v_permitted=read.step_kmh * MPS_PER_KMH,
-                    v_target=read.next_kmh * MPS_PER_KMH, free_blocks=read.free_blocks,
-                    target_distance_m=read.target_distance_m, gradient_permille=read.gradient_permille,
-                    word_carrier_hz=setup.line.sections[circuit].carrier_hz)
-    if cab_systems.is_alsu(system):
-        ind = setup.coding.alsu.indication(int(sent), category)
-        ceiling_kmh = min(ind.permitted_kmh, setup.receiver_v_max_mps * KMH_PER_MPS or alsu.CATEGORY_MAX_KMH[category])
-        return dict(aspect=ind.aspect, code=ind.code, v_permitted=ceiling_kmh * MPS_PER_KMH,
-                    v_target=min(ind.target_kmh, ceiling_kmh) * MPS_PER_KMH, free_blocks=ind.free_blocks)
-    ind = setup.coding.indication(int(sent), category)
-    ceiling = ind.permitted_kmh * MPS_PER_KMH
-    if setup.receiver_v_max_mps > 0:
-        ceiling = min(ceiling, setup.receiver_v_max_mps)
-    return dict(aspect=ind.aspect, code=ind.code, v_permitted=ceiling,
-                v_target=min(ind.target_kmh * MPS_PER_KMH, ceiling), free_blocks=ind.free_blocks)
+    return setup.cab.receiver_outputs(setup.reader, int(sent), setup.receiver_category, setup.receiver_v_max_mps,
+                                      setup.line.sections[circuit].carrier_hz)
 
 
 def _code_tx(setup: CabSetup, sent: int) -> int:
     """The coder's ``code_tx`` for what it sends: the id itself, a digital command's passenger
     code (digital_generator.py)."""
-    if cab_systems.digital_system(setup.system) is None:
+    if setup.cab.family != cab_systems.DIGITAL_FAMILY:
         return int(sent)
     return 0 if sent == NO_OUTPUT else setup.coding.indication(int(sent), "passenger").code
 
 
 def _label(setup: CabSetup, received: dict) -> str:
-    system = setup.system
-    if system == cab_systems.ALSN:
-        return ALSN_LABELS[received["aspect"]]
-    if cab_systems.is_alsu(system):
-        return f"code {received['code']}"
-    if cab_systems.is_tvm430(system):
-        return f"{received['v_permitted'] * KMH_PER_MPS:.0f}→{received['v_target'] * KMH_PER_MPS:.0f}"
-    return f"free {received['free_blocks']}, {received['v_target'] * KMH_PER_MPS:.0f} km/h"
+    return setup.cab.label(received)
 
 
 def indications_behind(setup: CabSetup, occupied_block: int) -> List[BlockIndication]:
@@ -327,7 +298,7 @@ def _permitted(atp: Atp, c: Constraints, x: np.ndarray, v: Optional[np.ndarray])
         curve = np.sqrt(target.speed_mps ** 2 + 2.0 * atp.decel * target.braking_share * np.maximum(distance, 0.0))
         permitted = np.minimum(permitted, np.where(distance >= 0.0, curve, target.speed_mps))
     stops, service = [], permitted
-    if atp.mode == "TVM430":
+    if atp.mode == cab_systems.AtoMode.TVM430:
         for target in c.targets:
             if target.trip_speed_mps is None:
                 continue

@@ -48,6 +48,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from fmus.signalling import cab_systems
 from orchestrator.errors import UserError
 from orchestrator.folders import replace_file
 from orchestrator.systems import queued
@@ -196,7 +197,7 @@ def read_trains(system_path: Path) -> List[TrainOfSystem]:
         a, t = values["ato"], values["train"]
         timetable = queued.resolved_file(a.get("timetable_file"), folder, DEFAULT_TIMETABLE)
         base = trials.BaseSystem(
-            name=name, folder=folder, cab_system=str(chain["coder"].get("system") or "ALSN"),
+            name=name, folder=folder, cab_system=str(chain["coder"].get("system") or cab_systems.DEFAULT.name),
             block_aspects=int(chain["coder"].get("block_aspects") or 3),
             line_file=queued.resolved_file(a.get("line_file") or chain["rail"].get("line_file"), folder, DEFAULT_LINE),
             stock_file=queued.resolved_file(a.get("rolling_stock_file") or t.get("rolling_stock_file"), folder,

@@ -426,16 +426,21 @@ def _save(fig, path: Path, top: float = 1.0) -> Path:
 
 def _receiver_band_pass(params: dict):
     """The band-pass the receiver FMU designs from these parameters: its own settings mapping
-    and filter design; None for ALSU (six channels) and TVM430 (its track's carriers)."""
+    and filter design; None for a receiver of several carriers or tones (ALSU's six channels,
+    TVM's track carriers: the EMF alone is drawn) or an unknown system."""
+    from fmus.errors import FmuInputError
     from fmus.loco_receiver.filters import receiver_band_pass
     from fmus.loco_receiver.parameters import receiver_settings
     from fmus.signalling import cab_systems
 
-    name = str(params.get("system", "ALSN"))
-    if name in (cab_systems.ALSU, cab_systems.TVM430):
-        return None              # ALSU's six tone channels, TVM's four carriers: the EMF alone is drawn
-    system = cab_systems.DIGITAL.get(name)
-    return receiver_band_pass(receiver_settings(system, params), system)
+    try:
+        cab = cab_systems.of_parameters(params)
+    except FmuInputError:
+        return None
+    if not cab.one_carrier:
+        return None
+    system = cab.system()
+    return receiver_band_pass(receiver_settings(cab.name, params), system)
 
 
 # ---- report.html ---------------------------------------------------------------------------------

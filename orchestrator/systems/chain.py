@@ -11,14 +11,13 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import fmus
 from fmus import ato_controller, loco_receiver, rail_line, traction, wayside_coder
+from fmus.signalling import cab_systems
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ, BuildConfig, sizes_of_source
 from orchestrator.verdicts.system_checks import span_defects
 from orchestrator.ports import read_manifest
 from orchestrator.sspgen import ComponentSpec, ConnectionSpec, Ports
 from orchestrator.sspgen import write_ssd as _write_ssd
 
-#: ALSU runs on a 4-aspect block (code 4 before a yellow)
-ALSU_BLOCK_ASPECTS = 4
 TRAIN_STEP_S = 0.5
 ATO_STEP_S = 0.5
 _UNITS = (wayside_coder, rail_line, loco_receiver, traction, ato_controller)
@@ -117,7 +116,6 @@ def train_and_ato(train: str = "train", ato: str = "ato", train_parameters: Dict
 
 
 CHAIN_PORTS = ("aspect", "code_valid", "v_permitted", "v_target", "free_blocks")
-TVM430_PORTS = ("target_distance", "gradient", "word_carrier")
 
 
 def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sections: int = 8, frame: int = 40,
@@ -145,8 +143,8 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     connections = [ConnectionSpec(f"coder.u_tx[{k},{n}]", f"rail.u_tx[{k},{n}]")
                    for k in range(1, sections + 1) for n in range(1, frame + 1)]
     connections += [ConnectionSpec(f"rail.occupied[{k}]", f"coder.occupied[{k}]") for k in range(1, sections + 1)]
-    alsu_chain = (receiver or {}).get("system") == "ALSU"
-    tvm_chain = (receiver or {}).get("system") == "TVM430"
+    # the system's own receiver → ATO links (ALSU's code shown, TVM-430's target and gradient, …)
+    own_links = cab_systems.of_parameters(receiver or {}).ato_links
     for j, (train, ato) in enumerate(trains, start=1):
         rx = "rx" if len(trains) == 1 else f"rx{j}"
         components.append(ComponentSpec(rx, f"{fmu_folder}/{RECEIVER_FMU}", step, dict(receiver or {})))
@@ -156,35 +154,14 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
         connections += [ConnectionSpec(f"{train}.{a}", f"rail.{b}[{j}]", transition="linear")
                         for a, b in (("x", "x_head"), ("v", "v"), ("i_traction", "i_traction"))]
         connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in CHAIN_PORTS]
-        if alsu_chain:                     # the ATP reads the ALSU code shown
-            connections.append(ConnectionSpec(f"{rx}.code", f"{ato}.cab_code"))
-        if tvm_chain:                      # and TVM-430's target and gradient
-            connections += [ConnectionSpec(f"{rx}.{port}", f"{ato}.{port}") for port in TVM430_PORTS]
+        connections += [ConnectionSpec(f"{rx}.{output}", f"{ato}.{input_}") for output, input_ in own_links]
     return components, connections
 
 
-# ---- the digital systems' settings ----------------------------------------------------------------
+# ---- each cab system's settings ------------------------------------------------------------------------
 def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
-    """(coder, rail, receiver, ATO) parameters of a cab-signal system."""
-    if system == "ALSN":
-        return {}, {}, {}, {"cab_signal": "ALSN"}
-    if system == "TVM430":
-        from fmus.loco_receiver import tvm430 as receiver
-
-        return ({"system": system}, {}, {"system": system},
-                {"cab_signal": "TVM430", "decoding_latency": round(receiver.STATED_LATENCY_S, 3)})
-    if system == "ALSU":
-        from fmus.signalling import alsu
-
-        tones = alsu.system().table.tones_hz
-        return ({"system": system, "block_aspects": ALSU_BLOCK_ASPECTS},
-                {"tone_band_min": min(tones), "tone_band_max": max(tones)}, {"system": system},
-                {"cab_signal": "ALSU", "decoding_latency": alsu.STATED_LATENCY_S})
-    from fmus.signalling import cab_systems
-    from fmus.signalling import digital_messages as digital
-
-    digital_system = cab_systems.digital_system(system)
-    carrier = digital_system.carrier_hz
-    allowance = digital.atp_allowance_s(digital_system.message_s(carrier))
-    return ({"system": system}, {"carrier": carrier}, {"system": system},
-            {"cab_signal": "digital", "decoding_latency": round(allowance, 3)})
+    """(coder, rail, receiver, ATO) parameters of a cab-signal system (its descriptor,
+    fmus/signalling/cab_systems.py)."""
+    cab = cab_systems.lookup(system)
+    coder, rail, receiver = cab.chain_parameters()
+    return coder, rail, receiver, cab.ato_parameters()

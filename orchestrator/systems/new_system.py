@@ -15,11 +15,14 @@ the rail line's train lengths come from the rolling-stock file; the receivers ar
 line's ALSN carrier and to the stock's category. Everything a run would refuse is refused here
 first, in one line naming the file and the field.
 
-``--system TVM430`` (a line of UM71 track circuits, docs/rail_line.md#tvm-430-track-circuits)
-writes the chain the shipped tvm430 system has (orchestrator/systems/shipped.py): 12 kHz, 10 ms
-frames of 120 samples, its signal FMUs named in a sized folder of the sources
-(``resources/k32m2n120/RailLine.fmu``, docs/architecture.md#build-sizes) that ``railcosim run``
-builds; the high-speed set is its default stock.
+``--system S`` is any registered cab system (fmus/signalling/cab_systems.py) on a line of the
+track circuits it codes (the descriptor's ``transmitter``: KPT circuits with joints, or UM71
+jointless circuits, docs/rail_line.md#tvm-430-track-circuits); any other pairing is refused in
+one line naming the section. A system whose descriptor names build sizes of its own (TVM-430,
+TVM-300) gets the chain its shipped systems have (orchestrator/systems/shipped.py): its sample
+rate, 10 ms frames (120 samples at 12 kHz), its signal FMUs named in a sized folder of the
+sources (``resources/k32m2n120/RailLine.fmu``, docs/architecture.md#build-sizes) that
+``railcosim run`` builds, and its default stock (the high-speed set).
 """
 from __future__ import annotations
 
@@ -35,28 +38,21 @@ from typing import Optional, Sequence
 from fmus.data.loader import (DATA, DEFAULT_ROLLING_STOCK, TVM_TRANSMITTER, Line, RollingStock, load_line,
                               load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
-from fmus.signalling.cab_systems import DIGITAL
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.verdicts.system_checks import check_sections_contiguous, load_data_file
 from orchestrator.systems.chain import (RAIL_FMU, cab_settings, check_placements, committed_ports, signal_chain,
                                         train_and_ato)
-from orchestrator.systems.shipped import TVM430_BUILD, TVM430_FS_HZ, TVM430_STOCK
 from orchestrator.errors import UserError
 from orchestrator.sspgen import fmu_ports, write_ssd, write_ssv
 
-TVM430 = "TVM430"
-CAB_SYSTEMS = ("ALSN", *sorted(DIGITAL), TVM430)
+CAB_SYSTEMS = cab_systems.NAMES
 TRACTION = {"dc": "DC3000", "ac": "AC25000", "none": "none"}
 #: the stock a train gets without --rolling-stock, by traction (bundled files)
 DEFAULT_STOCK = {"dc": Path(DEFAULT_ROLLING_STOCK), "ac": DATA / "freight_vl80.json",
                  "none": Path(DEFAULT_ROLLING_STOCK)}
-#: a TVM430 system's stock without --rolling-stock, whatever the traction: the high-speed set
-TVM430_DEFAULT_STOCK = DATA / TVM430_STOCK
-#: the block-section counts a TVM430 system's signal FMUs are built for: a line gets the smallest
-#: that holds it, so every line of 17 to 32 sections shares one build with the shipped tvm430
-#: (k32m2n120) and a few builds serve every line, at the cost of idle sections (above 8, fewer
-#: than the line uses)
-TVM430_SECTION_SIZES = (8, 16, 32, 64)
+#: the trains a sized build holds at least (the shipped two-train systems' build)
+SIZED_BUILD_TRAINS = 2
 LINE_PARAMETER_SET = "line.ssv"
 #: seconds the run goes on after the last scheduled arrival
 STOP_MARGIN_S = 120.0
@@ -78,37 +74,46 @@ def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
     return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
 
 
-def tvm430_sizes(sections: int, trains: int) -> BuildConfig:
-    """The build sizes of a TVM430 system's signal FMUs: the smallest of TVM430_SECTION_SIZES
-    holding the line's ``sections``, room for ``trains`` (at least TVM430_BUILD's), and
-    TVM430_BUILD's frame (120 samples: 10 ms at 12 kHz)."""
-    if sections > TVM430_SECTION_SIZES[-1]:
-        raise UserError(f"the line has {sections} block sections; a TVM430 system holds at most "
-                        f"{TVM430_SECTION_SIZES[-1]}")
-    return BuildConfig(sections=next(k for k in TVM430_SECTION_SIZES if k >= sections),
-                       trains=max(TVM430_BUILD.trains, trains), frame=TVM430_BUILD.frame)
+def sized_build(cab: cab_systems.CabSystem, sections: int, trains: int) -> BuildConfig:
+    """The build sizes of the signal FMUs of a system with build sizes of its own (its
+    descriptor's ``build_sections``): the smallest holding the line's ``sections``, so every line of
+    17 to 32 sections shares one build with the shipped tvm430 (k32m2n120) and a few builds serve
+    every line, at the cost of idle sections; room for ``trains`` (at least SIZED_BUILD_TRAINS);
+    10 ms frames at its sample rate."""
+    if sections > cab.build_sections[-1]:
+        raise UserError(f"the line has {sections} block sections; a {cab.name} system holds at most "
+                        f"{cab.build_sections[-1]}")
+    return BuildConfig(sections=next(k for k in cab.build_sections if k >= sections),
+                       trains=max(SIZED_BUILD_TRAINS, trains),
+                       frame=int(round(cab.sample_rate_hz * cab_systems.FRAME_S)))
 
 
 def default_stock(system: str, traction: str) -> Path:
-    """The rolling-stock file a train gets without --rolling-stock."""
-    return TVM430_DEFAULT_STOCK if system == TVM430 else DEFAULT_STOCK[traction]
+    """The rolling-stock file a train gets without --rolling-stock: the system's own (the
+    high-speed set for TVM), else the traction's."""
+    cab = cab_systems.REGISTRY.get(cab_systems.spelled(system))     # an unknown one: refused by new_system
+    return DATA / cab.default_stock if cab is not None and cab.default_stock else DEFAULT_STOCK[traction]
 
 
 def check_track_circuits(line: Line, system: str) -> None:
-    """TVM-430 codes UM71 track circuits only, and the other systems code none of them: the TVM
-    coder refuses any other carrier, the others' coders know KPT transmitters only."""
+    """A system codes the track circuits its descriptor names and no others: the TVM coders
+    refuse any carrier not of UM71, the others' coders know KPT transmitters only."""
+    cab = cab_systems.lookup(system)
     um71 = [s.transmitter == TVM_TRANSMITTER for s in line.sections]
-    if system == TVM430 and not any(um71):
-        raise UserError(f"--system {TVM430}: {line.path} has no {TVM_TRANSMITTER} sections (field "
-                        f"block_sections[].transmitter); TVM-430 codes {TVM_TRANSMITTER} track circuits")
-    if system == TVM430 and not all(um71):
-        k = um71.index(False)
-        raise UserError(f"--system {TVM430}: {line.path} field block_sections[{k}].transmitter is "
-                        f"{line.sections[k].transmitter!r}; TVM-430 codes {TVM_TRANSMITTER} track circuits only")
-    if system != TVM430 and any(um71):
+    if cab.transmitter == cab_systems.UM71:
+        if not any(um71):
+            raise UserError(f"--system {system}: {line.path} has no {TVM_TRANSMITTER} sections (field "
+                            f"block_sections[].transmitter); {cab.title} codes {TVM_TRANSMITTER} track circuits")
+        k = um71.index(False) if False in um71 else None
+        if k is not None:
+            raise UserError(f"--system {system}: {line.path} field block_sections[{k}].transmitter is "
+                            f"{line.sections[k].transmitter!r}; {cab.title} codes {TVM_TRANSMITTER} track circuits only")
+    elif True in um71:
         k = um71.index(True)
+        others = ", ".join(c.name for c in cab_systems.REGISTRY.values() if c.transmitter == cab_systems.UM71)
         raise UserError(f"--system {system}: {line.path} field block_sections[{k}].transmitter is "
-                        f"{TVM_TRANSMITTER!r}, a TVM-430 track circuit; give --system {TVM430}")
+                        f"{TVM_TRANSMITTER!r}, a jointless track circuit {cab.title} cannot code; give --system "
+                        f"{others.replace(', ', ' or ')}")
 
 
 def _load(loader, path: Path, option: str):
@@ -116,11 +121,12 @@ def _load(loader, path: Path, option: str):
 
 
 def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
-               rolling_stock_file: Optional[Path] = None, system: str = "ALSN", trains: Optional[int] = None,
+               rolling_stock_file: Optional[Path] = None, system: str = cab_systems.DEFAULT.name, trains: Optional[int] = None,
                traction: Optional[str] = None, fmu_dir: Optional[Path] = None) -> Path:
     """Write the system folder (module docstring); its SSD path. Bad input is a UserError."""
     folder = Path(folder)
     _refuse_existing(folder)
+    system = cab_systems.spelled(system)
     if system not in CAB_SYSTEMS:
         raise UserError(f"--system {system}: choose one of {', '.join(CAB_SYSTEMS)}")
     timetable_files = [Path(p) for p in timetable_files]
@@ -128,8 +134,9 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
     if count != len(timetable_files):
         raise UserError(f"--trains {count}: give one --timetable per train ({len(timetable_files)} given); "
                         "each train starts at its own timetable's first station")
-    # a TVM430 system's FMUs are sized for its line and trains below; the others are the build's
-    sizes = built_sizes(fmu_dir) if system != TVM430 else BuildConfig(trains=max(count, 1))
+    cab = cab_systems.lookup(system)
+    # a system with build sizes of its own is sized for its line and trains below; the others are the build's
+    sizes = built_sizes(fmu_dir) if not cab.build_sections else BuildConfig(trains=max(count, 1))
     if not 1 <= count <= sizes.trains:
         raise UserError(f"--trains {count}: the FMUs are built for 1 to {sizes.trains} trains "
                         f"(railcosim build --trains {count})")
@@ -139,9 +146,9 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
     except UserError as error:
         raise UserError(f"--line: {error}") from None
     check_track_circuits(line, system)
-    if system == TVM430:   # its own build sizes, named in the sources and built by railcosim run
+    if cab.build_sections:   # its own build sizes, named in the sources and built by railcosim run
         try:
-            sizes = tvm430_sizes(len(line.sections), count)
+            sizes = sized_build(cab, len(line.sections), count)
         except UserError as error:
             raise UserError(f"--line: {line.path}: {error}") from None
     if len(line.sections) > sizes.sections:
@@ -160,7 +167,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
                         f"cannot run on {line.path} (electrification {line.electrification!r})")
     timetables = [_load(lambda p: load_timetable(p, line), path, "--timetable") for path in timetable_files]
     carriers = sorted({s.carrier_hz for s in line.sections})
-    if system == "ALSN" and len(carriers) > 1:
+    if cab.line_carrier and len(carriers) > 1:
         raise UserError(f"--line: {line.path} field block_sections[].carrier_hz: the sections use "
                         f"{', '.join(f'{c:g}' for c in carriers)} Hz; one receiver is tuned to one carrier")
     names = [("train", "ato")] if count == 1 else [(f"train{j}", f"ato{j}") for j in range(1, count + 1)]
@@ -177,7 +184,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
 
     coder, rail, receiver, ato = cab_settings(system)
     receiver = {**receiver, "train_category": stock.category}
-    if system == "ALSN":
+    if cab.line_carrier:
         receiver["carrier"] = float(carriers[0])
     stock_parameters = {"rolling_stock_file": stock_path.name}
     components, connections = [], []
@@ -188,7 +195,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
             part.parameter_file = LINE_PARAMETER_SET
         components += parts
         connections += links
-    tvm = {"fmu_folder": f"resources/{sizes.folder_name}", "fs_hz": TVM430_FS_HZ} if system == TVM430 else {}
+    tvm = {"fmu_folder": f"resources/{sizes.folder_name}", "fs_hz": cab.sample_rate_hz} if cab.build_sections else {}
     chain, links = signal_chain(names, sections=sizes.sections, frame=sizes.frame, coder=coder, rail=rail,
                                 receiver=receiver, stocks=[stock_path] * count, parameter_file=LINE_PARAMETER_SET,
                                 **tvm)
@@ -295,7 +302,7 @@ def timetable_for(line_path: Path, stock_path: Path) -> dict:
 
 
 def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Sequence[Path], line_id=None,
-                           sidecar=None, schema_dir=None, rolling_stock_file=None, system: str = "ALSN",
+                           sidecar=None, schema_dir=None, rolling_stock_file=None, system: str = cab_systems.DEFAULT.name,
                            trains=None, traction=None, fmu_dir=None):
     """``railcosim new NAME --railml FILE``: the railML line imported (orchestrator/railml/
     read.py), written as a line file into the system's resources/, and the system made from it

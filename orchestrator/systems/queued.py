@@ -46,6 +46,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from fmus.data.loader import DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig, DEFAULT_SAMPLE_RATE_HZ, sizes_of_source
 from orchestrator.systems.chain import (ATO_FMU, CODER_FMU, RAIL_FMU, RECEIVER_FMU, TRAIN_FMU, signal_chain,
                                         train_and_ato, write_ssd)
@@ -157,7 +158,7 @@ def read_base(system_path: Path) -> BaseSystem:
     timetable_file = resolved_file(ato.get("timetable_file"), folder, DEFAULT_TIMETABLE)
     coder = parameters["coder"]
     return BaseSystem(
-        name=name, folder=folder, cab_system=str(coder.get("system") or "ALSN"),
+        name=name, folder=folder, cab_system=str(coder.get("system") or cab_systems.DEFAULT.name),
         block_aspects=int(coder.get("block_aspects") or 3), line_file=line_file, stock_file=stock_file,
         timetable_file=timetable_file, x0_m=float(train.get("x0", 400.0)),
         sections=sizes.sections, frame=sizes.frame, fs_hz=float(coder.get("fs") or DEFAULT_SAMPLE_RATE_HZ),
@@ -198,7 +199,7 @@ class TrialPlan:
         stations = {s["name"]: float(s["stop_m"]) for s in line_doc["stations"]}
         self.pitch_m = pitch = self.length_m + QUEUE_GAP_M
         #: sidings beyond the line for the trains to clear it, holding tracks before it (module docstring)
-        self.run_off = base.cab_system != "TVM430"
+        self.run_off = cab_systems.lookup(base.cab_system).transmitter != cab_systems.UM71
         self.offset_m = (trains - 1) * pitch if self.holding else 0.0
         line_end = float(line_doc["length_m"]) + self.offset_m
         last_circuit_m = max(float(s["end_m"]) for s in line_doc["block_sections"]) + self.offset_m
@@ -336,7 +337,7 @@ class TrialPlan:
                 self._trial_line = load_line(path)
         ato, stock = self.base.parameters["ato"], self.base.stock
         defaults = AtoSettings()
-        decel = float(ato.get("braking_decel") or 0.0) or default_plan_decel_mps2(stock, str(ato.get("cab_signal", "ALSN")))
+        decel = float(ato.get("braking_decel") or 0.0) or default_plan_decel_mps2(stock, str(ato.get("cab_signal", cab_systems.AtoMode.ALSN)))
         margin = float(ato.get("speed_margin", defaults.speed_margin_mps))
         category = str(ato.get("train_category") or stock.category)
         planner = StagePlanner(NominalTrain(stock, self._trial_line), self._trial_line, category, decel, margin)

@@ -39,6 +39,7 @@ from functools import partial
 from pathlib import Path
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
+from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig
 from orchestrator.folders import replace_file
 from orchestrator.systems.chain import (_shipped_json, _stop_m, _with_station, cab_settings, check_placements,
@@ -70,7 +71,7 @@ def alsu_line(line: dict) -> dict:
 
 def write_alsu(root: Path = SSP_ROOT, name: str = "alsu") -> Path:
     files = {"line_file": "alsu_line.json"}
-    coder, rail, receiver, ato = cab_settings("ALSU")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSU.name)
     components, connections = train_and_ato(train_parameters=files, ato_parameters={**ato, **files})
     chain, links = signal_chain(coder={**coder, **files}, rail={**rail, **files}, receiver=receiver)
     folder = root / name
@@ -91,7 +92,7 @@ TVM430_TIMETABLE = {"train": "TGV 9001", "stops": [{"station": "Origine", "depar
 
 
 def tvm430_chain(trains: Sequence[Tuple[str, str]], files: Dict[str, str]):
-    coder, rail, receiver, ato = cab_settings("TVM430")
+    coder, rail, receiver, ato = cab_settings(cab_systems.TVM430.name)
     chain, links = signal_chain(trains, sections=TVM430_BUILD.sections, frame=TVM430_BUILD.frame,
                                 fmu_folder=f"resources/{TVM430_BUILD.folder_name}", fs_hz=TVM430_FS_HZ,
                                 coder={**coder, **files}, rail={**rail, **files},
@@ -204,7 +205,7 @@ def following_line() -> dict:
     return line
 
 
-def write_following(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "following") -> Path:
+def write_following(root: Path = SSP_ROOT, system: str = cab_systems.DEFAULT.name, name: str = "following") -> Path:
     line = following_line()
     length_m = stock_length_m()
     check_placements(line, [("leader", LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "A"), length_m)])
@@ -264,7 +265,7 @@ FAULT_EVENTS = [
 FAULTS_STOP_TIME_S = 1500.0
 
 
-def write_free_run(root: Path = SSP_ROOT, system: str = "ALSN", name: str = "free_run",
+def write_free_run(root: Path = SSP_ROOT, system: str = cab_systems.DEFAULT.name, name: str = "free_run",
                    stop_time: float = 1100.0) -> Path:
     coder, rail, receiver, ato = cab_settings(system)
     components, connections = train_and_ato(ato_parameters=ato)
@@ -315,7 +316,7 @@ THROAT_TIMETABLE = {"train": "passenger 105 (through the throat)",
 
 def write_joints_at_speed(root: Path = SSP_ROOT) -> Path:
     files = {"line_file": "throat_line.json"}
-    coder, rail, receiver, ato = cab_settings("ALSN")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSN.name)
     components, connections = train_and_ato(
         train_parameters=files, ato_parameters={**ato, **files, "timetable_file": "throat_timetable.json",
                                                 "strategy": "flat_out"})
@@ -344,7 +345,7 @@ def write_freight_ac(root: Path = SSP_ROOT) -> Path:
     line = _shipped_json("default_line_ac.json")
     next(s for s in line["stations"] if s["name"] == "A")["stop_m"] = FREIGHT_ORIGIN_M
     check_placements(line, [("train", FREIGHT_ORIGIN_M, length_m)])
-    coder, rail, receiver, ato = cab_settings("ALSN")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSN.name)
     components, connections = train_and_ato(
         train_parameters={**files, **stock, "x0": FREIGHT_ORIGIN_M},
         ato_parameters={**ato, **files, **stock, "timetable_file": "freight_timetable.json"})
@@ -375,7 +376,7 @@ def write_same_block(root: Path = SSP_ROOT) -> Path:
     check_placements(line, [("leader", SAME_BLOCK_LEADER_ORIGIN[1], stock_length_m()),
                             ("follower", _stop_m(line, "A"), stock_length_m())])
     files = {"line_file": "same_block_line.json"}
-    coder, rail, receiver, ato = cab_settings("ALSN")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSN.name)
     leader, leader_links = train_and_ato(
         "leader", "leader_ato", train_parameters={**files, "x0": SAME_BLOCK_LEADER_ORIGIN[1]},
         ato_parameters={**ato, **files, "timetable_file": "leader_timetable.json"})
@@ -407,7 +408,7 @@ def write_suburban(root: Path = SSP_ROOT, name: str = "suburban") -> Path:
     check_placements(line, [("train", origin_m, stock_length_m(SUBURBAN_STOCK))])
     files = {"line_file": SUBURBAN_LINE}
     stock = {"rolling_stock_file": SUBURBAN_STOCK}
-    coder, rail, receiver, ato = cab_settings("ALSN")
+    coder, rail, receiver, ato = cab_settings(cab_systems.ALSN.name)
     chain, links = signal_chain(sections=SUBURBAN_BUILD.sections, frame=SUBURBAN_BUILD.frame,
                                 fmu_folder=f"resources/{SUBURBAN_BUILD.folder_name}",
                                 coder={**coder, **files, "block_aspects": SUBURBAN_BLOCK_ASPECTS},
@@ -446,13 +447,13 @@ SHIPPED: Dict[str, Callable[[Path], Path]] = {
     "faults": write_faults, "joints_at_speed": write_joints_at_speed, "freight_ac": write_freight_ac,
     "same_block": write_same_block,
 }
-for _system, _prefix in (("ALS-EN", "als_en"), ("FIRE_DQPSK", "fire_dqpsk")):
+for _system, _prefix in ((cab_systems.ALS_EN.name, "als_en"), (cab_systems.FIRE_DQPSK.name, "fire_dqpsk")):
     SHIPPED[_prefix] = partial(write_free_run, system=_system, name=_prefix)
     SHIPPED[f"{_prefix}_following"] = partial(write_following, system=_system, name=f"{_prefix}_following")
 SHIPPED["alsu"] = write_alsu
 SHIPPED["tvm430"] = write_tvm430
 SHIPPED["tvm430_following"] = write_tvm430_following
-SHIPPED["alsu_following"] = partial(write_following, system="ALSU", name="alsu_following")
+SHIPPED["alsu_following"] = partial(write_following, system=cab_systems.ALSU.name, name="alsu_following")
 SHIPPED["suburban"] = write_suburban
 # the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
 # suburban --method blocking: 292.4 s, critical the terminal block) plus a margin of 10 % [U]

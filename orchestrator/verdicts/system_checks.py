@@ -32,7 +32,7 @@ from fmus import traction
 from fmus.data.loader import (DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, Line, RollingStock,
                               load_line, load_rolling_stock, load_timetable)
 from fmus.errors import FmuInputError
-from fmus.signalling import alsn, alsu, tvm430
+from fmus.signalling import cab_systems
 from orchestrator.errors import RefusedComponents, UserError, print_warning
 from orchestrator.graph import SystemGraph
 from orchestrator.ports import split_element
@@ -93,16 +93,16 @@ def check_railway_data(graph: SystemGraph, warn: Callable[[str], None] = print_w
         raise RefusedComponents(defects)
 
 
-#: system → (loader, bundled default) of a ``codes_file``; every other system: ALSN's
-CODE_TABLES = {"ALSN": (alsn.load_transmitters, alsn.CODES_FILE), "ALSU": (alsu.load_codes, alsu.CODES_FILE),
-               "TVM430": (tvm430.load_codes, tvm430.CODES_FILE)}
+#: system → (loader, bundled default) of a ``codes_file``, from the cab-system descriptors; a
+#: system without a table of its own (the digital ones): the default system's
+CODE_TABLES = {cab.name: (cab.load_codes, cab.codes_file) for cab in cab_systems.REGISTRY.values() if cab.load_codes}
 
 
 def _system_of(graph: SystemGraph, name: str) -> str:
-    """The system whose code table a component's ``codes_file`` is (an unknown name: ALSN's, the
-    FMU refuses the name itself)."""
-    system = str(graph.nodes[name].parameters.get("system", "ALSN"))
-    return system if system in CODE_TABLES else "ALSN"
+    """The system whose code table a component's ``codes_file`` is (an unknown name: the default
+    system's, the FMU refuses the name itself)."""
+    system = str(graph.nodes[name].parameters.get("system", cab_systems.DEFAULT.name))
+    return system if system in CODE_TABLES else cab_systems.DEFAULT.name
 
 
 def check_sections_contiguous(line: Line) -> None:

@@ -19,9 +19,7 @@ from fmus.data.loader import (DATA, DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT
 from fmus import ato_controller, loco_receiver, traction
 from fmus.errors import FmuInputError
 from fmus.loco_receiver.parameters import display_hold_s
-from fmus.loco_receiver import tvm430 as tvm430_receiver
-from fmus.signalling import alsn, alsu, cab_systems, tvm430
-from fmus.signalling import digital_messages as digital
+from fmus.signalling import alsn, cab_systems
 from fmus.signalling import aspects as sig
 from fmus.signalling.aspects import ASPECT_NAMES
 from fmus.signalling.block_rules import NO_CODE_FREE_BLOCKS, block_codes
@@ -382,9 +380,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
 # ---- receivers: decoded codes, errors, wrong-side failures (docs/interfaces.md, "Results") ---
 RECEIVER_MODEL = loco_receiver.MODEL_IDENTIFIER
 RECEIVER_OUTPUTS = ("aspect", "code_valid", "free_blocks", "v_target", "v_permitted", "decoded_codes", "errors")
-TVM430_OUTPUTS = ("target_distance", "gradient")
 SPEED_TOLERANCE_KMH = 0.5
-DISTANCE_TOLERANCE_M = 1.0
 HOLD_DECAY_S = 0.2
 
 
@@ -427,13 +423,14 @@ class _Receiver:
     rail: str
     coder: str
     slot: int                      # the train's index j on the rail line (1-based)
-    system: object                 # DigitalSystem or AlsuSystem, or None for ALSN
+    cab: cab_systems.CabSystem
+    system: object                 # the descriptor's system object (None for ALSN: its codes are aspects)
     category: str
     latency_s: float
     hold_s: float                                # a code that disappears may be shown this long (display hold)
     wrong_side: Optional[_Episodes] = None       # against the code the coder sent
     unsafe: Optional[_Episodes] = None           # against the real occupancy by the block rules
-    coding: Optional[alsu.BlockCoding] = None    # ALSU: the code the block rules give each circuit
+    coding: Optional[object] = None              # TABLE systems: the code the block rules give each circuit
 
     def __post_init__(self):
         self.wrong_side = self.wrong_side or _Episodes(self.latency_s)
@@ -458,31 +455,19 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
             continue
         params = node.parameters
         try:
-            system = cab_systems.digital_system(str(params.get("system", "ALSN")))
-            if cab_systems.is_alsu(str(params.get("system", "ALSN"))):
-                table = params.get("codes_file")
-                system = alsu.system(str(_data_file(table, alsu.CODES_FILE)) if table else None)
-            if cab_systems.is_tvm430(str(params.get("system", "ALSN"))):
-                table = params.get("codes_file")
-                system = tvm430.system(str(_data_file(table, tvm430.CODES_FILE)) if table else None)
+            cab = cab_systems.of_parameters(params)
+            table = params.get("codes_file")
+            system = cab.system(str(_data_file(table, cab.codes_file)) if table and cab.codes_file else None)
         except FmuInputError:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
-        if isinstance(system, alsu.AlsuSystem):
-            latency = alsu.STATED_LATENCY_S
-        elif isinstance(system, tvm430.Tvm430System):
-            latency = tvm430_receiver.STATED_LATENCY_S
-        elif system is None:
-            latency = alsn.STATED_LATENCY_S
-        else:
-            carrier = float(params.get("carrier", 0.0) or system.carrier_hz)
-            latency = digital.stated_latency_s(system.message_s(carrier))
+        latency = cab.latency_s(params)
         try:
             # + the receiver's filters' decay before its relay or squelch lets go of the code
-            hold = max(display_hold_s(system, params) + HOLD_DECAY_S, latency)
+            hold = max(display_hold_s(cab.name, params) + HOLD_DECAY_S, latency)
         except (TypeError, ValueError):
             continue                  # a bad parameter value: the receiver reports it at initialisation
-        found.append(_Receiver(name, train, rail, coder, slot, system, category, latency, hold))
+        found.append(_Receiver(name, train, rail, coder, slot, cab, system, category, latency, hold))
     return found
 
 
@@ -514,10 +499,8 @@ class ReceiverVerdict(_OutputJudge):
             if track is not None:
                 r.unsafe = _Episodes(r.latency_s + track.detection_s)
                 try:
-                    if isinstance(r.system, alsu.AlsuSystem):
-                        r.coding = alsu.BlockCoding(track.line, track.block_aspects, r.system)
-                    elif isinstance(r.system, tvm430.Tvm430System):
-                        r.coding = tvm430.BlockWords(track.line, r.system)
+                    if r.cab.family == cab_systems.TABLE:
+                        r.coding = r.system.block_coding(track.line, track.block_aspects)
                 except FmuInputError:
                     r.unsafe = None    # a route or limit the code table cannot send: the coder reports it
 
@@ -525,8 +508,7 @@ class ReceiverVerdict(_OutputJudge):
         needed: Dict[str, List[str]] = {}
         for r in self.receivers:
             needed.setdefault(r.name, []).extend(RECEIVER_OUTPUTS)
-            if isinstance(r.system, tvm430.Tvm430System):
-                needed[r.name].extend(TVM430_OUTPUTS)
+            needed[r.name].extend(r.cab.judged_outputs)
             needed.setdefault(r.rail, []).append(f"coil_section[{r.slot}]")
             codes = [v for v in self.graph.nodes[r.coder].interface.variables if v.startswith("code_tx[")]
             needed.setdefault(r.coder, []).extend(codes)
@@ -568,8 +550,8 @@ class ReceiverVerdict(_OutputJudge):
                 continue
             buffer, index = self._code_tx[r.name][section - 1]
             sent = int(buffer.values[index])
-            meant = sent if r.system is None else transmitted_indication(r.system, sent, r.category)
-            nothing_sent = not meant if r.system is None else meant is None
+            meant = sent if r.cab.family == cab_systems.NUMERIC else transmitted_indication(r.system, sent, r.category)
+            nothing_sent = not meant if r.cab.family == cab_systems.NUMERIC else meant is None
             r.wrong_side.check(now, self._more_permissive(r, meant), {"section": section, "code_sent": sent},
                                r.hold_s if nothing_sent else None)
 
@@ -586,7 +568,7 @@ class ReceiverVerdict(_OutputJudge):
         free = int(rules.free_blocks[circuit])
         if free != NO_CODE_FREE_BLOCKS and track.occupied_ahead_in_block(heads, train, coil_m, circuit):
             free = NO_CODE_FREE_BLOCKS          # occupied between the coil and the block's exit signal
-        if r.system is None:
+        if r.cab.family == cab_systems.NUMERIC:
             allowed = alsn.NO_CODE if free == NO_CODE_FREE_BLOCKS else int(rules.alsn_code[circuit])
         elif free == NO_CODE_FREE_BLOCKS:
             allowed = None
@@ -605,7 +587,7 @@ class ReceiverVerdict(_OutputJudge):
         """Whether the receiver shows more than ``meant``: an ALSN code (aspect enumeration, 0
         none) or a digital Indication (None: no code)."""
         aspect = int(self._value(r.name, "aspect"))
-        if r.system is None:                       # ALSN: code_tx is in the aspect enumeration
+        if r.cab.family == cab_systems.NUMERIC:                       # ALSN: code_tx is in the aspect enumeration
             return sig.restrictiveness(aspect) > sig.restrictiveness(meant if meant else sig.WHITE)
         shown = (sig.restrictiveness(aspect), int(self._value(r.name, "free_blocks")),
                  float(self._value(r.name, "v_target")) * KMH_PER_MPS, float(self._value(r.name, "v_permitted")) * KMH_PER_MPS)
@@ -617,10 +599,8 @@ class ReceiverVerdict(_OutputJudge):
                 or shown[2] > meant.target_kmh + SPEED_TOLERANCE_KMH
                 or shown[3] > meant.permitted_kmh + SPEED_TOLERANCE_KMH):
             return True
-        if isinstance(r.system, tvm430.Tvm430System):   # a target farther or a gradient less falling
-            read = r.system.reading(meant.code)
-            return (float(self._value(r.name, "target_distance")) > read.target_distance_m + DISTANCE_TOLERANCE_M
-                    or float(self._value(r.name, "gradient")) > read.gradient_permille + 1e-6)
+        if r.cab.judged_outputs:        # the system's own fields (TVM-430: a target farther, a gradient less falling)
+            return r.system.shows_beyond(meant.code, {port: self._value(r.name, port) for port in r.cab.judged_outputs})
         return False
 
     def summary_section(self) -> Dict[str, list]:
@@ -635,7 +615,7 @@ class ReceiverVerdict(_OutputJudge):
     def summary(self) -> List[dict]:
         entries = []
         for r in self.receivers:
-            entry = {"receiver": r.name, "train": r.train, "system": "ALSN" if r.system is None else r.system.name,
+            entry = {"receiver": r.name, "train": r.train, "system": r.cab.name,
                      "latency_s": r.latency_s, "wrong_side_failures": r.wrong_side.count,
                      "wrong_side_s": round(r.wrong_side.seconds, 3), "wrong_side_events": r.wrong_side.events}
             if r.unsafe is not None:

@@ -3,6 +3,7 @@ train, the bundled timetable and a signal at danger ahead (docs/ato.md).
 """
 from __future__ import annotations
 
+from fmus.signalling import cab_systems
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_TIMETABLE, load_line, load_timetable
 from fmus.signalling import aspects as sig
 from orchestrator.conformance.generate.role_file import RoleFile, cond, in_range
@@ -34,7 +35,7 @@ def ato_vectors() -> RoleFile:
     role.vectors.append({
         "name": "timetable_closed_loop", "what": "the bundled timetable A → B → C (19.2 km) with green codes throughout; "
                                                 "the reference train from A",
-        "parameters": {"cab_signal": "ALSN"}, "step": step, "duration_s": float(timetable[-1].arrival_s) + 60.0,
+        "parameters": {"cab_signal": cab_systems.AtoMode.ALSN}, "step": step, "duration_s": float(timetable[-1].arrival_s) + 60.0,
         "plant": {"x0_m": timetable[0].stop_m},
         "checks": checks + never + [{"kind": "extreme", "label": "speed never negative", "port": "plant.v",
                                      "extreme": "min", "at_least": 0.0, "unit": "m/s"}]})
@@ -49,7 +50,7 @@ def ato_vectors() -> RoleFile:
     role.vectors.append({
         "name": "red_signal_ahead", "what": f"signal at {red_m:g} m at danger until {clear_s:g} s: Ж from {y[0]:g} m, "
                                             f"КЖ from {ry[0]:g} m; green after",
-        "parameters": {"cab_signal": "ALSN"}, "step": step, "duration_s": clear_s + 150.0,
+        "parameters": {"cab_signal": cab_systems.AtoMode.ALSN}, "step": step, "duration_s": clear_s + 150.0,
         "plant": {"x0_m": timetable[0].stop_m, "cab_zones": [[*y, sig.YELLOW], [*ry, sig.RED_YELLOW]],
                   "cab_clear_s": clear_s},
         "checks": never + [

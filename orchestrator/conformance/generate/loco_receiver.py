@@ -30,13 +30,13 @@ def receiver_vectors() -> RoleFile:
     role = RoleFile("loco_receiver", ["system", "fs", "e_coil", "aspect", "code_valid", "free_blocks",
                                       # TVM430's reading of the word shown
                                       "v_permitted", "v_target", "target_distance", "gradient", "word_carrier"])
-    alsn_params = {"system": "ALSN", "fs": FS_HZ}
+    alsn_params = {"system": cab_systems.ALSN.name, "fs": FS_HZ}
     for kpt in ("KPT-5", "KPT-7"):
         role.vectors.extend(_alsn_acquire_vectors(role, alsn_params, kpt))
         role.vectors.append(_alsn_restrictive_change_vector(role, alsn_params, kpt))
     role.vectors.extend(_alsn_noise_vectors(role, alsn_params))
     role.vectors.append(_alsn_joint_vector(role, alsn_params))
-    for system_name in ("FIRE_DQPSK", "ALS-EN"):
+    for system_name in (cab_systems.FIRE_DQPSK.name, cab_systems.ALS_EN.name):
         role.vectors.extend(_digital_receiver_vectors(role, system_name))
     role.vectors.extend(_alsu_receiver_vectors(role))
     role.vectors.extend(_tvm430_receiver_vectors(role))
@@ -171,7 +171,7 @@ def _alsu_receiver_vectors(role: RoleFile) -> List[dict]:
 
     system = alsu.system()
     latency = alsu.STATED_LATENCY_S
-    params = {"system": "ALSU", "fs": FS_HZ}
+    params = {"system": cab_systems.ALSU.name, "fs": FS_HZ}
 
     def shows(code: int) -> list:
         ind = system.indication(code, "passenger")
@@ -286,7 +286,7 @@ class _Tvm430Bench:
 
         self.role = role
         self.tvm = tvm430.system()
-        self.params = {"system": "TVM430", "fs": TVM_FS_HZ}
+        self.params = {"system": cab_systems.TVM430.name, "fs": TVM_FS_HZ}
         self.step = {"fs_hz": TVM_FS_HZ}
         self.decode_s, self.latency_s = round(STATED_DECODE_S, 4), round(STATED_LATENCY_S, 4)
         self.no_word = [cond("code_valid", [0]), in_range("v_permitted", None, 0.01),

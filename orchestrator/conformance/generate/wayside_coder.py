@@ -41,7 +41,7 @@ def _alsu_coder_vectors() -> List[dict]:
     from fmus.wayside_coder.alsu import AlsuCoderCore
 
     line = load_line(str(DEFAULT_LINE))
-    params = {"system": "ALSU", "fs": FS_HZ, "block_aspects": 4}
+    params = {"system": cab_systems.ALSU.name, "fs": FS_HZ, "block_aspects": 4}
     step = {"fs_hz": FS_HZ, "frame_port": "u_tx"}
     core = AlsuCoderCore(line, 8, FRAME, CoderSettings(fs_hz=FS_HZ, block_aspects=4, seed=1))
     patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(1, 8)]
@@ -84,7 +84,7 @@ def _tvm430_coder_vectors() -> List[dict]:
     from fmus.wayside_coder.tvm430 import PEAK_DEVIATION_HZ, Tvm430CoderCore
 
     line = tvm_line_loaded()
-    params = {"system": "TVM430", "fs": TVM_FS_HZ, "line_file": TVM_LINE_FILE}
+    params = {"system": cab_systems.TVM430.name, "fs": TVM_FS_HZ, "line_file": TVM_LINE_FILE}
     step = {"fs_hz": TVM_FS_HZ, "frame_port": "u_tx"}
     core = Tvm430CoderCore(line, 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
     patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(8)]
@@ -144,7 +144,7 @@ def _code_timings(role: RoleFile, step: dict) -> None:
             sent = coder_core().step(0.0, occupied).code_tx.tolist()
             role.vectors.append({
                 "name": name, "what": f"{CODE_NAME[code]} into section {section + 1} ({kpt}) for {seconds} s",
-                "parameters": {"system": "ALSN", "fs": FS_HZ}, "step": step, "duration_s": seconds,
+                "parameters": {"system": cab_systems.ALSN.name, "fs": FS_HZ}, "step": step, "duration_s": seconds,
                 "inputs": {"occupied": schedule_input([0.0], [occupied.tolist()])},
                 "record_frames": [f"u_tx[{section + 1}]"],
                 "checks": [
@@ -171,7 +171,7 @@ def _block_logic(role: RoleFile, step: dict) -> None:
             codes.append(out.code_tx.tolist())
         role.vectors.append({
             "name": f"block_logic_{aspects}_aspect", "what": f"{len(patterns)} occupancy patterns, {aspects}-aspect block",
-            "parameters": {"system": "ALSN", "fs": FS_HZ, "block_aspects": aspects}, "step": step,
+            "parameters": {"system": cab_systems.ALSN.name, "fs": FS_HZ, "block_aspects": aspects}, "step": step,
             "duration_s": round(len(patterns) * hold_s, 4),
             "inputs": {"occupied": schedule_input(times, [p.tolist() for p in patterns])},
             "checks": [{"kind": "table", "label": "signal of every section (block rules)", "port": "signal",
@@ -188,7 +188,7 @@ def _two_out_of_two_faults(role: RoleFile, step: dict) -> None:
     sent = core.step(0.0, clear).code_tx.tolist()
     role.vectors.append({
         "name": "two_out_of_two_faults", "what": "main transmitter fails at 1 s, the reserve at 2 s",
-        "parameters": {"system": "ALSN", "fs": FS_HZ}, "step": step, "duration_s": 3.0,
+        "parameters": {"system": cab_systems.ALSN.name, "fs": FS_HZ}, "step": step, "duration_s": 3.0,
         "inputs": {"fault_main": schedule_input([0.0, 1.0], [False, True]),
                    "fault_reserve": schedule_input([0.0, 2.0], [False, True])},
         "record_frames": ["u_tx[1]"],
@@ -206,7 +206,7 @@ def _two_out_of_two_faults(role: RoleFile, step: dict) -> None:
 def _wrong_command(role: RoleFile, step: dict) -> None:
     """Digital 2-out-of-2 comparison: a controller computing a wrong command is outvoted by the more
     restrictive of the two (fmus/signalling/redundancy.py); expected from our core."""
-    for system_name in ("FIRE_DQPSK", "ALS-EN"):
+    for system_name in (cab_systems.FIRE_DQPSK.name, cab_systems.ALS_EN.name):
         system = cab_systems.digital_system(system_name)
         wrong = max(system.commands(), key=system.rank)          # the most permissive command
         core = coder_core(system=system_name)
