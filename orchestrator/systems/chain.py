@@ -158,6 +158,24 @@ def signal_chain(trains: Sequence[Tuple[str, str]] = (("train", "ato"),), sectio
     return components, connections
 
 
+#: the trains a sized build holds at least (the shipped two-train systems' build)
+SIZED_BUILD_TRAINS = 2
+
+
+def sized_build(cab: cab_systems.CabSystem, sections: int, trains: int) -> BuildConfig:
+    """The build sizes of the signal FMUs of a system with build sizes of its own (its
+    descriptor's ``build_sections``): the smallest holding the line's ``sections``, so every line of
+    17 to 32 sections shares one build with the shipped tvm430 (k32m2n120) and a few builds serve
+    every line, at the cost of idle sections; room for ``trains`` (at least SIZED_BUILD_TRAINS);
+    10 ms frames at its sample rate."""
+    if sections > cab.build_sections[-1]:
+        raise ValueError(f"the line has {sections} block sections; a {cab.name} system holds at most "
+                        f"{cab.build_sections[-1]}")
+    return BuildConfig(sections=next(k for k in cab.build_sections if k >= sections),
+                       trains=max(SIZED_BUILD_TRAINS, trains),
+                       frame=int(round(cab.sample_rate_hz * cab_systems.FRAME_S)))
+
+
 # ---- each cab system's settings ------------------------------------------------------------------------
 def cab_settings(system: str) -> Tuple[dict, dict, dict, dict]:
     """(coder, rail, receiver, ATO) parameters of a cab-signal system (its descriptor,

@@ -41,7 +41,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig, sizes_of_source
 from orchestrator.verdicts.system_checks import check_sections_contiguous, load_data_file
-from orchestrator.systems.chain import (RAIL_FMU, cab_settings, check_placements, committed_ports, signal_chain,
+from orchestrator.systems.chain import (RAIL_FMU, cab_settings, check_placements, committed_ports, signal_chain, sized_build,
                                         train_and_ato)
 from orchestrator.errors import UserError
 from orchestrator.sspgen import fmu_ports, write_ssd, write_ssv
@@ -51,8 +51,6 @@ TRACTION = {"dc": "DC3000", "ac": "AC25000", "none": "none"}
 #: the stock a train gets without --rolling-stock, by traction (bundled files)
 DEFAULT_STOCK = {"dc": Path(DEFAULT_ROLLING_STOCK), "ac": DATA / "freight_vl80.json",
                  "none": Path(DEFAULT_ROLLING_STOCK)}
-#: the trains a sized build holds at least (the shipped two-train systems' build)
-SIZED_BUILD_TRAINS = 2
 LINE_PARAMETER_SET = "line.ssv"
 #: seconds the run goes on after the last scheduled arrival
 STOP_MARGIN_S = 120.0
@@ -72,20 +70,6 @@ def built_sizes(fmu_dir: Optional[Path]) -> Sizes:
     ports = built_ports(fmu_dir, RAIL_FMU)
     k, n = ports["u_tx"]["shape"]
     return Sizes(int(k), int(ports["x_head"]["shape"][0]), int(n))
-
-
-def sized_build(cab: cab_systems.CabSystem, sections: int, trains: int) -> BuildConfig:
-    """The build sizes of the signal FMUs of a system with build sizes of its own (its
-    descriptor's ``build_sections``): the smallest holding the line's ``sections``, so every line of
-    17 to 32 sections shares one build with the shipped tvm430 (k32m2n120) and a few builds serve
-    every line, at the cost of idle sections; room for ``trains`` (at least SIZED_BUILD_TRAINS);
-    10 ms frames at its sample rate."""
-    if sections > cab.build_sections[-1]:
-        raise UserError(f"the line has {sections} block sections; a {cab.name} system holds at most "
-                        f"{cab.build_sections[-1]}")
-    return BuildConfig(sections=next(k for k in cab.build_sections if k >= sections),
-                       trains=max(SIZED_BUILD_TRAINS, trains),
-                       frame=int(round(cab.sample_rate_hz * cab_systems.FRAME_S)))
 
 
 def default_stock(system: str, traction: str) -> Path:
@@ -149,7 +133,7 @@ def new_system(folder: Path, line_file: Path, timetable_files: Sequence[Path],
     if cab.build_sections:   # its own build sizes, named in the sources and built by railcosim run
         try:
             sizes = sized_build(cab, len(line.sections), count)
-        except UserError as error:
+        except ValueError as error:
             raise UserError(f"--line: {line.path}: {error}") from None
     if len(line.sections) > sizes.sections:
         raise UserError(f"--line: {line.path} has {len(line.sections)} block sections; the FMUs are built for "

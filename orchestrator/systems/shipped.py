@@ -42,7 +42,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 from fmus.signalling import cab_systems
 from fmus.sizes import BuildConfig
 from orchestrator.folders import replace_file
-from orchestrator.systems.chain import (_shipped_json, _stop_m, _with_station, cab_settings, check_placements,
+from orchestrator.systems.chain import (sized_build, _shipped_json, _stop_m, _with_station, cab_settings, check_placements,
                                         signal_chain, stock_length_m, train_and_ato, write_ssd)
 
 SSP_ROOT = Path(__file__).resolve().parents[2] / "ssp"   # the checkout's committed systems
@@ -80,25 +80,32 @@ def write_alsu(root: Path = SSP_ROOT, name: str = "alsu") -> Path:
     return path
 
 
-# TVM-430 on the high-speed line: 28 block sections of 1500 m at 12 kHz (docs/rail_line.md,
+# TVM-430 on the high-speed line: 28 block sections of 1500 m at its 12 kHz (docs/rail_line.md,
 # sample rate of the TVM chain), so the signal FMUs are a build of 32 sections and 10 ms frames
-# of 120 samples (docs/architecture.md#build-sizes)
-TVM430_FS_HZ = 12000.0
-TVM430_BUILD = BuildConfig(sections=32, trains=2, frame=120)
-TVM430_LINE, TVM430_STOCK = "hsl_tvm430_line.json", "high_speed_tgv.json"
+# of 120 samples (docs/architecture.md#build-sizes: the descriptor's build sizes, chain.sized_build)
+TVM430_FS_HZ = cab_systems.TVM430.sample_rate_hz
+TVM430_BUILD = sized_build(cab_systems.TVM430, 28, 2)
+TVM430_LINE, TVM430_STOCK = "hsl_tvm430_line.json", cab_systems.TVM430.default_stock
 TVM430_ARRIVAL_S, TVM430_STOP_TIME_S = 735.0, 860.0
 TVM430_TIMETABLE = {"train": "TGV 9001", "stops": [{"station": "Origine", "departure_s": 30},
                                                    {"station": "Terminus", "arrival_s": TVM430_ARRIVAL_S}]}
 
 
-def tvm430_chain(trains: Sequence[Tuple[str, str]], files: Dict[str, str]):
-    coder, rail, receiver, ato = cab_settings(cab_systems.TVM430.name)
-    chain, links = signal_chain(trains, sections=TVM430_BUILD.sections, frame=TVM430_BUILD.frame,
-                                fmu_folder=f"resources/{TVM430_BUILD.folder_name}", fs_hz=TVM430_FS_HZ,
+def sized_chain(cab: cab_systems.CabSystem, build: BuildConfig, trains: Sequence[Tuple[str, str]],
+                files: Dict[str, str]):
+    """The signal chain of a system with build sizes of its own (the TVM systems) for high-speed
+    trains of its default stock: (components, connections, the ATO's parameters)."""
+    coder, rail, receiver, ato = cab_settings(cab.name)
+    chain, links = signal_chain(trains, sections=build.sections, frame=build.frame,
+                                fmu_folder=f"resources/{build.folder_name}", fs_hz=cab.sample_rate_hz,
                                 coder={**coder, **files}, rail={**rail, **files},
                                 receiver={**receiver, "train_category": "high_speed"},
-                                stocks=[TVM430_STOCK] * len(trains))
+                                stocks=[cab.default_stock] * len(trains))
     return chain, links, ato
+
+
+def tvm430_chain(trains: Sequence[Tuple[str, str]], files: Dict[str, str]):
+    return sized_chain(cab_systems.TVM430, TVM430_BUILD, trains, files)
 
 
 def write_tvm430(root: Path = SSP_ROOT, name: str = "tvm430") -> Path:
