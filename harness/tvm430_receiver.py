@@ -93,13 +93,14 @@ def run(plan: Plan, duration_s: float, fs_hz: float = 12000.0, frame: int = 40, 
 
 
 def rail_line_emf(schedule: Sequence[Tuple[float, Sequence[int]]], head_m: float, seconds: float,
-                  fs_hz: float = 12000.0, ballast_ohm_km: float = 0.0) -> np.ndarray:
+                  fs_hz: float = 12000.0, ballast_ohm_km: float = 0.0, coder_core=None) -> np.ndarray:
     """The coil EMF (V, per sample) of a train standing with its first wheelset at ``head_m`` on
     the high-speed line: the TVM-430 coder core (its default 4 V) → harness/tvm_line.py's rail
     line core, every section k sending ``words[k]`` of the schedule's latest (start s, words)
     on its line-file carrier (the coder's ``send``: the block rules bypassed, each change
     phase-continuous as in service). ``ballast_ohm_km``: every section's ballast, as the rail
-    line's ballast_override input sets it (0: the line file's, its minimum)."""
+    line's ballast_override input sets it (0: the line file's, its minimum). ``coder_core``: the
+    coder core's class (Tvm430CoderCore; Tvm300CoderCore sends codes instead of words)."""
     from fmus.wayside_coder.core import CoderSettings
     from fmus.wayside_coder.tvm430 import Tvm430CoderCore
     from harness.tvm_line import tvm_rail_line
@@ -108,7 +109,7 @@ def rail_line_emf(schedule: Sequence[Tuple[float, Sequence[int]]], head_m: float
     count, n = len(rail.line.sections), rail.frame
     if ballast_ohm_km:
         rail.set_faults(-1.0, np.full(count, float(ballast_ohm_km)), np.zeros(count, dtype=bool))
-    coder = Tvm430CoderCore(rail.line, count, n, CoderSettings(fs_hz=fs_hz))
+    coder = (coder_core or Tvm430CoderCore)(rail.line, count, n, CoderSettings(fs_hz=fs_hz))
     clear = np.zeros(count, dtype=bool)
     rail.start(np.array([head_m]))
     frames = []

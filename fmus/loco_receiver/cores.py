@@ -13,6 +13,8 @@ from fmus.loco_receiver import tvm430 as tvm430_receiver
 from fmus.loco_receiver.alsu import AlsuReceiverCore, AlsuReceiverSettings
 from fmus.loco_receiver.core import LocoReceiverCore, ReceiverSettings, resolve_inertia_s
 from fmus.loco_receiver.digital_receiver import DigitalReceiverCore, DigitalReceiverSettings
+from fmus.loco_receiver import tvm300 as tvm300_receiver
+from fmus.loco_receiver.tvm300 import Tvm300ReceiverCore, Tvm300ReceiverSettings
 from fmus.loco_receiver.tvm430 import Tvm430ReceiverCore, Tvm430ReceiverSettings
 from fmus.signalling import cab_systems
 
@@ -55,6 +57,9 @@ RECEIVERS: Dict[str, ReceiverKind] = {
     cab_systems.TVM430.name: ReceiverKind(Tvm430ReceiverSettings, UM71_PARAMETERS, tvm430_receiver.resolve_inertia_s,
                                           lambda frame, settings, system: Tvm430ReceiverCore(frame, settings, system),
                                           "TVM430 listens to its track's carriers (leave carrier 0, set track)"),
+    cab_systems.TVM300.name: ReceiverKind(Tvm300ReceiverSettings, UM71_PARAMETERS, tvm300_receiver.resolve_inertia_s,
+                                          lambda frame, settings, system: Tvm300ReceiverCore(frame, settings, system),
+                                          "TVM300 listens to its track's carriers (leave carrier 0, set track)"),
 }
 for _name, _cab in cab_systems.REGISTRY.items():
     if _cab.family == cab_systems.DIGITAL_FAMILY:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Callable, Dict, Mapping, Optional, Tuple
 
 from fmus.errors import FmuInputError
-from fmus.signalling import als_en, alsn, alsu, fire_dqpsk, tvm430
+from fmus.signalling import als_en, alsn, alsu, fire_dqpsk, tvm300, tvm430
 from fmus.signalling import aspects as sig
 from fmus.signalling import digital_messages as digital
 from fmus.signalling.digital_messages import DigitalSystem
@@ -200,7 +200,16 @@ TVM430 = CabSystem(
     ato_links=(("target_distance", "target_distance"), ("gradient", "gradient"), ("word_carrier", "word_carrier")),
     judged_outputs=("target_distance", "gradient"), sample_rate_hz=12000.0, build_sections=(8, 16, 32, 64),
     default_stock="high_speed_tgv.json", receiver_outputs=_tvm430_outputs, label=_steps_label)
-REGISTRY: Dict[str, CabSystem] = {s.name: s for s in (ALSN, ALSU, ALS_EN, FIRE_DQPSK, TVM430)}
+TVM300 = CabSystem(
+    name=tvm300.NAME, title="TVM-300", summary="one of 18 sub-frequencies on UM71 carriers, a cascade of fixed steps",
+    family=TABLE, ato_mode=AtoMode.TVM300, transmitter=UM71, codes_file=tvm300.CODES_FILE,
+    load_codes=tvm300.load_codes, make_system=lambda codes_file=None: tvm300.system(codes_file),
+    latency_s=lambda _parameters: tvm300.STATED_LATENCY_S, atp_latency_s=lambda: tvm300.STATED_LATENCY_S,
+    chain_parameters=lambda: ({"system": tvm300.NAME}, {}, {"system": tvm300.NAME}),
+    ato_links=(("word_carrier", "word_carrier"),), sample_rate_hz=12000.0, build_sections=(8, 16, 32, 64),
+    default_stock="high_speed_tgv.json", receiver_outputs=_tvm300_outputs, label=_steps_label)
+
+REGISTRY: Dict[str, CabSystem] = {s.name: s for s in (ALSN, ALSU, ALS_EN, FIRE_DQPSK, TVM430, TVM300)}
 NAMES = tuple(REGISTRY)
 DEFAULT = ALSN
 DIGITAL = {name: s.system() for name, s in REGISTRY.items() if s.family == DIGITAL_FAMILY}

@@ -40,6 +40,7 @@ import numpy as np
 from fmus.data.loader import read_json_file
 from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
+from fmus.signalling import um71
 from fmus.signalling.digital_messages import Indication
 
 NAME = "TVM430"
@@ -56,25 +57,22 @@ FIELDS = {"address": (24, 3), "speed": (16, 8), "distance": (10, 6), "gradient":
 CHECK_GENERATOR = 0b1101111          # x⁶ + x⁵ + x³ + x² + x + 1
 CHECK_XOR = 0b101101
 DATA_BITS = WORD_BITS - FIELDS["check"][1]
-#: carriers per track, alternating block by block [S]
-TRACK_CARRIERS_HZ = {1: (1700.0, 2300.0), 2: (2000.0, 2600.0)}
-CARRIERS_HZ = (1700.0, 2000.0, 2300.0, 2600.0)
+#: carriers per track, alternating block by block [S] (the UM71 circuits', um71.py)
+TRACK_CARRIERS_HZ = um71.TRACK_CARRIERS_HZ
+CARRIERS_HZ = um71.CARRIERS_HZ
 NO_WORD = 0
 FREE_BLOCKS_OPEN = 6                 # the `free_blocks` reported for "no target in range"
 
-# ---- the receiver's decoder timing (fmus/loco_receiver/tvm430.py; the facts the ATO and the verdicts
-# take its latency from) ----
-WINDOW_S = 1.0 / TONE_SPACING_HZ      # 1.5625 s: the shortest window resolving 0.64 Hz
+# ---- the decoder rules (ours [U]; docs/loco_receiver.md#tvm-430): what the receiver
+# (fmus/loco_receiver/tvm430.py) decides on and the times it states ---------------------------
+#: the 27 tones are 0.64 Hz apart: 1.5625 s is the shortest window resolving them
+WINDOW_S = 1.0 / TONE_SPACING_HZ
 HOP_S = 0.125                     # one decision every 0.125 s
 #: `inertia` 0: how long the word shown outlives its last support. It bridges a block boundary
 #: at the worst moment: the word of the block being left changes just before it (the windows
 #: straddling the change read nothing, up to a window and a hop), then the new block's carrier
 #: needs a window and two hops of its own; the ATP trips on a lost word (docs/ato.md#tvm-430)
 HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
-#: the baseband low-pass's rise (s): its step response reaches SQUELCH_V / WEAKEST_CARRIER_V
-#: after 7.2 ms (a third after 7.5 ms), so a carrier that starts is above the squelch that much later
-#: (tests/test_tvm430_receiver.py checks it against the filter at 8 and 12 kHz)
-BASEBAND_RISE_S = 0.0076
 #: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
 #: to the restrictive display (s): a window that still holds part of the old word may read it
 #: (a whole window at most), then the hold, then the next decision (5.19 s). Measured: a lost
@@ -87,7 +85,7 @@ STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
 #: (1.82 s; a restrictive change needs no confirmation); an output read at step ends shows it
 #: by the end of the step. Measured: a carrier starting anywhere in a hop 1.69–1.818 s at
 #: 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
-STATED_DECODE_S = WINDOW_S + 2 * HOP_S + BASEBAND_RISE_S
+STATED_DECODE_S = WINDOW_S + 2 * HOP_S + um71.BASEBAND_RISE_S
 
 
 def check_bits(data: int) -> int:

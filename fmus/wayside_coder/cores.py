@@ -9,6 +9,7 @@ from fmus.signalling import cab_systems
 from fmus.wayside_coder.alsu import AlsuCoderCore
 from fmus.wayside_coder.core import WaysideCoderCore
 from fmus.wayside_coder.digital_generator import DigitalCoderCore
+from fmus.wayside_coder.tvm300 import Tvm300CoderCore
 from fmus.wayside_coder.tvm430 import Tvm430CoderCore
 
 #: (line, sections, frame, settings, code table, system object, parameter getter) → core; the
@@ -22,6 +23,8 @@ CODERS: Dict[str, CoreMaker] = {
         AlsuCoderCore(line, k, n, settings, codes),
     cab_systems.TVM430.name: lambda line, k, n, settings, codes, system, param:
         Tvm430CoderCore(line, k, n, settings, codes, param("address") or None),
+    cab_systems.TVM300.name: lambda line, k, n, settings, codes, system, param:
+        Tvm300CoderCore(line, k, n, settings, codes),
 }
 for _name, _cab in cab_systems.REGISTRY.items():
     if _cab.family == cab_systems.DIGITAL_FAMILY:

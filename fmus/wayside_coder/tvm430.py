@@ -31,15 +31,13 @@ from typing import Optional
 import numpy as np
 
 from fmus.data.loader import Line
-from fmus.errors import FmuInputError
 from fmus.signalling import tvm430
 from fmus.signalling.block_rules import SIGNAL_DARK, block_codes
-from fmus.wayside_coder.core import (STATUS_FAILED, STATUS_OK, STATUS_PARTIAL, CoderOutputs, CoderSettings,
-                                     check_settings)
+from fmus.wayside_coder.core import STATUS_FAILED, CoderOutputs, CoderSettings
+from fmus.wayside_coder.um71 import MAX_FREQUENCY_PER_FS, SampleClock, check_um71_settings, fault_status  # noqa: F401
+from fmus.wayside_coder import um71
 
-#: the modulated carrier's highest frequency must stay below this share of fs (Nyquist 0.5, with
-#: room for the rail line's and the receiver's filters)
-MAX_FREQUENCY_PER_FS = 0.4
+SYSTEM_LABEL = "TVM-430"
 #: the largest frequency deviation any word can make (every tone at its peak at once)
 PEAK_DEVIATION_HZ = tvm430.TONE_COUNT * tvm430.DEVIATION_HZ_PER_TONE
 
@@ -47,30 +45,14 @@ PEAK_DEVIATION_HZ = tvm430.TONE_COUNT * tvm430.DEVIATION_HZ_PER_TONE
 def check_carriers_and_rate(line: Line, fs_hz: float) -> np.ndarray:
     """Each section's carrier (Hz) from the line file; a carrier not of TVM-430 or a sample rate
     that cannot hold the highest one is an input error."""
-    carriers = np.array([sec.carrier_hz for sec in line.sections], dtype=float)
-    for index, carrier in enumerate(carriers):
-        if not any(abs(carrier - c) < 1e-9 for c in tvm430.CARRIERS_HZ):
-            raise FmuInputError(f"{line.path}: field block_sections[{index}].carrier_hz: {carrier:g} Hz is not a "
-                                f"TVM-430 carrier ({', '.join(f'{c:g}' for c in tvm430.CARRIERS_HZ)} Hz)")
-    top = float(carriers.max()) + PEAK_DEVIATION_HZ
-    if top > MAX_FREQUENCY_PER_FS * fs_hz:
-        raise FmuInputError(f"parameter fs: {fs_hz:g} Hz cannot hold the carrier {carriers.max():g} Hz "
-                            f"+ {PEAK_DEVIATION_HZ:g} Hz deviation: TVM-430 needs fs ≥ "
-                            f"{top / MAX_FREQUENCY_PER_FS:g} Hz")
-    return carriers
+    return um71.check_carriers_and_rate(line, fs_hz, PEAK_DEVIATION_HZ, SYSTEM_LABEL)
 
 
 class Tvm430CoderCore:
     def __init__(self, line: Line, sections: int, frame: int, settings: CoderSettings,
                  table: Optional[tvm430.CodeTable] = None, address: Optional[int] = None):
         s = settings
-        check_settings(line, sections, s)
-        if s.carrier_hz:
-            raise FmuInputError(f"parameter carrier: {s.carrier_hz:g} Hz, but TVM-430 sends on each section's "
-                                f"line-file carrier (leave carrier 0)")
-        if s.coding != "always":
-            raise FmuInputError(f"parameter coding: {s.coding}, but a TVM-430 carrier is its track circuit's "
-                                f"detection signal and never stops (use always)")
+        check_um71_settings(line, sections, s, SYSTEM_LABEL)
         self.tvm = tvm430.Tvm430System(table) if table is not None else tvm430.system()
         self.settings = s
         self.carriers_hz = check_carriers_and_rate(line, s.fs_hz)
@@ -83,13 +65,9 @@ class Tvm430CoderCore:
         self._bits = np.zeros((k, tvm430.WORD_BITS))                 # b_k, one row per section
         rng = np.random.default_rng(s.seed)
         self._offset = rng.uniform(0.0, 2.0 * np.pi, k)              # offset_k (rad)
-        self._index = np.arange(frame, dtype=float)
-        # per-frame work buffers (the frame's sample indices and times, tone terms, carrier and
-        # total phase of every section)
-        self._samples = np.empty(frame)
-        self._times = np.empty(frame)
+        self.clock = SampleClock(self.carriers_hz, frame, s.fs_hz)
+        # per-frame work buffers (tone terms, total phase of every section)
         self._terms = np.empty((tvm430.TONE_COUNT, frame))
-        self._cycles = np.empty((k, frame))
         self._phase = np.empty((k, frame))
         self._logic_state = None
         self._forced: Optional[np.ndarray] = None      # a bench's words (send), instead of the block's
@@ -106,11 +84,9 @@ class Tvm430CoderCore:
     def step(self, t: float, occupied: np.ndarray, fault_main: bool = False, fault_reserve: bool = False,
              wrong_command_main: int = 0, wrong_command_reserve: int = 0) -> CoderOutputs:
         """One frame (the wrong-command faults are the digital coders': ignored here)."""
-        s, k, out = self.settings, self.count, self.out
+        k, out = self.count, self.out
         n = out.u_tx.shape[1]
-        first = round(t * s.fs_hz)
-        index = np.add(self._index[:n], first, out=self._samples[:n])     # whole numbers, exact below 2⁵³
-        times = np.divide(index, s.fs_hz, out=self._times[:n])
+        index, times = self.clock.samples(t, n)
         terms = tvm430.modulation_phase_terms(times, out=self._terms[:, :n])
         state = (occupied[:k].tobytes(), fault_main, fault_reserve)
         if state != self._logic_state:
@@ -120,23 +96,18 @@ class Tvm430CoderCore:
         if out.status == STATUS_FAILED:
             u.fill(0.0)
             return out
-        # carrier cycles f_c·n/fs reduced mod 1 before the 2π: exact whatever the run's length
-        cycles = np.multiply.outer(self.carriers_hz, index, out=self._cycles[:, :n])
-        np.fmod(cycles, s.fs_hz, out=cycles)
-        cycles *= 2.0 * np.pi / s.fs_hz
         phase = np.matmul(self._bits, terms, out=self._phase[:, :n])
-        phase += cycles
+        phase += self.clock.carrier_phase(index)
         phase += self._offset[:, None]
         np.sin(phase, out=u)
-        u *= s.amplitude_v
+        u *= self.settings.amplitude_v
         return out
 
     def _block_logic(self, occupied: np.ndarray, fault_main: bool, fault_reserve: bool,
                      terms_now: np.ndarray) -> None:
         k, out = self.count, self.out
         rules = block_codes(occupied, self.block_of, self.settings.block_aspects)
-        out.status = STATUS_FAILED if (fault_main and fault_reserve) else (
-            STATUS_PARTIAL if fault_main or fault_reserve else STATUS_OK)
+        out.status = fault_status(fault_main, fault_reserve)
         if self._forced is not None:
             words = self._forced
         elif out.status == STATUS_FAILED:
