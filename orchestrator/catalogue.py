@@ -43,6 +43,10 @@ SYSTEM_DESCRIPTIONS: Dict[str, str] = {
               "1700 / 2300 Hz track circuits), stopping at the end",
     "tvm430_following": "two TGV sets 3 min apart under TVM-430: the follower closes in on the halted "
                         "leader under the steps 300-270-230-170-0",
+    "tvm300": "a TGV set at 300 km/h on a 42 km Atlantique-like line with TVM-300 (one of 18 sub-frequencies on "
+              "1700 / 2300 Hz track circuits of 2000 m), stopping at the end",
+    "tvm300_following": "two TGV sets 4 min apart under TVM-300: the follower steps down the cascade "
+                        "300-270-220-160-80-0 behind the halted leader",
     "suburban": "one ЭР2 EMU stopping at all 13 stations of the 36 km suburban line (DC 3 kV, 4-aspect "
                 "ALSN block of 31 sections)",
     "suburban_peak": "ten ЭР2 EMUs on the suburban line at its blocking-time headway plus 10 %, the "

@@ -173,6 +173,81 @@ def write_tvm430_following(root: Path = SSP_ROOT, name: str = "tvm430_following"
     return path
 
 
+# TVM-300 on its own high-speed line (fmus/data/shipped/hsl_tvm300_line.json, docs/rail_line.md#tvm-300-line):
+# 21 UM71 circuits of 2000 m, the same 12 kHz chain and sized build as TVM-430's
+TVM300_BUILD = sized_build(cab_systems.TVM300, 21, 2)
+TVM300_LINE = "hsl_tvm300_line.json"
+TVM300_ARRIVAL_S, TVM300_STOP_TIME_S = 760.0, 880.0
+TVM300_TIMETABLE = {"train": "TGV 8501", "stops": [{"station": "Origine", "departure_s": 30},
+                                                   {"station": "Terminus", "arrival_s": TVM300_ARRIVAL_S}]}
+
+
+def write_tvm300(root: Path = SSP_ROOT, name: str = "tvm300") -> Path:
+    line = _shipped_json(TVM300_LINE)
+    stock_file = cab_systems.TVM300.default_stock
+    check_placements(line, [("train", _stop_m(line, "Origine"), stock_length_m(stock_file))])
+    files = {"line_file": TVM300_LINE}
+    stock = {"rolling_stock_file": stock_file}
+    chain, links, ato = sized_chain(cab_systems.TVM300, TVM300_BUILD, (("train", "ato"),), files)
+    components, connections = train_and_ato(
+        train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "tvm300_timetable.json"})
+    folder = root / name
+    path = write_ssd(folder, name, chain + components, connections + links, stop_time=TVM300_STOP_TIME_S)
+    _write_json(folder / "resources" / TVM300_LINE, line)
+    _write_json(folder / "resources" / stock_file, _shipped_json(stock_file))
+    _write_json(folder / "resources" / "tvm300_timetable.json", TVM300_TIMETABLE)
+    return path
+
+
+# tvm300_following: the leader, standing at "Origine est" ahead of the follower, departs at 30 s;
+# the follower departs 4 min later (TVM-300's headway on LGV Atlantique, docs/sources.md#tvm-430
+# row 2). The leader is held by a full service brake from 445 s until 745 s; the follower, at
+# 300 km/h, steps down the cascade 300 → 270 → 220 → 160 → 80 → 0 block by block, stands before
+# the buffer section, then follows it on to its stop at "Milieu" while the leader runs to Terminus
+TVM300_LEADER_ORIGIN = ("Origine est", 1200.0)
+TVM300_MIDDLE = ("Milieu", 33750.0)
+TVM300_LEADER_HALT_S = (445.0, 745.0)
+TVM300_LEADER_TIMETABLE = {"train": "TGV 8503 (leader)", "stops": [
+    {"station": TVM300_LEADER_ORIGIN[0], "departure_s": 30}, {"station": "Terminus", "arrival_s": 800}]}
+TVM300_FOLLOWER_TIMETABLE = {"train": "TGV 8505 (4 min behind)", "stops": [
+    {"station": "Origine", "departure_s": 270}, {"station": TVM300_MIDDLE[0], "arrival_s": 900}]}
+TVM300_FOLLOWING_STOP_TIME_S = 1200.0
+
+
+def write_tvm300_following(root: Path = SSP_ROOT, name: str = "tvm300_following") -> Path:
+    line = _with_station(_shipped_json(TVM300_LINE), *TVM300_LEADER_ORIGIN,
+                         "Origine est: where the leader of tvm300_following stands, ahead of the follower")
+    line = _with_station(line, *TVM300_MIDDLE, "Milieu: the follower's stop in tvm300_following")
+    stock_file = cab_systems.TVM300.default_stock
+    length_m = stock_length_m(stock_file)
+    check_placements(line, [("leader", TVM300_LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "Origine"), length_m)])
+    files = {"line_file": "tvm300_following_line.json"}
+    stock = {"rolling_stock_file": stock_file}
+    trains = (("leader", "leader_ato"), ("follower", "follower_ato"))
+    chain, links, ato = sized_chain(cab_systems.TVM300, TVM300_BUILD, trains, files)
+    leader, leader_links = train_and_ato(
+        "leader", "leader_ato", train_parameters={**files, **stock, "x0": TVM300_LEADER_ORIGIN[1]},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "leader_timetable.json"})
+    follower, follower_links = train_and_ato(
+        "follower", "follower_ato", train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "follower_timetable.json"})
+    folder = root / name
+    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
+                     stop_time=TVM300_FOLLOWING_STOP_TIME_S)
+    resources = folder / "resources"
+    _write_json(resources / "tvm300_following_line.json", line)
+    _write_json(resources / stock_file, _shipped_json(stock_file))
+    _write_json(resources / "leader_timetable.json", TVM300_LEADER_TIMETABLE)
+    _write_json(resources / "follower_timetable.json", TVM300_FOLLOWER_TIMETABLE)
+    _write_json(folder / "scenario.json", leader_halt_scenario(
+        "TVM-300 at 4 min headway: the leader, held by a full service brake from 445 s until 745 s, stands on "
+        "the line; the follower, 4 min behind at 300 km/h, steps down the cascade 300, 270, 220, 160, 80 and "
+        "0 km/h block by block, stands before the buffer section, follows when the blocks clear and stops at "
+        "Milieu (33.75 km) while the leader runs to Terminus.", *TVM300_LEADER_HALT_S))
+    return path
+
+
 def write_ato_only(root: Path = SSP_ROOT) -> Path:
     components, connections = train_and_ato(ato_parameters={"cab_signal": "off"})
     return write_ssd(root / "ato_only", "ato_only", components, connections, stop_time=1100.0)
@@ -460,6 +535,8 @@ for _system, _prefix in ((cab_systems.ALS_EN.name, "als_en"), (cab_systems.FIRE_
 SHIPPED["alsu"] = write_alsu
 SHIPPED["tvm430"] = write_tvm430
 SHIPPED["tvm430_following"] = write_tvm430_following
+SHIPPED["tvm300"] = write_tvm300
+SHIPPED["tvm300_following"] = write_tvm300_following
 SHIPPED["alsu_following"] = partial(write_following, system=cab_systems.ALSU.name, name="alsu_following")
 SHIPPED["suburban"] = write_suburban
 # the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
