@@ -15,8 +15,9 @@ from fmus.loco_receiver.parameters import receiver_settings
 class LocoReceiver(FrameFacadeSlave):
     description = ("Locomotive cab-signal receiver: ALSN (gain control, band-pass, envelope, impulse relay, KPT "
                    "decoder), ALSU (six tone channels, exactly two tones), TVM430 (the track's two carriers, FM "
-                   "discriminator, 27 tones by least squares, word check) or ALS-EN / FIRE_DQPSK (correlation "
-                   "demodulator, code check, 2-out-of-3 channels)")
+                   "discriminator, 27 tones by least squares, word check), TVM300 (the same front end, exactly one "
+                   "of 18 sub-frequencies) or ALS-EN / FIRE_DQPSK (correlation demodulator, code check, 2-out-of-3 "
+                   "channels)")
 
     @classmethod
     def declare_ports(cls, build):
@@ -26,10 +27,11 @@ class LocoReceiver(FrameFacadeSlave):
         return [
             cab_system_port(cab_systems.NAMES, cab_systems.DEFAULT.name),
             Port("codes_file", "parameter", "String", start="",
-                 description="ALSU: the code table (tone pairs, readings); TVM430: the word tables; empty: the bundled one"),
+                 description="ALSU: the code table (tone pairs, readings); TVM430: the word tables; TVM300: the "
+                             "sub-frequency table; empty: the bundled one"),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: the system's (ALSN 50 Hz, ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz); ALSN 25, 50 or 75 Hz; "
-                             "ALSU and TVM430 (its track's carriers): 0 only"),
+                             "ALSU, TVM430 and TVM300 (their track's carriers): 0 only"),
             sample_rate_port(s.fs_hz, n),
             Port("train_category", "parameter", "String", start=s.train_category,
                  description="passenger | freight | high_speed"),
@@ -49,14 +51,14 @@ class LocoReceiver(FrameFacadeSlave):
                  description="relay drop-out (input-referred envelope); below pick_up"),
             Port("inertia", "parameter", unit="s", start=s.inertia_s, min=0.0,
                  description="longest loss of code the display bridges, from the last code supporting it; "
-                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; TVM430 3.5 s; digital: none)"),
+                             "0: the system's (ALSN 5.5 s, the equipment's inertia; ALSU 1 s; TVM430 3.5 s; TVM300 2.12 s; digital: none)"),
             Port("track_parity", "parameter", "Integer", start=d.track_parity, min=0, max=1,
                  description="digital: parity of the track the train runs on (messages of the other are discarded)"),
             Port("limiter", "parameter", unit="V", start=d.limiter_v, min=0.0, description="digital: input limiter; 0 none"),
             Port("min_level", "parameter", unit="V", start=d.min_level_v, min=0.0,
                  description="digital: squelch, carrier amplitude below which nothing is decided"),
             Port("track", "parameter", "Integer", start=tvm.track, min=1, max=2,
-                 description="TVM430: the track whose carriers are decoded (1: 1700 / 2300 Hz, 2: 2000 / 2600 Hz)"),
+                 description="TVM430, TVM300: the track whose carriers are decoded (1: 1700 / 2300 Hz, 2: 2000 / 2600 Hz)"),
             Port("channel_fault", "input", "Integer", start=0, shape=(CHANNELS,), min=0, max=3,
                  description="digital, per channel: 0 ok, 1 failed (self-test), 2 stuck most permissive, 3 silent"),
             Port("e_coil", "input", unit="V", shape=(n,), frame=True, description="coil EMF frame"),
@@ -67,7 +69,7 @@ class LocoReceiver(FrameFacadeSlave):
                  description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code", "output", "Integer", start=0, fail_safe=alsn.NO_CODE,
                  description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, "
-                             "TVM430: the 27-bit word shown; 0 none"),
+                             "TVM430: the 27-bit word shown; TVM300: the sub-frequency shown (1-18); 0 none"),
             Port("code_valid", "output", "Boolean", start=False, fail_safe=False,
                  description="the indication shown is a received code (held ones included); false: the no-code indication"),
             Port("v_permitted", "output", unit="m/s", core_field="v_permitted_mps", fail_safe=0.0,
@@ -92,7 +94,7 @@ class LocoReceiver(FrameFacadeSlave):
             Port("gradient", "output", unit="1", core_field="gradient_permille",
                  description="TVM430: the word's gradient in ‰ (+ uphill), the most falling up to the target; 0 no word"),
             Port("word_carrier", "output", unit="Hz", core_field="word_carrier_hz",
-                 description="TVM430: the carrier the word shown came from; 0 none"),
+                 description="TVM430, TVM300: the carrier the word or code shown came from; 0 none"),
         ]
 
     def make_default_experiment(self):

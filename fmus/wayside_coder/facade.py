@@ -10,7 +10,8 @@ from fmus.wayside_coder.cores import make_coder
 
 class WaysideCoder(FrameFacadeSlave):
     description = ("Wayside cab-signal coder: automatic-block aspects from occupancy; ALSN KPT-5/KPT-7 transmitters, "
-                   "ALSU two-of-six tone generators, TVM-430 word generators or ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
+                   "ALSU two-of-six tone generators, TVM-430 word or TVM-300 sub-frequency generators on UM71 carriers, or "
+                   "ALS-EN / FIRE_DQPSK digital generators (2-out-of-2) per section")
 
     @classmethod
     def declare_ports(cls, build):
@@ -20,12 +21,12 @@ class WaysideCoder(FrameFacadeSlave):
             line_file_port(),
             Port("codes_file", "parameter", "String", start="",
                  description="code tables (JSON); empty: the bundled ones (ALSN KPT-5/KPT-7 timings, ALSU tone pairs, "
-                             "TVM-430 word tables)"),
+                             "TVM-430 word tables, TVM-300 sub-frequency table)"),
             cab_system_port(cab_systems.NAMES, cab_systems.DEFAULT.name),
             sample_rate_port(s.fs_hz, n),
             Port("carrier", "parameter", unit="Hz", start=s.carrier_hz, min=0.0,
                  description="0: ALSN each section's carrier from the line file, digital the system's "
-                             "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz), ALSU its six tones, TVM430 each section's "
+                             "(ALS-EN 174.38 Hz, FIRE_DQPSK 175 Hz), ALSU its six tones, TVM430 and TVM300 each section's "
                              "from the line file; else this carrier for all (ALSN, digital)"),
             Port("amplitude", "parameter", unit="V", start=s.amplitude_v, min=0.0,
                  description="peak transmitter voltage (ALSU: of each tone)"),
@@ -59,7 +60,7 @@ class WaysideCoder(FrameFacadeSlave):
             Port("u_tx", "output", unit="V", shape=(k, n), frame=True, description="transmitter voltage into each section"),
             Port("code_tx", "output", "Integer", start=0, shape=(k,),
                  description="code in the frame's last sample, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; ALSU code 1-13; "
-                             "FIRE_DQPSK command 1-16; ALS-EN KLUB register; TVM430 the 27-bit word"),
+                             "FIRE_DQPSK command 1-16; ALS-EN KLUB register; TVM430 the 27-bit word; TVM300 the sub-frequency 1-18"),
             Port("signal", "output", "Integer", start=0, shape=(k,),
                  description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
             Port("status", "output", "Integer", start=0, description="0 ok, 1 one transmitter/controller failed, 2 both"),
