@@ -27,15 +27,12 @@ step, ``free_blocks`` the fewest blocks before the stop that give the pair, ``as
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Optional
 
 import numpy as np
 
-from fmus.loco_receiver.core import ReceiverOutputs
-from fmus.loco_receiver.um71 import FailSafeDisplay, Um71FrontEnd, Um71ReceiverSettings
-from fmus.signalling import aspects as sig
+from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings  # noqa: F401 (Decision: read here)
 from fmus.signalling import tvm300
 from fmus.signalling.tvm300 import HOLD_S, HOP_S, STATED_DECODE_S, STATED_LATENCY_S, WINDOW_S  # noqa: F401
 
@@ -64,83 +61,17 @@ def sub_frequency_fit(window: int, rate_hz: float) -> np.ndarray:
     return fit
 
 
-@dataclass(frozen=True)
-class Decision:
-    """What one decision heard (diagnostics and tests)."""
+class Tvm300ReceiverCore(Um71ReceiverCore):
+    deviation_hz = tvm300.DEVIATION_HZ
+    no_code = tvm300.NO_CODE
 
-    time_s: float
-    carrier_hz: float                  # 0: no carrier decoded
-    amplitudes: Optional[np.ndarray]   # the 18 sub-frequencies' fitted amplitudes / DEVIATION_HZ
-    code: int                          # the code read, 0: none (no carrier, none or two present, unused)
-
-    @property
-    def word(self) -> int:             # the name TVM-430's decisions give it (harnesses read either)
-        return self.code
-
-
-class Tvm300ReceiverCore:
     def __init__(self, frame: int, settings: Um71ReceiverSettings, tvm: Optional[tvm300.Tvm300System] = None):
-        self.front = Um71FrontEnd(settings, tvm300.NAME, WINDOW_S, HOP_S)
-        self.carriers_hz = self.front.carriers_hz
-        self.tvm = tvm if tvm is not None else tvm300.system(settings.codes_file or None)
-        self.settings, self.frame = settings, frame
-        self.rate_hz, self.window = self.front.rate_hz, self.front.window
-        self.fit = sub_frequency_fit(self.window, self.rate_hz)
-        self.hold_s = resolve_inertia_s(settings.inertia_s)
-        self.display = FailSafeDisplay(self.hold_s)
-        self._shown_reading: Optional[tvm300.Reading] = None
-        self.last_decision: Optional[Decision] = None
-        self.out = ReceiverOutputs()
-        self._publish(0.0)
+        super().__init__(frame, settings, tvm if tvm is not None else tvm300.system(settings.codes_file or None),
+                         tvm300.NAME, WINDOW_S, HOP_S, sub_frequency_fit, resolve_inertia_s(settings.inertia_s))
 
-    def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
-        """One frame of coil EMF (``channel_faults`` is the digital receiver's input: ignored)."""
-        self._publish(self.front.feed(t, e_coil, self._decide))
-        return self.out
-
-    def read_window(self, time_s: float) -> Decision:
-        """The code the current window gives (module docstring)."""
-        best = self.front.carrier_to_decode()
-        if best is None:
-            return Decision(time_s, 0.0, None, tvm300.NO_CODE)
-        coefficients = self.fit @ self.front.offset_hz[best]
-        cos_sin = coefficients[1:].reshape(2, tvm300.SUB_FREQUENCY_COUNT)
-        amplitudes = np.hypot(cos_sin[0], cos_sin[1]) / tvm300.DEVIATION_HZ
-        carrier = float(self.carriers_hz[best])
+    def code_of(self, amplitudes: np.ndarray) -> int:
+        """The code of the one sub-frequency present, every other absent (module docstring); else none."""
         present = np.flatnonzero(amplitudes > PRESENT_FRACTION)
         if present.size != 1 or np.count_nonzero(amplitudes >= ABSENT_FRACTION) != 1:
-            return Decision(time_s, carrier, amplitudes, tvm300.NO_CODE)
-        code = tvm300.code_of_index(int(present[0]))
-        if self.tvm.reading(code) is None:
-            code = tvm300.NO_CODE
-        return Decision(time_s, carrier, amplitudes, code)
-
-    def _decide(self, time_s: float) -> None:
-        decision = self.read_window(time_s)
-        self.last_decision = decision
-        out = self.out
-        if decision.code == tvm300.NO_CODE:
-            key = None
-            if decision.carrier_hz:
-                out.errors += 1
-        else:
-            key = (decision.code, decision.carrier_hz)
-            out.decoded_codes += 1
-        if self.display.decide(key, time_s, self.tvm.at_most):
-            self._shown_reading = self.tvm.reading(key[0])
-
-    def _publish(self, level_v: float) -> None:
-        out = self.out
-        out.level_v = level_v
-        out.relay = level_v >= self.settings.squelch_v
-        shown = self.display.shown
-        if shown is None:
-            out.aspect, out.code, out.code_valid, out.free_blocks = sig.RED, tvm300.NO_CODE, False, 0
-            out.v_permitted_mps = out.v_target_mps = 0.0
-            out.target_distance_m = out.gradient_permille = out.word_carrier_hz = 0.0
-            return
-        code, carrier = shown
-        read = self._shown_reading
-        out.aspect, out.code, out.code_valid, out.free_blocks = read.aspect, code, True, read.free_blocks
-        out.v_permitted_mps, out.v_target_mps = read.step_kmh / 3.6, read.next_kmh / 3.6
-        out.word_carrier_hz = carrier
+            return tvm300.NO_CODE
+        return tvm300.code_of_index(int(present[0]))

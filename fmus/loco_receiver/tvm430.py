@@ -28,7 +28,6 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from functools import lru_cache
 from typing import Optional
 
@@ -38,8 +37,7 @@ from fmus.loco_receiver.core import ReceiverOutputs
 from fmus.loco_receiver.um71 import (BASEBAND_RATE_HZ, BASEBAND_RISE_S, CONFIRMATIONS, DOMINANCE_DB,  # noqa: F401
                                      IMAGE_GUARD_HZ, LOW_PASS_CORNER_HZ, LOW_PASS_ORDER, SQUELCH_V,
                                      WEAKEST_CARRIER_V, FailSafeDisplay, Um71FrontEnd, low_pass_design)
-from fmus.loco_receiver.um71 import Um71ReceiverSettings
-from fmus.signalling import aspects as sig
+from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings  # noqa: F401 (Decision: read here)
 from fmus.signalling import tvm430
 # the decoder rules' times (fmus/signalling/tvm430.py), importable from here as before
 from fmus.signalling.tvm430 import HOLD_S, HOP_S, STATED_DECODE_S, STATED_LATENCY_S, WINDOW_S  # noqa: F401
@@ -71,81 +69,19 @@ def tone_fit(window: int, rate_hz: float) -> np.ndarray:
     return fit
 
 
-@dataclass(frozen=True)
-class Decision:
-    """What one decision heard (diagnostics and tests)."""
+class Tvm430ReceiverCore(Um71ReceiverCore):
+    deviation_hz = tvm430.DEVIATION_HZ_PER_TONE
+    no_code = tvm430.NO_WORD
 
-    time_s: float
-    carrier_hz: float          # 0: no carrier decoded
-    amplitudes: Optional[np.ndarray]   # the 27 tones' fitted amplitudes / DEVIATION_HZ_PER_TONE
-    word: int                  # the word read, 0: none (no carrier, a tone undecided, failed check or unused)
-
-
-class Tvm430ReceiverCore:
     def __init__(self, frame: int, settings: Tvm430ReceiverSettings, tvm: Optional[tvm430.Tvm430System] = None):
-        self.front = Um71FrontEnd(settings, tvm430.NAME, WINDOW_S, HOP_S)
-        self.carriers_hz = self.front.carriers_hz
-        self.tvm = tvm if tvm is not None else tvm430.system(settings.codes_file or None)
-        self.settings, self.frame = settings, frame
-        self.rate_hz, self.window = self.front.rate_hz, self.front.window
-        self.fit = tone_fit(self.window, self.rate_hz)
-        self.hold_s = resolve_inertia_s(settings.inertia_s)
-        self.display = FailSafeDisplay(self.hold_s)
-        self._shown_reading: Optional[tvm430.Reading] = None
-        self.last_decision: Optional[Decision] = None
-        self.out = ReceiverOutputs()
-        self._publish(0.0)
+        super().__init__(frame, settings, tvm if tvm is not None else tvm430.system(settings.codes_file or None),
+                         tvm430.NAME, WINDOW_S, HOP_S, tone_fit, resolve_inertia_s(settings.inertia_s))
 
-    def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
-        """One frame of coil EMF (``channel_faults`` is the digital receiver's input: ignored)."""
-        self._publish(self.front.feed(t, e_coil, self._decide))
-        return self.out
-
-    # ---- decisions ----------------------------------------------------------------------------
-    def read_window(self, time_s: float) -> Decision:
-        """The word the current window gives (module docstring: which carrier, tones)."""
-        best = self.front.carrier_to_decode()
-        if best is None:
-            return Decision(time_s, 0.0, None, tvm430.NO_WORD)
-        coefficients = self.fit @ self.front.offset_hz[best]
-        cos_sin = coefficients[1:].reshape(2, tvm430.TONE_COUNT)
-        amplitudes = np.hypot(cos_sin[0], cos_sin[1]) / tvm430.DEVIATION_HZ_PER_TONE
-        carrier = float(self.carriers_hz[best])
+    def code_of(self, amplitudes: np.ndarray) -> int:
+        """The word of the 27 tones (module docstring); a tone between the fractions: no word."""
         if ((amplitudes > ABSENT_FRACTION) & (amplitudes < PRESENT_FRACTION)).any():
-            return Decision(time_s, carrier, amplitudes, tvm430.NO_WORD)
-        word = tvm430.word_of_bits(amplitudes >= PRESENT_FRACTION)
-        if self.tvm.reading(word) is None:
-            word = tvm430.NO_WORD
-        return Decision(time_s, carrier, amplitudes, word)
+            return tvm430.NO_WORD
+        return tvm430.word_of_bits(amplitudes >= PRESENT_FRACTION)
 
-    def _decide(self, time_s: float) -> None:
-        decision = self.read_window(time_s)
-        self.last_decision = decision
-        out = self.out
-        if decision.word == tvm430.NO_WORD:
-            key = None
-            if decision.carrier_hz:
-                out.errors += 1
-        else:
-            key = (decision.word, decision.carrier_hz)
-            out.decoded_codes += 1
-        # tvm430's partial order (words on different carriers: never comparable)
-        if self.display.decide(key, time_s, self.tvm.at_most):
-            self._shown_reading = self.tvm.reading(key[0])
-
-    def _publish(self, level_v: float) -> None:
-        out = self.out
-        out.level_v = level_v
-        out.relay = level_v >= self.settings.squelch_v
-        shown = self.display.shown
-        if shown is None:
-            out.aspect, out.code, out.code_valid, out.free_blocks = sig.RED, tvm430.NO_WORD, False, 0
-            out.v_permitted_mps = out.v_target_mps = 0.0
-            out.target_distance_m = out.gradient_permille = out.word_carrier_hz = 0.0
-            return
-        word, carrier = shown
-        read = self._shown_reading
-        out.aspect, out.code, out.code_valid, out.free_blocks = read.aspect, word, True, read.free_blocks
-        out.v_permitted_mps, out.v_target_mps = read.step_kmh / 3.6, read.next_kmh / 3.6
+    def publish_extra(self, out: ReceiverOutputs, read: tvm430.Reading) -> None:
         out.target_distance_m, out.gradient_permille = read.target_distance_m, read.gradient_permille
-        out.word_carrier_hz = carrier

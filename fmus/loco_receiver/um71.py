@@ -41,6 +41,8 @@ import scipy        # scipy.signal loads at its first use, a design (SciPy loads
 
 from fmus.dsp.filter_design import SosFilter, sections, sos_frame
 from fmus.errors import FmuInputError
+from fmus.loco_receiver.core import ReceiverOutputs
+from fmus.signalling import aspects as sig
 from fmus.signalling import um71
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
@@ -227,3 +229,101 @@ class FailSafeDisplay:
         self.shown, self._supported_s = key, time_s
         self._pending, self._pending_count = None, 0
         return True
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What one decision heard (diagnostics and tests)."""
+
+    time_s: float
+    carrier_hz: float                  # 0: no carrier decoded
+    amplitudes: Optional[np.ndarray]   # each tone's or sub-frequency's fitted amplitude / its deviation
+    code: int                          # the word or code read, 0: none
+
+    @property
+    def word(self) -> int:             # TVM-430's name for it
+        return self.code
+
+
+class Um71ReceiverCore:
+    """What both TVM receivers do around their own reading of a window (``code_of``): the front
+    end, the fit of the window's frequency offset (``fit``, a pseudo-inverse whose rows after the
+    first are the cosines then the sines of the system's tones), the decision, the fail-safe
+    display and the outputs. A subclass sets ``deviation_hz`` (a tone's amplitude unit) and may
+    add outputs of its own in ``publish_extra``."""
+
+    deviation_hz = 1.0
+    no_code = 0
+
+    def __init__(self, frame: int, settings: Um71ReceiverSettings, tvm, system_name: str, window_s: float,
+                 hop_s: float, fit_of, hold_s: float):
+        self.front = Um71FrontEnd(settings, system_name, window_s, hop_s)
+        self.carriers_hz = self.front.carriers_hz
+        self.tvm = tvm
+        self.settings, self.frame = settings, frame
+        self.rate_hz, self.window = self.front.rate_hz, self.front.window
+        self.fit = fit_of(self.window, self.rate_hz)
+        self.hold_s = hold_s
+        self.display = FailSafeDisplay(self.hold_s)
+        self._shown_reading = None
+        self.last_decision: Optional[Decision] = None
+        self.out = ReceiverOutputs()
+        self._publish(0.0)
+
+    def step(self, t: float, e_coil: np.ndarray, channel_faults=None) -> ReceiverOutputs:
+        """One frame of coil EMF (``channel_faults`` is the digital receiver's input: ignored)."""
+        self._publish(self.front.feed(t, e_coil, self._decide))
+        return self.out
+
+    def code_of(self, amplitudes: np.ndarray) -> int:
+        """The word or code the fitted amplitudes give, ``no_code`` for none."""
+        raise NotImplementedError
+
+    def publish_extra(self, out: ReceiverOutputs, read) -> None:
+        """Outputs of the system's own for a reading shown (none by default)."""
+
+    def read_window(self, time_s: float) -> Decision:
+        """What the current window gives (the system's module docstring): the carrier decoded,
+        the tones' amplitudes, the code — one the system does not read is none."""
+        best = self.front.carrier_to_decode()
+        if best is None:
+            return Decision(time_s, 0.0, None, self.no_code)
+        coefficients = self.fit @ self.front.offset_hz[best]
+        cos_sin = coefficients[1:].reshape(2, -1)
+        amplitudes = np.hypot(cos_sin[0], cos_sin[1]) / self.deviation_hz
+        code = self.code_of(amplitudes)
+        if code != self.no_code and self.tvm.reading(code) is None:
+            code = self.no_code
+        return Decision(time_s, float(self.carriers_hz[best]), amplitudes, code)
+
+    def _decide(self, time_s: float) -> None:
+        decision = self.read_window(time_s)
+        self.last_decision = decision
+        out = self.out
+        if decision.code == self.no_code:
+            key = None
+            if decision.carrier_hz:
+                out.errors += 1
+        else:
+            key = (decision.code, decision.carrier_hz)
+            out.decoded_codes += 1
+        # the system's partial order (codes on different carriers: never comparable)
+        if self.display.decide(key, time_s, self.tvm.at_most):
+            self._shown_reading = self.tvm.reading(key[0])
+
+    def _publish(self, level_v: float) -> None:
+        out = self.out
+        out.level_v = level_v
+        out.relay = level_v >= self.settings.squelch_v
+        shown = self.display.shown
+        if shown is None:
+            out.aspect, out.code, out.code_valid, out.free_blocks = sig.RED, self.no_code, False, 0
+            out.v_permitted_mps = out.v_target_mps = 0.0
+            out.target_distance_m = out.gradient_permille = out.word_carrier_hz = 0.0
+            return
+        code, carrier = shown
+        read = self._shown_reading
+        out.aspect, out.code, out.code_valid, out.free_blocks = read.aspect, code, True, read.free_blocks
+        out.v_permitted_mps, out.v_target_mps = read.step_kmh / 3.6, read.next_kmh / 3.6
+        self.publish_extra(out, read)
+        out.word_carrier_hz = carrier
