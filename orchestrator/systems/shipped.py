@@ -34,6 +34,7 @@ orchestrator/verdicts/system_checks.py). Train lengths come from the rolling-sto
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 import tempfile
 from functools import partial
 from pathlib import Path
@@ -80,15 +81,36 @@ def write_alsu(root: Path = SSP_ROOT, name: str = "alsu") -> Path:
     return path
 
 
-# TVM-430 on the high-speed line: 28 block sections of 1500 m at its 12 kHz (docs/rail_line.md,
-# sample rate of the TVM chain), so the signal FMUs are a build of 32 sections and 10 ms frames
-# of 120 samples (docs/architecture.md#build-sizes: the descriptor's build sizes, chain.sized_build)
-TVM430_FS_HZ = cab_systems.TVM430.sample_rate_hz
-TVM430_BUILD = sized_build(cab_systems.TVM430, 28, 2)
-TVM430_LINE, TVM430_STOCK = "hsl_tvm430_line.json", cab_systems.TVM430.default_stock
-TVM430_ARRIVAL_S, TVM430_STOP_TIME_S = 735.0, 860.0
-TVM430_TIMETABLE = {"train": "TGV 9001", "stops": [{"station": "Origine", "departure_s": 30},
-                                                   {"station": "Terminus", "arrival_s": TVM430_ARRIVAL_S}]}
+@dataclass(frozen=True)
+class HighSpeedLine:
+    """A TVM system on its high-speed line, single and following (the shipped tvm430 /
+    tvm430_following and tvm300 / tvm300_following pairs): the chain at the system's sample rate
+    on a sized build (chain.sized_build), high-speed sets of the system's stock."""
+
+    cab: cab_systems.CabSystem
+    line_file: str
+    sections: int                          # the line's track circuits (the build holds them)
+    timetable: dict                        # the single train's
+    stop_time_s: float
+    leader_origin: Tuple[str, float]       # following: where the leader stands, ahead of the follower
+    middle: Tuple[str, float]              # following: the follower's stop
+    leader_timetable: dict
+    follower_timetable: dict
+    leader_halt_s: Tuple[float, float]     # following: the leader's full service brake, from … until
+    following_stop_time_s: float
+    following_story: str                   # following: its scenario's description
+
+    @property
+    def build(self) -> BuildConfig:
+        return sized_build(self.cab, self.sections, 2)
+
+    @property
+    def stock_file(self) -> str:
+        return self.cab.default_stock
+
+    @property
+    def prefix(self) -> str:
+        return self.cab.name.lower()
 
 
 def sized_chain(cab: cab_systems.CabSystem, build: BuildConfig, trains: Sequence[Tuple[str, str]],
@@ -104,148 +126,108 @@ def sized_chain(cab: cab_systems.CabSystem, build: BuildConfig, trains: Sequence
     return chain, links, ato
 
 
-def tvm430_chain(trains: Sequence[Tuple[str, str]], files: Dict[str, str]):
-    return sized_chain(cab_systems.TVM430, TVM430_BUILD, trains, files)
+def write_high_speed(spec: HighSpeedLine, root: Path = SSP_ROOT, name: Optional[str] = None) -> Path:
+    """One high-speed set from Origine to Terminus under the system's cab signal."""
+    name = name or spec.prefix
+    line = _shipped_json(spec.line_file)
+    check_placements(line, [("train", _stop_m(line, "Origine"), stock_length_m(spec.stock_file))])
+    files = {"line_file": spec.line_file}
+    stock = {"rolling_stock_file": spec.stock_file}
+    timetable_file = f"{spec.prefix}_timetable.json"
+    chain, links, ato = sized_chain(spec.cab, spec.build, (("train", "ato"),), files)
+    components, connections = train_and_ato(
+        train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": timetable_file})
+    folder = root / name
+    path = write_ssd(folder, name, chain + components, connections + links, stop_time=spec.stop_time_s)
+    _write_json(folder / "resources" / spec.line_file, line)
+    _write_json(folder / "resources" / spec.stock_file, _shipped_json(spec.stock_file))
+    _write_json(folder / "resources" / timetable_file, spec.timetable)
+    return path
+
+
+def write_high_speed_following(spec: HighSpeedLine, root: Path = SSP_ROOT, name: Optional[str] = None) -> Path:
+    """Two high-speed sets: the leader ahead, held by a full service brake; the follower closes in
+    under the cab signal's steps, stands, follows and stops at the middle station."""
+    name = name or f"{spec.prefix}_following"
+    line = _with_station(_shipped_json(spec.line_file), *spec.leader_origin,
+                         f"{spec.leader_origin[0]}: where the leader of {name} stands, ahead of the follower")
+    line = _with_station(line, *spec.middle, f"{spec.middle[0]}: the follower's stop in {name}")
+    length_m = stock_length_m(spec.stock_file)
+    check_placements(line, [("leader", spec.leader_origin[1], length_m), ("follower", _stop_m(line, "Origine"), length_m)])
+    line_file = f"{name}_line.json"
+    files = {"line_file": line_file}
+    stock = {"rolling_stock_file": spec.stock_file}
+    trains = (("leader", "leader_ato"), ("follower", "follower_ato"))
+    chain, links, ato = sized_chain(spec.cab, spec.build, trains, files)
+    leader, leader_links = train_and_ato(
+        "leader", "leader_ato", train_parameters={**files, **stock, "x0": spec.leader_origin[1]},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "leader_timetable.json"})
+    follower, follower_links = train_and_ato(
+        "follower", "follower_ato", train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
+        ato_parameters={**ato, **files, **stock, "timetable_file": "follower_timetable.json"})
+    folder = root / name
+    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
+                     stop_time=spec.following_stop_time_s)
+    resources = folder / "resources"
+    _write_json(resources / line_file, line)
+    _write_json(resources / spec.stock_file, _shipped_json(spec.stock_file))
+    _write_json(resources / "leader_timetable.json", spec.leader_timetable)
+    _write_json(resources / "follower_timetable.json", spec.follower_timetable)
+    _write_json(folder / "scenario.json", leader_halt_scenario(spec.following_story, *spec.leader_halt_s))
+    return path
+
+
+# TVM-430 on the high-speed line: 28 block sections of 1500 m at its 12 kHz (docs/rail_line.md,
+# sample rate of the TVM chain), so the signal FMUs are a build of 32 sections and 10 ms frames
+# of 120 samples (docs/architecture.md#build-sizes). tvm430_following: the leader, standing at
+# "Origine est" ahead of the follower, departs at 30 s; the follower departs 3 min later
+# (TVM-430's headway on LGV Nord, docs/sources.md#tvm-430). The leader is held by a full service
+# brake from 445 s (≈ 25.5 km, 250 km/h) until 685 s: it stands at 27.7 km (block 19); the
+# follower, at 300 km/h, closes in under the steps 300 → 270 → 230 → 170 → 0, stands before the
+# buffer section (block 18, from 25.5 km), then follows it on to its stop at "Milieu" (33.75 km)
+# while the leader runs to Terminus
+TVM430_SPEC = HighSpeedLine(
+    cab_systems.TVM430, "hsl_tvm430_line.json", 28,
+    {"train": "TGV 9001", "stops": [{"station": "Origine", "departure_s": 30},
+                                    {"station": "Terminus", "arrival_s": 735.0}]}, 860.0,
+    ("Origine est", 1200.0), ("Milieu", 33750.0),
+    {"train": "TGV 9003 (leader)", "stops": [{"station": "Origine est", "departure_s": 30},
+                                             {"station": "Terminus", "arrival_s": 740}]},
+    {"train": "TGV 9005 (3 min behind)", "stops": [{"station": "Origine", "departure_s": 210},
+                                                   {"station": "Milieu", "arrival_s": 830}]},
+    (445.0, 685.0), 1100.0,
+    "TVM-430 at 3 min headway: the leader, held by a full service brake from 445 s at about 25.5 km until "
+    "685 s, stands in block 19 (27.7 km); the follower, 3 min behind at 300 km/h, closes in under the steps "
+    "300, 270, 230, 170 and 0 km/h, stands before the buffer section (25.5 km), follows when the blocks clear "
+    "and stops at Milieu (33.75 km) while the leader runs to Terminus.")
+TVM430_FS_HZ, TVM430_BUILD = cab_systems.TVM430.sample_rate_hz, TVM430_SPEC.build
+TVM430_LINE, TVM430_STOCK = TVM430_SPEC.line_file, TVM430_SPEC.stock_file
+
+# TVM-300 on its own high-speed line (fmus/data/shipped/hsl_tvm300_line.json,
+# docs/rail_line.md#tvm-300-line): 21 UM71 circuits of 2000 m, the same 12 kHz chain and sized
+# build. tvm300_following: the follower departs 4 min after the leader (TVM-300's headway on LGV
+# Atlantique, docs/sources.md#tvm-430 row 2); the leader is held from 445 s until 745 s; the
+# follower steps down the cascade 300 → 270 → 220 → 160 → 80 → 0 block by block, stands before the
+# buffer section, then follows it on to its stop at "Milieu"
+TVM300_SPEC = HighSpeedLine(
+    cab_systems.TVM300, "hsl_tvm300_line.json", 21,
+    {"train": "TGV 8501", "stops": [{"station": "Origine", "departure_s": 30},
+                                    {"station": "Terminus", "arrival_s": 760.0}]}, 880.0,
+    ("Origine est", 1200.0), ("Milieu", 33750.0),
+    {"train": "TGV 8503 (leader)", "stops": [{"station": "Origine est", "departure_s": 30},
+                                             {"station": "Terminus", "arrival_s": 800}]},
+    {"train": "TGV 8505 (4 min behind)", "stops": [{"station": "Origine", "departure_s": 270},
+                                                   {"station": "Milieu", "arrival_s": 900}]},
+    (445.0, 745.0), 1200.0,
+    "TVM-300 at 4 min headway: the leader, held by a full service brake from 445 s until 745 s, stands on "
+    "the line; the follower, 4 min behind at 300 km/h, steps down the cascade 300, 270, 220, 160, 80 and "
+    "0 km/h block by block, stands before the buffer section, follows when the blocks clear and stops at "
+    "Milieu (33.75 km) while the leader runs to Terminus.")
 
 
 def write_tvm430(root: Path = SSP_ROOT, name: str = "tvm430") -> Path:
-    line = _shipped_json(TVM430_LINE)
-    check_placements(line, [("train", _stop_m(line, "Origine"), stock_length_m(TVM430_STOCK))])
-    files = {"line_file": TVM430_LINE}
-    stock = {"rolling_stock_file": TVM430_STOCK}
-    chain, links, ato = tvm430_chain((("train", "ato"),), files)
-    components, connections = train_and_ato(
-        train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "tvm430_timetable.json"})
-    folder = root / name
-    path = write_ssd(folder, name, chain + components, connections + links, stop_time=TVM430_STOP_TIME_S)
-    _write_json(folder / "resources" / TVM430_LINE, line)
-    _write_json(folder / "resources" / TVM430_STOCK, _shipped_json(TVM430_STOCK))
-    _write_json(folder / "resources" / "tvm430_timetable.json", TVM430_TIMETABLE)
-    return path
-
-
-# tvm430_following: the leader, standing at "Origine est" ahead of the follower, departs at 30 s;
-# the follower departs 3 min later (TVM-430's headway on LGV Nord, docs/sources.md#tvm-430). The
-# leader is held by a full service brake from 445 s (≈ 25.5 km, 250 km/h) until 685 s: it stands
-# at 27.7 km (block 19); the follower, at 300 km/h, closes in under the steps 300 → 270 → 230 →
-# 170 → 0, stands before the buffer section (block 18, from 25.5 km), then follows it on to its
-# stop at "Milieu" (33.75 km) while the leader runs to Terminus
-TVM430_LEADER_ORIGIN = ("Origine est", 1200.0)
-TVM430_MIDDLE = ("Milieu", 33750.0)
-TVM430_LEADER_HALT_S = (445.0, 685.0)
-TVM430_LEADER_TIMETABLE = {"train": "TGV 9003 (leader)", "stops": [
-    {"station": TVM430_LEADER_ORIGIN[0], "departure_s": 30}, {"station": "Terminus", "arrival_s": 740}]}
-TVM430_FOLLOWER_TIMETABLE = {"train": "TGV 9005 (3 min behind)", "stops": [
-    {"station": "Origine", "departure_s": 210}, {"station": TVM430_MIDDLE[0], "arrival_s": 830}]}
-TVM430_FOLLOWING_STOP_TIME_S = 1100.0
-
-
-def write_tvm430_following(root: Path = SSP_ROOT, name: str = "tvm430_following") -> Path:
-    line = _with_station(_shipped_json(TVM430_LINE), *TVM430_LEADER_ORIGIN,
-                         "Origine est: where the leader of tvm430_following stands, ahead of the follower")
-    line = _with_station(line, *TVM430_MIDDLE, "Milieu: the follower's stop in tvm430_following")
-    length_m = stock_length_m(TVM430_STOCK)
-    check_placements(line, [("leader", TVM430_LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "Origine"), length_m)])
-    files = {"line_file": "tvm430_following_line.json"}
-    stock = {"rolling_stock_file": TVM430_STOCK}
-    trains = (("leader", "leader_ato"), ("follower", "follower_ato"))
-    chain, links, ato = tvm430_chain(trains, files)
-    leader, leader_links = train_and_ato(
-        "leader", "leader_ato", train_parameters={**files, **stock, "x0": TVM430_LEADER_ORIGIN[1]},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "leader_timetable.json"})
-    follower, follower_links = train_and_ato(
-        "follower", "follower_ato", train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "follower_timetable.json"})
-    folder = root / name
-    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
-                     stop_time=TVM430_FOLLOWING_STOP_TIME_S)
-    resources = folder / "resources"
-    _write_json(resources / "tvm430_following_line.json", line)
-    _write_json(resources / TVM430_STOCK, _shipped_json(TVM430_STOCK))
-    _write_json(resources / "leader_timetable.json", TVM430_LEADER_TIMETABLE)
-    _write_json(resources / "follower_timetable.json", TVM430_FOLLOWER_TIMETABLE)
-    _write_json(folder / "scenario.json", leader_halt_scenario(
-        "TVM-430 at 3 min headway: the leader, held by a full service brake from 445 s at about 25.5 km until "
-        "685 s, stands in block 19 (27.7 km); the follower, 3 min behind at 300 km/h, closes in under the steps "
-        "300, 270, 230, 170 and 0 km/h, stands before the buffer section (25.5 km), follows when the blocks clear "
-        "and stops at Milieu (33.75 km) while the leader runs to Terminus.", *TVM430_LEADER_HALT_S))
-    return path
-
-
-# TVM-300 on its own high-speed line (fmus/data/shipped/hsl_tvm300_line.json, docs/rail_line.md#tvm-300-line):
-# 21 UM71 circuits of 2000 m, the same 12 kHz chain and sized build as TVM-430's
-TVM300_BUILD = sized_build(cab_systems.TVM300, 21, 2)
-TVM300_LINE = "hsl_tvm300_line.json"
-TVM300_ARRIVAL_S, TVM300_STOP_TIME_S = 760.0, 880.0
-TVM300_TIMETABLE = {"train": "TGV 8501", "stops": [{"station": "Origine", "departure_s": 30},
-                                                   {"station": "Terminus", "arrival_s": TVM300_ARRIVAL_S}]}
-
-
-def write_tvm300(root: Path = SSP_ROOT, name: str = "tvm300") -> Path:
-    line = _shipped_json(TVM300_LINE)
-    stock_file = cab_systems.TVM300.default_stock
-    check_placements(line, [("train", _stop_m(line, "Origine"), stock_length_m(stock_file))])
-    files = {"line_file": TVM300_LINE}
-    stock = {"rolling_stock_file": stock_file}
-    chain, links, ato = sized_chain(cab_systems.TVM300, TVM300_BUILD, (("train", "ato"),), files)
-    components, connections = train_and_ato(
-        train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "tvm300_timetable.json"})
-    folder = root / name
-    path = write_ssd(folder, name, chain + components, connections + links, stop_time=TVM300_STOP_TIME_S)
-    _write_json(folder / "resources" / TVM300_LINE, line)
-    _write_json(folder / "resources" / stock_file, _shipped_json(stock_file))
-    _write_json(folder / "resources" / "tvm300_timetable.json", TVM300_TIMETABLE)
-    return path
-
-
-# tvm300_following: the leader, standing at "Origine est" ahead of the follower, departs at 30 s;
-# the follower departs 4 min later (TVM-300's headway on LGV Atlantique, docs/sources.md#tvm-430
-# row 2). The leader is held by a full service brake from 445 s until 745 s; the follower, at
-# 300 km/h, steps down the cascade 300 → 270 → 220 → 160 → 80 → 0 block by block, stands before
-# the buffer section, then follows it on to its stop at "Milieu" while the leader runs to Terminus
-TVM300_LEADER_ORIGIN = ("Origine est", 1200.0)
-TVM300_MIDDLE = ("Milieu", 33750.0)
-TVM300_LEADER_HALT_S = (445.0, 745.0)
-TVM300_LEADER_TIMETABLE = {"train": "TGV 8503 (leader)", "stops": [
-    {"station": TVM300_LEADER_ORIGIN[0], "departure_s": 30}, {"station": "Terminus", "arrival_s": 800}]}
-TVM300_FOLLOWER_TIMETABLE = {"train": "TGV 8505 (4 min behind)", "stops": [
-    {"station": "Origine", "departure_s": 270}, {"station": TVM300_MIDDLE[0], "arrival_s": 900}]}
-TVM300_FOLLOWING_STOP_TIME_S = 1200.0
-
-
-def write_tvm300_following(root: Path = SSP_ROOT, name: str = "tvm300_following") -> Path:
-    line = _with_station(_shipped_json(TVM300_LINE), *TVM300_LEADER_ORIGIN,
-                         "Origine est: where the leader of tvm300_following stands, ahead of the follower")
-    line = _with_station(line, *TVM300_MIDDLE, "Milieu: the follower's stop in tvm300_following")
-    stock_file = cab_systems.TVM300.default_stock
-    length_m = stock_length_m(stock_file)
-    check_placements(line, [("leader", TVM300_LEADER_ORIGIN[1], length_m), ("follower", _stop_m(line, "Origine"), length_m)])
-    files = {"line_file": "tvm300_following_line.json"}
-    stock = {"rolling_stock_file": stock_file}
-    trains = (("leader", "leader_ato"), ("follower", "follower_ato"))
-    chain, links, ato = sized_chain(cab_systems.TVM300, TVM300_BUILD, trains, files)
-    leader, leader_links = train_and_ato(
-        "leader", "leader_ato", train_parameters={**files, **stock, "x0": TVM300_LEADER_ORIGIN[1]},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "leader_timetable.json"})
-    follower, follower_links = train_and_ato(
-        "follower", "follower_ato", train_parameters={**files, **stock, "x0": _stop_m(line, "Origine")},
-        ato_parameters={**ato, **files, **stock, "timetable_file": "follower_timetable.json"})
-    folder = root / name
-    path = write_ssd(folder, name, chain + leader + follower, links + leader_links + follower_links,
-                     stop_time=TVM300_FOLLOWING_STOP_TIME_S)
-    resources = folder / "resources"
-    _write_json(resources / "tvm300_following_line.json", line)
-    _write_json(resources / stock_file, _shipped_json(stock_file))
-    _write_json(resources / "leader_timetable.json", TVM300_LEADER_TIMETABLE)
-    _write_json(resources / "follower_timetable.json", TVM300_FOLLOWER_TIMETABLE)
-    _write_json(folder / "scenario.json", leader_halt_scenario(
-        "TVM-300 at 4 min headway: the leader, held by a full service brake from 445 s until 745 s, stands on "
-        "the line; the follower, 4 min behind at 300 km/h, steps down the cascade 300, 270, 220, 160, 80 and "
-        "0 km/h block by block, stands before the buffer section, follows when the blocks clear and stops at "
-        "Milieu (33.75 km) while the leader runs to Terminus.", *TVM300_LEADER_HALT_S))
-    return path
+    return write_high_speed(TVM430_SPEC, root, name)
 
 
 def write_ato_only(root: Path = SSP_ROOT) -> Path:
@@ -534,9 +516,9 @@ for _system, _prefix in ((cab_systems.ALS_EN.name, "als_en"), (cab_systems.FIRE_
     SHIPPED[f"{_prefix}_following"] = partial(write_following, system=_system, name=f"{_prefix}_following")
 SHIPPED["alsu"] = write_alsu
 SHIPPED["tvm430"] = write_tvm430
-SHIPPED["tvm430_following"] = write_tvm430_following
-SHIPPED["tvm300"] = write_tvm300
-SHIPPED["tvm300_following"] = write_tvm300_following
+SHIPPED["tvm430_following"] = partial(write_high_speed_following, TVM430_SPEC)
+SHIPPED["tvm300"] = partial(write_high_speed, TVM300_SPEC)
+SHIPPED["tvm300_following"] = partial(write_high_speed_following, TVM300_SPEC)
 SHIPPED["alsu_following"] = partial(write_following, system=cab_systems.ALSU.name, name="alsu_following")
 SHIPPED["suburban"] = write_suburban
 # the suburban peak: ten EMUs at the suburban line's blocking-time headway (railcosim headway
