@@ -54,20 +54,9 @@ NO_CODE = 0
 #: the sub-frequencies are 1.1 Hz apart: 0.909 s is the shortest window resolving them
 WINDOW_S = 1.0 / SUB_FREQUENCY_SPACING_HZ
 HOP_S = 0.1                        # one decision every 0.1 s
-#: `inertia` 0: how long the code shown outlives its last support: it bridges a block boundary
-#: at the worst moment (the code of the block being left changes just before it, the windows
-#: straddling the change read nothing, up to a window and a hop; then the new block's carrier
-#: needs a window and two hops of its own), as TVM-430's hold
-HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 2.12 s
-#: from the instant the code at the coils is lost (no carrier, no or two sub-frequencies, an
-#: unused one) to the restrictive display (s): a window still holding part of the old code may
-#: read it (a whole window at most), then the hold, then the next decision (3.13 s)
-STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
-#: a code is shown within this of the instant it starts at the coils (from cold, on a new
-#: carrier, a permissive change): the carrier's rise through the baseband low-pass, the window
-#: filled, a decision boundary and one more to confirm (1.12 s; a restrictive change needs no
-#: confirmation: a hop less)
-STATED_DECODE_S = WINDOW_S + 2 * HOP_S + um71.BASEBAND_RISE_S
+#: the hold (2.12 s), stated latency (3.13 s) and decode time (1.12 s), by the rule of
+#: um71.decoder_times
+HOLD_S, STATED_LATENCY_S, STATED_DECODE_S = um71.decoder_times(WINDOW_S, HOP_S)
 
 
 def code_of_index(index: int) -> int:

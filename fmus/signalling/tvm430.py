@@ -68,24 +68,12 @@ FREE_BLOCKS_OPEN = 6                 # the `free_blocks` reported for "no target
 #: the 27 tones are 0.64 Hz apart: 1.5625 s is the shortest window resolving them
 WINDOW_S = 1.0 / TONE_SPACING_HZ
 HOP_S = 0.125                     # one decision every 0.125 s
-#: `inertia` 0: how long the word shown outlives its last support. It bridges a block boundary
-#: at the worst moment: the word of the block being left changes just before it (the windows
-#: straddling the change read nothing, up to a window and a hop), then the new block's carrier
-#: needs a window and two hops of its own; the ATP trips on a lost word (docs/ato.md#tvm-430)
-HOLD_S = 2 * WINDOW_S + 3 * HOP_S   # 3.5 s
-#: from the instant the word at the coils is lost (no carrier, a corrupted word, an unused field)
-#: to the restrictive display (s): a window that still holds part of the old word may read it
-#: (a whole window at most), then the hold, then the next decision (5.19 s). Measured: a lost
-#: carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
-#: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py)
-STATED_LATENCY_S = WINDOW_S + HOLD_S + HOP_S
-#: a word is shown within this of the instant it starts at the coils (from cold, on a new
-#: carrier, a change of word): the carrier rises above the squelch through the baseband
-#: low-pass, the window must fill with it, then a decision boundary and one more to confirm
-#: (1.82 s; a restrictive change needs no confirmation); an output read at step ends shows it
-#: by the end of the step. Measured: a carrier starting anywhere in a hop 1.69–1.818 s at
-#: 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430, decode time)
-STATED_DECODE_S = WINDOW_S + 2 * HOP_S + um71.BASEBAND_RISE_S
+#: the hold (3.5 s), stated latency (5.19 s) and decode time (1.82 s), by the rule of
+#: um71.decoder_times
+#: measured: a lost carrier 3.5 s, every single- and double-bit corruption 4.4 s at worst
+#: (tests/test_tvm430_receiver.py, benchmarks/tvm430_decode.py); a carrier starting anywhere in
+#: a hop shown 1.69–1.818 s after at 0.1 V, a change 1.25–1.75 s (docs/loco_receiver.md#tvm-430)
+HOLD_S, STATED_LATENCY_S, STATED_DECODE_S = um71.decoder_times(WINDOW_S, HOP_S)
 
 
 def check_bits(data: int) -> int:

@@ -14,3 +14,23 @@ CARRIERS_HZ = (1700.0, 2000.0, 2300.0, 2600.0)
 #: is above the squelch that much later (tests/test_tvm430_receiver.py checks it against the
 #: low-pass of fmus/loco_receiver/um71.py at 8 and 12 kHz); a decode time counts it
 BASEBAND_RISE_S = 0.0076
+
+
+def decoder_times(window_s: float, hop_s: float):
+    """(hold, stated latency, stated decode time) in s of a UM71 receiver that decides every
+    ``hop_s`` on a sliding window of ``window_s`` (the rule both TVM receivers follow, ours [U];
+    docs/loco_receiver.md#tvm-430):
+
+    * **hold** (``inertia`` 0), 2·window + 3·hop: how long the code shown outlives its last
+      support. It bridges a block boundary at the worst moment: the code of the block being left
+      changes just before it (the windows straddling the change read nothing, up to a window and
+      a hop), then the new block's carrier needs a window and two hops of its own;
+    * **stated latency**, window + hold + hop: from the instant the code at the coils is lost (no
+      carrier, a code not read) to the restrictive display — a window that still holds part of
+      the old code may read it (a whole window at most), then the hold, then the next decision;
+    * **stated decode time**, window + 2·hop + BASEBAND_RISE_S: a code is shown within this of
+      the instant it starts at the coils (from cold, on a new carrier, a permissive change): the
+      carrier's rise through the baseband low-pass, the window filled, a decision boundary and
+      one more to confirm (a restrictive change needs no confirmation: a hop less)."""
+    hold_s = 2 * window_s + 3 * hop_s
+    return hold_s, window_s + hold_s + hop_s, window_s + 2 * hop_s + BASEBAND_RISE_S
