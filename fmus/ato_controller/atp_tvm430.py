@@ -2,15 +2,18 @@
 docs/ato.md#tvm-430): which track circuit a word comes from, the constraints of a word, the
 trip curves at the stock's emergency deceleration and the service curves, and the stop point
 passed at danger. The line's track circuits are TVM's blocks; the ATP owns the state of a run
-(the last valid word, the intervention) and asks this for the curves."""
+(the last valid word, the intervention) and asks this for the curves; ``Tvm430Mode`` is the
+ATP's TVM430 mode (atp.py's CAB_SIGNAL_MODES) over them."""
 from __future__ import annotations
 
 import bisect
 import math
 from typing import Optional, Tuple
 
+from fmus.ato_controller.atp_modes import CabSignalMode, Indication
 from fmus.ato_controller.supervision import Constraints, Target, dv_sbi_mps
 from fmus.data.loader import Line
+from fmus.signalling import aspects as sig
 from fmus.units import MPS_PER_KMH, STANDARD_GRAVITY_MPS2
 
 # the control (trip) level lies this far above the cab's speed step (300 → 315 km/h,
@@ -140,3 +143,65 @@ class Tvm430Supervision:
                     service = min(service, curve - 2.0 * dv_sbi_mps(v))
                 permitted = min(permitted, max(service, 0.0))
         return trip, permitted
+
+
+class Tvm430Mode(CabSignalMode):
+    """TVM430: the cab's speed step ``v_permitted`` with a trip at its control level (step +
+    15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
+    target point (the word's block start + ``target_distance``) on a continuous curve from the
+    transmitted ``gradient`` and the train's braking; the word's block is found by its carrier
+    (``word_carrier``, :meth:`Tvm430Supervision.word_block`). A lost or invalid word is step 0,
+    acted upon as red-yellow and braked for at once (no driver's reaction)."""
+
+    inputs = ("aspect", "v_permitted", "v_target", "target_distance", "gradient", "word_carrier")
+    reaction_s = 0.0
+    lost_code_aspect = sig.RED_YELLOW
+    # the block rules announce a stop only four blocks ahead: a train at 300 km/h must plan at
+    # 0.58 m/s² or more (docs/ato.md#tvm-430)
+    plan_decel_capped = False
+    station_stop_replaces_signal_stops = True
+
+    def __init__(self, atp):
+        super().__init__(atp)
+        self.tvm = Tvm430Supervision(atp.line, atp.decel, atp.emergency_decel, atp.brake_lead_s)
+
+    def validate(self, x: float, shown: Indication) -> bool:
+        """A word from no block at or just behind the head is none; passing the last valid
+        word's stop point at a block marker is a signal passed at danger."""
+        valid = shown.code_valid and self.tvm.word_block(x, shown.word_carrier_hz) is not None
+        if self.tvm.passes_stop_point(x):
+            self.atp.signal_passed_at_danger()
+        return valid
+
+    def constraints(self, x, k, shown):
+        block = self.tvm.word_block(x, shown.word_carrier_hz)
+        if block is None:
+            return self.no_code()
+        return self.tvm.constraints(shown.v_permitted_mps, shown.v_target_mps, shown.target_distance_m,
+                                    shown.gradient_permille, block)
+
+    def no_code(self) -> Constraints:
+        return Constraints(0.0)               # the most restrictive indication: step 0
+
+    def remember(self, constraints, shown):
+        self.tvm.remember_stop(constraints)
+
+    # passing a block exit (the base rule): the word's targets lie where they are on the line
+    # (carrier matching), so the last valid word's constraints hold as they are until the new
+    # block's word shows; passing a stop point is counted where it lies (validate), not at a
+    # block exit
+
+    def levels(self, c, x, v, permitted, cab_ceiling_mps):
+        return self.tvm.levels(c, x, v, permitted, cab_ceiling_mps)
+
+    def fault(self, shown):
+        fault = super().fault(shown)
+        if fault is not None:
+            return fault
+        for name, value, lowest in (("v_permitted", shown.v_permitted_mps, 0.0), ("v_target", shown.v_target_mps, 0.0),
+                                    ("target_distance", shown.target_distance_m, 0.0),
+                                    ("gradient", shown.gradient_permille, -math.inf),
+                                    ("word_carrier", shown.word_carrier_hz, 0.0)):
+            if not (math.isfinite(value) and value >= lowest):
+                return name, f"TVM-430 {name} = {value:g} is impossible"
+        return None
