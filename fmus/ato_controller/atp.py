@@ -17,8 +17,15 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
   target point (the word's block start + ``target_distance``) on a continuous curve from the
   transmitted ``gradient`` and the train's braking; the word's block is found by its carrier
-  (``word_carrier``, atp_tvm430.py ``Tvm430Supervision.word_block``). See "TVM-430 supervision" below.
+  (``word_carrier``, atp_tvm430.py ``TvmBlocks.word_block``). See "TVM-430 supervision" below.
+  ``"TVM300"``: fixed steps, no continuous curve — the step ``v_permitted`` until the exit of the
+  word's block, the next step ``v_target`` from there, each with a trip at its control level,
+  and a stop at the exit of an 80→0 or 0→0 block (atp_tvm300.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
+
+  Each mode is a class (atp_modes.py, atp_tvm430.py, atp_tvm300.py) named in the table
+  ``CAB_SIGNAL_MODES``; the ATP keeps the state of a run and asks its mode object (``Atp.cab``)
+  what an indication imposes, what passing a signal does, and its trip levels.
 
 Fail-safe rules (never more permissive than the last valid code):
 
@@ -67,6 +74,7 @@ from typing import Dict, Optional, Type
 
 from fmus.ato_controller.atp_modes import (DEPARTURE_ASPECTS, T_DRIVER_S, AlsnMode, AlsuMode,  # noqa: F401
                                           CabSignalMode, DigitalMode, Indication, NoCabSignal)
+from fmus.ato_controller.atp_tvm300 import Tvm300Mode
 from fmus.ato_controller.atp_tvm430 import Tvm430Mode
 from fmus.ato_controller.speed_restrictions import SpeedRestrictions
 from fmus.ato_controller.supervision import Constraints, Target, dv_ebi_mps, dv_sbi_mps
@@ -76,10 +84,10 @@ from fmus.data.loader import Line
 from fmus.errors import FmuInputError
 
 #: the ATP's cab-signal modes by their ``cab_signal`` name: how it reads each (atp_modes.py,
-#: atp_tvm430.py); adding a mode is a class and a row here
+#: atp_tvm430.py, atp_tvm300.py); adding a mode is a class and a row here
 CAB_SIGNAL_MODES: Dict[str, Type[CabSignalMode]] = {
     AtoMode.ALSN: AlsnMode, AtoMode.ALSU: AlsuMode, AtoMode.DIGITAL: DigitalMode, AtoMode.TVM430: Tvm430Mode,
-    AtoMode.OFF: NoCabSignal}
+    AtoMode.TVM300: Tvm300Mode, AtoMode.OFF: NoCabSignal}
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
 _INF = math.inf
 # below this the train stands (a tachometer's resolution; the ATO's arrival test uses the same)

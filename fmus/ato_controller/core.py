@@ -259,7 +259,8 @@ class AtoCore:
              vigilance_ack: bool = False, cab_code: int = 0, target_distance: float = 0.0,
              gradient: float = 0.0, word_carrier: float = 0.0) -> AtoOutputs:
         """One ATO step; ``target_distance`` (m), ``gradient`` (‰) and ``word_carrier`` (Hz) are
-        the TVM-430 receiver's outputs, read in TVM430 mode."""
+        the TVM-430 receiver's outputs, read in TVM430 mode (``word_carrier`` in TVM300 mode too);
+        which inputs a mode reads: CabSignalMode.inputs."""
         shown = Indication(aspect, code_valid, v_permitted, v_target, free_blocks, cab_code, target_distance,
                            gradient, word_carrier)
         self.fault = measurement_fault(self.atp.cab, x, v, shown)
@@ -270,7 +271,7 @@ class AtoCore:
             self.stop_approach.brake.advance(t, v)
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
         atp = self.atp.supervise_indication(t, x, v, shown)
-        # TVM430: a word on a carrier of no block of ours is no word (Tvm430Supervision.word_block)
+        # TVM: a word on a carrier of no block of ours is no word (TvmBlocks.word_block)
         permissive = self.atp.permits_departure(aspect, self.atp.code_shown, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)

@@ -63,8 +63,10 @@ class AtoController(FacadeSlave):
                  description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code_valid", "input", "Boolean", start=False,
                  description="the receiver shows a received code; false: the fail-safe memory of the last valid code applies"),
-            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
-            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
+            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
+                 description="digital systems; TVM: the step in force"),
+            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
+                 description="digital systems; TVM: the next step, at the word's block exit"),
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
             Port("cab_code", "input", "Integer", start=0, min=0, bad_input="unit",
                  description=f"{AtoMode.ALSU}: the code the receiver shows (its code output), 0 none"),
@@ -73,7 +75,7 @@ class AtoController(FacadeSlave):
             Port("gradient", "input", unit="1", start=0.0, bad_input="unit",
                  description=f"{AtoMode.TVM430}: most falling gradient to the target point, per mille, + uphill"),
             Port("word_carrier", "input", unit="Hz", start=0.0, min=0.0, bad_input="unit",
-                 description=f"{AtoMode.TVM430}: carrier of the track circuit the shown word came from; 0 none"),
+                 description=f"{AtoMode.TVM430}, {AtoMode.TVM300}: carrier of the track circuit the shown word came from; 0 none"),
             # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
             # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
             Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
