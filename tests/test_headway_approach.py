@@ -212,7 +212,7 @@ def fresh_atp(setup):
     of approach.py leaves them out)."""
     atp = setup.atp
     fresh = Atp(setup.line, setup.category, setup.stock.length_m, atp.mode, atp.decel, atp.latency_s,
-                emergency_decel_mps2=atp.tvm.emergency_decel, brake_lead_s=atp.tvm.brake_lead_s)
+                emergency_decel_mps2=atp.emergency_decel, brake_lead_s=atp.brake_lead_s)
     fresh.limits = [math.inf] * len(fresh.limits)
     fresh.restrictions.of_line = ()
     return fresh

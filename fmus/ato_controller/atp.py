@@ -17,8 +17,15 @@ What it supervises at each step, as constraints (a ceiling now and targets ahead
   15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
   target point (the word's block start + ``target_distance``) on a continuous curve from the
   transmitted ``gradient`` and the train's braking; the word's block is found by its carrier
-  (``word_carrier``, atp_tvm430.py ``Tvm430Supervision.word_block``). See "TVM-430 supervision" below.
+  (``word_carrier``, atp_tvm430.py ``TvmBlocks.word_block``). See "TVM-430 supervision" below.
+  ``"TVM300"``: fixed steps, no continuous curve — the step ``v_permitted`` until the exit of the
+  word's block, the next step ``v_target`` from there, each with a trip at its control level,
+  and a stop at the exit of an 80→0 or 0→0 block (atp_tvm300.py).
   ``"off"``: line limits only (plant studies without a signalling chain).
+
+  Each mode is a class (atp_modes.py, atp_tvm430.py, atp_tvm300.py) named in the table
+  ``CAB_SIGNAL_MODES``; the ATP keeps the state of a run and asks its mode object (``Atp.cab``)
+  what an indication imposes, what passing a signal does, and its trip levels.
 
 Fail-safe rules (never more permissive than the last valid code):
 
@@ -63,31 +70,28 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Dict, Optional, Type
 
-from fmus.ato_controller.atp_tvm430 import Tvm430Supervision
+from fmus.ato_controller.atp_modes import (DEPARTURE_ASPECTS, T_DRIVER_S, AlsnMode, AlsuMode,  # noqa: F401
+                                          CabSignalMode, DigitalMode, Indication, NoCabSignal)
+from fmus.ato_controller.atp_tvm300 import Tvm300Mode
+from fmus.ato_controller.atp_tvm430 import Tvm430Mode
 from fmus.ato_controller.speed_restrictions import SpeedRestrictions
 from fmus.ato_controller.supervision import Constraints, Target, dv_ebi_mps, dv_sbi_mps
-from fmus.signalling import alsu
 from fmus.signalling import aspects as sig
+from fmus.signalling.cab_systems import AtoMode
 from fmus.data.loader import Line
-from fmus.signalling.digital_messages import FREE_BLOCKS_OPEN
 from fmus.errors import FmuInputError
-from fmus.signalling.alsn import EQUIPMENT_INERTIA_S
-from fmus.units import MPS_PER_KMH
 
-CAB_SIGNAL_MODES = ("ALSN", "ALSU", "digital", "TVM430", "off")
+#: the ATP's cab-signal modes by their ``cab_signal`` name: how it reads each (atp_modes.py,
+#: atp_tvm430.py, atp_tvm300.py); adding a mode is a class and a row here
+CAB_SIGNAL_MODES: Dict[str, Type[CabSignalMode]] = {
+    AtoMode.ALSN: AlsnMode, AtoMode.ALSU: AlsuMode, AtoMode.DIGITAL: DigitalMode, AtoMode.TVM430: Tvm430Mode,
+    AtoMode.TVM300: Tvm300Mode, AtoMode.OFF: NoCabSignal}
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
-# aspects a train may start on (docs/ato.md, departure hold): red-yellow too, since it permits
-# moving up to the exit signal, which the ATP supervises as a stop target; white (no code) and
-# red never
-DEPARTURE_ASPECTS = (sig.GREEN, sig.YELLOW, sig.RED_YELLOW)
 _INF = math.inf
 # below this the train stands (a tachometer's resolution; the ATO's arrival test uses the same)
 STANDSTILL_MPS = 1e-3
-# driver's (here the ATO's) reaction time before a lower ceiling is supervised on its braking
-# curve: ETCS T_driver (docs/sources.md#atp-margins-etcs)
-T_DRIVER_S = 4.0
 
 
 @dataclass
@@ -158,10 +162,8 @@ class Atp:
         self.mode = cab_signal
         self.decel = supervision_decel_mps2
         self.latency_s = decoding_latency_s
-        self.alsu = alsu.system() if cab_signal == "ALSU" else None
-        self.last_valid_code = 0                 # ALSU: the code of the last valid indication
-        # the receiver's display hold: how long it may show the previous section's code
-        self.inertia_s = alsu.EQUIPMENT_INERTIA_S if cab_signal == "ALSU" else EQUIPMENT_INERTIA_S
+        self.emergency_decel = emergency_decel_mps2 if emergency_decel_mps2 > 0 else supervision_decel_mps2
+        self.brake_lead_s = max(brake_lead_s, 0.0)
         # "sections" here are blocks, signal to signal (a track circuit without a signal at its
         # exit, e.g. in a station throat, is no signal to pass)
         self.section_starts = [start for start, _ in line.block_bounds]
@@ -185,12 +187,17 @@ class Atp:
         self.signals_passed_at_danger = 0
         self.max_overspeed_mps = 0.0
         self.restrictions = SpeedRestrictions(line, category, train_length_m, supervision_decel_mps2)
-        # TVM430: the words' blocks and the trip curves
-        self.tvm = Tvm430Supervision(line, supervision_decel_mps2,
-                                     emergency_decel_mps2 if emergency_decel_mps2 > 0 else supervision_decel_mps2,
-                                     max(brake_lead_s, 0.0))
-        self.trip_mps = _INF                     # TVM430: the trip level at the head, last step
-        self.code_shown = False                  # a valid code at the last step (TVM430: a word of ours)
+        #: how this run's mode reads the cab signal (CAB_SIGNAL_MODES)
+        self.cab: CabSignalMode = CAB_SIGNAL_MODES[cab_signal](self)
+        # the receiver's display hold: how long it may show the previous section's code
+        self.inertia_s = self.cab.display_hold_s
+        self.trip_mps = _INF                     # the mode's trip level at the head, last step (TVM)
+        self.code_shown = False                  # a valid code at the last step (TVM: a word of ours)
+
+    @property
+    def tvm(self):
+        """The TVM modes' block supervision (their words' blocks, their curves); None in the others."""
+        return self.cab.tvm
 
     # ---- geometry ---------------------------------------------------------------------------
     def section_of(self, x: float) -> Optional[int]:
@@ -219,42 +226,12 @@ class Atp:
         return c
 
     # ---- cab signal -------------------------------------------------------------------------
-    def _alsn(self, aspect: int, k: Optional[int]) -> Constraints:
-        ceiling, at_signal = sig.alsn_speeds_mps(self.category, aspect)
-        c = Constraints(_INF if ceiling is None else ceiling)
-        if at_signal is not None and k is not None:
-            c.targets.append(Target(self.exit_signal_m(k), at_signal, signal=at_signal == 0.0))
-        return c
-
-    def _digital(self, v_permitted: float, v_target: float, free_blocks: int, k: Optional[int]) -> Constraints:
-        c = Constraints(max(v_permitted, 0.0))
-        if k is not None:
-            target = max(v_target, 0.0)
-            c.targets.append(Target(self.exit_signal_m(k), target, signal=target == 0.0))
-            if free_blocks < FREE_BLOCKS_OPEN:       # the section after the free ones is occupied
-                c.targets.append(Target(self.exit_signal_m(k, max(free_blocks, 0)), 0.0, signal=True))
-        return c
-
-    def _alsu(self, code: int, k: Optional[int]) -> Constraints:
-        """The constraints of an ALSU code: its ceiling from now on, and its speed at the exit
-        signal of the current section on its braking's curve (a stop there if 0)."""
-        ind = self.alsu.indication(code, self.category)
-        c = Constraints(ind.permitted_kmh * MPS_PER_KMH)
-        if k is not None and ind.target_kmh < ind.permitted_kmh:
-            target = ind.target_kmh * MPS_PER_KMH
-            c.targets.append(Target(self.exit_signal_m(k), target, signal=target == 0.0,
-                                    braking_share=alsu.BRAKING_SHARE[self.alsu.braking(code)]))
-        return c
-
     def permits_departure(self, aspect: int, code_valid: bool, v_permitted_mps: float) -> bool:
         """A standing train may start only on a valid permissive cab code (docs/ato.md,
         departure hold): what the receiver shows now, not a remembered code. ``off`` (no cab
-        signal) always permits; digital also needs a permitted speed above zero."""
-        if self.mode == "off":
-            return True
-        if not code_valid or int(aspect) not in DEPARTURE_ASPECTS:
-            return False
-        return self.mode in ("ALSN", "ALSU") or v_permitted_mps > 0.0
+        signal) always permits; the modes with speeds also need a permitted speed above zero
+        (CabSignalMode.permits_departure)."""
+        return self.cab.permits_departure(aspect, code_valid, v_permitted_mps)
 
     def indication_constraints(self, x: float, aspect: int = sig.WHITE, code: int = 0, v_permitted: float = 0.0,
                                v_target: float = 0.0, free_blocks: int = 0, target_distance_m: float = 0.0,
@@ -264,23 +241,9 @@ class Atp:
         kept — not the last valid code, the assumption after passing a signal, nor the curve of a
         falling ceiling — and no line limit. For planning without a run (the approach of a block,
         orchestrator/headway/approach.py). TVM430: a word on no carrier of ours is no word."""
-        k = self.section_of(x)
-        if self.mode == "ALSN":
-            return self._alsn(aspect, k)
-        if self.mode == "ALSU":
-            return self._alsu(code, k)
-        if self.mode == "TVM430":
-            block = self.tvm.word_block(x, word_carrier_hz)
-            return self._no_code() if block is None else \
-                self.tvm.constraints(v_permitted, v_target, target_distance_m, gradient_permille, block)
-        if self.mode == "digital":
-            return self._digital(v_permitted, v_target, free_blocks, k)
-        return Constraints()
-
-    def _no_code(self) -> Constraints:
-        if self.mode == "TVM430":
-            return Constraints(0.0)               # the most restrictive indication: step 0
-        return self._alsn(sig.WHITE, None)
+        shown = Indication(aspect, True, v_permitted, v_target, free_blocks, code, target_distance_m,
+                           gradient_permille, word_carrier_hz)
+        return self.cab.constraints(x, self.section_of(x), shown)
 
     def supervise(self, t: float, x: float, v: float, aspect: int, code_valid: bool,
                   v_permitted: float, v_target: float, free_blocks: int, code: int = 0,
@@ -288,51 +251,42 @@ class Atp:
                   word_carrier_hz: float = 0.0) -> AtpResult:
         """One step; ``code`` is the ALSU code shown (the receiver's ``code``), read in ALSU mode;
         ``target_distance_m``, ``gradient_permille`` and ``word_carrier_hz`` in TVM430 mode."""
+        return self.supervise_indication(t, x, v, Indication(aspect, code_valid, v_permitted, v_target, free_blocks,
+                                                             code, target_distance_m, gradient_permille,
+                                                             word_carrier_hz))
+
+    def supervise_indication(self, t: float, x: float, v: float, shown: Indication) -> AtpResult:
+        """One step with the receiver's outputs ``shown`` (:meth:`supervise`)."""
         result = AtpResult()
-        word_block = None
-        if self.mode == "TVM430":
-            word_block = self.tvm.word_block(x, word_carrier_hz) if code_valid else None
-            code_valid = word_block is not None       # a word from no block behind us is none
-            if self.tvm.passes_stop_point(x):         # a stop at a block marker passed: at danger
-                self.signals_passed_at_danger += 1
-                self._emergency()
+        cab = self.cab
+        code_valid = cab.validate(x, shown)
         self.code_shown = code_valid
         c = self.line_constraints(x, v)
         c.add(self.restrictions.constraints(x, v))
         k = self.section_of(x)
         acted_aspect = sig.GREEN
-        if self.mode != "off":
+        if cab.has_cab_signal:
             crossed = self.section is not None and k != self.section
             if crossed:
                 self._passed_signal(t)
             self.section = k
-            if self.mode == "ALSN":
-                shown = self._alsn(aspect, k)
-            elif self.mode == "ALSU":
-                shown = self._alsu(code, k) if code_valid else self._no_code()
-            elif self.mode == "TVM430":
-                shown = self.tvm.constraints(v_permitted, v_target, target_distance_m, gradient_permille, word_block) \
-                    if code_valid else self._no_code()
-            else:
-                shown = self._digital(v_permitted, v_target, free_blocks, k) if code_valid else self._no_code()
-            acted_aspect = int(aspect) if code_valid or self.mode != "TVM430" else sig.RED_YELLOW
-            cab = Constraints()
+            constraints = cab.shown_constraints(x, k, shown, code_valid)
+            acted_aspect = int(shown.aspect) if code_valid or cab.lost_code_aspect is None else cab.lost_code_aspect
+            in_force = Constraints()
             if code_valid:
-                self.last_valid, self.last_valid_aspect, self.last_valid_s = shown, int(aspect), t
-                self.last_valid_code = int(code)
-                if self.mode == "TVM430":
-                    self.tvm.remember_stop(shown)
+                self.last_valid, self.last_valid_aspect, self.last_valid_s = constraints, int(shown.aspect), t
+                cab.remember(constraints, shown)
             elif self.last_valid is not None:
                 # no code displayed (the receiver's hold is over): the last valid code's
                 # constraints stay where they were, with the no-code ones
-                cab.add(self.last_valid)
+                in_force.add(self.last_valid)
                 if sig.restrictiveness(self.last_valid_aspect) < sig.restrictiveness(acted_aspect):
                     acted_aspect = self.last_valid_aspect
-            cab.add(shown)
+            in_force.add(constraints)
             if t < self.assumed_until and self.assumed is not None:
-                cab.add(self.assumed)        # constraints only: the reported aspect stays the shown one
-            c.add(self._ceiling_on_a_curve(cab, x, v))
-            result.stop_now = acted_aspect == sig.RED and self.mode in ("ALSN", "ALSU")
+                in_force.add(self.assumed)   # constraints only: the reported aspect stays the shown one
+            c.add(self._ceiling_on_a_curve(in_force, x, v))
+            result.stop_now = acted_aspect == sig.RED and cab.stops_on_red
         result.aspect = acted_aspect
         result.constraints = c
         result.ceiling_mps = c.ceiling_mps
@@ -343,9 +297,7 @@ class Atp:
                 permitted = min(permitted, math.sqrt(target.speed_mps ** 2 + 2.0 * decel * (target.position_m - x)))
             else:
                 permitted = min(permitted, target.speed_mps)
-        trip = _INF
-        if self.mode == "TVM430":
-            trip, permitted = self.tvm.levels(c, x, v, permitted, self.cab_ceiling_mps)
+        trip, permitted = cab.levels(c, x, v, permitted, self.cab_ceiling_mps)
         self.trip_mps = trip
         result.permitted_mps = permitted
         self.max_overspeed_mps = max(self.max_overspeed_mps, v - c.ceiling_mps)
@@ -355,9 +307,9 @@ class Atp:
     def _ceiling_on_a_curve(self, cab: Constraints, x: float, v: float) -> Constraints:
         """The cab-signal constraints with a fall of their ceiling below the speed supervised
         on a braking curve: the lower ceiling becomes a target at the point the train reaches
-        it braking at the supervision deceleration after T_DRIVER_S, the ceiling before the
-        fall holding until there (service brake first; the emergency brake only if the train
-        overruns that curve by dV_ebi)."""
+        it braking at the supervision deceleration after the mode's reaction time (T_DRIVER_S;
+        TVM: none), the ceiling before the fall holding until there (service brake first; the
+        emergency brake only if the train overruns that curve by dV_ebi)."""
         ceiling = cab.ceiling_mps
         drop = self.ceiling_drop
         if drop is not None:
@@ -377,61 +329,25 @@ class Atp:
         return Constraints(max(ceiling, self.ceiling_before_mps), cab.targets + [drop])
 
     def _reach_m(self, v: float, ceiling: float) -> float:
-        # TVM430: a lost word is braked for at once (the cab's reaction, no driver's time)
-        reaction = 0.0 if self.mode == "TVM430" else T_DRIVER_S
+        reaction = self.cab.reaction_s
         return v * reaction + (v * v - ceiling * ceiling) / (2.0 * self.decel)
 
     def _passed_signal(self, t: float) -> None:
-        """The head passed the exit signal of the previous section."""
-        previous = self.section
+        """The head passed the exit signal of the previous section: the mode says what the ATP
+        assumes until the new section's code can have been decoded (CabSignalMode.passed_signal)."""
         active = self.last_valid_aspect
         if self.assumed is not None and t < self.assumed_until \
                 and sig.restrictiveness(self.assumed_aspect) < sig.restrictiveness(active):
             active = self.assumed_aspect
-        if self.mode == "ALSN":
-            if active == sig.RED_YELLOW:
-                self.signals_passed_at_danger += 1
-                self._emergency()
-            # past the line's last block signal there is no section whose code to assume
-            entered = None if previous is None or previous + 1 >= len(self.section_ends) else previous + 1
-            if active == sig.GREEN:
-                # the worst the new section can carry is yellow (a yellow-green signal is sent
-                # as green too), whose consequence is a red signal at its end: a stop target at
-                # the exit of the section after the new one, not yellow's speed step
-                self.assumed_aspect = sig.YELLOW
-                self.assumed = Constraints() if entered is None else \
-                    Constraints(_INF, [Target(self.exit_signal_m(entered, 1), 0.0, signal=True)])
-            else:
-                degraded = sig.RED_YELLOW if active == sig.YELLOW else sig.RED
-                self.assumed_aspect = degraded
-                self.assumed = self._alsn(degraded, entered)
-        elif self.mode == "ALSU":
-            shown = self.last_valid_code if self.last_valid is not None else 0
-            if shown and self.alsu.indication(shown, self.category).target_kmh == 0.0:
-                self.signals_passed_at_danger += 1      # passed the signal its code said to stop at
-                self._emergency()
-            entered = None if previous is None or previous + 1 >= len(self.section_ends) else previous + 1
-            worst = self.alsu.worst_next(shown) if shown else alsu.RED_CODE
-            self.assumed_aspect = self.alsu.indication(worst, self.category).aspect
-            self.assumed = self._alsu(worst, entered)
-        elif self.mode == "TVM430":
-            # the word's targets lie where they are on the line (carrier matching), so the last
-            # valid word's constraints hold as they are until the new block's word shows; passing
-            # a stop point is counted where it lies (Tvm430Supervision.passes_stop_point), not at a block exit
-            self.assumed_aspect = active
-            self.assumed = self.last_valid
-        else:
-            stop_here = self.last_valid is not None and any(
-                tg.signal and abs(tg.position_m - self.section_ends[previous]) < 1e-6
-                for tg in self.last_valid.targets) if previous is not None else False
-            if stop_here:
-                self.signals_passed_at_danger += 1
-                self._emergency()
-            self.assumed_aspect = active
-            self.assumed = self.last_valid
+        self.assumed_aspect, self.assumed = self.cab.passed_signal(self.section, active)
         # the receiver may display the previous section's code until it has decoded the new
         # one, or for its display hold when the new code is lost (at most the ALSN inertia)
         self.assumed_until = t + max(self.latency_s, self.inertia_s)
+
+    def signal_passed_at_danger(self) -> None:
+        """A signal (a stop point) passed at danger: counted, and the emergency brake applied."""
+        self.signals_passed_at_danger += 1
+        self._emergency()
 
     def apply_emergency(self) -> None:
         """Emergency brake until standstill, counted once per application (a fault: core.py)."""
@@ -444,7 +360,7 @@ class Atp:
             self.interventions += 1
 
     def _intervene(self, v: float, permitted: float, trip: float = _INF) -> int:
-        """``trip``: TVM430's trip level (it replaces the dV_ebi margin); inf in the other modes."""
+        """``trip``: the mode's trip level (TVM: it replaces the dV_ebi margin); inf in the other modes."""
         if self.emergency_latched and v <= STANDSTILL_MPS:
             self.emergency_latched = False
         if v > (trip if trip < _INF else permitted + dv_ebi_mps(v)):
@@ -476,6 +392,6 @@ class Atp:
         if self.vigilance is None:
             return
         shown = int(aspect) if code_valid else sig.WHITE
-        checked = self.mode != "off" and shown in sig.VIGILANCE_ASPECTS
+        checked = self.cab.has_cab_signal and shown in sig.VIGILANCE_ASPECTS
         if self.vigilance.step(t, checked, pressed, ato_answers):
             self._emergency()

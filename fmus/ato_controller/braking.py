@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
-from fmus.signalling import aspects as sig
 from fmus.units import STANDARD_GRAVITY_MPS2
 
 _INF = math.inf
@@ -70,7 +69,7 @@ class TargetBraking:
         stop_point = self._stop_targets[stage]
         targets = [stop_point]
         for target in atp_result.constraints.targets:
-            if target.signal and self.settings.cab_signal == "TVM430" \
+            if target.signal and self.atp.cab.station_stop_replaces_signal_stops \
                     and target.position_m >= stop_point.position_m - s.stop_window_m:
                 continue        # a TVM stop at the station's stop point (or beyond): the stop point itself
             share = target.braking_share * self._gradient_share(target)
@@ -95,12 +94,11 @@ class TargetBraking:
         return max(self.a_plan - pull, 0.1 * self.a_plan) / self.a_plan
 
     def aspect_driving(self, x: float, atp_result) -> Tuple[float, List[BrakingTarget]]:
-        """How the ATO itself drives under the ALSN aspect the ATP acts upon (the book's МИИТ
-        reactions, fmus/signalling/aspects.py ``ALSN_DRIVING_KMH``): the top of its band and its
-        own target at the exit signal, below the supervised speeds."""
-        if self.settings.cab_signal != "ALSN":
-            return _INF, []
-        band, at_signal = sig.alsn_driving_mps(self.category, atp_result.aspect)
+        """How the ATO itself drives under the aspect the ATP acts upon, in the modes that give
+        it speeds of its own (CabSignalMode.driving_speeds; ALSN: the book's МИИТ reactions,
+        fmus/signalling/aspects.py ``ALSN_DRIVING_KMH``): the top of its band and its own target
+        at the exit signal, below the supervised speeds."""
+        band, at_signal = self.atp.cab.driving_speeds(self.category, atp_result.aspect)
         targets = []
         if at_signal is not None and at_signal > 0.0:
             k = self.atp.section_of(x)

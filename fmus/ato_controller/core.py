@@ -18,10 +18,12 @@ import numpy as np
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
+from fmus.signalling.cab_systems import AtoMode
 from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
-from fmus.ato_controller.atp import (EMERGENCY_INTERVENTION, NO_INTERVENTION, SERVICE_INTERVENTION,
-                                     STANDSTILL_MPS, Atp, AtpResult)
+from fmus.ato_controller.atp import (CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION, NO_INTERVENTION,
+                                     SERVICE_INTERVENTION, STANDSTILL_MPS, Atp, AtpResult)
+from fmus.ato_controller.atp_modes import CabSignalMode, Indication
 from fmus.ato_controller.braking import BrakingTarget, TargetBraking
 from fmus.ato_controller.supervision import Constraints
 from fmus.ato_controller.driving import STRATEGIES, Controllers, make_strategy
@@ -80,45 +82,21 @@ DIGITAL_CODE_LOSS_GRACE_S = 3.0
 
 def judged_measurements(cab_signal: str) -> Tuple[str, ...]:
     """The measurements whose impossible values the ATP answers with the emergency brake
-    (measurement_fault) in a cab-signal mode: position and speed always, the aspect
-    with a cab signal, the digital speeds and free blocks with a digital one. The others the
-    controller does not read in that mode."""
-    return ("x", "v") + {"off": (), "ALSN": ("aspect",), "ALSU": ("aspect", "cab_code"),
-                         "digital": ("aspect", "v_permitted", "v_target", "free_blocks"),
-                         "TVM430": ("aspect", "v_permitted", "v_target", "target_distance", "gradient",
-                                    "word_carrier")}.get(cab_signal, ())
+    (measurement_fault) in a cab-signal mode: position and speed always, and the inputs the
+    mode reads (CabSignalMode.inputs: the aspect with a cab signal, the digital speeds and free
+    blocks with a digital one, …). The others the controller does not read in that mode."""
+    mode = CAB_SIGNAL_MODES.get(cab_signal)
+    return ("x", "v") + (() if mode is None else mode.inputs)
 
 
-def measurement_fault(cab_signal: str, alsu_system, x: float, v: float, aspect: int, v_permitted: float,
-                      v_target: float, free_blocks: int, cab_code: int = 0, code_valid: bool = False,
-                      target_distance: float = 0.0, gradient: float = 0.0,
-                      word_carrier: float = 0.0) -> Optional[Tuple[str, str]]:
-    """(input, why) when a measurement the ATP relies on cannot be true in mode ``cab_signal``
-    (``alsu_system``: the ALSU code table under ALSU), else None. Which measurements it judges:
-    :func:`judged_measurements`."""
+def measurement_fault(mode: CabSignalMode, x: float, v: float, shown: Indication) -> Optional[Tuple[str, str]]:
+    """(input, why) when a measurement the ATP relies on cannot be true in cab-signal mode
+    ``mode`` (the ATP's), else None. Which measurements it judges: :func:`judged_measurements`."""
     if not math.isfinite(x):
         return "x", f"measured position x = {x:g} m is not finite"
     if not math.isfinite(v) or v < -NEGATIVE_SPEED_TOLERANCE_MPS:
         return "v", f"measured speed v = {v:g} m/s is impossible"
-    if cab_signal == "off":
-        return None
-    if not sig.WHITE <= aspect <= sig.GREEN:
-        return "aspect", f"cab-signal aspect = {aspect} is not an aspect (0..4)"
-    if cab_signal == "ALSU" and code_valid and alsu_system.command_of_code(cab_code) is None:
-        return "cab_code", f"cab_code = {cab_code} is not an ALSU code a wayside sends"
-    if cab_signal == "digital":
-        for name, value in (("v_permitted", v_permitted), ("v_target", v_target)):
-            if not (math.isfinite(value) and value >= 0.0):
-                return name, f"cab-signal speed {name} = {value:g} m/s is impossible"
-        if free_blocks < 0:
-            return "free_blocks", f"free_blocks = {free_blocks} is negative"
-    if cab_signal == "TVM430":
-        for name, value, lowest in (("v_permitted", v_permitted, 0.0), ("v_target", v_target, 0.0),
-                                    ("target_distance", target_distance, 0.0), ("gradient", gradient, -_INF),
-                                    ("word_carrier", word_carrier, 0.0)):
-            if not (math.isfinite(value) and value >= lowest):
-                return name, f"TVM-430 {name} = {value:g} is impossible"
-    return None
+    return mode.fault(shown)
 
 
 def plan_stages(planner: StagePlanner, timetable: List[TimetableStop], timetable_path) -> list:
@@ -148,11 +126,12 @@ def event_restrictions(starts_m, ends_m, speeds_mps) -> List[TemporaryRestrictio
 
 def default_plan_decel_mps2(stock, cab_signal: str) -> float:
     """The ATO's planned deceleration when parameter ``braking_decel`` is 0: 0.6 × the stock's
-    service deceleration, at most 0.5 m/s² — except under TVM430, whose block rules announce a
-    stop only four blocks ahead, so a train at 300 km/h must plan at 0.58 m/s² or more
-    (docs/ato.md#tvm-430)."""
+    service deceleration, at most 0.5 m/s² — except in the modes that take off the cap
+    (CabSignalMode.plan_decel_capped): TVM430, whose block rules announce a stop only four blocks
+    ahead, so a train at 300 km/h must plan at 0.58 m/s² or more (docs/ato.md#tvm-430)."""
     planned = PLAN_DECEL_SHARE * stock.service_decel
-    return planned if cab_signal == "TVM430" else min(PLAN_DECEL_MAX_MPS2, planned)
+    mode = CAB_SIGNAL_MODES.get(cab_signal)
+    return planned if mode is not None and not mode.plan_decel_capped else min(PLAN_DECEL_MAX_MPS2, planned)
 
 
 def default_atp_decel_mps2(stock) -> float:
@@ -163,7 +142,7 @@ def default_atp_decel_mps2(stock) -> float:
 @dataclass
 class AtoSettings:
     strategy: str = "programme"
-    cab_signal: str = "ALSN"
+    cab_signal: str = AtoMode.ALSN
     braking_decel_mps2: float = 0.0       # 0: min(0.5, 0.6 × service deceleration)
     atp_decel_mps2: float = 0.0           # 0: 0.7 × service deceleration
     speed_margin_mps: float = 2.0 * MPS_PER_KMH   # ATO drives this far below every limit
@@ -261,7 +240,7 @@ class AtoCore:
         # a slow brake: the ATO follows its pipeline every step and predicts the stopping point
         self.stop_approach = StopApproach(self.train, MIN_BRAKE_SHARE) \
             if self.brake_lead_s > s.predictive_stop_lead_s else None
-        self.out = AtoOutputs(stop_index=1, aspect=sig.GREEN if s.cab_signal == "off" else sig.WHITE)
+        self.out = AtoOutputs(stop_index=1, aspect=sig.WHITE if self.atp.cab.has_cab_signal else sig.GREEN)
         self.arrivals: List[dict] = []
         # (input, message) of the measurement fault of the last step, None while all are valid
         self.fault: Optional[Tuple[str, str]] = None
@@ -280,18 +259,19 @@ class AtoCore:
              vigilance_ack: bool = False, cab_code: int = 0, target_distance: float = 0.0,
              gradient: float = 0.0, word_carrier: float = 0.0) -> AtoOutputs:
         """One ATO step; ``target_distance`` (m), ``gradient`` (‰) and ``word_carrier`` (Hz) are
-        the TVM-430 receiver's outputs, read in TVM430 mode."""
-        self.fault = measurement_fault(self.settings.cab_signal, self.atp.alsu, x, v, aspect, v_permitted, v_target, free_blocks,
-                                       cab_code, code_valid, target_distance, gradient, word_carrier)
+        the TVM-430 receiver's outputs, read in TVM430 mode (``word_carrier`` in TVM300 mode too);
+        which inputs a mode reads: CabSignalMode.inputs."""
+        shown = Indication(aspect, code_valid, v_permitted, v_target, free_blocks, cab_code, target_distance,
+                           gradient, word_carrier)
+        self.fault = measurement_fault(self.atp.cab, x, v, shown)
         if self.fault is not None:
             return self._fail_safe(t)
         self.braking.measure(t, v)
         if self.stop_approach is not None:
             self.stop_approach.brake.advance(t, v)
         self.atp.check_vigilance(t, aspect, code_valid, vigilance_ack, self.settings.ato_acknowledges)
-        atp = self.atp.supervise(t, x, v, aspect, code_valid, v_permitted, v_target, free_blocks, cab_code,
-                                 target_distance, gradient, word_carrier)
-        # TVM430: a word on a carrier of no block of ours is no word (Tvm430Supervision.word_block)
+        atp = self.atp.supervise_indication(t, x, v, shown)
+        # TVM: a word on a carrier of no block of ours is no word (TvmBlocks.word_block)
         permissive = self.atp.permits_departure(aspect, self.atp.code_shown, v_permitted)
         bridging = self._bridging_code_loss(t, code_valid)
         command, mode = self._drive(t, h, x, v, self._as_before_the_loss(atp) if bridging else atp, permissive)
@@ -307,8 +287,9 @@ class AtoCore:
         return self._publish(command, mode, emergency, atp)
 
     def _bridging_code_loss(self, t: float, code_valid: bool) -> bool:
-        """A digital code lost for less than DIGITAL_CODE_LOSS_GRACE_S after a valid one."""
-        if code_valid or self.settings.cab_signal != "digital":
+        """A digital code lost for less than DIGITAL_CODE_LOSS_GRACE_S after a valid one (the modes
+        that bridge a loss: CabSignalMode.bridges_code_loss)."""
+        if code_valid or not self.atp.cab.bridges_code_loss:
             self.code_lost_s = None
             return False
         if self.code_lost_s is None:
@@ -438,7 +419,7 @@ class AtoCore:
         """The book's recovery rule: late by more than the threshold, or late when a restrictive
         cab signal or a temporary restriction clears, drive at the maximum permitted speed until
         back on schedule."""
-        if in_restriction or (self.settings.cab_signal != "off" and atp.aspect != sig.GREEN):
+        if in_restriction or (self.atp.cab.has_cab_signal and atp.aspect != sig.GREEN):
             self.restricted = True
         elif self.restricted:
             self.restricted = False
@@ -503,11 +484,11 @@ class AtoCore:
         (v_limit − 8 km/h; КЖ 42 km/h: the book's traction–coast bands); None otherwise."""
         limit = self.atp.restrictions.speed_at(x)
         bottom = limit - RESTRICTION_BAND_MPS
-        if self.settings.cab_signal == "ALSN":
-            top, aspect_bottom = sig.alsn_driving_mps(self.category, atp.aspect)[0], \
-                sig.alsn_band_bottom_mps(self.category, atp.aspect)
-            if top is not None and aspect_bottom is not None and top < limit:
-                limit, bottom = top, aspect_bottom
+        # the mode's own band under the aspect acted upon (ALSN's КЖ), when it binds
+        cab = self.atp.cab
+        top, aspect_bottom = cab.driving_speeds(self.category, atp.aspect)[0], cab.band_bottom_mps(self.category, atp.aspect)
+        if top is not None and aspect_bottom is not None and top < limit:
+            limit, bottom = top, aspect_bottom
         if not (limit < _INF and v_set >= limit - self.settings.speed_margin_mps - SPEED_ROUNDING_MPS):
             self.band_coasting = False
             return None

@@ -4,7 +4,8 @@ from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FacadeSlave, Port, line_file_port
-from fmus.ato_controller.atp import EMERGENCY_INTERVENTION
+from fmus.ato_controller.atp import CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION
+from fmus.signalling.cab_systems import AtoMode
 from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, MODE_ATP_EMERGENCY, TSR_SLOTS, AtoCore, AtoSettings,
                                       event_restrictions, judged_measurements)
 
@@ -24,9 +25,7 @@ class AtoController(FacadeSlave):
                  description="passenger | freight | high_speed; empty: the rolling stock's category"),
             Port("strategy", "parameter", "String", start=s.strategy, description="programme | predictive | flat_out"),
             Port("cab_signal", "parameter", "String", start=s.cab_signal,
-                 description="ALSN (aspect) | ALSU (cab_code) | digital (v_permitted, v_target, free_blocks) | "
-                             "TVM430 (v_permitted, v_target, target_distance, gradient, word_carrier) | "
-                             "off (line limits only)"),
+                 description=" | ".join(f"{name} ({mode.reads()})" for name, mode in CAB_SIGNAL_MODES.items())),
             Port("braking_decel", "parameter", unit="m/s2", start=s.braking_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
                  description="planned (target) braking deceleration; 0: min(0.5, 0.6 × service)"),
             Port("atp_decel", "parameter", unit="m/s2", start=s.atp_decel_mps2, min=0.0, max=MAX_DECEL_MPS2,
@@ -64,17 +63,19 @@ class AtoController(FacadeSlave):
                  description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
             Port("code_valid", "input", "Boolean", start=False,
                  description="the receiver shows a received code; false: the fail-safe memory of the last valid code applies"),
-            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
-            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit", description="digital systems"),
+            Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
+                 description="digital systems; TVM: the step in force"),
+            Port("v_target", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
+                 description="digital systems; TVM: the next step, at the word's block exit"),
             Port("free_blocks", "input", "Integer", start=0, min=0, bad_input="unit", description="digital systems"),
             Port("cab_code", "input", "Integer", start=0, min=0, bad_input="unit",
-                 description="ALSU: the code the receiver shows (its code output), 0 none"),
+                 description=f"{AtoMode.ALSU}: the code the receiver shows (its code output), 0 none"),
             Port("target_distance", "input", unit="m", start=0.0, min=0.0, bad_input="unit",
-                 description="TVM430: from the entry of the word's block to the target point"),
+                 description=f"{AtoMode.TVM430}: from the entry of the word's block to the target point"),
             Port("gradient", "input", unit="1", start=0.0, bad_input="unit",
-                 description="TVM430: most falling gradient to the target point, per mille, + uphill"),
+                 description=f"{AtoMode.TVM430}: most falling gradient to the target point, per mille, + uphill"),
             Port("word_carrier", "input", unit="Hz", start=0.0, min=0.0, bad_input="unit",
-                 description="TVM430: carrier of the track circuit the shown word came from; 0 none"),
+                 description=f"{AtoMode.TVM430}, {AtoMode.TVM300}: carrier of the track circuit the shown word came from; 0 none"),
             # temporary restrictions set while running (scenario events; docs/scenarios.md): slot k
             # is in force while tsr_speed[k] > 0 and tsr_end[k] > tsr_start[k]
             Port("tsr_start", "input", unit="m", start=0.0, min=0.0, shape=(TSR_SLOTS,),
