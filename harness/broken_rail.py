@@ -1,6 +1,6 @@
 """A system with a broken rail ahead of its train, optionally with the coder deaf to the
 occupancy, run in process with the railway verdicts (tests/test_track_verdict.py,
-tests/test_tvm430_systems.py: the verdict against the track catches a coder that sends a clear
+tests/test_tvm_systems.py: the verdict against the track catches a coder that sends a clear
 line's codes while the rail line detects the break)."""
 from __future__ import annotations
 

@@ -1,12 +1,13 @@
-"""TVM-430 through the whole chain under the orchestrator (coder → rail line → receiver → ATP/ATO,
-docs/scenarios.md): the run's verdicts judge a TVM430 receiver against the words sent and against
-the block rules on the real occupancy; the shipped tvm430 system runs on its own build sizes
-(32 sections, 10 ms frames at 12 kHz). The full tvm430 and tvm430_following runs are in
-docs/scenarios.md's table (benchmarks/run_tvm430.py)."""
+"""TVM-430 and TVM-300 through the whole chain under the orchestrator (coder → rail line → receiver
+→ ATP/ATO, docs/scenarios.md): the run's verdicts judge a TVM receiver against the codes sent and
+against the block rules on the real occupancy; the shipped tvm430 and tvm300 systems run on their
+own build sizes (32 sections, 10 ms frames at 12 kHz). The full tvm430, tvm430_following, tvm300
+and tvm300_following runs are in docs/scenarios.md's table."""
 import json
 
 import pytest
 
+from fmus.signalling import cab_systems
 from harness.broken_rail import run_with_broken_rail
 from orchestrator.systems.chain import signal_chain, train_and_ato
 from orchestrator.verdicts.verdict import railway_verdicts, safety_verdict
@@ -35,9 +36,11 @@ def _line(folder):
     return path, timetable
 
 
-def _run(tmp_path, product_fmus, occupancy_sent: bool, stop_time: float = 16.0):
-    from fmus.loco_receiver import tvm430 as receiver
+TVM_SYSTEMS = [cab.name for cab in cab_systems.REGISTRY.values() if cab.transmitter == cab_systems.UM71]
 
+
+def _run(tmp_path, product_fmus, occupancy_sent: bool, system: str, stop_time: float = 16.0):
+    cab = cab_systems.lookup(system)
     folder = str(product_fmus)
     line, timetable = _line(tmp_path)
     files = {"line_file": str(line)}
@@ -46,19 +49,19 @@ def _run(tmp_path, product_fmus, occupancy_sent: bool, stop_time: float = 16.0):
     stock = {"rolling_stock_file": str(DATA / "high_speed_tgv.json")}
     components, connections = train_and_ato(
         fmu_folder=folder, train_parameters={**files, **stock},
-        ato_parameters={"cab_signal": "TVM430", "decoding_latency": receiver.STATED_LATENCY_S,
-                        "timetable_file": str(timetable), **files, **stock})
-    chain, links = signal_chain(fmu_folder=folder, fs_hz=FS_HZ, frame=FRAME, coder={"system": "TVM430", **files},
-                                rail=files, receiver={"system": "TVM430", "train_category": "high_speed"},
+        ato_parameters={**cab.ato_parameters(), "timetable_file": str(timetable), **files, **stock})
+    chain, links = signal_chain(fmu_folder=folder, fs_hz=FS_HZ, frame=FRAME, coder={"system": system, **files},
+                                rail=files, receiver={"system": system, "train_category": "high_speed"},
                                 stocks=[stock["rolling_stock_file"]])
     # occupancy not sent: the coder never learns it and sends a clear line's words everywhere
     return run_with_broken_rail(tmp_path, product_fmus, chain + components, connections + links, BROKEN_RAIL_M,
                                 occupancy_sent, stop_time)
 
 
-def test_a_tvm_coder_that_never_hears_the_occupancy_is_caught_against_the_track(tmp_path, product_fmus):
-    summary, rx = _run(tmp_path, product_fmus, occupancy_sent=False)
-    assert rx["system"] == "TVM430" and rx["decoded_codes"] > 0, rx
+@pytest.mark.parametrize("system", TVM_SYSTEMS)
+def test_a_tvm_coder_that_never_hears_the_occupancy_is_caught_against_the_track(tmp_path, product_fmus, system):
+    summary, rx = _run(tmp_path, product_fmus, False, system)
+    assert rx["system"] == system and rx["decoded_codes"] > 0, rx
     assert rx["wrong_side_failures"] == 0, rx          # the receiver shows the word sent …
     assert rx["unsafe_indications"] == 1, rx           # … which the broken rail two blocks ahead forbids
     (event,) = rx["unsafe_events"]
@@ -67,29 +70,31 @@ def test_a_tvm_coder_that_never_hears_the_occupancy_is_caught_against_the_track(
     assert not safe and "unsafe indications 1" in line
 
 
-def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus):
-    summary, rx = _run(tmp_path, product_fmus, occupancy_sent=True)
+@pytest.mark.parametrize("system", TVM_SYSTEMS)
+def test_the_same_fault_with_the_occupancy_sent_is_safe(tmp_path, product_fmus, system):
+    summary, rx = _run(tmp_path, product_fmus, True, system)
     assert rx["decoded_codes"] > 0 and rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
-    assert rx["latency_s"] == pytest.approx(5.1875)
+    assert rx["latency_s"] == pytest.approx({"TVM430": 5.1875, "TVM300": 3.1273}[system], abs=1e-4)
     assert safety_verdict(summary)[0]
     (train,) = summary["trains"]
     assert train["signals_passed_at_danger"] == 0 and train["atp_interventions"] == 0
 
 
-def test_the_shipped_tvm430_runs_on_its_build_sizes_and_departs_under_its_words(tmp_path, product_fmus):
+@pytest.mark.parametrize("system", TVM_SYSTEMS)
+def test_the_shipped_tvm_system_runs_on_its_build_sizes_and_departs_under_its_codes(tmp_path, product_fmus, system):
     from orchestrator.systems.shipped import SSP_ROOT
 
-    result = run_system(SSP_ROOT / "tvm430", RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out",
+    result = run_system(SSP_ROOT / system.lower(), RunOptions(summaries=railway_verdicts, output_dir=tmp_path / "out",
                                                         in_process=True, fmu_dirs=[product_fmus], stop_time=130.0,
                                                         record=["train.x", "train.v", "rx.v_permitted",
                                                                 "rx.word_carrier"]))
     summary = result.summary
     (rx,) = summary["receivers"]
-    assert rx["system"] == "TVM430" and rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
+    assert rx["system"] == system and rx["wrong_side_failures"] == 0 and rx["unsafe_indications"] == 0, rx
     assert safety_verdict(summary)[0]
     header, *rows = (line.split(",") for line in (tmp_path / "out" / "results.csv").read_text().splitlines())
     column = {name: k for k, name in enumerate(header)}
     last = rows[-1]
-    assert float(last[column["train.x"]]) > 2000.0          # out of the first block, on its 300 km/h word
+    assert float(last[column["train.x"]]) > 2100.0          # out of the first block, on its 300 km/h code
     assert float(last[column["rx.v_permitted"]]) == pytest.approx(300 / 3.6)
     assert {float(r[column["rx.word_carrier"]]) for r in rows} >= {1700.0, 2300.0}
