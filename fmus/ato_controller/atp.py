@@ -79,7 +79,7 @@ from fmus.ato_controller.atp_tvm430 import Tvm430Mode
 from fmus.ato_controller.speed_restrictions import SpeedRestrictions
 from fmus.ato_controller.supervision import Constraints, Target, dv_ebi_mps, dv_sbi_mps
 from fmus.signalling import aspects as sig
-from fmus.signalling.cab_systems import AtoMode
+from fmus.signalling.ato_modes import AtoMode
 from fmus.data.loader import Line
 from fmus.errors import FmuInputError
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
-from fmus.signalling.cab_systems import AtoMode
+from fmus.signalling.ato_modes import AtoMode
 from fmus.data.loader import Line, RollingStock, TemporaryRestriction, TimetableStop
 from fmus.errors import FmuInputError
 from fmus.ato_controller.atp import (CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION, NO_INTERVENTION,

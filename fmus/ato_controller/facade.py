@@ -5,7 +5,7 @@ from pythonfmu.enums import Fmi2Status
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
 from fmus.fmi.slave import FacadeSlave, Port, line_file_port
 from fmus.ato_controller.atp import CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION
-from fmus.signalling.cab_systems import AtoMode
+from fmus.signalling.ato_modes import AtoMode
 from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, MODE_ATP_EMERGENCY, TSR_SLOTS, AtoCore, AtoSettings,
                                       event_restrictions, judged_measurements)
 

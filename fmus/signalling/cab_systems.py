@@ -28,6 +28,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling import als_en, alsn, alsu, fire_dqpsk, tvm300, tvm430
 from fmus.signalling import aspects as sig
 from fmus.signalling import digital_messages as digital
+from fmus.signalling.ato_modes import AtoMode
 from fmus.signalling.digital_messages import DigitalSystem
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
@@ -36,20 +37,6 @@ NUMERIC, TABLE, DIGITAL_FAMILY = "numeric", "table", "digital"
 #: the track circuits a system's coder feeds (the line file's ``transmitter``): KPT coded track
 #: circuits with insulated joints, UM71 jointless audio-frequency circuits
 KPT, UM71 = "KPT", "UM71"
-
-
-class AtoMode:
-    """The ATO's ``cab_signal`` modes: how its ATP reads the receiver's indication
-    (fmus/ato_controller/atp.py). One mode may serve several systems (``digital``: ALS-EN and
-    FIRE_DQPSK); ``off`` runs without a cab signal."""
-
-    ALSN = "ALSN"
-    ALSU = "ALSU"
-    DIGITAL = "digital"
-    TVM430 = "TVM430"
-    TVM300 = "TVM300"
-    OFF = "off"
-    ALL = (ALSN, ALSU, DIGITAL, TVM430, TVM300, OFF)
 
 
 @dataclass(frozen=True)

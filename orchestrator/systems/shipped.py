@@ -213,7 +213,7 @@ TVM430_LINE, TVM430_STOCK = TVM430_SPEC.line_file, TVM430_SPEC.stock_file
 TVM300_SPEC = HighSpeedLine(
     cab_systems.TVM300, "hsl_tvm300_line.json", 21,
     {"train": "TGV 8501", "stops": [{"station": "Origine", "departure_s": 30},
-                                    {"station": "Terminus", "arrival_s": 775.0}]}, 900.0,
+                                    {"station": "Terminus", "arrival_s": 760.0}]}, 880.0,
     ("Origine est", 1200.0), ("Milieu", 33750.0),
     {"train": "TGV 8503 (leader)", "stops": [{"station": "Origine est", "departure_s": 30},
                                              {"station": "Terminus", "arrival_s": 800}]},
