@@ -1,4 +1,4 @@
-"""Noise immunity of ALSN, ALSU, ALS-EN, FIRE_DQPSK and TVM-430 side by side. A study, not a speed
+"""Noise immunity of ALSN, ALSU, ALS-EN, FIRE_DQPSK, TVM-430 and TVM-300 side by side. A study, not a speed
 benchmark: its tables and plots are in docs/noise_immunity.md.
 
 1. **Bit error rate vs Eb/N0** of the two modems (ideal symbol timing, integrate-and-dump,
@@ -31,15 +31,18 @@ benchmark: its tables and plots are in docs/noise_immunity.md.
    decoded by the TVM-430 receiver core; white and impulse noise, a traction harmonic sweeping
    the carrier ±50 Hz (inband: its level against the carrier in dB), and the neighbour's
    2300 Hz carrier at its worst separation-zone leak with white noise (leak: the SNR in dB).
+   TVM300: a message is 10 decisions (1.0 s) of one sub-frequency on the 1700 Hz carrier at
+   0.1 V, decoded by the TVM-300 receiver core; the same four kinds of noise as TVM430's.
 3. **A steady unmodulated tone at the carrier and the adjacent track's signal alone** (the other
    track parity) must never give a command.
 
-    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--tvm430-messages 2000] [--systems ALSN,ALSU,ALS-EN,FIRE_DQPSK,TVM430]
+    python benchmarks/study_noise_immunity.py [--messages 100000] [--alsn-cycles 2000] [--tvm430-messages 2000] [--tvm300-messages 10000]
+        [--systems ALSN,ALSU,ALS-EN,FIRE_DQPSK,TVM430,TVM300]
 
-Part 2 is the studies orchestrator/study/studies/noise_immunity.toml, noise_immunity_alsu.toml
-and noise_immunity_tvm430.toml run on Dask (a local cluster, or --scheduler): ``railcosim study
-noise_immunity`` (and ``noise_immunity_alsu``, ``noise_immunity_tvm430``) run the same conditions
-on their own.
+Part 2 is the studies orchestrator/study/studies/noise_immunity.toml, noise_immunity_alsu.toml,
+noise_immunity_tvm430.toml and noise_immunity_tvm300.toml run on Dask (a local cluster, or
+--scheduler): ``railcosim study noise_immunity`` (and ``noise_immunity_alsu``,
+``noise_immunity_tvm430``, ``noise_immunity_tvm300``) run the same conditions on their own.
 """
 from __future__ import annotations
 
@@ -60,13 +63,15 @@ STUDIES = Path(__file__).resolve().parents[1] / "orchestrator" / "study" / "stud
 STUDY = STUDIES / "noise_immunity.toml"
 ALSU_STUDY = STUDIES / "noise_immunity_alsu.toml"
 TVM430_STUDY = STUDIES / "noise_immunity_tvm430.toml"
-SYSTEMS = (cab_systems.ALSN.name, cab_systems.ALSU.name, cab_systems.ALS_EN.name, cab_systems.FIRE_DQPSK.name, cab_systems.TVM430.name)
+TVM300_STUDY = STUDIES / "noise_immunity_tvm300.toml"
+SYSTEMS = (cab_systems.ALSN.name, cab_systems.ALSU.name, cab_systems.ALS_EN.name, cab_systems.FIRE_DQPSK.name,
+           cab_systems.TVM430.name, cab_systems.TVM300.name)
 NOISE_KINDS = ("white", "impulse", "joint", "inband", "leak")
 
 
 # ---- main ------------------------------------------------------------------------------------------
 def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, workers=None, scheduler=None,
-                   tvm430_messages: int = 2000) -> dict:
+                   tvm430_messages: int = 2000, tvm300_messages: int = 10000) -> dict:
     """The white- and impulse-noise tables through ``railcosim study`` (the study file with
     these message counts and systems): {"white": {snr: {system: result}}, "impulse": …} for
     every kind of NOISE_KINDS."""
@@ -74,10 +79,13 @@ def run_conditions(messages: int, alsn_cycles: int, systems, output: Path, worke
     from orchestrator.study.spec import load_study
 
     tables = {kind: {} for kind in NOISE_KINDS}
-    for study, folder in ((STUDY, output), (ALSU_STUDY, output.with_name(output.name + "_alsu")),
-                          (TVM430_STUDY, output.with_name(output.name + "_tvm430"))):
+    # each study: its folder beside ``output`` and its messages per condition
+    studies = ((STUDY, "", messages), (ALSU_STUDY, "_alsu", messages), (TVM430_STUDY, "_tvm430", tvm430_messages),
+               (TVM300_STUDY, "_tvm300", tvm300_messages))
+    for study, suffix, study_messages in studies:
+        folder = output.with_name(output.name + suffix)
         spec = load_study(study)
-        spec.data["arguments"].update(messages=tvm430_messages if study == TVM430_STUDY else messages,
+        spec.data["arguments"].update(messages=study_messages,
                                       **({"alsn_cycles": alsn_cycles} if study == STUDY else {}))
         spec.runs = [r for r in spec.runs if r.values["system"] in systems]
         if not spec.runs:
@@ -100,6 +108,8 @@ def main():
     parser.add_argument("--alsn-cycles", type=int, default=2000, help="ALSN code cycles per condition")
     parser.add_argument("--tvm430-messages", type=int, default=2000,
                         help="TVM-430 messages (1.625 s, 13 decisions each) per condition")
+    parser.add_argument("--tvm300-messages", type=int, default=10000,
+                        help="TVM-300 messages (1.0 s, 10 decisions each) per condition")
     parser.add_argument("--ber-symbols", type=int, default=200000)
     parser.add_argument("--systems", default=",".join(SYSTEMS),
                         help="which systems to (re)compute; the others are kept from an existing --output")
@@ -124,7 +134,7 @@ def main():
     results["ber"]["theory"] = {str(e): float(dqpsk.theory_ber(e)) for e in (2, 4, 6, 8, 10)}
     print("BER", json.dumps(results["ber"]), f"{time.perf_counter() - began:.0f} s", flush=True)
     tables = run_conditions(args.messages, args.alsn_cycles, chosen, Path(args.runs), args.workers, args.scheduler,
-                            args.tvm430_messages)
+                            args.tvm430_messages, args.tvm300_messages)
     for kind in NOISE_KINDS:
         for level, row in tables[kind].items():
             results[kind].setdefault(level, {}).update(row)

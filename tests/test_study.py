@@ -473,6 +473,38 @@ def test_tvm430_noise_study_is_never_wrong_side_and_errs_more_in_more_noise(tmp_
         assert record["collected"][key] == want[key], key
 
 
+def test_tvm300_noise_study_is_never_wrong_side_and_errs_more_in_more_noise(tmp_path):
+    """The shipped TVM-300 noise study, every condition (reduced: 60 messages of 1 s): no code
+    shown more permissive than every code sent within the stated latency and no decision
+    reading a more permissive code, in white, impulse and in-band noise and with the
+    neighbour's carrier leaking; the message error rate in white noise does not fall as the
+    SNR falls and is far higher at the lowest; and a run's counts are the chain's with the
+    study's seeds."""
+    import harness.noise_immunity as noise
+
+    shipped = load_study(REPO / "orchestrator" / "study" / "studies" / "noise_immunity_tvm300.toml")
+    assert shipped.data["arguments"]["messages"] >= 10000
+    data = {**shipped.data, "arguments": {"messages": 60}}
+    study = _write(tmp_path, "noise_tvm300.json", json.dumps(data))
+    result = run_study(load_study(study), tmp_path / "out", None, [], workers=2, python_path=[str(REPO)])
+    assert result.counts["ok"] == len(shipped.runs) == 13
+    for record in result.records:
+        assert record["collected"]["messages"] == 60
+        assert record["collected"]["wrong_side_events"] == 0, record["values"]
+        assert record["collected"]["undetected_permissive"] == 0, record["values"]
+    white = sorted((r["values"]["level"], r["collected"]["mer"]) for r in result.records
+                   if r["values"]["noise"] == "white")
+    assert [level for level, _ in white] == [-10.0, -8.0, -6.0, 0.0]
+    mers = [mer for _, mer in white]                        # lowest SNR first
+    assert all(a >= b for a, b in zip(mers, mers[1:])) and mers[0] > 0.5 > mers[-1], white
+    # the leaking neighbour at -6 dB: noise seed 496, message seed 40
+    want = noise.tvm300_chain(60, noise.white(-6.0, np.random.default_rng(496), noise.TVM_CARRIER_V), 40,
+                              noise.tvm_leak_ratio())
+    record = next(r for r in result.records if r["values"] == {"noise": "leak", "level": -6.0, "system": "TVM300"})
+    for key in ("correct", "undetected", "detected", "decisions_other_code", "wrong_side_events"):
+        assert record["collected"][key] == want[key], key
+
+
 @pytest.mark.parametrize("text, message", [
     ('system = "ato_only"\n[grid]\n"train.mass_scal" = [1.0]\n',
      "field grid.train.mass_scal: component 'train' of ato_only has no variable 'mass_scal'"),

@@ -40,6 +40,7 @@ def receiver_vectors() -> RoleFile:
         role.vectors.extend(_digital_receiver_vectors(role, system_name))
     role.vectors.extend(_alsu_receiver_vectors(role))
     role.vectors.extend(_tvm430_receiver_vectors(role))
+    role.vectors.extend(_tvm300_receiver_vectors(role))
     return role
 
 
@@ -229,14 +230,15 @@ def _alsu_receiver_vectors(role: RoleFile) -> List[dict]:
     return vectors
 
 
-def _tvm_emf(seconds: float, plan: List[tuple], noise_v: float = 0.0, seed: int = 0) -> np.ndarray:
-    """Coil EMF from the TVM-430 coder core on the coder vectors' line (section 1: 1700 Hz,
-    section 2: 2300 Hz) at TVM_FS_HZ: ``plan`` is (from s, {section index: (word, peak V)}) in
-    time order, sent through the core's test generator (each change phase-continuous, as in
-    service); a section not listed is silent; plus white noise of ``noise_v`` rms."""
+def _tvm_emf(seconds: float, plan: List[tuple], noise_v: float = 0.0, seed: int = 0, coder_core=None) -> np.ndarray:
+    """Coil EMF from a TVM coder core (``coder_core``, default TVM-430's) on the coder vectors'
+    line (section 1: 1700 Hz, section 2: 2300 Hz) at TVM_FS_HZ: ``plan`` is (from s, {section
+    index: (word or code, peak V)}) in time order, sent through the core's test generator (each
+    change phase-continuous, as in service); a section not listed is silent; plus white noise
+    of ``noise_v`` rms."""
     from fmus.wayside_coder.tvm430 import Tvm430CoderCore
 
-    coder = Tvm430CoderCore(tvm_line_loaded(), 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
+    coder = (coder_core or Tvm430CoderCore)(tvm_line_loaded(), 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
     amplitude = coder.settings.amplitude_v
     words = np.zeros(8, dtype=np.int64)
     frames, current = [], None
@@ -396,6 +398,198 @@ def _tvm430_double_bit_error(bench: _Tvm430Bench) -> dict:
           "where": [cond("code_valid", [1])], "conditions": bench.meaning(yellow, own_hz), "bound_s": 0.0},
          {"kind": "latency", "label": "corrupted word: no word (step 0, code_valid false) within the stated latency",
           "from_s": corrupt_s, "until": bench.no_word, "bound_s": bench.latency_s}])
+
+
+def _tvm300_receiver_vectors(role: RoleFile) -> List[dict]:
+    """TVM-300 (docs/loco_receiver.md#tvm-300): every used code shown within the stated decode
+    time (a window, two decisions and the baseband low-pass's rise, 1.12 s), from cold and at
+    each change; a restrictive change, then a lost carrier → no code within the stated latency
+    (3.13 s) and not before the hold less one decision; a bare carrier, two sub-frequencies at
+    once and an unused one → no code within the stated latency, never a code after; the
+    neighbour's more permissive code 20 dB down never shown. Never more permissive than the
+    code sent. The coil EMF is our coder core's output at 8 kHz (the two sub-frequencies: a
+    coder whose second oscillator joins in, synthesised here); the readings are the shipped
+    code table's."""
+    bench = _Tvm300Bench(role)
+    return [_tvm300_every_code(bench), _tvm300_change_and_loss(bench), _tvm300_neighbour(bench),
+            *(_tvm300_no_code(bench, kind) for kind in ("bare_carrier", "two_sub_frequencies", "unused_sub_frequency"))]
+
+
+class _Tvm300Bench:
+    """What the TVM-300 receiver vectors share: the carriers of our sections (1700 Hz; the next
+    one's 2300 Hz) at 0.3 V peak, the stated times, and what the receiver must show of a code
+    (the shipped code table's readings)."""
+    OWN, NEIGHBOUR = 0, 1                                     # sections: 1700 Hz, 2300 Hz
+    LEVEL_V = 0.3                                             # a carrier at the coils (peak)
+
+    def __init__(self, role: RoleFile):
+        from fmus.signalling import tvm300
+
+        self.role = role
+        self.tvm = tvm300.system()
+        self.params = {"system": cab_systems.TVM300.name, "fs": TVM_FS_HZ}
+        self.step = {"fs_hz": TVM_FS_HZ}
+        self.decode_s, self.latency_s = round(tvm300.STATED_DECODE_S, 4), round(tvm300.STATED_LATENCY_S, 4)
+        self.no_code = [cond("code_valid", [0]), in_range("v_permitted", None, 0.01),
+                        cond("aspect", not_more_permissive(sig.RED))]
+        sections = tvm_line()["block_sections"]
+        self.carriers_hz = [float(sections[k]["carrier_hz"]) for k in (self.OWN, self.NEIGHBOUR)]
+        self.used = [c for c in range(1, tvm300.SUB_FREQUENCY_COUNT + 1) if self.tvm.reading(c) is not None]
+        self.unused = [c for c in range(1, tvm300.SUB_FREQUENCY_COUNT + 1) if self.tvm.reading(c) is None]
+
+    def code(self, step_kmh: float, next_kmh: float) -> int:
+        return self.tvm.table.code_of_pair(float(step_kmh), float(next_kmh))
+
+    def label(self, code: int) -> str:
+        read = self.tvm.reading(code)
+        return f"{read.step_kmh:g}/{read.next_kmh:g}"
+
+    def shows(self, code: int, carrier_hz: float) -> list:
+        """Code ``code`` shown from ``carrier_hz``: its aspect, steps (to 0.01 m/s), free blocks,
+        carrier (to 0.5 Hz)."""
+        read = self.tvm.reading(code)
+        return [cond("aspect", [read.aspect]), _near("v_permitted", read.step_kmh / 3.6, 0.01),
+                _near("v_target", read.next_kmh / 3.6, 0.01), cond("free_blocks", [read.free_blocks]),
+                _near("word_carrier", carrier_hz, 0.5), cond("code_valid", [1])]
+
+    def at_most(self, code: int) -> list:
+        """Nothing more permissive than ``code``: its aspect or a more restrictive one, neither
+        its step nor its next step exceeded (no code: both 0)."""
+        read = self.tvm.reading(code)
+        return [cond("aspect", not_more_permissive(read.aspect)),
+                in_range("v_permitted", None, round(read.step_kmh / 3.6 + 0.01, 6)),
+                in_range("v_target", None, round(read.next_kmh / 3.6 + 0.01, 6))]
+
+    def emf(self, seconds: float, plan: List[tuple], noise_v: float = 0.0, seed: int = 0) -> np.ndarray:
+        from fmus.wayside_coder.tvm300 import Tvm300CoderCore
+
+        return _tvm_emf(seconds, plan, noise_v, seed, coder_core=Tvm300CoderCore)
+
+    def vector(self, name: str, what: str, seconds: float, emf: np.ndarray, checks: list) -> dict:
+        return {"name": name, "what": what, "parameters": self.params, "step": self.step, "duration_s": seconds,
+                "inputs": {"e_coil": self.role.samples(name, "e_coil", emf)}, "checks": checks}
+
+
+def _tvm300_every_code(bench: _Tvm300Bench) -> dict:
+    """The 14 used codes in turn (sub-frequency order, 0/0 first from cold), each for 2 s."""
+    own, level_v, own_hz = bench.OWN, bench.LEVEL_V, bench.carriers_hz[0]
+    each_s = 2.0
+    seconds = each_s * len(bench.used)
+    plan = [(k * each_s, {own: (code, level_v)}) for k, code in enumerate(bench.used)]
+    checks = []
+    for k, code in enumerate(bench.used):
+        start, end = k * each_s, (k + 1) * each_s
+        checks.append({"kind": "latency", "label": f"{bench.label(code)} (code {code}) shown within the stated "
+                                                   f"decode time", "from_s": start, "until": bench.shows(code, own_hz),
+                       "bound_s": bench.decode_s})
+        checks.append({"kind": "holds", "label": f"never more permissive than {bench.label(code)} after it",
+                       "from_s": round(start + bench.decode_s, 4), "to_s": end, "conditions": bench.at_most(code),
+                       "bound_s": 0.0})
+    return bench.vector(
+        "tvm300_every_code", f"TVM-300 on the {own_hz:g} Hz carrier at {level_v:g} V: the {len(bench.used)} used "
+                             f"codes in sub-frequency order ({', '.join(bench.label(c) for c in bench.used)}), "
+                             f"{each_s:g} s each, the first from cold",
+        seconds, bench.emf(seconds, plan), checks)
+
+
+def _tvm300_change_and_loss(bench: _Tvm300Bench) -> dict:
+    """300/300 from cold on the other carrier, a restrictive change to 160/80, then the carrier lost."""
+    from fmus.signalling.tvm300 import HOLD_S, HOP_S, STATED_LATENCY_S
+
+    section, level_v, hz = bench.NEIGHBOUR, bench.LEVEL_V, bench.carriers_hz[1]
+    clear, yellow = bench.code(300, 300), bench.code(160, 80)
+    change_s, loss_s = 3.0, 6.0
+    seconds = round(loss_s + STATED_LATENCY_S + 0.5, 1)
+    hold_to_s = round(loss_s + HOLD_S - HOP_S, 4)
+    return bench.vector(
+        "tvm300_300_then_160_then_loss",
+        f"TVM-300 on the {hz:g} Hz carrier at {level_v:g} V: 300/300 from cold, 160/80 from {change_s:g} s, "
+        f"no carrier from {loss_s:g} s",
+        seconds, bench.emf(seconds, [(0.0, {section: (clear, level_v)}), (change_s, {section: (yellow, level_v)}),
+                                     (loss_s, {})]),
+        [{"kind": "latency", "label": "300/300 shown with its reading within the stated decode time",
+          "from_s": 0.0, "until": bench.shows(clear, hz), "bound_s": bench.decode_s},
+         {"kind": "latency", "label": "restrictive change to 160/80 within the stated decode time",
+          "from_s": change_s, "until": bench.shows(yellow, hz), "bound_s": bench.decode_s},
+         {"kind": "holds", "label": "never more permissive than 160/80 after the stated decode time",
+          "from_s": round(change_s + bench.decode_s, 4), "conditions": bench.at_most(yellow), "bound_s": 0.0},
+         {"kind": "holds", "label": "lost carrier: the code held for the hold less one decision (it bridges a "
+                                    "separation zone)", "from_s": loss_s, "to_s": hold_to_s,
+          "conditions": [cond("code_valid", [1])], "bound_s": 0.0},
+         {"kind": "latency", "label": "lost carrier: no code (step 0, code_valid false) within the stated latency",
+          "from_s": loss_s, "until": bench.no_code, "bound_s": bench.latency_s}])
+
+
+def _tvm300_neighbour(bench: _Tvm300Bench) -> dict:
+    """The next block's more permissive code 20 dB down in noise: never shown."""
+    own, level_v, own_hz = bench.OWN, bench.LEVEL_V, bench.carriers_hz[0]
+    yellow, clear = bench.code(160, 80), bench.code(300, 300)
+    seconds, leak, noise_v = 5.0, 0.1, 0.03
+    plan = [(0.0, {own: (yellow, level_v), bench.NEIGHBOUR: (clear, leak * level_v)})]
+    return bench.vector(
+        "tvm300_neighbour_20dB_permissive",
+        f"TVM-300: 160/80 on the {own_hz:g} Hz carrier at {level_v:g} V, the next block's "
+        f"{bench.carriers_hz[1]:g} Hz carrier 20 dB down with 300/300, white noise {noise_v:g} V rms",
+        seconds, bench.emf(seconds, plan, noise_v, seed=44),
+        [{"kind": "latency", "label": "160/80 shown from its own carrier within the stated decode time",
+          "from_s": 0.0, "until": bench.shows(yellow, own_hz), "bound_s": bench.decode_s},
+         {"kind": "holds", "label": "the neighbour's 300/300 never shown (nothing more permissive, never its carrier)",
+          "conditions": [*bench.at_most(yellow), in_range("word_carrier", None, own_hz + 0.5)], "bound_s": 0.0}])
+
+
+#: the no-code vectors: the code sent first (a speed pair), and what follows it
+_TVM300_NO_CODE = {"bare_carrier": ((160, 80), "the bare carrier (no sub-frequency)"),
+                   "two_sub_frequencies": ((160, 80), "its sub-frequency and 300/300's at once, each at the full "
+                                                      "deviation (a coder's second oscillator joining in)"),
+                   "unused_sub_frequency": ((270, 220), "an unused sub-frequency")}
+
+
+def _tvm300_no_code(bench: _Tvm300Bench, kind: str) -> dict:
+    """A code, then no sub-frequency, two, or an unused one: no code within the stated latency,
+    none after it, never anything more permissive than the code first sent."""
+    from fmus.signalling import tvm300
+
+    own, level_v, own_hz = bench.OWN, bench.LEVEL_V, bench.carriers_hz[0]
+    (step_kmh, next_kmh), then = _TVM300_NO_CODE[kind]
+    first = bench.code(step_kmh, next_kmh)
+    change_s = 3.0
+    seconds = round(change_s + bench.latency_s + 1.5, 1)
+    if kind == "two_sub_frequencies":
+        emf = _two_sub_frequencies_emf(seconds, own_hz, level_v, first, bench.code(300, 300), change_s)
+    else:
+        # the unused sub-frequency beside the one a confusion would gain most speed from (300/220)
+        later = tvm300.NO_CODE if kind == "bare_carrier" else min(bench.unused, key=lambda c: abs(c - bench.code(300, 220)))
+        then = then if kind == "bare_carrier" else f"{then} (code {later}, {tvm300.SUB_FREQUENCIES_HZ[later - 1]:.1f} Hz)"
+        emf = bench.emf(seconds, [(0.0, {own: (first, level_v)}), (change_s, {own: (later, level_v)})])
+    after_s = round(change_s + bench.latency_s, 4)
+    return bench.vector(
+        f"tvm300_{kind}", f"TVM-300: {bench.label(first)} on the {own_hz:g} Hz carrier at {level_v:g} V, from "
+                          f"{change_s:g} s {then}",
+        seconds, emf,
+        [{"kind": "latency", "label": f"{bench.label(first)} shown within the stated decode time", "from_s": 0.0,
+          "until": bench.shows(first, own_hz), "bound_s": bench.decode_s},
+         {"kind": "holds", "label": f"never more permissive than {bench.label(first)}",
+          "conditions": bench.at_most(first), "bound_s": 0.0},
+         {"kind": "latency", "label": "no code (step 0, code_valid false) within the stated latency",
+          "from_s": change_s, "until": bench.no_code, "bound_s": bench.latency_s},
+         {"kind": "holds", "label": "no code after that", "from_s": after_s, "conditions": bench.no_code,
+          "bound_s": 0.0}])
+
+
+def _two_sub_frequencies_emf(seconds: float, carrier_hz: float, level_v: float, code: int, second: int,
+                             from_s: float) -> np.ndarray:
+    """A carrier frequency-modulated by ``code``'s sub-frequency throughout and, from
+    ``from_s``, by ``second``'s as well, each at the full deviation (fmus/signalling/tvm300.py:
+    the phase's term (Δ/f)·sin(2π f t); the second starts at 0, so the phase is continuous), at
+    TVM_FS_HZ: what no coder in service sends."""
+    from fmus.signalling import tvm300
+
+    t = np.arange(int(round(seconds * TVM_FS_HZ))) / TVM_FS_HZ
+    f1, f2 = (tvm300.SUB_FREQUENCIES_HZ[tvm300.index_of_code(c)] for c in (code, second))
+    phase = 2.0 * np.pi * carrier_hz * t + tvm300.DEVIATION_HZ / f1 * np.sin(2.0 * np.pi * f1 * t)
+    late = t >= from_s
+    phase[late] += tvm300.DEVIATION_HZ / f2 * np.sin(2.0 * np.pi * f2 * (t[late] - from_s))
+    return level_v * np.sin(phase)
 
 
 def _digital_receiver_vectors(role: RoleFile, system_name: str) -> List[dict]:

@@ -1,6 +1,6 @@
 """The wayside_coder role's vectors (data/wayside_coder.json): code timings, the block logic,
-the 2-out-of-2 transmitters and comparison, ALSU's tones and TVM-430's words
-(docs/wayside_coder.md).
+the 2-out-of-2 transmitters and comparison, ALSU's tones, TVM-430's words and TVM-300's
+sub-frequencies (docs/wayside_coder.md).
 """
 from __future__ import annotations
 
@@ -17,6 +17,11 @@ from orchestrator.conformance.generate.coder_signals import (CODE_NAME, CODE_TAG
                                                              coder_core, occupancy, tvm_line, tvm_line_loaded)
 from orchestrator.conformance.generate.role_file import FRAME, FS_HZ, RoleFile, schedule_input
 
+#: TVM-300's deviation is always its peak, so the judge's instantaneous frequency (from the
+#: analytic signal) overshoots it by its own ripple: 11.12 Hz for our coder's 11 Hz at 8 kHz. A
+#: phase step shows as far more (0.1 rad in one sample at 8 kHz: 127 Hz)
+FREQUENCY_EXCURSION_MARGIN_HZ = 1.0
+
 
 def coder_vectors() -> RoleFile:
     role = RoleFile("wayside_coder", ["system", "fs", "block_aspects", "line_file", "occupied", "fault_main",
@@ -30,6 +35,7 @@ def coder_vectors() -> RoleFile:
     role.vectors.extend(_alsu_coder_vectors())
     role.data_files[TVM_LINE_FILE] = tvm_line()
     role.vectors.extend(_tvm430_coder_vectors())
+    role.vectors.extend(_tvm300_coder_vectors())
     _wrong_command(role, step)
     return role
 
@@ -119,6 +125,58 @@ def _tvm430_coder_vectors() -> List[dict]:
     vectors.append({
         "name": "tvm430_word_section_1", "what": f"the line clear, then block 3 occupied from {change_s:g} s: "
                                                  f"the word's tones on section 1's {carrier:g} Hz carrier",
+        "parameters": params, "step": step, "duration_s": seconds,
+        "inputs": {"occupied": schedule_input([0.0, change_s], [clear.tolist(), occupied.tolist()])},
+        "record_frames": ["u_tx[1]"], "checks": checks})
+    return vectors
+
+
+def _tvm300_coder_vectors() -> List[dict]:
+    """TVM-300 on the TVM-430 vectors' line (its block rules accept it): the block rules' code
+    of every section for a train in each block, and the code's one sub-frequency on section
+    1's carrier before and after a change, with no phase step at the change
+    (docs/wayside_coder.md#tvm-300)."""
+    from fmus.signalling import tvm300
+    from fmus.wayside_coder.tvm300 import PEAK_DEVIATION_HZ, Tvm300CoderCore
+
+    line = tvm_line_loaded()
+    params = {"system": cab_systems.TVM300.name, "fs": TVM_FS_HZ, "line_file": TVM_LINE_FILE}
+    step = {"fs_hz": TVM_FS_HZ, "frame_port": "u_tx"}
+    core = Tvm300CoderCore(line, 8, FRAME, CoderSettings(fs_hz=TVM_FS_HZ, seed=1))
+    patterns = [np.zeros(8, dtype=bool)] + [np.eye(8, dtype=bool)[k] for k in range(8)]
+    hold_s = 0.05
+    times = [round(i * hold_s, 4) for i in range(len(patterns))]
+    at = [round(t + hold_s, 4) for t in times]
+    codes = [core.step(0.0, pattern).code_tx.tolist() for pattern in patterns]
+    vectors = [{
+        "name": "tvm300_block_codes", "what": f"{len(patterns)} occupancy patterns (the line clear, a train in each "
+                                              f"block) on an 8-block line of UM71 circuits, TVM-300",
+        "parameters": params, "step": step, "duration_s": round(len(patterns) * hold_s, 4),
+        "inputs": {"occupied": schedule_input(times, [p.tolist() for p in patterns])},
+        "checks": [{"kind": "table", "label": "TVM-300 code (sub-frequency index + 1) of every section (block rules)",
+                    "port": "code_tx", "at_s": at, "expected": codes}]}]
+    change_s, seconds = 3.0, 6.0
+    clear, occupied = np.zeros(8, dtype=bool), np.eye(8, dtype=bool)[2]
+    first, second = (int(core.step(0.0, pattern).code_tx[0]) for pattern in (clear, occupied))
+    carrier = float(line.sections[0].carrier_hz)
+    sub_hz = [round(float(f), 2) for f in tvm300.SUB_FREQUENCIES_HZ]
+    checks = []
+    for (start, end), code in (((0.2, change_s - 0.2), first), ((change_s + 0.2, seconds - 0.2), second)):
+        read = tvm300.system().reading(code)
+        checks.append({"kind": "fm_tones", "label": f"section 1 sends code {code} ({read.step_kmh:g}/{read.next_kmh:g} "
+                                                    f"km/h): its sub-frequency, no other",
+                       "port": "u_tx[1]", "from_s": start, "to_s": end, "fs_hz": TVM_FS_HZ, "carrier_hz": carrier,
+                       "frequencies_hz": sub_hz, "present": [sub_hz[tvm300.index_of_code(code)]],
+                       "at_least": 0.9 * tvm300.DEVIATION_HZ, "at_most": 0.1 * tvm300.DEVIATION_HZ, "unit": "Hz"})
+    bound_hz = PEAK_DEVIATION_HZ + FREQUENCY_EXCURSION_MARGIN_HZ
+    checks.append({"kind": "frequency_excursion", "label": "no phase step at the code change: the carrier stays "
+                                                          f"within ±{bound_hz:g} Hz",
+                   "port": "u_tx[1]", "from_s": 0.2, "to_s": seconds - 0.2, "fs_hz": TVM_FS_HZ,
+                   "carrier_hz": carrier, "at_most": bound_hz, "unit": "Hz"})
+    vectors.append({
+        "name": "tvm300_sub_frequency_section_1", "what": f"TVM-300: the line clear, then block 3 occupied from "
+                                                          f"{change_s:g} s: the code's sub-frequency on section 1's "
+                                                          f"{carrier:g} Hz carrier",
         "parameters": params, "step": step, "duration_s": seconds,
         "inputs": {"occupied": schedule_input([0.0, change_s], [clear.tolist(), occupied.tolist()])},
         "record_frames": ["u_tx[1]"], "checks": checks})
