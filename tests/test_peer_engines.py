@@ -19,7 +19,7 @@ RUNNER = Path(__file__).resolve().parent / "host" / "peer_run.py"
 # systems whose parameters name data files of their own (resources/ of the system): libcosim passes a
 # String parameter as written; the FMU finds the file in its own resources, where packing copies it
 OWN_DATA_FILES = ("following", "same_block", "joints_at_speed", "freight_ac", "als_en_following",
-                  "fire_dqpsk_following", "alsu", "alsu_following", "tvm430", "tvm430_following",
+                  "fire_dqpsk_following", "alsu", "alsu_following", "tvm430", "tvm430_following", "tvm300", "tvm300_following",
                   "suburban", "suburban_peak", "tvm430_headway")
 #: systems of several trains: their receivers are rx1, rx2 …
 SEVERAL_TRAINS = ("same_block", "suburban_peak", "tvm430_headway")

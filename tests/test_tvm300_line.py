@@ -1,4 +1,4 @@
-"""The shipped TVM-300 line, fmus/data/shipped/hsl_tvm300_line.json (docs/rail_line.md#tvm-300-line):
+"""The shipped TVM-300 line, fmus/data/shipped/hsl_tvm300_line.json (docs/rail_line.md#tvm-430-track-circuits):
 it loads, its blocks are as documented, its carriers alternate with a separation zone at every
 boundary, its limits are TVM-300 steps, and every drop of the cascade is braked within one block
 at the ATP's supervision deceleration after the receiver's latency and the brake's lead."""

@@ -69,7 +69,7 @@ class Tvm300Mode(CabSignalMode):
     lost_code_aspect = sig.RED_YELLOW
     # the cascade's largest one-block drop (270 → 220 km/h) in a 2000 m block needs more than
     # the 0.5 m/s² cap once the brake's lead and the receiver's latency are taken off the block
-    # (docs/rail_line.md#tvm-300-line)
+    # (docs/rail_line.md#tvm-430-track-circuits)
     plan_decel_capped = False
     station_stop_replaces_signal_stops = True
 

@@ -205,7 +205,7 @@ TVM430_FS_HZ, TVM430_BUILD = cab_systems.TVM430.sample_rate_hz, TVM430_SPEC.buil
 TVM430_LINE, TVM430_STOCK = TVM430_SPEC.line_file, TVM430_SPEC.stock_file
 
 # TVM-300 on its own high-speed line (fmus/data/shipped/hsl_tvm300_line.json,
-# docs/rail_line.md#tvm-300-line): 21 UM71 circuits of 2000 m, the same 12 kHz chain and sized
+# docs/rail_line.md#tvm-430-track-circuits): 21 UM71 circuits of 2000 m, the same 12 kHz chain and sized
 # build. tvm300_following: the follower departs 4 min after the leader (TVM-300's headway on LGV
 # Atlantique, docs/sources.md#tvm-430 row 2); the leader is held from 445 s until 745 s; the
 # follower steps down the cascade 300 → 270 → 220 → 160 → 80 → 0 block by block, stands before the
