@@ -24,6 +24,7 @@ from fmus.ato_controller.core import (ATP_DECEL_SHARE, MODE_ATP_EMERGENCY, MODE_
 from fmus.data.loader import load_line, load_rolling_stock, load_timetable
 from fmus.loco_receiver.tvm430 import STATED_LATENCY_S
 from fmus.signalling import aspects as sig
+from fmus.signalling import tvm300
 from fmus.signalling.cab_systems import AtoMode
 from fmus.traction.brake_pipeline import brake_lead_s
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
@@ -238,3 +239,70 @@ def test_a_code_lost_at_speed_brakes_the_train_to_a_stand(tmp_path):
     stood = t[(t > 300.0) & (v <= 1e-3)]
     assert stood.size and v[t >= stood[0]].max() <= 1e-3
     assert loop.ato.atp.emergency_brakings == 1 and loop.ato.atp.signals_passed_at_danger == 0
+
+
+# ---- the planner foresees the cascade to the terminus ------------------------------------------
+
+class FreeLineCodes(CascadeCodes):
+    """The codes the block rules send with the whole line free (tvm300.BlockCoding): the
+    cascade before the line's last station stop, shown as CascadeCodes shows its own."""
+
+    def __init__(self, hold_s: float = STATED_LATENCY_S):
+        super().__init__(0, hold_s)
+        coding = tvm300.system().block_coding(self.line)
+        circuits = len(self.line.sections)
+        free = coding.codes_of(np.full(circuits, coding.open_blocks), np.ones(circuits, dtype=bool))
+        readings = [coding.tvm.reading(int(code)) for code in free]
+        self.pairs_kmh = [(r.step_kmh, r.next_kmh) for r in readings]
+
+    def steps_kmh(self, k: int):
+        return self.pairs_kmh[k]
+
+
+def _programme_run(tmp_path, arrival_s: float):
+    codes = FreeLineCodes()
+    loop = run_closed_loop(arrival_s + 60.0, 0.5, AtoSettings(cab_signal=AtoMode.TVM300),
+                           line_file=LINE, stock_file=TGV, timetable_file=_timetable(tmp_path, arrival_s),
+                           cab_signal=codes)
+    return codes, loop
+
+
+def test_the_planned_profile_keeps_the_free_line_steps_to_the_terminus(tmp_path):
+    """The planner plans the cascade the block rules send before the terminus on a free line
+    (300→270 from 32 km … 80→0 from 40 km): every planned programme is at most each block's
+    step inside it and its next step at its exit; the minimum running time is longer than on
+    the line's limits alone (TVM-430's mode plans those)."""
+    codes, timetable = FreeLineCodes(), _timetable(tmp_path, 1000.0)
+    line, stock = codes.line, load_rolling_stock(TGV)
+    plans = {mode: AtoCore(line, stock, load_timetable(timetable, line), timetable, "high_speed",
+                           AtoSettings(cab_signal=mode)).plans[0] for mode in (AtoMode.TVM300, AtoMode.TVM430)}
+    plan = plans[AtoMode.TVM300]
+    assert [pair for pair in codes.pairs_kmh[16:21]] == [(300, 270), (270, 220), (220, 160), (160, 80), (80, 0)]
+    for k, section in enumerate(line.sections):
+        step, nxt = (v * MPS_PER_KMH for v in codes.pairs_kmh[k])
+        inside = (plan.s >= section.start_m) & (plan.s < section.end_m)
+        assert np.all(plan.family.v[:, inside] <= step + 1e-9), k
+        if section.start_m < plan.end_m < section.end_m:
+            continue                     # the stop point lies inside the block: it ends there
+        at_exit = [np.interp(section.end_m, plan.s, v) for v in plan.family.v]
+        assert max(at_exit) <= nxt, (k, max(at_exit) * KMH_PER_MPS)
+    assert plan.minimum_time_s > plans[AtoMode.TVM430].minimum_time_s + 20.0
+
+
+@pytest.mark.parametrize("slack_s, earliest_s", [(1.5, -3.0), (60.0, -AtoSettings().early_threshold_s)])
+def test_the_ato_alone_on_a_free_line_is_not_late_under_the_cascade(tmp_path, slack_s, earliest_s):
+    """Closed loop, the ATO under the free line's codes (``programme``), timetables of the
+    minimum running time plus 1.5 s and plus 60 s: it arrives less than 2 s late (planned on
+    the line's limits alone: 27 s and 21 s late), no ATP
+    intervention. With 60 s the programme's MARECO coasting before the cascade, planned as held
+    at its end speed on the falling gradient, runs faster in the loop: early, by less than the
+    ATO's early threshold, from which it holds the programme speed (docs/ato.md#tvm-300)."""
+    codes, timetable = FreeLineCodes(), _timetable(tmp_path, 1000.0)
+    line, stock = codes.line, load_rolling_stock(TGV)
+    minimum_s = AtoCore(line, stock, load_timetable(timetable, line), timetable, "high_speed",
+                        AtoSettings(cab_signal=AtoMode.TVM300)).plans[0].minimum_time_s
+    due_s = 10.0 + minimum_s + slack_s
+    codes, loop = _programme_run(tmp_path, due_s)
+    arrival = loop.ato.arrivals[0]
+    assert earliest_s <= arrival["arrival_deviation_s"] < 2.0, arrival
+    assert loop.ato.atp.interventions == 0 and loop.ato.atp.signals_passed_at_danger == 0

@@ -128,6 +128,14 @@ class CabSignalMode:
             return "aspect", f"cab-signal aspect = {shown.aspect} is not an aspect (0..4)"
         return None
 
+    # ---- the ATO's planning ----------------------------------------------------------------
+    def planned_limits(self) -> Tuple[Tuple[float, float, float], ...]:
+        """Limits (start m, end m, speed m/s) the ATO's running-time planner plans under besides
+        the line's (planner.StagePlanner ``head_limits``), each in force while the head is in
+        [start, end): what the mode's cab signal shows on a free line where it is below the
+        line's limits. None here: the line's limits are what a free line permits."""
+        return ()
+
     # ---- the ATO's own driving under an aspect --------------------------------------------
     def driving_speeds(self, category: str, aspect: int) -> Tuple[Optional[float], Optional[float]]:
         """(top of the ATO's band, its speed at the exit signal) under ``aspect``, below the

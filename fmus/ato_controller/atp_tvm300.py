@@ -27,10 +27,14 @@ from __future__ import annotations
 import math
 from typing import Tuple
 
+import numpy as np
+
 from fmus.ato_controller.atp_modes import CabSignalMode, Indication
 from fmus.ato_controller.atp_tvm430 import TVM_CONTROL_MARGIN_MPS, TvmBlocks
 from fmus.ato_controller.supervision import Constraints, Target
 from fmus.signalling import aspects as sig
+from fmus.signalling import tvm300
+from fmus.units import MPS_PER_KMH
 
 
 class Tvm300Supervision(TvmBlocks):
@@ -99,6 +103,28 @@ class Tvm300Mode(CabSignalMode):
 
     def levels(self, c, x, v, permitted, cab_ceiling_mps):
         return self.tvm.levels(c, x, permitted, cab_ceiling_mps)
+
+    def planned_limits(self):
+        """The steps the block rules send with the whole line free (tvm300.BlockCoding): they
+        count the blocks to the line's last station stop as to an occupied block, so the last
+        five blocks before it show the cascade even on a free line. Each track circuit's step
+        while the head is in it, and — where its next step is lower — that next step from its
+        exit until the next circuit's exit (the ATP wants it reached at the exit; on the free
+        line it is the next circuit's own step), so the planner's braking for the drop ends at
+        the exit. The shipped code table's steps: the ATO reads steps, not the table."""
+        line = self.atp.line
+        coding = tvm300.system().block_coding(line)
+        circuits = len(line.sections)
+        free = coding.codes_of(np.full(circuits, coding.open_blocks), np.ones(circuits, dtype=bool))
+        limits = []
+        for k, code in enumerate(free):
+            reading = coding.tvm.reading(int(code))
+            section = line.sections[k]
+            limits.append((section.start_m, section.end_m, reading.step_kmh * MPS_PER_KMH))
+            if reading.next_kmh < reading.step_kmh:
+                until_m = line.sections[k + 1].end_m if k + 1 < circuits else math.inf
+                limits.append((section.end_m, until_m, reading.next_kmh * MPS_PER_KMH))
+        return tuple(dict.fromkeys(limits))       # a drop that is the next circuit's step once
 
     def fault(self, shown):
         fault = super().fault(shown)

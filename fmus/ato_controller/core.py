@@ -221,7 +221,8 @@ class AtoCore:
         self.atp = Atp(line, category, stock.length_m, s.cab_signal, a_atp, s.decoding_latency_s,
                        emergency_decel_mps2=stock.emergency_decel, brake_lead_s=self.brake_lead_s)
         self.atp.attach_vigilance(s.vigilance_period_s, s.vigilance_answer_s)
-        self.plans = plan_stages(StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps),
+        self.plans = plan_stages(StagePlanner(self.train, line, category, self.a_plan, s.speed_margin_mps,
+                                              head_limits=self.atp.cab.planned_limits()),
                                  timetable, timetable_path)
         self.controllers = Controllers(self.train, s.speed_gain, s.hysteresis_mps)
         self.braking = TargetBraking(s, category, self.a_plan, self.brake_lead_s, self.atp, timetable)

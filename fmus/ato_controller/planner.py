@@ -3,7 +3,9 @@
 1. **Static speed profile** (MRSP) on a distance grid: the line's limit for the train's
    category, applied from the head reaching a lower limit until the *tail* has cleared it
    (re-acceleration only after the last car, docs/sources.md#running-time-calculation-osrd-mareco), less the ATO speed margin, capped by
-   the vehicle's maximum speed.
+   the vehicle's maximum speed; and the cab signal's own limits on a free line where its mode
+   has some (``head_limits``: TVM-300's steps before the terminus), in force while the head is
+   in their block.
 2. **Speed ceiling**: braking curves at the planned deceleration integrated backwards from
    every limit drop and from the stop point (closed form: a reverse cumulative minimum of
    v² + 2·a·s).
@@ -41,7 +43,7 @@ import tempfile
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -107,8 +109,13 @@ class StagePlan:
 
 class StagePlanner:
     def __init__(self, train: NominalTrain, line: Line, category: str, braking_decel_mps2: float,
-                 speed_margin_mps: float, step_m: float = PLAN_STEP_M):
+                 speed_margin_mps: float, step_m: float = PLAN_STEP_M,
+                 head_limits: Sequence[Tuple[float, float, float]] = ()):
+        """``head_limits``: (start m, end m, speed m/s) in force while the head is in [start,
+        end), no tail rule — a cab signal's steps on a free line (CabSignalMode.planned_limits):
+        a block's code changes when the head enters the next block."""
         self.train, self.line, self.category = train, line, category
+        self.head_limits = tuple(head_limits)
         self.braking_decel = braking_decel_mps2
         self.margin = speed_margin_mps
         self.step_m = step_m
@@ -127,6 +134,9 @@ class StagePlanner:
             # the line file's temporary restrictions are planned like limits (same tail rule)
             inside = (s >= restriction.start_m) & (s < restriction.end_m + length)
             static[inside] = np.minimum(static[inside], restriction.speed_mps)
+        for start_m, end_m, speed_mps in self.head_limits:
+            inside = (s >= start_m) & (s < end_m)
+            static[inside] = np.minimum(static[inside], speed_mps)
         return np.maximum(static - self.margin, 0.5)
 
     def ceiling(self, s: np.ndarray, static: np.ndarray) -> np.ndarray:

@@ -209,11 +209,13 @@ TVM430_LINE, TVM430_STOCK = TVM430_SPEC.line_file, TVM430_SPEC.stock_file
 # build. tvm300_following: the follower departs 4 min after the leader (TVM-300's headway on LGV
 # Atlantique, docs/sources.md#tvm-430 row 2); the leader is held from 445 s until 745 s; the
 # follower steps down the cascade 300 → 270 → 220 → 160 → 80 → 0 block by block, stands before the
-# buffer section, then follows it on to its stop at "Milieu"
+# buffer section, then follows it on to its stop at "Milieu". tvm300 is due at 766 s: the
+# planner, planning the free line's cascade before Terminus, runs Origine → Terminus in 734.7 s
+# at the least (earliest arrival 764.7 s; docs/ato.md#tvm-300)
 TVM300_SPEC = HighSpeedLine(
     cab_systems.TVM300, "hsl_tvm300_line.json", 21,
     {"train": "TGV 8501", "stops": [{"station": "Origine", "departure_s": 30},
-                                    {"station": "Terminus", "arrival_s": 760.0}]}, 880.0,
+                                    {"station": "Terminus", "arrival_s": 766.0}]}, 880.0,
     ("Origine est", 1200.0), ("Milieu", 33750.0),
     {"train": "TGV 8503 (leader)", "stops": [{"station": "Origine est", "departure_s": 30},
                                              {"station": "Terminus", "arrival_s": 800}]},
