@@ -12,6 +12,7 @@ The base class holds the rules most modes share; a mode overrides what it does o
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Optional, Tuple
 
@@ -48,7 +49,7 @@ class Indication:
     word_carrier_hz: float = 0.0        # TVM: the carrier the word came from
 
 
-class CabSignalMode:
+class CabSignalMode(ABC):
     """One ``cab_signal`` mode of the ATP of one run (``atp``: its geometry, its last valid
     indication, its counters). The class attributes are the mode's fixed rules."""
 
@@ -88,9 +89,10 @@ class CabSignalMode:
         """Whether the indication shown is a valid one of ours (one step, before the constraints)."""
         return shown.code_valid
 
+    @abstractmethod
     def constraints(self, x: float, k: Optional[int], shown: Indication) -> Constraints:
-        """What a valid indication imposes with the head at ``x`` in section ``k``: no state read."""
-        raise NotImplementedError
+        """What a valid indication imposes with the head at ``x`` in section ``k``: no state read
+        (each mode its own)."""
 
     def no_code(self) -> Constraints:
         """What the no-code indication imposes: ALSN's white (40 km/h)."""

@@ -29,10 +29,8 @@ from typing import Tuple
 
 import numpy as np
 
-from fmus.ato_controller.atp_modes import CabSignalMode, Indication
-from fmus.ato_controller.atp_tvm430 import TVM_CONTROL_MARGIN_MPS, TvmBlocks
+from fmus.ato_controller.atp_tvm430 import TVM_CONTROL_MARGIN_MPS, TvmBlocks, TvmMode
 from fmus.ato_controller.supervision import Constraints, Target
-from fmus.signalling import aspects as sig
 from fmus.signalling import tvm300
 from fmus.units import MPS_PER_KMH
 
@@ -65,41 +63,20 @@ class Tvm300Supervision(TvmBlocks):
         return trip, permitted
 
 
-class Tvm300Mode(CabSignalMode):
+class Tvm300Mode(TvmMode):
     """TVM300: the ATP's reading of the TVM-300 code (this module's docstring)."""
 
     inputs = ("aspect", "v_permitted", "v_target", "word_carrier")
-    reaction_s = 0.0                       # a lost code is braked for at once (the cab's reaction)
-    lost_code_aspect = sig.RED_YELLOW
-    # the cascade's largest one-block drop (270 → 220 km/h) in a 2000 m block needs more than
-    # the 0.5 m/s² cap once the brake's lead and the receiver's latency are taken off the block
-    # (docs/rail_line.md#tvm-430-track-circuits)
-    plan_decel_capped = False
-    station_stop_replaces_signal_stops = True
 
     def __init__(self, atp):
         super().__init__(atp)
         self.tvm = Tvm300Supervision(atp.line)
-
-    def validate(self, x: float, shown: Indication) -> bool:
-        """A code from no block at or just behind the head is none; passing the stop at the exit
-        of an (80, 0) or (0, 0) block is a signal passed at danger."""
-        valid = shown.code_valid and self.tvm.word_block(x, shown.word_carrier_hz) is not None
-        if self.tvm.passes_stop_point(x):
-            self.atp.signal_passed_at_danger()
-        return valid
 
     def constraints(self, x, k, shown):
         block = self.tvm.word_block(x, shown.word_carrier_hz)
         if block is None:
             return self.no_code()
         return self.tvm.constraints(shown.v_permitted_mps, shown.v_target_mps, block)
-
-    def no_code(self) -> Constraints:
-        return Constraints(0.0)               # the most restrictive indication: step 0
-
-    def remember(self, constraints, shown):
-        self.tvm.remember_stop(constraints)
 
     def levels(self, c, x, v, permitted, cab_ceiling_mps):
         return self.tvm.levels(c, x, permitted, cab_ceiling_mps)

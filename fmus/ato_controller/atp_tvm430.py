@@ -154,7 +154,36 @@ class Tvm430Supervision(TvmBlocks):
         return trip, permitted
 
 
-class Tvm430Mode(CabSignalMode):
+class TvmMode(CabSignalMode):
+    """What both TVM modes share: a code is read only from the block at or just behind the head
+    whose carrier it came on (:meth:`TvmBlocks.word_block`), a lost code is step 0 braked for at
+    once and acted upon as red-yellow, passing the last valid code's stop point at a block marker
+    is a signal passed at danger. A subclass makes ``self.tvm``, its TvmBlocks supervision."""
+
+    reaction_s = 0.0
+    lost_code_aspect = sig.RED_YELLOW
+    # the block rules announce a stop only a few blocks ahead: a train at 300 km/h must plan
+    # above the 0.5 m/s² cap (docs/ato.md#tvm-430, #tvm-300)
+    plan_decel_capped = False
+    station_stop_replaces_signal_stops = True
+    tvm: TvmBlocks
+
+    def validate(self, x: float, shown: Indication) -> bool:
+        """A code from no block at or just behind the head is none; passing the last valid
+        code's stop point at a block marker is a signal passed at danger."""
+        valid = shown.code_valid and self.tvm.word_block(x, shown.word_carrier_hz) is not None
+        if self.tvm.passes_stop_point(x):
+            self.atp.signal_passed_at_danger()
+        return valid
+
+    def no_code(self) -> Constraints:
+        return Constraints(0.0)               # the most restrictive indication: step 0
+
+    def remember(self, constraints, shown):
+        self.tvm.remember_stop(constraints)
+
+
+class Tvm430Mode(TvmMode):
     """TVM430: the cab's speed step ``v_permitted`` with a trip at its control level (step +
     15 km/h), the next step ``v_target`` at the exit of the word's block, and a stop at the
     target point (the word's block start + ``target_distance``) on a continuous curve from the
@@ -163,24 +192,10 @@ class Tvm430Mode(CabSignalMode):
     acted upon as red-yellow and braked for at once (no driver's reaction)."""
 
     inputs = ("aspect", "v_permitted", "v_target", "target_distance", "gradient", "word_carrier")
-    reaction_s = 0.0
-    lost_code_aspect = sig.RED_YELLOW
-    # the block rules announce a stop only four blocks ahead: a train at 300 km/h must plan at
-    # 0.58 m/s² or more (docs/ato.md#tvm-430)
-    plan_decel_capped = False
-    station_stop_replaces_signal_stops = True
 
     def __init__(self, atp):
         super().__init__(atp)
         self.tvm = Tvm430Supervision(atp.line, atp.decel, atp.emergency_decel, atp.brake_lead_s)
-
-    def validate(self, x: float, shown: Indication) -> bool:
-        """A word from no block at or just behind the head is none; passing the last valid
-        word's stop point at a block marker is a signal passed at danger."""
-        valid = shown.code_valid and self.tvm.word_block(x, shown.word_carrier_hz) is not None
-        if self.tvm.passes_stop_point(x):
-            self.atp.signal_passed_at_danger()
-        return valid
 
     def constraints(self, x, k, shown):
         block = self.tvm.word_block(x, shown.word_carrier_hz)
@@ -188,12 +203,6 @@ class Tvm430Mode(CabSignalMode):
             return self.no_code()
         return self.tvm.constraints(shown.v_permitted_mps, shown.v_target_mps, shown.target_distance_m,
                                     shown.gradient_permille, block)
-
-    def no_code(self) -> Constraints:
-        return Constraints(0.0)               # the most restrictive indication: step 0
-
-    def remember(self, constraints, shown):
-        self.tvm.remember_stop(constraints)
 
     # passing a block exit (the base rule): the word's targets lie where they are on the line
     # (carrier matching), so the last valid word's constraints hold as they are until the new

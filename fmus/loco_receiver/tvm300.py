@@ -27,12 +27,11 @@ step, ``free_blocks`` the fewest blocks before the stop that give the pair, ``as
 """
 from __future__ import annotations
 
-from functools import lru_cache
 from typing import Optional
 
 import numpy as np
 
-from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings  # noqa: F401 (Decision: read here)
+from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings, tone_window_fit  # noqa: F401 (Decision: read here)
 from fmus.signalling import tvm300
 from fmus.signalling.tvm300 import HOLD_S, HOP_S, STATED_DECODE_S, STATED_LATENCY_S, WINDOW_S  # noqa: F401
 
@@ -49,16 +48,9 @@ def resolve_inertia_s(inertia_s: float) -> float:
     return inertia_s if inertia_s > 0 else HOLD_S
 
 
-@lru_cache(maxsize=8)
 def sub_frequency_fit(window: int, rate_hz: float) -> np.ndarray:
-    """(1 + 2·18, window) pseudo-inverse of the window's model: a constant, then cos and sin of
-    every sub-frequency (time origin the window's first sample: the receiver does not know the
-    coder's phase). Shared, read-only."""
-    t = np.arange(window) / rate_hz
-    angle = np.multiply.outer(t, 2.0 * np.pi * tvm300.SUB_FREQUENCIES_HZ)
-    fit = np.linalg.pinv(np.hstack([np.ones((window, 1)), np.cos(angle), np.sin(angle)]))
-    fit.flags.writeable = False
-    return fit
+    """The window's least-squares fit of the 18 sub-frequencies (um71.tone_window_fit)."""
+    return tone_window_fit(window, rate_hz, tuple(tvm300.SUB_FREQUENCIES_HZ.tolist()))
 
 
 class Tvm300ReceiverCore(Um71ReceiverCore):

@@ -28,7 +28,6 @@ docs/loco_receiver.md#tvm-430; the word, tones and modulation: fmus/signalling/t
 """
 from __future__ import annotations
 
-from functools import lru_cache
 from typing import Optional
 
 import numpy as np
@@ -37,7 +36,7 @@ from fmus.loco_receiver.core import ReceiverOutputs
 from fmus.loco_receiver.um71 import (BASEBAND_RATE_HZ, BASEBAND_RISE_S, CONFIRMATIONS, DOMINANCE_DB,  # noqa: F401
                                      IMAGE_GUARD_HZ, LOW_PASS_CORNER_HZ, LOW_PASS_ORDER, SQUELCH_V,
                                      WEAKEST_CARRIER_V, FailSafeDisplay, Um71FrontEnd, low_pass_design)
-from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings  # noqa: F401 (Decision: read here)
+from fmus.loco_receiver.um71 import Decision, Um71ReceiverCore, Um71ReceiverSettings, tone_window_fit  # noqa: F401 (Decision: read here)
 from fmus.signalling import tvm430
 # the decoder rules' times (fmus/signalling/tvm430.py), importable from here as before
 from fmus.signalling.tvm430 import HOLD_S, HOP_S, STATED_DECODE_S, STATED_LATENCY_S, WINDOW_S  # noqa: F401
@@ -55,18 +54,9 @@ def resolve_inertia_s(inertia_s: float) -> float:
     return inertia_s if inertia_s > 0 else HOLD_S
 
 
-@lru_cache(maxsize=8)
 def tone_fit(window: int, rate_hz: float) -> np.ndarray:
-    """(1 + 2·27, window) pseudo-inverse of the window's model: a constant, then cos and sin of
-    every tone, over ``window`` samples at ``rate_hz`` (the fit's time origin is the window's
-    first sample: the receiver does not know the coder's tone phases). Shared, read-only: every
-    receiver at one rate fits with the same matrix."""
-    t = np.arange(window) / rate_hz
-    angle = np.multiply.outer(t, 2.0 * np.pi * tvm430.TONES_HZ)
-    model = np.hstack([np.ones((window, 1)), np.cos(angle), np.sin(angle)])
-    fit = np.linalg.pinv(model)
-    fit.flags.writeable = False
-    return fit
+    """The window's least-squares fit of the 27 tones (um71.tone_window_fit)."""
+    return tone_window_fit(window, rate_hz, tuple(tvm430.TONES_HZ.tolist()))
 
 
 class Tvm430ReceiverCore(Um71ReceiverCore):

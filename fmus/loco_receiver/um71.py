@@ -32,6 +32,7 @@ sub-frequency of a code) is each system's.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable, Optional, Tuple
@@ -231,6 +232,19 @@ class FailSafeDisplay:
         return True
 
 
+@lru_cache(maxsize=16)
+def tone_window_fit(window: int, rate_hz: float, tones_hz: Tuple[float, ...]) -> np.ndarray:
+    """(1 + 2·len(tones), window) pseudo-inverse of a window's model of the frequency offset: a
+    constant, then the cos and the sin of every tone, over ``window`` samples at ``rate_hz`` (the
+    fit's time origin is the window's first sample: the receiver does not know the coder's
+    phases). Shared, read-only: every receiver of a system at one rate fits with one matrix."""
+    t = np.arange(window) / rate_hz
+    angle = np.multiply.outer(t, 2.0 * np.pi * np.asarray(tones_hz))
+    fit = np.linalg.pinv(np.hstack([np.ones((window, 1)), np.cos(angle), np.sin(angle)]))
+    fit.flags.writeable = False
+    return fit
+
+
 @dataclass(frozen=True)
 class Decision:
     """What one decision heard (diagnostics and tests)."""
@@ -245,7 +259,7 @@ class Decision:
         return self.code
 
 
-class Um71ReceiverCore:
+class Um71ReceiverCore(ABC):
     """What both TVM receivers do around their own reading of a window (``code_of``): the front
     end, the fit of the window's frequency offset (``fit``, a pseudo-inverse whose rows after the
     first are the cosines then the sines of the system's tones), the decision, the fail-safe
@@ -275,9 +289,9 @@ class Um71ReceiverCore:
         self._publish(self.front.feed(t, e_coil, self._decide))
         return self.out
 
+    @abstractmethod
     def code_of(self, amplitudes: np.ndarray) -> int:
-        """The word or code the fitted amplitudes give, ``no_code`` for none."""
-        raise NotImplementedError
+        """The word or code the fitted amplitudes give, ``no_code`` for none (each system its own)."""
 
     def publish_extra(self, out: ReceiverOutputs, read) -> None:
         """Outputs of the system's own for a reading shown (none by default)."""

@@ -114,17 +114,9 @@ def load_codes(path=CODES_FILE) -> CodeTable:
     def fail(name: str, message: str):
         raise FmuInputError(f"{path}: field {name}: {message}")
 
-    def number(value) -> bool:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
     if not isinstance(doc, dict):
         fail("(top level)", "expected an object with steps_kmh, control_margin_kmh, sub_frequency_codes")
-    steps = doc.get("steps_kmh")
-    if not isinstance(steps, list) or len(steps) < 2 or any(not number(s) or s < 0 for s in steps) \
-            or any(b >= a for a, b in zip(steps, steps[1:])) or steps[-1] != 0:
-        fail("steps_kmh", "expected speeds in km/h falling from the fastest step to 0")
-    margin = doc.get("control_margin_kmh")
-    if not number(margin) or margin <= 0:
-        fail("control_margin_kmh", "must be a speed in km/h above 0")
+    steps, margin = um71.read_steps_and_margin(doc, fail)
     codes_doc = doc.get("sub_frequency_codes")
     if not isinstance(codes_doc, dict) or not codes_doc:
         fail("sub_frequency_codes", "missing or not an object")
@@ -134,7 +126,7 @@ def load_codes(path=CODES_FILE) -> CodeTable:
         if not key.isdigit() or not 0 <= int(key) < SUB_FREQUENCY_COUNT:
             fail(where, f"sub-frequency indices are 0…{SUB_FREQUENCY_COUNT - 1} "
                         f"({SUB_FREQUENCY_FIRST_HZ:g} + {SUB_FREQUENCY_SPACING_HZ:g}·k Hz)")
-        if not isinstance(pair, list) or len(pair) != 2 or any(not number(v) or v not in steps for v in pair) \
+        if not isinstance(pair, list) or len(pair) != 2 or any(not um71.is_number(v) or v not in steps for v in pair) \
                 or pair[1] > pair[0]:
             fail(where, "expected [step km/h, next step km/h], both of steps_kmh, the next not above the step")
         pairs[int(key)] = (float(pair[0]), float(pair[1]))

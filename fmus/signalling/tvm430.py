@@ -189,21 +189,13 @@ def load_codes(path=CODES_FILE) -> CodeTable:
     def fail(name: str, message: str):
         raise FmuInputError(f"{path}: field {name}: {message}")
 
-    def number(value) -> bool:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
     if not isinstance(doc, dict):
         fail("(top level)", "expected an object with addresses, steps_kmh, speed_codes, …")
     addresses = doc.get("addresses")
     if not isinstance(addresses, list) or not addresses or any(
             not isinstance(a, int) or isinstance(a, bool) or not 0 < a < 8 for a in addresses):
         fail("addresses", "expected a list of network addresses 1…7 (3 bits, not 0)")
-    steps = doc.get("steps_kmh")
-    if not isinstance(steps, list) or len(steps) < 2 or any(not number(s) or s < 0 for s in steps) \
-            or any(b >= a for a, b in zip(steps, steps[1:])) or steps[-1] != 0:
-        fail("steps_kmh", "expected speeds in km/h falling from the fastest step to 0")
-    margin = doc.get("control_margin_kmh")
-    if not number(margin) or margin <= 0:
-        fail("control_margin_kmh", "must be a speed in km/h above 0")
+    steps, margin = um71.read_steps_and_margin(doc, fail)
     speed_doc = doc.get("speed_codes")
     if not isinstance(speed_doc, dict) or not speed_doc:
         fail("speed_codes", "missing or not an object")
@@ -218,13 +210,13 @@ def load_codes(path=CODES_FILE) -> CodeTable:
     if len(set(speed_codes.values())) != len(speed_codes):
         fail("speed_codes", "two field values for the same pair of steps")
     step_m = doc.get("distance_step_m")
-    if not number(step_m) or step_m <= 0:
+    if not um71.is_number(step_m) or step_m <= 0:
         fail("distance_step_m", "must be a length in m above 0")
     codes = doc.get("distance_codes")
     if not isinstance(codes, int) or isinstance(codes, bool) or not 2 <= codes <= 64:
         fail("distance_codes", "must be a whole number 2…64 (6 bits)")
     gradients = doc.get("gradient_permille")
-    if not isinstance(gradients, list) or len(gradients) != 16 or any(not number(g) for g in gradients) \
+    if not isinstance(gradients, list) or len(gradients) != 16 or any(not um71.is_number(g) for g in gradients) \
             or any(b <= a for a, b in zip(gradients, gradients[1:])):
         fail("gradient_permille", "expected 16 gradients in ‰, rising")
     return CodeTable(path, tuple(addresses), tuple(float(s) for s in steps), float(margin), speed_codes,

@@ -34,3 +34,20 @@ def decoder_times(window_s: float, hop_s: float):
       one more to confirm (a restrictive change needs no confirmation: a hop less)."""
     hold_s = 2 * window_s + 3 * hop_s
     return hold_s, window_s + hold_s + hop_s, window_s + 2 * hop_s + BASEBAND_RISE_S
+
+
+def read_steps_and_margin(doc: dict, fail) -> tuple:
+    """A TVM code table's ``steps_kmh`` (falling from the fastest step to 0) and
+    ``control_margin_kmh`` (above 0), as given; ``fail(field, message)`` raises the table's error."""
+    steps = doc.get("steps_kmh")
+    if not isinstance(steps, list) or len(steps) < 2 or any(not is_number(s) or s < 0 for s in steps) \
+            or any(b >= a for a, b in zip(steps, steps[1:])) or steps[-1] != 0:
+        fail("steps_kmh", "expected speeds in km/h falling from the fastest step to 0")
+    margin = doc.get("control_margin_kmh")
+    if not is_number(margin) or margin <= 0:
+        fail("control_margin_kmh", "must be a speed in km/h above 0")
+    return steps, margin
+
+
+def is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
