@@ -23,6 +23,7 @@ from orchestrator.master import Master
 from orchestrator.observers import cannot_write
 from orchestrator.pacing import Pacer
 from orchestrator.plan import RunPlan
+from orchestrator.provenance import content_hash, railcosim_version, utc_now_iso
 from orchestrator.protocols import Slave
 
 #: what a run (and `railcosim report` into the run folder) writes; a run removes these before it
@@ -145,6 +146,12 @@ def metadata(plan: RunPlan, steps_taken: Dict[str, int]) -> dict:
     return {
         "system": graph.name,
         "ssd": str(system.ssd_path),
+        "railcosim_version": railcosim_version(),
+        "date_utc": utc_now_iso(),
+        # of the system folder (an .ssp: of what it unpacked to), so an edited copy is told apart
+        "system_sha256": content_hash(system.folder),
+        "overrides": dict(plan.options.overrides),
+        "param_sets": list(plan.options.param_sets),
         "algorithm": plan.options.algorithm,
         "in_process": plan.options.in_process,
         "start_time_s": system.start_time,
