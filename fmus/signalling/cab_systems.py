@@ -77,6 +77,8 @@ class CabSystem:
     receiver_outputs: Callable[..., dict] = field(default=None, repr=False)
     #: the indication in the system's own terms: "КЖ", "code 4", "270→220", …
     label: Callable[[Mapping[str, float]], str] = field(default=None, repr=False)
+    #: its indications are speed steps (TVM), drawn by step rather than in the aspect colours
+    speed_steps: bool = False
 
     def system(self, codes_file: Optional[str] = None):
         """The system object (None for ALSN: its codes are aspects)."""
@@ -186,7 +188,7 @@ TVM430 = CabSystem(
     chain_parameters=lambda: ({"system": tvm430.NAME}, {}, {"system": tvm430.NAME}),
     ato_links=(("target_distance", "target_distance"), ("gradient", "gradient"), ("word_carrier", "word_carrier")),
     judged_outputs=("target_distance", "gradient"), sample_rate_hz=12000.0, build_sections=(8, 16, 32, 64),
-    default_stock="high_speed_tgv.json", receiver_outputs=_tvm430_outputs, label=_steps_label)
+    default_stock="high_speed_tgv.json", receiver_outputs=_tvm430_outputs, label=_steps_label, speed_steps=True)
 TVM300 = CabSystem(
     name=tvm300.NAME, title="TVM-300", summary="one of 18 sub-frequencies on UM71 carriers, a cascade of fixed steps",
     family=TABLE, ato_mode=AtoMode.TVM300, transmitter=UM71, codes_file=tvm300.CODES_FILE,
@@ -194,7 +196,7 @@ TVM300 = CabSystem(
     latency_s=lambda _parameters: tvm300.STATED_LATENCY_S, atp_latency_s=lambda: tvm300.STATED_LATENCY_S,
     chain_parameters=lambda: ({"system": tvm300.NAME}, {}, {"system": tvm300.NAME}),
     ato_links=(("word_carrier", "word_carrier"),), sample_rate_hz=12000.0, build_sections=(8, 16, 32, 64),
-    default_stock="high_speed_tgv.json", receiver_outputs=_tvm300_outputs, label=_steps_label)
+    default_stock="high_speed_tgv.json", receiver_outputs=_tvm300_outputs, label=_steps_label, speed_steps=True)
 
 REGISTRY: Dict[str, CabSystem] = {s.name: s for s in (ALSN, ALSU, ALS_EN, FIRE_DQPSK, TVM430, TVM300)}
 NAMES = tuple(REGISTRY)

@@ -133,8 +133,20 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
         print_warning(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
                       f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
-    written.append(write_html(output / "report.html", summary, written))
+    line = _line_of(components, trains[0].get("ato")) if trains else None
+    written.append(write_html(output / "report.html", summary, written, metadata, results, line,
+                              _capture_data(run_dir)))
     return written
+
+
+def _capture_data(run_dir: Path) -> Optional[tuple]:
+    """(the first coil-EMF capture's columns, its EMF column's name), or None for no capture."""
+    captures = sorted(run_dir.glob("capture_*e_coil*.csv"))
+    if not captures:
+        return None
+    capture = read_results_file(captures[0])
+    columns = [name for name in capture if name != "time"]
+    return (capture, columns[0]) if columns and len(capture["time"]) else None
 
 
 def _parameters_of(components: Dict[str, dict], name: Optional[str]) -> dict:
@@ -484,9 +496,13 @@ def verdict_items(summary: dict) -> Tuple[List[List[str]], List[Tuple[str, str]]
     return stops, others
 
 
-def write_html(path: Path, summary: dict, pictures: Sequence[Path]) -> Path:
-    """report.html beside the pictures: the run, the verdict tables and every picture."""
+def write_html(path: Path, summary: dict, pictures: Sequence[Path], metadata: Optional[dict] = None,
+               results: Optional[Dict[str, np.ndarray]] = None, line=None, capture: Optional[tuple] = None) -> Path:
+    """report.html beside the pictures: provenance, the verdict tables, the interactive figures
+    (orchestrator/reports/interactive.py) and every picture."""
     from html import escape
+
+    from orchestrator.reports import interactive
 
     stops, others = verdict_items(summary)
     head = ("train", "station", "scheduled arrival (s)", "arrival (s)", "deviation (s)", "stop error (m)", "result")
@@ -506,20 +522,7 @@ def write_html(path: Path, summary: dict, pictures: Sequence[Path]) -> Path:
         lines.append(f"stopped: {summary['error']}")
     if scenario:
         lines.append(f"scenario: {len(scenario['events_applied'])} events applied ({scenario['file']})")
-    text = f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<title>railcosim report: {escape(str(summary.get('system')))}</title>
-<style>
-body {{ font-family: sans-serif; margin: 2em; max-width: 1300px; }}
-table {{ border-collapse: collapse; margin: 0.5em 0 1.5em; }}
-th, td {{ border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; }}
-thead th {{ background: #eee; }}
-tr.missed td {{ background: #fdd; }}
-figure {{ margin: 1.5em 0; }} img {{ max-width: 100%; }}
-</style></head>
-<body>
-<h1>{escape(str(summary.get('system')))}</h1>
-{"".join(f"<p>{escape(line)}</p>" for line in lines)}
+    tables = f"""{"".join(f"<p>{escape(line)}</p>" for line in lines)}
 <h2>Stops</h2>
 <table id="stops"><thead><tr>{"".join(f"<th>{h}</th>" for h in head)}</tr></thead>
 <tbody>
@@ -528,14 +531,9 @@ figure {{ margin: 1.5em 0; }} img {{ max-width: 100%; }}
 <h2>Supervision and safety</h2>
 <table id="judgements"><tbody>
 {more}
-</tbody></table>
-<h2>Pictures</h2>
-{figures}
-</body></html>
-"""
-    with create_file(path) as handle:
-        handle.write(text)
-    return path
+</tbody></table>"""
+    results = results if results is not None else {"time": np.zeros(0)}
+    return interactive.write(path, interactive.page(summary, metadata or {}, results, line, tables, figures, capture))
 
 
 def verdict_table(summary: dict) -> str:

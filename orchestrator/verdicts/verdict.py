@@ -615,8 +615,8 @@ class ReceiverVerdict(_OutputJudge):
     def summary(self) -> List[dict]:
         entries = []
         for r in self.receivers:
-            entry = {"receiver": r.name, "train": r.train, "system": r.cab.name,
-                     "latency_s": r.latency_s, "wrong_side_failures": r.wrong_side.count,
+            entry = {"receiver": r.name, "train": r.train, "system": r.cab.name, "rail": r.rail, "coder": r.coder,
+                     "slot": r.slot, "latency_s": r.latency_s, "wrong_side_failures": r.wrong_side.count,
                      "wrong_side_s": round(r.wrong_side.seconds, 3), "wrong_side_events": r.wrong_side.events}
             if r.unsafe is not None:
                 entry.update(unsafe_indications=r.unsafe.count, unsafe_s=round(r.unsafe.seconds, 3),
@@ -673,9 +673,12 @@ def safety_parts(summary: dict) -> Tuple[bool, str]:
     unjudged = summary.get("receivers_not_judged", [])
     safe = spad == 0 and wrong == 0 and unsafe == 0 and not unjudged
     word = "UNSAFE" if spad or wrong or unsafe else ("not judged" if unjudged else "safe")
+    # a run that stopped early was judged over what it simulated, no further
+    held = "" if summary.get("completed", True) else \
+        f" over 0–{float(summary.get('sim_time_s') or 0.0):.1f} s only (the run did not complete)"
     return safe, (f"{word} (signals passed at danger {spad}, "
                   f"wrong-side failures {wrong}, unsafe indications {unsafe}"
-                  + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")")
+                  + (f"; receivers not judged: {', '.join(unjudged)}" if unjudged else "") + ")" + held)
 
 
 def safety_verdict(summary: dict) -> Tuple[bool, str]:

@@ -1,0 +1,169 @@
+"""report.html as an engineer's instrument: the signal chain per train in its cab system's own
+terms (ALSN's letters, ALSU's code numbers, TVM's steps), each receiver error with its cause,
+a provenance block, an interrupted run's verdict qualified, and a page that works offline."""
+import json
+import re
+
+import numpy as np
+import pytest
+
+from helpers import REPO, railcosim
+
+
+def _chains(run):
+    from orchestrator.reports import chain_view
+    from orchestrator.reports.report import read_results
+
+    summary = json.loads((run / "summary.json").read_text())
+    metadata = json.loads((run / "metadata.json").read_text())
+    return chain_view.chains(read_results(run), summary, metadata["components"]), summary, metadata
+
+
+def _run(tmp_path, system, stop_s):
+    run = tmp_path / system
+    code, _, stderr = railcosim("run", system, "--output", run, "--no-build", "--in-process", "--stop-time", stop_s)
+    assert code == 0, stderr
+    return run
+
+
+def test_alsn_chain_in_letters_and_its_errors_at_the_joints(tmp_path, product_fmus):
+    """free_run to 300 s: the code sent under the coils is З from the first circuit on, what the
+    receiver shows is in ALSN's letters, and the receiver's error at 278.3 s (the coils entered
+    circuit 3 at 277.1 s) is put down to that joint, not to noise."""
+    from orchestrator.reports.chain_view import ASPECT_COLOURS
+    from fmus.signalling import aspects as sig
+
+    chains, summary, _ = _chains(_run(tmp_path, "free_run", 300))
+    (chain,) = chains
+    assert chain.cab.name == "ALSN" and chain.train == "train"
+    assert {s.label for s in chain.sent if s.t0_s > 1.0} == {"З"}
+    assert {s.colour for s in chain.sent if s.t0_s > 1.0} == {ASPECT_COLOURS[sig.GREEN]}
+    assert {s.label for s in chain.shown} <= {"Б", "К", "КЖ", "Ж", "З"} and "З" in {s.label for s in chain.shown}
+    counted = summary["receivers"][0]["code_errors"]
+    assert sum(e.count for e in chain.errors) == counted > 0
+    assert all(e.cause == "section change" for e in chain.errors), chain.errors
+
+
+def test_tvm430_chain_in_speed_steps_and_its_errors_at_the_circuit_boundaries(tmp_path, product_fmus):
+    """TVM-430 to 120 s: every code sent and shown is a step pair ``300→300`` in the steps'
+    colours, not the ALSN aspect colours; the errors its receiver counts come where the coils
+    cross from one UM71 circuit into the next."""
+    from orchestrator.reports.chain_view import STEP_COLOURS
+
+    chains, summary, _ = _chains(_run(tmp_path, "tvm430", 120))
+    (chain,) = chains
+    on_line = [s for s in chain.sent if s.label not in ("off the circuits", "no code")]
+    assert on_line and all(re.fullmatch(r"\d+→\d+", s.label) for s in on_line)
+    assert {s.colour for s in on_line} <= set(STEP_COLOURS)
+    assert any(re.fullmatch(r"300→\d+", s.label) for s in chain.shown)
+    assert sum(e.count for e in chain.errors) == summary["receivers"][0]["code_errors"] > 0
+    assert all(e.cause == "section change" for e in chain.errors), chain.errors
+
+
+def test_alsu_chain_in_code_numbers(tmp_path, product_fmus):
+    """ALSU to 250 s: the codes are named by number (code 9 on the open line, code 6 after the
+    4-aspect block's yellow), sent, decoded and shown alike once the receiver has the code."""
+    chains, _, _ = _chains(_run(tmp_path, "alsu", 250))
+    (chain,) = chains
+    sent = [s.label for s in chain.sent if s.label.startswith("code ")]
+    assert "code 9" in sent and "code 6" in sent
+    shown = {s.label for s in chain.shown}
+    assert {"code 9", "code 6"} <= shown
+
+
+def test_each_receiver_error_is_explained_by_what_happened_under_the_coils():
+    from orchestrator.reports.chain_view import explain_errors
+
+    time = np.round(np.arange(0.0, 100.0, 0.1), 1)
+    keys = np.zeros((len(time), 2), dtype=int)
+    keys[:, 0] = np.where(time < 30.0, 1, np.where(time < 70.0, 2, 3))     # circuits 1, 2, 3
+    keys[:, 1] = np.where((time >= 50.0) & (time < 60.0), 2, 4)            # the code sent drops to КЖ at 50 s
+    keys[(time >= 80.0) & (time < 85.0), 1] = 0                             # no code in circuit 3 at 80–85 s
+    errors = np.zeros(len(time))
+    for t in (1.0, 31.0, 51.0, 69.5, 82.0, 95.0):
+        errors[time >= t] += 1
+    found = explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=2.0)
+    assert [(e.t_s, e.cause) for e in found] == [
+        (1.0, "acquisition"), (31.0, "section change"), (51.0, "code change"), (69.5, "section change"),
+        (82.0, "no code"), (95.0, "steady code")]
+    assert "circuit 2 at 30.0 s" in found[1].explanation and "circuit 3" in found[3].explanation
+
+
+def _interrupted_summary():
+    return {"system": "s", "sim_time_s": 42.0, "realtime_factor": 5.0, "completed": False, "interrupted": "SIGINT",
+            "trains": [], "receivers": [{"receiver": "rx", "system": "ALSN", "train": "t", "wrong_side_failures": 0,
+                                         "unsafe_indications": 0}]}
+
+
+def test_an_interrupted_runs_verdict_says_over_which_time_it_holds(tmp_path):
+    from orchestrator.reports.report import verdict_table, write_html
+
+    summary = _interrupted_summary()
+    write_html(tmp_path / "report.html", summary, [], {"stop_time_s": 1100.0})
+    page = (tmp_path / "report.html").read_text()
+    assert 'class="interrupted"' in page and "interrupted by SIGINT at 42.0 s of 1100.0 s" in page
+    assert "safe (signals passed at danger 0, wrong-side failures 0, unsafe indications 0) over 0–42.0 s only" in page
+    assert "over 0–42.0 s only (the run did not complete)" in verdict_table(summary)
+
+
+#: what a page may not do to stay offline: load a script, a style sheet, an image or a frame
+#: from anywhere, or use a model that fetches (map tiles, Google Maps, a TeX renderer)
+FETCHING = re.compile(r"<(script|link|img|iframe)\b[^>]*\b(src|href)\s*=\s*[\"']?(https?:)?//", re.I)
+FETCHING_MODELS = ("GMapPlot", "TileSource", "TeX", "MathML", "ImageURL", "GeoJSONDataSource", "AjaxDataSource")
+
+
+def check_offline(page: str, limit_bytes: int) -> None:
+    assert len(page.encode()) < limit_bytes
+    assert not FETCHING.search(page), FETCHING.search(page)
+    assert "url(http" not in page.replace(" ", "") and "@import" not in page
+    documents = bokeh_documents(page)
+    assert documents, "no Bokeh document embedded"
+    for document in documents:
+        kinds = set(re.findall(r'"name": "([A-Za-z0-9_]+)"', document))
+        assert kinds and not {k for k in kinds for bad in FETCHING_MODELS if bad in k}, kinds
+    return "\n".join(documents)
+
+
+def bokeh_documents(page: str) -> list:
+    """The Bokeh documents embedded in a page, as JSON text: each is a JavaScript string literal
+    (ASCII, escaped as such) holding the document's JSON."""
+    return [json.dumps(json.loads(literal.encode().decode("unicode_escape")), ensure_ascii=False)
+            for literal in re.findall(r"const docs_json = '(.*?)';", page, re.S)]
+
+
+def test_report_html_is_one_offline_page_with_the_chain_and_its_provenance(tmp_path, product_fmus):
+    """free_run to 300 s: report.html holds the BokehJS it needs inline (no request anywhere, under
+    5 MB), the chain figure and the speed figure of the train, the time–distance figure, a line
+    telling how to capture the coil EMF, and a provenance block naming this railcosim, the system
+    and its hash, the parameters set and the date."""
+    from orchestrator.provenance import content_hash, railcosim_version
+
+    run = tmp_path / "run"
+    code, _, stderr = railcosim("run", "free_run", "--output", run, "--no-build", "--in-process", "--stop-time", "300",
+                                "--set", "ato.cab_signal=ALSN")
+    assert code == 0, stderr
+    code, _, stderr = railcosim("report", run)
+    assert code == 0, stderr
+    page = (run / "report.html").read_text(encoding="utf-8")
+    figures = check_offline(page, 5_000_000)
+    metadata = json.loads((run / "metadata.json").read_text())
+    assert metadata["railcosim_version"] == railcosim_version() and metadata["overrides"]
+    assert metadata["system_sha256"] == content_hash(REPO / "ssp" / "free_run")
+    provenance = re.search(r'<table id="provenance">(.*?)</table>', page, re.S).group(1)
+    for shown in (railcosim_version(), metadata["system_sha256"], metadata["date_utc"],
+                  *(f"{k} = {v}" for k, v in metadata["overrides"].items())):
+        assert shown in provenance, shown
+    assert "yes: 300.0 s simulated" in provenance
+    for title in ("train train: ALSN chain (receiver rx)", "train train: speed and the ATP", "time–distance",
+                  "code sent under the coils", "З"):
+        assert title in figures, title
+    assert "railcosim run free_run --capture rail.e_coil[1]@" in page
+
+
+def test_the_offline_check_refuses_a_page_that_loads_bokeh_from_its_cdn():
+    from bokeh.embed import file_html
+    from bokeh.plotting import figure
+    from bokeh.resources import CDN
+
+    with pytest.raises(AssertionError):
+        check_offline(file_html(figure(), CDN), 5_000_000)
