@@ -268,8 +268,27 @@ def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):
     table = [line for line in text.splitlines() if line.startswith("| ") and line[2].isdigit()]
     assert len(table) == 4 and all("safe×2" in line for line in table)
     assert (out / "report.txt").read_text() in text
-    assert sorted(p.name for p in out.glob("study_*.png")) == [
-        "study_final_train_v.png", "study_final_train_x.png", "study_trains_train_energy_kwh.png"]
+    # the energy over 20 s is one figure at every point: its plot would be a flat line
+    assert sorted(p.name for p in out.glob("study_*.png")) == ["study_final_train_v.png", "study_final_train_x.png"]
+    # the same on one page: a row per point, the two plots inlined (nothing to fetch), no worst run
+    page = (out / "report.html").read_text()
+    assert page.count('<tr class="point">') == 4 and page.count('src="data:image/png;base64,') == 2
+    assert "Not plotted (one value over the sweep, or a single point): trains.train.energy_kwh, verdict" in page
+    assert 'src="http' not in page and "none: no safety key above zero, no failed run" in page
+
+
+def test_only_plots_that_carry_information_are_drawn():
+    """A key with one value everywhere (all zeros) or figures at a single x value says nothing a
+    plot adds to the table: no picture of it."""
+    from orchestrator.study.report import informative
+
+    def entry(x, low, high):
+        return {"axes": {"x": x}, "keys": {"k": {"mean": (low + high) / 2, "min": low, "max": high}}}
+
+    assert informative([entry("1", 0.0, 0.0), entry("2", 0.0, 1.0)], "k", "x")
+    assert not informative([entry("1", 0.0, 0.0), entry("2", 0.0, 0.0)], "k", "x")          # all zeros
+    assert not informative([entry("1", 3.0, 5.0)], "k", "x")                                  # one point
+    assert not informative([entry("1", 3.0, 5.0), {"axes": {"x": "2"}, "keys": {"k": {"values": {}}}}], "k", "x")
 
 
 WORKER_MODULE = """
@@ -299,6 +318,14 @@ def test_failing_and_timed_out_runs_are_recorded_and_the_rest_complete(tmp_path)
     assert all(r["status"] == "failed" and r["error"] == "ValueError: x = 2 is refused" for r in by_x[2])
     assert all(r["status"] == "timeout" and "3 s" in r["error"] for r in by_x[3])
     assert result.counts == {"ok": 4, "failed": 2, "timeout": 2, "lost": 0, "runs": 8, "points": 4, "skipped": 0}
+    # the study's page links each run that did not end ok to its folder
+    from orchestrator.study.report import make_study_report
+
+    make_study_report(tmp_path / "out")
+    page = (tmp_path / "out" / "report.html").read_text()
+    for record in result.records:
+        assert (f'<a href="runs/{record["id"]}/">{record["id"]}</a>' in page) == (record["status"] != "ok" or
+                                                                                record["collected"]["y"] > 0)
     # resuming runs the failed and timed-out points again, and only those
     again = run_study(spec, tmp_path / "out", None, [], workers=1, resume=True)
     assert again.skipped == 4 and again.counts["ok"] == 4

@@ -3,8 +3,10 @@
 
 From DIR/study.json and DIR/study.csv: per point the mean, min and max of every numeric
 collected key over the point's successful runs (its seeds), for the safety keys the total and
-the worst run, the values other keys took; PNG plots for one- and two-axis studies; the worst
-runs by id. Written to DIR/report.txt (Markdown) and DIR/study_<key>*.png.
+the worst run, the values other keys took; PNG plots for one- and two-axis studies, of the
+keys whose plot says more than the table (:func:`informative`); the worst runs by id. Written to
+DIR/report.txt (Markdown), DIR/report.html (all of it on one offline page, the worst runs
+linked to their folders) and DIR/study_<key>*.png.
 """
 from __future__ import annotations
 
@@ -87,24 +89,26 @@ def _format(stats: dict) -> str:
     return f"{g(stats['mean'])} [{g(stats['min'])}, {g(stats['max'])}]"
 
 
-def _worst_runs(study: dict, rows: List[dict]) -> List[str]:
-    lines = []
+def _worst_runs(study: dict, rows: List[dict]) -> List[Tuple[str, str, str]]:
+    """(run id, its point and seed, what is wrong with it): the runs with the most of each
+    safety key, then every run that did not end ok."""
+    found = []
     for key in study.get("safety", []):
         hits = sorted(((v, r) for r in rows if (v := _number(r.get(key, ""))) is not None and v > 0),
                       key=lambda item: -item[0])
         for value, r in hits[:WORST_SHOWN]:
-            lines.append(f"- {r['id']} ({_axes_text(study, r)}, seed {r['seed'] or '—'}): {key} = {value:g}")
+            found.append((r["id"], f"{_axes_text(study, r)}, seed {r['seed'] or '—'}", f"{key} = {value:g}"))
     for r in rows:
         if r["status"] != "ok":
-            lines.append(f"- {r['id']} ({_axes_text(study, r)}, seed {r['seed'] or '—'}): {r['status']}: {r['error']}")
-    return lines
+            found.append((r["id"], f"{_axes_text(study, r)}, seed {r['seed'] or '—'}", f"{r['status']}: {r['error']}"))
+    return found
 
 
 def _axes_text(study: dict, row: dict) -> str:
     return ", ".join(f"{a} {row[a]}" for a in study["axes"]) or "the point"
 
 
-def _markdown(study: dict, table: List[dict], worst: List[str]) -> str:
+def _markdown(study: dict, table: List[dict], worst: List[Tuple[str, str, str]]) -> str:
     counts = study["counts"]
     head = ["point", *study["axes"], "runs", "failed", *study["collect"]]
     lines = [f"# Study {study['name']}", "",
@@ -117,12 +121,22 @@ def _markdown(study: dict, table: List[dict], worst: List[str]) -> str:
         cells = [str(entry["point"]), *entry["axes"].values(), str(entry["runs"]), str(entry["failed"]),
                  *[_format(entry["keys"][k]) for k in study["collect"]]]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "## Worst runs", ""] + (worst or ["none: no safety key above zero, no failed run"])
+    lines += ["", "## Worst runs", ""] + ([f"- {run} ({where}): {what}" for run, where, what in worst]
+                                          or ["none: no safety key above zero, no failed run"])
     return "\n".join(lines) + "\n"
 
 
 def _slug(key: str) -> str:
     return re.sub(r"[^A-Za-z0-9]+", "_", key).strip("_")
+
+
+def informative(table: List[dict], key: str, x_axis: str) -> bool:
+    """Whether a key's plot says more than its row of the table: at least two values of the x
+    axis have a figure, and the figures are not one value everywhere (all zeros, say)."""
+    drawn = [e for e in table if "mean" in e["keys"][key]]
+    xs = {e["axes"][x_axis] for e in drawn}
+    figures = {round(v, 12) for e in drawn for v in (e["keys"][key]["min"], e["keys"][key]["max"])}
+    return len(xs) >= 2 and len(figures) >= 2
 
 
 def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
@@ -152,6 +166,8 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
     written = []
     for key in study["collect"]:
         if not all("mean" in e["keys"][key] or e["runs"] == e["failed"] for e in table):
+            continue
+        if not informative(table, key, x_axis):
             continue
         for facet, members in facets.items():
             figure, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -199,9 +215,69 @@ def make_study_report(folder: Path, stream: Optional[TextIO] = None) -> List[Pat
     """report.txt (a Markdown table) and the plots in ``folder``; the table is also written to ``stream``."""
     study, rows = _read(folder)
     table = aggregate(study, rows)
-    text = _markdown(study, table, _worst_runs(study, rows))
+    worst = _worst_runs(study, rows)
+    text = _markdown(study, table, worst)
     if stream is not None:
         stream.write(text)
     report = folder / "report.txt"
     report.write_text(text)
-    return [report, *plot(study, table, folder)]
+    pictures = plot(study, table, folder)
+    return [report, write_html(folder / "report.html", study, table, worst, pictures), *pictures]
+
+
+def write_html(path: Path, study: dict, table: List[dict], worst: List[Tuple[str, str, str]],
+               pictures: List[Path]) -> Path:
+    """report.html: the study on one page, offline — its counts, the table per point, the plots
+    that carry information (inlined), the worst runs linked to their folders and reports."""
+    import base64
+    from html import escape
+
+    counts = study["counts"]
+    head = ["point", *study["axes"], "runs", "failed", *study["collect"]]
+    rows = "\n".join("<tr class=\"point\">" + "".join(f"<td>{escape(str(c))}</td>" for c in (
+        entry["point"], *entry["axes"].values(), entry["runs"], entry["failed"],
+        *[_format(entry["keys"][k]) for k in study["collect"]])) + "</tr>" for entry in table)
+    plotted = {p.name for p in pictures}
+    left_out = [k for k in study["collect"] if not any(n.startswith(f"study_{_slug(k)}") for n in plotted)]
+    figures = "\n".join(
+        f"<figure><img alt=\"{escape(p.stem)}\" src=\"data:image/png;base64,"
+        f"{base64.b64encode(p.read_bytes()).decode()}\"><figcaption>{escape(p.name)}</figcaption></figure>"
+        for p in pictures)
+
+    def link(run: str) -> str:
+        folder = path.parent / "runs" / run
+        target = f"runs/{run}/report.html" if (folder / "report.html").is_file() else f"runs/{run}/"
+        return f"<a href=\"{escape(target)}\">{escape(run)}</a>"
+
+    worst_items = "\n".join(f"<li class=\"worst\">{link(run)} ({escape(where)}): {escape(what)}</li>"
+                             for run, where, what in worst) or "<li>none: no safety key above zero, no failed run</li>"
+    text = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8">
+<title>railcosim study: {escape(study['name'])}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; max-width: 1300px; }}
+table {{ border-collapse: collapse; margin: 0.5em 0 1.5em; }}
+th, td {{ border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; }}
+thead th {{ background: #eee; }}
+figure {{ display: inline-block; margin: 1em; }} img {{ max-width: 100%; }}
+</style></head>
+<body>
+<h1>Study {escape(study['name'])}</h1>
+<p>{counts['runs']} runs of {counts['points']} points: {counts['ok']} ok, {counts['failed']} failed,
+{counts['timeout']} timed out, {counts['lost']} lost (study file {escape(str(study['file']))}, hash
+{escape(str(study['hash']))}). Numbers: mean [min, max] over the point's successful runs; safety keys:
+total over the runs and the run with the most.</p>
+<h2>Per point</h2>
+<table id="points"><thead><tr>{"".join(f"<th>{escape(h)}</th>" for h in head)}</tr></thead>
+<tbody>
+{rows}
+</tbody></table>
+<h2>Worst runs</h2>
+<ul>{worst_items}</ul>
+<h2>Plots</h2>
+{figures or "<p>No plot carries more than the table.</p>"}
+{f"<p>Not plotted (one value over the sweep, or a single point): {escape(', '.join(left_out))}.</p>" if left_out else ""}
+</body></html>
+"""
+    path.write_text(text, encoding="utf-8")
+    return path
