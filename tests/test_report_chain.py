@@ -167,3 +167,38 @@ def test_the_offline_check_refuses_a_page_that_loads_bokeh_from_its_cdn():
 
     with pytest.raises(AssertionError):
         check_offline(file_html(figure(), CDN), 5_000_000)
+
+
+def test_wrong_side_unsafe_and_scenario_events_on_the_chain_are_marked():
+    """The verdicts' episodes of a receiver and the scenario's events on its chain's components
+    are the chain's marks; an event on another train's components is not."""
+    from orchestrator.reports.chain_view import episodes
+
+    receiver = {"receiver": "rx", "rail": "rail", "coder": "coder", "train": "train",
+                "wrong_side_events": [{"t": 310.0, "section": 4, "code_sent": 2}],
+                "unsafe_events": [{"t": 120.5, "section": 2, "free_blocks_allowed": 0, "aspect_shown": 4}]}
+    events = [{"t": 100.0, "model": "coder", "variable": "transmitter_failed[3]", "action": "set", "value": True},
+              {"t": 200.0, "model": "rx2", "variable": "noise_v", "action": "set", "value": 0.5}]
+    found = episodes(receiver, events)
+    assert [(e.t_s, e.kind) for e in found] == [(100.0, "event"), (120.5, "unsafe"), (310.0, "wrong-side")]
+    assert "circuit 4, code sent 2" in found[2].text and "aspect shown green" in found[1].text
+    assert "coder.transmitter_failed[3] = True" in found[0].text
+
+
+def test_a_code_whose_current_does_not_reach_the_first_axle_is_told_apart():
+    """A pulsed KPT code (the current zero between pulses) arrives; a code the coder sends into a
+    circuit whose current the first axle never sees (a train ahead shunts it) does not, and the
+    receiver's error then is put down to that, not to noise."""
+    from orchestrator.reports.chain_view import code_arrives, explain_errors
+
+    time = np.round(np.arange(0.0, 60.0, 0.1), 1)
+    pulsed = np.where((time % 1.6) < 0.6, 3.0, 0.0)                 # 3 A pulses, gaps of 1 s
+    current = np.where(time < 30.0, 0.0, pulsed)                    # nothing reaches the axle before 30 s
+    sent = np.ones(len(time), dtype=bool)
+    arrives = code_arrives(time, current, sent)
+    assert not arrives[time < 28.0].any() and arrives[time >= 30.0].all()
+    assert code_arrives(time, np.full(len(time), np.nan), sent).all()     # not recorded: not judged
+    keys = np.column_stack((np.ones(len(time), dtype=int), np.full(len(time), 4), arrives))
+    errors = (time >= 20.0).astype(float)
+    (error,) = explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=4.5)
+    assert error.cause == "no code" and "does not reach the first axle" in error.explanation

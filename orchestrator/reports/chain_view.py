@@ -31,6 +31,15 @@ STEP_COLOURS = ("#d62728", "#ff7f0e", "#ffd700", "#9acd32", "#2ca02c")
 #: an error counted this long after a change under the coils is put down to that change, on top
 #: of the system's stated latency (a decoding cycle begun before the change ends after it)
 CAUSE_MARGIN_S = 1.0
+#: the code current under the first axle is taken over this window (s): a KPT code is pulsed, so
+#: one recorded instant may fall between two pulses
+CURRENT_WINDOW_S = 2.0
+#: a code sent whose current under the first axle (its maximum over the window) is below this
+#: share of the run's median is drawn as not arriving: a train ahead shunts it, a rail is broken
+#: or a feed open — relative, because a UM71 circuit's 0.2 A is a KPT circuit's 3 A
+NO_CURRENT_SHARE = 0.05
+#: appended to the label of a code sent that does not arrive (drawn hatched)
+NOT_ARRIVING = " ✕"
 #: an error this long before the coils enter the next circuit is put down to the boundary: over a
 #: jointless circuits' tuned zone (UM71) both carriers are heard before the nominal boundary
 CAUSE_AHEAD_S = 1.0
@@ -156,8 +165,15 @@ class ChainReader:
                 int(out["free_blocks"]), int(out["code"]))
 
     def sent(self, key: tuple) -> Tuple[str, str, str]:
-        """``key``: (coil section, raw code_tx of that section) — section 0: the coils on no circuit."""
-        section, raw = int(key[0]), int(key[1])
+        """``key``: (coil section, raw code_tx of that section, whether its current reaches the
+        first axle) — section 0: the coils on no circuit."""
+        label, colour, detail = self._sent(int(key[0]), int(key[1]))
+        if len(key) > 2 and not key[2] and label not in ("off the circuits", "no code"):
+            return (label + NOT_ARRIVING, colour, detail + "; no code current at the first axle (a train ahead in the "
+                    "circuit shunts it, or a broken rail or an open feed stops it)")
+        return label, colour, detail
+
+    def _sent(self, section: int, raw: int) -> Tuple[str, str, str]:
         if section <= 0:
             return "off the circuits", NO_CODE_COLOUR, "the coils are over no track circuit of the line"
         if self.cab.family == cab_systems.NUMERIC:
@@ -223,7 +239,8 @@ def train_chain(results: Mapping[str, np.ndarray], receiver: Mapping[str, object
     code_tx = np.column_stack([results[k] for k in sections]).astype(int)
     inside = (section >= 1) & (section <= len(sections))
     sent_raw = np.where(inside, code_tx[np.arange(n), np.clip(section - 1, 0, len(sections) - 1)], 0)
-    sent_keys = np.column_stack((np.where(inside, section, 0), sent_raw))
+    arrives = code_arrives(time_s, _column(results, f"{rail}.i_axle[{slot}]", n, np.nan), inside & (sent_raw != 0))
+    sent_keys = np.column_stack((np.where(inside, section, 0), sent_raw, arrives))
     valid = _column(results, f"{name}.code_valid", n, 1.0).astype(int)
     code = _column(results, f"{name}.code", n).astype(int)
     aspect = results[f"{name}.aspect"].astype(int)
@@ -240,8 +257,21 @@ def train_chain(results: Mapping[str, np.ndarray], receiver: Mapping[str, object
     if f"{name}.errors" in results:
         chain.errors = explain_errors(time_s, results[f"{name}.errors"], sent_keys,
                                       _column(results, f"{rail}.off_line[{slot}]", n), chain.latency_s)
-    chain.episodes = episodes(receiver, events, components)
+    chain.episodes = episodes(receiver, events)
     return chain
+
+
+def code_arrives(time_s: np.ndarray, i_axle_a: np.ndarray, sent: np.ndarray) -> np.ndarray:
+    """Per row, 1 where the code current under the train's first axle is there (its maximum over
+    :data:`CURRENT_WINDOW_S` at least :data:`NO_CURRENT_SHARE` of the median over the rows a code
+    is sent), 0 where it is not; 1 throughout when the run did not record the current."""
+    from scipy.ndimage import maximum_filter1d
+
+    if not np.isfinite(i_axle_a).all() or not sent.any() or len(time_s) < 2:
+        return np.ones(len(time_s), dtype=int)
+    rows = max(1, int(round(CURRENT_WINDOW_S / float(time_s[1] - time_s[0]))))
+    peak = maximum_filter1d(np.abs(i_axle_a), size=rows)
+    return (peak >= NO_CURRENT_SHARE * float(np.median(peak[sent]))).astype(int)
 
 
 def explain_errors(time_s: np.ndarray, errors: np.ndarray, sent_keys: np.ndarray, off_line: np.ndarray,
@@ -265,6 +295,9 @@ def explain_errors(time_s: np.ndarray, errors: np.ndarray, sent_keys: np.ndarray
         section, raw = int(sent_keys[row, 0]), int(sent_keys[row, 1])
         if off_line[row] > 0.5 or section <= 0:
             found.append(ReceiverError(t, count, "no code", "the train is off the coded circuits"))
+        elif sent_keys.shape[1] > 2 and not sent_keys[row, 2] and raw != 0:
+            found.append(ReceiverError(t, count, "no code", f"circuit {section}'s code current does not reach the "
+                                       "first axle (shunted by a train ahead, a broken rail or an open feed)"))
         elif last_section is not None and t - last_section <= window_s:
             found.append(ReceiverError(t, count, "section change",
                                        f"the coils entered circuit {section} at {last_section:.1f} s (a joint: "
@@ -297,7 +330,7 @@ def _last_before(times: np.ndarray, t: float) -> Optional[float]:
     return float(times[k - 1]) if k else None
 
 
-def episodes(receiver: Mapping[str, object], events: Sequence[dict], components: Mapping[str, dict]) -> List[Episode]:
+def episodes(receiver: Mapping[str, object], events: Sequence[dict]) -> List[Episode]:
     """The verdicts' wrong-side and unsafe episodes of this receiver, and the scenario's events
     (faults and their repairs, a signaller's commands) on the components of its chain."""
     found = [Episode(float(e["t"]), "wrong-side", f"wrong-side failure: circuit {e.get('section')}, "
@@ -308,7 +341,7 @@ def episodes(receiver: Mapping[str, object], events: Sequence[dict], components:
               for e in receiver.get("unsafe_events", [])]
     chain = {receiver.get("receiver"), receiver.get("rail"), receiver.get("coder"), receiver.get("train")}
     for event in events:
-        if event.get("model") in chain or len(components) <= 1:
+        if event.get("model") in chain:
             found.append(Episode(float(event.get("t", 0.0)), "event",
                                  f"scenario: {event.get('action', 'set')} {event.get('model')}.{event.get('variable')}"
                                  + (f" = {event['value']}" if "value" in event else "")))

@@ -51,14 +51,15 @@ def chain_figure(chain: TrainChain, x_range):
                  tools="xpan,xwheel_zoom,box_zoom,reset,save", active_scroll="xwheel_zoom",
                  title=f"train {chain.train}: {chain.cab.title} chain (receiver {chain.receiver}) — "
                        f"sent under the coils → decoded → shown", toolbar_location="above")
-    segments = {"row": [], "left": [], "right": [], "label": [], "colour": [], "detail": []}
+    segments = {"row": [], "left": [], "right": [], "label": [], "colour": [], "detail": [], "hatch": []}
     for row, parts in zip(ROWS, (chain.shown, chain.decoded, chain.sent)):
         for seg in parts:
-            for key, value in zip(segments, (row, seg.t0_s, seg.t1_s, seg.label, seg.colour, seg.detail)):
+            hatch = "x" if seg.label.endswith(chain_view.NOT_ARRIVING) else " "
+            for key, value in zip(segments, (row, seg.t0_s, seg.t1_s, seg.label, seg.colour, seg.detail, hatch)):
                 segments[key].append(value)
     source = ColumnDataSource(segments)
     bars = fig.hbar(y="row", left="left", right="right", height=0.8, fill_color="colour", line_color="#888888",
-                    line_width=0.3, source=source)
+                    line_width=0.3, hatch_pattern="hatch", hatch_color="#555555", hatch_alpha=0.6, source=source)
     fig.add_tools(HoverTool(renderers=[bars], tooltips=[("", "@row: @label"), ("from", "@left{0.0} s"),
                                                          ("to", "@right{0.0} s"), ("", "@detail")]))
     # each run of one label named once, where its name fits (at ~1100 px for the whole run)
