@@ -23,6 +23,9 @@ def test_report_of_a_run_with_a_coil_capture(tmp_path, product_fmus):
     assert "receiver rx (ALSN, train train)" in stdout and "wrong-side failures 0" in stdout
     assert "SPAD 0" in stdout
     _check_html(tmp_path / "pictures", json.loads((run / "summary.json").read_text()))
+    # the interactive page draws the capture too, and then gives no line telling how to make one
+    page = (tmp_path / "pictures" / "report.html").read_text(encoding="utf-8")
+    assert "captured coil EMF (rail.e_coil[1])" in page and "No coil EMF was captured" not in page
 
 
 class _Page(HTMLParser):

@@ -87,6 +87,8 @@ class TrainChain:
     errors: List[ReceiverError]
     episodes: List[Episode] = field(default_factory=list)
     latency_s: float = 0.0
+    rail: str = "rail"
+    slot: int = 1                  # the train's index on the rail line (its coil EMF is e_coil[slot])
 
 
 def runs(values: np.ndarray) -> List[Tuple[int, int]]:
@@ -253,7 +255,8 @@ def train_chain(results: Mapping[str, np.ndarray], receiver: Mapping[str, object
                        sent=_segments(time_s, sent_keys, reader.sent),
                        decoded=_segments(time_s, np.column_stack((valid, code)), reader.decoded),
                        shown=_segments(time_s, shown_keys, reader.shown),
-                       errors=[], latency_s=float(receiver.get("latency_s", cab.latency_s(parameters))))
+                       errors=[], latency_s=float(receiver.get("latency_s", cab.latency_s(parameters))),
+                       rail=str(rail), slot=int(slot))
     if f"{name}.errors" in results:
         chain.errors = explain_errors(time_s, results[f"{name}.errors"], sent_keys,
                                       _column(results, f"{rail}.off_line[{slot}]", n), chain.latency_s)

@@ -225,12 +225,14 @@ def coil_figure(capture: Mapping[str, np.ndarray], column: str):
     return fig
 
 
-def capture_hint(system: str, chains: Sequence[TrainChain], rail: Optional[str], stop_s: float) -> str:
-    """The command that captures the coil EMF, around the first receiver error if there is one."""
-    first = next((e.t_s for c in chains for e in c.errors), None)
-    t0 = max(0.0, (first if first is not None else min(stop_s, 60.0)) - 2.0)
-    slot = 1
-    return f"railcosim run {system} --capture {rail or 'rail'}.e_coil[{slot}]@{t0:g}:{t0 + 4.0:g}"
+def capture_hint(system: str, chains: Sequence[TrainChain], stop_s: float) -> str:
+    """The command that captures the coil EMF: around the first receiver error if there is one
+    (of that train), else in the first minute."""
+    erring = next((c for c in chains if c.errors), chains[0] if chains else None)
+    first = erring.errors[0].t_s if erring is not None and erring.errors else min(stop_s, 60.0)
+    t0 = max(0.0, first - 2.0)
+    where = f"{erring.rail}.e_coil[{erring.slot}]" if erring is not None else "rail.e_coil[1]"
+    return f"railcosim run {system} --capture {where}@{t0:g}:{t0 + 4.0:g}"
 
 
 def provenance_rows(summary: Mapping[str, object], metadata: Mapping[str, object]) -> List[tuple]:
@@ -286,8 +288,7 @@ def page(summary: Mapping[str, object], metadata: Mapping[str, object], results:
     if capture is not None:
         figures.append(coil_figure(*capture))
     else:
-        hint = capture_hint(str(summary.get("system")), chains, rails[0] if rails else None,
-                            float(summary.get("sim_time_s") or 0.0))
+        hint = capture_hint(str(summary.get("system")), chains, float(summary.get("sim_time_s") or 0.0))
         notes.append(f"No coil EMF was captured in this run. To see it (and the receiver's band-pass output in "
                      f"coil_emf.png), capture a window: <code>{escape(hint)}</code>, then "
                      f"<code>railcosim report</code> the new run.")
