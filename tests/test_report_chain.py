@@ -202,3 +202,18 @@ def test_a_code_whose_current_does_not_reach_the_first_axle_is_told_apart():
     errors = (time >= 20.0).astype(float)
     (error,) = explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=4.5)
     assert error.cause == "no code" and "does not reach the first axle" in error.explanation
+
+
+@pytest.mark.parametrize("system, code, label", [("ALSN", 3, "Ж"), ("ALSN", 2, "КЖ"), ("ALSU", 6, "code 6"),
+                                                 ("ALS-EN", 15, "free 6, 160 km/h")])
+def test_a_code_reads_the_same_sent_and_decoded(system, code, label):
+    """The coder's code_tx and the receiver's code are one numbering: the same value is named
+    alike on the sent and the decoded row (ALS-EN's KLUB register 15 is 6 free blocks at 160,
+    not the command 15)."""
+    from fmus.signalling import cab_systems
+    from orchestrator.reports.chain_view import ChainReader
+
+    reader = ChainReader(cab_systems.lookup(system), {"system": system}, top_kmh=160.0)
+    assert reader.sent((2, code, 1))[0] == label
+    assert reader.decoded((1, code))[0] == label
+    assert reader.decoded((0, code))[0] == "none"

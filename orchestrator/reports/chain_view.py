@@ -153,18 +153,19 @@ class ChainReader:
         self.v_max_mps = float(parameters.get("v_max", 0.0) or 0.0)
 
     def _of_code(self, code: int) -> Optional[Tuple[int, float, float, int, int]]:
-        """(aspect, permitted km/h, target km/h, free blocks, code) of a decoded code; None: no code."""
+        """(aspect, permitted km/h, target km/h, free blocks, code) of a code as the coder sends
+        it and the receiver reports it (``code_tx``, ``code``: one numbering); None: no code."""
         if self.cab.family == cab_systems.NUMERIC:
             if code == 0:
                 return None
             out = self.cab.receiver_outputs(None, code, self.category, self.v_max_mps, 0.0)
-        else:
-            try:
-                out = self.cab.receiver_outputs(self.system, code, self.category, self.v_max_mps, 0.0)
-            except (KeyError, ValueError, IndexError, FmuInputError):
-                return None
-        return (int(out["aspect"]), out["v_permitted"] * KMH_PER_MPS, out["v_target"] * KMH_PER_MPS,
-                int(out["free_blocks"]), int(out["code"]))
+            return (int(out["aspect"]), out["v_permitted"] * KMH_PER_MPS, out["v_target"] * KMH_PER_MPS,
+                    int(out["free_blocks"]), int(out["code"]))
+        try:
+            ind = transmitted_indication(self.system, code, self.category)
+        except (KeyError, ValueError, IndexError, FmuInputError):
+            return None
+        return None if ind is None else (ind.aspect, ind.permitted_kmh, ind.target_kmh, ind.free_blocks, ind.code)
 
     def sent(self, key: tuple) -> Tuple[str, str, str]:
         """``key``: (coil section, raw code_tx of that section, whether its current reaches the
@@ -178,11 +179,7 @@ class ChainReader:
     def _sent(self, section: int, raw: int) -> Tuple[str, str, str]:
         if section <= 0:
             return "off the circuits", NO_CODE_COLOUR, "the coils are over no track circuit of the line"
-        if self.cab.family == cab_systems.NUMERIC:
-            read = self._of_code(raw)
-        else:
-            ind = transmitted_indication(self.system, raw, self.category)
-            read = None if ind is None else (ind.aspect, ind.permitted_kmh, ind.target_kmh, ind.free_blocks, ind.code)
+        read = self._of_code(raw)
         if read is None:
             return "no code", NO_CODE_COLOUR, f"circuit {section}: no code sent (code_tx {raw})"
         aspect, permitted, target, free, code = read
