@@ -181,6 +181,7 @@ def _run_options(args, overrides: dict, **more):
     --set overrides parsed (:func:`_overrides`)."""
     from functools import partial
 
+    from orchestrator.verdicts.labels import railway_labels
     from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
@@ -190,7 +191,7 @@ def _run_options(args, overrides: dict, **more):
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
         scenario=args.scenario, default_scenario=not args.no_scenario,
-        summaries=partial(railway_verdicts, warn=print_warning), **more)
+        summaries=partial(railway_verdicts, warn=print_warning), labels=railway_labels, **more)
 
 
 def _run_command(args) -> int:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from orchestrator.components import Components, interface_of, plan_components
 from orchestrator.dcp.master import DcpTarget
@@ -51,6 +51,10 @@ class RunOptions:
     #: graph once it is built (the railway verdicts: orchestrator.verdicts.verdict.railway_verdicts,
     #: bound to ``warn`` with functools.partial for its warnings to go there too)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
+    #: the labels of the enumerations among the graph's ports, (component, port) → value →
+    #: label, for columns.json (the railway's: orchestrator.verdicts.labels.railway_labels);
+    #: None: a Boolean's false/true only
+    labels: Optional[Callable[[SystemGraph], Mapping[Tuple[str, str], Mapping[int, str]]]] = None
     #: one line per suspicious thing that still runs: a capture window or scenario event beyond
     #: the stop time, a rounded stop time, a paced run that could not keep pace (default: stderr)
     warn: Callable[[str], None] = print_warning

@@ -18,6 +18,7 @@ from typing import Dict, List, Optional, Sequence
 from orchestrator.errors import UserError, os_error, shown_paths
 from orchestrator.folders import FolderLock, refuse_link, replace_file
 from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.ports import base_of
 from orchestrator.interrupts import Interrupted
 from orchestrator.master import Master
 from orchestrator.observers import cannot_write
@@ -28,7 +29,7 @@ from orchestrator.protocols import Slave
 
 #: what a run (and `railcosim report` into the run folder) writes; a run removes these before it
 #: starts, so the folder never mixes two runs. Nothing else in the folder is touched.
-RUN_FILES = ("results.csv", "summary.json", "metadata.json")
+RUN_FILES = ("results.csv", "columns.json", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
 REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
 
@@ -174,6 +175,39 @@ def metadata(plan: RunPlan, steps_taken: Dict[str, int]) -> dict:
             } for name, node in graph.nodes.items()
         },
     }
+
+
+def columns(plan: RunPlan) -> dict:
+    """columns.json: every column of results.csv in its order, with its unit, FMI type and
+    description as the component's modelDescription states them, and for an enumeration the
+    label of each value (``plan.options.labels``; a Boolean: false, true). A unit the
+    modelDescription gives (on the variable, else its declaredType) is the unit; else an Integer
+    is a count or an index, "1", and an enumeration, a Boolean or a Real without a unit have "".
+    """
+    named = plan.options.labels(plan.graph) if plan.options.labels is not None else {}
+    entries = [{"name": "time", "unit": "s", "type": "Real", "description": "simulated time"}]
+    for component, name in plan.recorded:
+        variable = plan.graph.nodes[component].interface.variables[name]
+        labels = named.get((component, base_of(name)))
+        if labels is None and variable.type == "Boolean":
+            labels = {0: "false", 1: "true"}
+        unit = variable.unit or variable.declared_unit or ("1" if variable.type == "Integer" and not labels else "")
+        entry = {"name": f"{component}.{name}", "unit": unit, "type": variable.type,
+                 "description": variable.description}
+        if labels:
+            entry["labels"] = {str(value): text for value, text in sorted(labels.items())}
+        entries.append(entry)
+    return {"file": "results.csv", "columns": entries}
+
+
+def write_columns(out: Path, plan: RunPlan) -> None:
+    """columns.json beside results.csv, written whole before the run steps (a file that cannot
+    be written stops the run before it starts: one line naming it)."""
+    path = out / "columns.json"
+    try:
+        replace_file(path, json.dumps(columns(plan), indent=1, ensure_ascii=False) + "\n")
+    except OSError as error:
+        raise cannot_write(path, error) from None
 
 
 def write_results(out: Path, summary: dict, metadata: Optional[dict]) -> List[str]:

@@ -26,7 +26,7 @@ from orchestrator.pacing import Pacer
 from orchestrator.plan import RunOptions, RunPlan, plan_run
 from orchestrator.protocols import Observer, Slave
 from orchestrator.results import (Outcome, OutputFolder, interrupted_before_start, metadata, raise_failure,
-                                  summary, write_results)
+                                  summary, write_columns, write_results)
 from orchestrator.ssp import SystemDescription, open_system
 
 
@@ -80,6 +80,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     workdir: Optional[Path] = None
     try:
         out.claim()                       # from here on the folder holds this run's files
+        write_columns(out.path, plan)
         # the FMUs' extractions: in a folder of the run's, unless the process keeps them
         workdir = None if extractions_kept() else new_workdir()
         outcome = _run(plan, out.path, workdir, flag)

@@ -298,7 +298,8 @@ def test_a_run_failing_at_initialisation_leaves_no_earlier_results(tmp_path, pro
     _one_error_line(code, stderr, "mass_scale")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is False and "mass_scale" in summary["error"]
-    assert sorted(os.listdir(out)) == [".railcosim.lock", "metadata.json", "notes.txt", "summary.json"]
+    assert sorted(os.listdir(out)) == [".railcosim.lock", "columns.json", "metadata.json", "notes.txt",
+                                     "summary.json"]
     code, _, stderr = railcosim("report", out)
     assert code != 0                         # nothing of the earlier run left to plot
     _no_leftovers(private_tmp, out)
@@ -366,7 +367,8 @@ def test_links_at_the_temporary_files_are_replaced_never_followed(tmp_path, test
     for name in ("summary.json", "metadata.json"):
         assert not (out / name).is_symlink() and json.loads((out / name).read_text())["system"] == "pair"
     assert json.loads((out / "summary.json").read_text())["completed"] is True
-    assert sorted(os.listdir(out)) == [".railcosim.lock", "metadata.json", "results.csv", "summary.json"]
+    assert sorted(os.listdir(out)) == [".railcosim.lock", "columns.json", "metadata.json", "results.csv",
+                                     "summary.json"]
 
 
 def test_an_output_folder_that_is_a_link_is_refused(tmp_path, test_fmus, private_tmp):
