@@ -704,7 +704,11 @@ def _add_section_arguments(parser, required: bool = True) -> None:
 
 
 def make_parser() -> argparse.ArgumentParser:
+    from orchestrator.provenance import railcosim_version
+
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
+    parser.add_argument("--version", action="version", version=f"railcosim {railcosim_version()}",
+                        help="print railcosim's version and exit")
     # not required: a missing command is said by main, naming the commands, in one line
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
 
