@@ -256,6 +256,15 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_plot(args) -> int:
+    from orchestrator.reports.plot import plot_run
+
+    path = plot_run(Path(args.run_dir), args.variables, args.t0, args.t1,
+                    Path(args.output) if args.output else None)
+    print(f"wrote {path}")
+    return 0
+
+
 def cmd_inspect(args) -> int:
     from orchestrator.fmu import read_interface
     from orchestrator.ports import base_of
@@ -743,6 +752,18 @@ def make_parser() -> argparse.ArgumentParser:
     report.add_argument("--output", help="folder for the PNGs (default: the run folder)")
     report.add_argument("--at", action=_Number, of="seconds", help="time (s) to centre the coil-EMF picture on")
     report.set_defaults(func=cmd_report)
+
+    plot = sub.add_parser("plot", help="variables of a finished run against time, with their units and labels "
+                                       "(a PNG or SVG)")
+    plot.add_argument("run_dir", metavar="RUN", help="a run's output folder (results.csv, columns.json)")
+    plot.add_argument("variables", nargs="+", metavar="VAR", help="a results.csv column: train.v, rx.aspect, "
+                                                                 "rail.occupied[3]; one panel each")
+    plot.add_argument("--from", dest="t0", action=_Number, of="seconds", metavar="T0",
+                      help="from this time (s; default the run's start)")
+    plot.add_argument("--to", dest="t1", action=_Number, of="seconds", metavar="T1",
+                      help="to this time (s; default the run's end)")
+    plot.add_argument("-o", "--output", metavar="FILE", help="a .png or .svg (default RUN/plot_VARS.png)")
+    plot.set_defaults(func=cmd_plot)
 
     inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")
     inspect.add_argument("target")

@@ -32,6 +32,8 @@ from orchestrator.protocols import Slave
 RUN_FILES = ("results.csv", "columns.json", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
 REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
+#: what ``railcosim plot`` draws into the run folder (orchestrator/reports/plot.py), cleared with it
+REPORT_PATTERNS = ("plot_*.png", "plot_*.svg")
 
 
 class OutputFolder:
@@ -64,7 +66,7 @@ class OutputFolder:
         pipe at results.csv was put there on purpose and is written through); a symbolic link at
         one of these names is refused, before anything is removed."""
         names = list(RUN_FILES) + list(REPORT_FILES)
-        for pattern in RUN_PATTERNS:
+        for pattern in RUN_PATTERNS + REPORT_PATTERNS:
             names.extend(p.name for p in self.path.glob(pattern))
         for name in names:
             refuse_link(self.path / name)
