@@ -210,13 +210,13 @@ def _run_command(args) -> int:
     for text in args.swap or []:
         target = parse_swap(text)
         swaps[target.component] = target
-    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty(),
-                           real_time=args.real_time, swaps=swaps)
+    progress = args.progress if args.progress != "auto" else "bar" if sys.stderr.isatty() else "lines"
+    options = _run_options(args, overrides, output_dir=Path(args.output), progress=progress,
+                           progress_interval=args.progress_interval, real_time=args.real_time, swaps=swaps)
     result = run_system(system, options)
     summary = result.summary
-    print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
-          f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
-          f"results in {result.output_dir}")
+    print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in {summary['wall_time_s']:.3f} s "
+          f"({_timing(summary)}); results in {result.output_dir}")
     from orchestrator.verdicts.verdict import stop_text
 
     for train in summary["trains"]:
@@ -229,7 +229,18 @@ def _run_command(args) -> int:
         from orchestrator.verdicts.verdict import safety_verdict
 
         print(f"  {safety_verdict(summary)[1]}")
+    import shlex
+
+    print(f"  draw it: railcosim report {shlex.quote(str(result.output_dir))}")
     return 0
+
+
+def _timing(summary: dict) -> str:
+    """``initialisation 2.105 s, then 37.8x real time``: the run's wall time parted, the factor
+    the stepping's (summary.json ``stepping_realtime_factor``; the whole run's is
+    ``realtime_factor``)."""
+    init_s, factor = summary.get("init_wall_time_s") or 0.0, summary.get("stepping_realtime_factor")
+    return f"initialisation {init_s:.3f} s, then " + (f"{factor:.1f}x real time" if factor else "no stepping")
 
 
 def _collapse(names: List[str]) -> List[str]:
@@ -742,6 +753,12 @@ def make_parser() -> argparse.ArgumentParser:
     run.add_argument("--real-time", action=_Number, nargs="?", const=1.0, default=None, metavar="FACTOR",
                      help="pace the run to the wall clock, FACTOR simulated seconds per second (default 1: "
                           "real time); late steps are counted in summary.json real_time")
+    run.add_argument("--progress", choices=["auto", "bar", "lines", "none"], default="auto",
+                     help="the run's progress on stderr: a bar redrawn in place, a line every --progress-interval "
+                          "seconds (none for a shorter run), or none (default auto: the bar on a terminal, "
+                          "else lines)")
+    run.add_argument("--progress-interval", action=_Number, above=0.0, of="seconds", default=5.0, metavar="S",
+                     help="with lines: seconds of wall time between two progress lines (default 5)")
     run.add_argument("--swap", action="append", metavar="NAME=dcp://HOST:PORT[?dcpx=FILE]",
                      help="drive component NAME as a remote DCP slave (hardware in the loop); its .dcpx "
                           "beside the component's FMU unless given; options deadline_ms, timeout_s")

@@ -15,7 +15,7 @@ from orchestrator.components import Components, interface_of, plan_components
 from orchestrator.dcp.master import DcpTarget
 from orchestrator.errors import UserError, print_warning
 from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.observers import CaptureRequest, scalar_outputs
+from orchestrator.observers import DEFAULT_PROGRESS_INTERVAL_S, PROGRESS_MODES, CaptureRequest, scalar_outputs
 from orchestrator.pacing import check_factor
 from orchestrator.process_policy import ProcessPolicy
 from orchestrator.protocols import ALGORITHMS, AlgorithmName, Manipulator, SummaryObserver
@@ -43,7 +43,11 @@ class RunOptions:
     in_process: bool = False
     fmu_dirs: Sequence[Path] = ()
     record: Optional[Sequence[str]] = None    # "comp.var"; None → all scalar outputs
-    progress: bool = False
+    #: the run's progress on stderr (orchestrator/observers.py Progress): "bar" (a terminal),
+    #: "lines" (a log: one every ``progress_interval`` seconds of wall time) or "none" (True:
+    #: "bar", False: "none")
+    progress: str = "none"
+    progress_interval: float = DEFAULT_PROGRESS_INTERVAL_S
     manipulators: Sequence[Manipulator] = ()
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
@@ -75,6 +79,12 @@ class RunOptions:
                 _check_time(label, value)
         if self.real_time is not None:
             check_factor(self.real_time)
+        if isinstance(self.progress, bool):
+            object.__setattr__(self, "progress", "bar" if self.progress else "none")
+        if self.progress not in PROGRESS_MODES:
+            raise UserError(f"--progress {self.progress}: choose {', '.join(PROGRESS_MODES)}")
+        if not (math.isfinite(self.progress_interval) and self.progress_interval > 0):
+            raise UserError(f"--progress-interval {self.progress_interval!r}: must be a positive number of seconds")
         if self.output_interval is not None and self.output_interval <= 0:
             raise UserError(f"--output-interval {self.output_interval}: must be positive")
         for name in ("param_sets", "captures", "record", "fmu_dirs"):

@@ -101,7 +101,7 @@ class OutputFolder:
 class Outcome:
     """What the stepping left, however it ended."""
 
-    wall_s: float                       # stepping time, initialisation included
+    wall_s: float                       # the components made, initialised and stepped
     failure: Optional[BaseException]    # what stopped the run (an interruption included), if anything
     problems: List[str]                 # what closing the files and shutting the slaves down met
     master: Optional[Master]
@@ -109,15 +109,24 @@ class Outcome:
     pacer: Optional[Pacer] = None
     hil: Dict[str, Slave] = field(default_factory=dict)     # the remote DCP slaves, by name
     streamed: List[Path] = field(default_factory=list)       # results.csv and the captures
+    init_s: Optional[float] = None      # of wall_s: the components made and initialised (None: none made)
 
 
-def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Optional[BaseException]) -> dict:
-    """summary.json's own keys: what was simulated, how fast, and how the run ended."""
+def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Optional[BaseException],
+               init_s: Optional[float] = None) -> dict:
+    """summary.json's own keys: what was simulated, how fast, and how the run ended. The wall
+    time and ``realtime_factor`` are the whole run's (the components made and initialised, then
+    stepped); ``init_wall_time_s``, ``stepping_wall_time_s`` and ``stepping_realtime_factor``
+    part them: the stepping's factor is the rate a run keeps (``--real-time``'s)."""
+    stepping_s = wall_s - init_s if init_s is not None else None
     summary = {
         "system": system_name,
         "sim_time_s": sim_time_s,
         "wall_time_s": wall_s,
         "realtime_factor": sim_time_s / wall_s if wall_s > 0 else None,
+        "init_wall_time_s": init_s,
+        "stepping_wall_time_s": stepping_s,
+        "stepping_realtime_factor": sim_time_s / stepping_s if stepping_s else None,
         "completed": failure is None,
         "interrupted": failure.signal_name if isinstance(failure, Interrupted) else None,
     }
@@ -129,7 +138,7 @@ def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Opti
 def summary(plan: RunPlan, sim_time_s: float, outcome: Outcome) -> dict:
     """summary.json: the run's own keys, then each judge's section, the pacer's, the remote
     slaves' and the scenario's."""
-    summary = summary_of(plan.graph.name, sim_time_s, outcome.wall_s, outcome.failure)
+    summary = summary_of(plan.graph.name, sim_time_s, outcome.wall_s, outcome.failure, outcome.init_s)
     for judge in plan.judges:
         summary.update(judge.summary_section())
     if outcome.pacer is not None:

@@ -18,7 +18,7 @@ import zipfile
 
 import pytest
 
-from helpers import ComponentSpec, ConnectionSpec, cli_environment, railcosim, write_ssd
+from helpers import ComponentSpec, ConnectionSpec, cli_environment, railcosim, without_progress, write_ssd
 from orchestrator.errors import UserError
 from orchestrator.interrupts import Interrupted
 from orchestrator.protocols import Manipulator, SummaryObserver
@@ -27,8 +27,9 @@ from orchestrator.run import RunOptions, run_system
 
 # ---- helpers ---------------------------------------------------------------------------------------
 def _one_error_line(code, stderr, *fragments):
+    """One line says what stopped the run (after the progress lines of a run that went on a while)."""
     assert code == 2, stderr
-    lines = [line for line in stderr.splitlines() if line.strip()]
+    lines = [line for line in without_progress(stderr).splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     for fragment in fragments:
         assert fragment in lines[0], lines[0]
