@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from orchestrator.errors import UserError, print_warning
+from orchestrator.errors import UserError, did_you_mean, print_warning
 from orchestrator.interrupts import Interrupted
 
 # A checkout (the README's editable install) runs its committed ssp/ and builds into its own
@@ -123,8 +123,9 @@ def _system_path(name: Optional[str]) -> Path:
     shipped = SSP_ROOT / name
     if shipped.is_dir():
         return shipped
-    raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system "
-                    f"(shipped: {', '.join(available) or 'none yet'})")
+    close = did_you_mean(name, available)
+    raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system"
+                    + (close if close else f" (shipped: {', '.join(available) or 'none yet'})"))
 
 
 def cmd_build(args) -> int:
@@ -352,8 +353,9 @@ def _study_path(name: str) -> Path:
     shipped = shipped_studies()
     if name in shipped:
         return shipped[name]
-    raise UserError(f"study {name!r}: no such file, and not a shipped study "
-                    f"(shipped: {', '.join(sorted(shipped)) or 'none'})")
+    close = did_you_mean(name, shipped)
+    raise UserError(f"study {name!r}: no such file, and not a shipped study"
+                    + (close if close else f" (shipped: {', '.join(sorted(shipped)) or 'none'})"))
 
 
 def cmd_study(args) -> int:

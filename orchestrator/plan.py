@@ -13,10 +13,12 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from orchestrator.components import Components, interface_of, plan_components
 from orchestrator.dcp.master import DcpTarget
-from orchestrator.errors import UserError, print_warning
-from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
+from orchestrator.errors import UserError, did_you_mean, print_warning
+from orchestrator.graph import (MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, closest_variable,
+                                 seconds_to_ticks)
 from orchestrator.observers import DEFAULT_PROGRESS_INTERVAL_S, PROGRESS_MODES, CaptureRequest, scalar_outputs
 from orchestrator.pacing import check_factor
+from orchestrator.ports import base_of
 from orchestrator.process_policy import ProcessPolicy
 from orchestrator.protocols import ALGORITHMS, AlgorithmName, Manipulator, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
@@ -241,7 +243,8 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
         comp, _, var = item.partition(".")
         node = graph.nodes.get(comp)
         if node is None or var not in node.interface.variables:
-            raise UserError(f"--record {item}: no such variable")
+            raise UserError(f"--record {item}: no such variable"
+                            + closest_variable(graph.nodes, item, lambda v: v.causality == "output"))
         if node.interface.variables[var].causality != "output":
             raise UserError(f"--record {item}: only outputs can be recorded")
         chosen.append((comp, var))
@@ -254,6 +257,17 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Capture]:
     for text in texts:
         request = CaptureRequest.parse(text)
         if request.component not in graph.nodes:
-            raise UserError(f"--capture {text}: no component {request.component!r}")
-        captures.append((request, request.elements(graph.nodes[request.component].interface)))
+            raise UserError(f"--capture {text}: no component {request.component!r}"
+                            + did_you_mean(request.component, graph.nodes))
+        interface = graph.nodes[request.component].interface
+        try:
+            elements = request.elements(interface)
+        except UserError as error:
+            frames = [f"{request.component}.{port}" for port in sorted(interface.frame_ports)
+                      if any(base_of(n) == port and v.causality == "output" for n, v in interface.variables.items())]
+            given = f"{request.component}.{request.port}"
+            if f"{request.component}.{base_of(request.port)}" in frames:
+                raise
+            raise UserError(f"{error}{did_you_mean(given, frames)}") from None
+        captures.append((request, elements))
     return captures
