@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import List, Optional
 
-from orchestrator.errors import UserError, print_warning
+from orchestrator.errors import UserError, did_you_mean, print_warning
 from orchestrator.interrupts import Interrupted
 
 # A checkout (the README's editable install) runs its committed ssp/ and builds into its own
@@ -123,8 +123,9 @@ def _system_path(name: Optional[str]) -> Path:
     shipped = SSP_ROOT / name
     if shipped.is_dir():
         return shipped
-    raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system "
-                    f"(shipped: {', '.join(available) or 'none yet'})")
+    close = did_you_mean(name, available)
+    raise UserError(f"system {name!r}: no such folder or .ssp file, and not a shipped system"
+                    + (close if close else f" (shipped: {', '.join(available) or 'none yet'})"))
 
 
 def cmd_build(args) -> int:
@@ -181,6 +182,7 @@ def _run_options(args, overrides: dict, **more):
     --set overrides parsed (:func:`_overrides`)."""
     from functools import partial
 
+    from orchestrator.verdicts.labels import railway_labels
     from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions
 
@@ -190,7 +192,7 @@ def _run_options(args, overrides: dict, **more):
         output_interval=args.output_interval, captures=args.capture or [], record=args.record,
         algorithm=args.algorithm, in_process=args.in_process, fmu_dirs=[_build_dir()],
         scenario=args.scenario, default_scenario=not args.no_scenario,
-        summaries=partial(railway_verdicts, warn=print_warning), **more)
+        summaries=partial(railway_verdicts, warn=print_warning), labels=railway_labels, **more)
 
 
 def _run_command(args) -> int:
@@ -209,13 +211,13 @@ def _run_command(args) -> int:
     for text in args.swap or []:
         target = parse_swap(text)
         swaps[target.component] = target
-    options = _run_options(args, overrides, output_dir=Path(args.output), progress=sys.stderr.isatty(),
-                           real_time=args.real_time, swaps=swaps)
+    progress = args.progress if args.progress != "auto" else "bar" if sys.stderr.isatty() else "lines"
+    options = _run_options(args, overrides, output_dir=Path(args.output), progress=progress,
+                           progress_interval=args.progress_interval, real_time=args.real_time, swaps=swaps)
     result = run_system(system, options)
     summary = result.summary
-    print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
-          f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
-          f"results in {result.output_dir}")
+    print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in {summary['wall_time_s']:.3f} s "
+          f"({_timing(summary)}); results in {result.output_dir}")
     from orchestrator.verdicts.verdict import stop_text
 
     for train in summary["trains"]:
@@ -228,7 +230,18 @@ def _run_command(args) -> int:
         from orchestrator.verdicts.verdict import safety_verdict
 
         print(f"  {safety_verdict(summary)[1]}")
+    import shlex
+
+    print(f"  draw it: railcosim report {shlex.quote(str(result.output_dir))}")
     return 0
+
+
+def _timing(summary: dict) -> str:
+    """``initialisation 2.105 s, then 37.8x real time``: the run's wall time parted, the factor
+    the stepping's (summary.json ``stepping_realtime_factor``; the whole run's is
+    ``realtime_factor``)."""
+    init_s, factor = summary.get("init_wall_time_s") or 0.0, summary.get("stepping_realtime_factor")
+    return f"initialisation {init_s:.3f} s, then " + (f"{factor:.1f}x real time" if factor else "no stepping")
 
 
 def _collapse(names: List[str]) -> List[str]:
@@ -252,6 +265,15 @@ def cmd_report(args) -> int:
 
     for path in make_report(Path(args.run_dir), Path(args.output) if args.output else None, args.at):
         print(f"wrote {path}")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from orchestrator.reports.plot import plot_run
+
+    path = plot_run(Path(args.run_dir), args.variables, args.t0, args.t1,
+                    Path(args.output) if args.output else None)
+    print(f"wrote {path}")
     return 0
 
 
@@ -331,8 +353,9 @@ def _study_path(name: str) -> Path:
     shipped = shipped_studies()
     if name in shipped:
         return shipped[name]
-    raise UserError(f"study {name!r}: no such file, and not a shipped study "
-                    f"(shipped: {', '.join(sorted(shipped)) or 'none'})")
+    close = did_you_mean(name, shipped)
+    raise UserError(f"study {name!r}: no such file, and not a shipped study"
+                    + (close if close else f" (shipped: {', '.join(sorted(shipped)) or 'none'})"))
 
 
 def cmd_study(args) -> int:
@@ -703,7 +726,11 @@ def _add_section_arguments(parser, required: bool = True) -> None:
 
 
 def make_parser() -> argparse.ArgumentParser:
+    from orchestrator.provenance import railcosim_version
+
     parser = _Parser(prog="railcosim", description="Railway cab-signalling and ATO co-simulation")
+    parser.add_argument("--version", action="version", version=f"railcosim {railcosim_version()}",
+                        help="print railcosim's version and exit")
     # not required: a missing command is said by main, naming the commands, in one line
     sub = parser.add_subparsers(dest="command", parser_class=_Parser)
 
@@ -728,6 +755,12 @@ def make_parser() -> argparse.ArgumentParser:
     run.add_argument("--real-time", action=_Number, nargs="?", const=1.0, default=None, metavar="FACTOR",
                      help="pace the run to the wall clock, FACTOR simulated seconds per second (default 1: "
                           "real time); late steps are counted in summary.json real_time")
+    run.add_argument("--progress", choices=["auto", "bar", "lines", "none"], default="auto",
+                     help="the run's progress on stderr: a bar redrawn in place, a line every --progress-interval "
+                          "seconds (none for a shorter run), or none (default auto: the bar on a terminal, "
+                          "else lines)")
+    run.add_argument("--progress-interval", action=_Number, above=0.0, of="seconds", default=5.0, metavar="S",
+                     help="with lines: seconds of wall time between two progress lines (default 5)")
     run.add_argument("--swap", action="append", metavar="NAME=dcp://HOST:PORT[?dcpx=FILE]",
                      help="drive component NAME as a remote DCP slave (hardware in the loop); its .dcpx "
                           "beside the component's FMU unless given; options deadline_ms, timeout_s")
@@ -738,6 +771,18 @@ def make_parser() -> argparse.ArgumentParser:
     report.add_argument("--output", help="folder for the PNGs (default: the run folder)")
     report.add_argument("--at", action=_Number, of="seconds", help="time (s) to centre the coil-EMF picture on")
     report.set_defaults(func=cmd_report)
+
+    plot = sub.add_parser("plot", help="variables of a finished run against time, with their units and labels "
+                                       "(a PNG or SVG)")
+    plot.add_argument("run_dir", metavar="RUN", help="a run's output folder (results.csv, columns.json)")
+    plot.add_argument("variables", nargs="+", metavar="VAR", help="a results.csv column: train.v, rx.aspect, "
+                                                                 "rail.occupied[3]; one panel each")
+    plot.add_argument("--from", dest="t0", action=_Number, of="seconds", metavar="T0",
+                      help="from this time (s; default the run's start)")
+    plot.add_argument("--to", dest="t1", action=_Number, of="seconds", metavar="T1",
+                      help="to this time (s; default the run's end)")
+    plot.add_argument("-o", "--output", metavar="FILE", help="a .png or .svg (default RUN/plot_VARS.png)")
+    plot.set_defaults(func=cmd_plot)
 
     inspect = sub.add_parser("inspect", help="ports of an FMU, or components and connections of a system")
     inspect.add_argument("target")

@@ -1,8 +1,9 @@
 """Errors the CLI turns into one line on stderr and exit code 2."""
+import difflib
 import math
 import os
 import sys
-from typing import Dict, FrozenSet, List, Optional, Sequence, Tuple
+from typing import Dict, FrozenSet, Iterable, List, Optional, Sequence, Tuple
 
 #: extraction folder of an .ssp archive → the archive as the user named it (orchestrator/ssp.py
 #: registers each folder it unpacks); see :func:`shown_paths`
@@ -73,6 +74,16 @@ def os_error(error: OSError) -> UserError:
 def print_warning(message: str) -> None:
     """One warning line on stderr (the message's line breaks and runs of spaces made one space)."""
     print(f"railcosim: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+
+def did_you_mean(given: str, choices: Iterable[str]) -> str:
+    """``; did you mean NAME?`` for the choice closest to a mistyped name (difflib's ratio at
+    least 0.6, case aside), to end the one line that says what is wrong; "" when none is close."""
+    by_lower: Dict[str, str] = {}
+    for choice in choices:
+        by_lower.setdefault(str(choice).lower(), str(choice))
+    close = difflib.get_close_matches(str(given).lower(), list(by_lower), n=1, cutoff=0.6)
+    return f"; did you mean {by_lower[close[0]]}?" if close else ""
 
 
 def where(path, line=None) -> str:

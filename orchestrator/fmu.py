@@ -40,6 +40,9 @@ class Variable:
     start: object
     min: Optional[float] = None
     max: Optional[float] = None
+    description: str = ""
+    #: the unit of the variable's declaredType (FMI 2.0: where the variable names none itself)
+    declared_unit: Optional[str] = None
 
 
 @dataclass
@@ -114,7 +117,8 @@ def _read_interface(fmu_path: Path) -> Interface:
         variables[v.name] = Variable(v.name, int(v.valueReference), v.type, v.causality,
                                      v.variability, v.unit, v.start,
                                      None if v.min is None else float(v.min),
-                                     None if v.max is None else float(v.max))
+                                     None if v.max is None else float(v.max), v.description or "",
+                                     getattr(v.declaredType, "unit", None))
     step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
     from lxml import etree
 

@@ -14,7 +14,7 @@ from functools import reduce
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, did_you_mean
 from orchestrator.fmu import Interface, Variable, read_interface
 from orchestrator.ports import base_of
 from orchestrator.protocols import TRANSITIONS, Transition, UnitDef
@@ -135,7 +135,8 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
         node = nodes.get(comp_name)
         if node is None or var_name not in node.interface.variables:
             raise UserError(f"--set {key}: no such variable (component {comp_name!r}"
-                            f"{' exists' if node else ' does not exist'})")
+                            f"{' exists' if node else ' does not exist'})"
+                            + closest_variable(nodes, key, lambda v: v.causality in ("parameter", "input")))
         var = node.interface.variables[var_name]
         if var.causality not in ("parameter", "input"):
             raise UserError(f"--set {key}: {var.causality} variables cannot be set")
@@ -151,6 +152,19 @@ def build_graph(system: SystemDescription, overrides: Dict[str, object] = None,
     base = _base_ticks(nodes, system.base_step_s, f"{system.ssd_path}: BaseStep")
     order, cycles = _order(list(nodes), edges)
     return SystemGraph(system.name, nodes, edges, order, base, cycles)
+
+
+def closest_variable(nodes: Dict[str, "Node"], key: str, accept: Callable[[Variable], bool]) -> str:
+    """``; did you mean COMPONENT.VARIABLE?`` for a mistyped ``COMP.VAR`` (--set, --record,
+    --capture): among the component's variables that ``accept`` takes, or, for a component the
+    system has not, among the components with that variable, else among the components."""
+    component, _, variable = key.partition(".")
+    node = nodes.get(component)
+    if node is not None:
+        return did_you_mean(key, [f"{component}.{v.name}" for v in node.interface.variables.values() if accept(v)])
+    having = [f"{name}.{variable}" for name, other in nodes.items()
+              if variable in other.interface.variables and accept(other.interface.variables[variable])]
+    return did_you_mean(key, having) if having else did_you_mean(component, nodes)
 
 
 def resolve_data_file(value, system_folder: Path):

@@ -8,7 +8,8 @@ read from the slaves on demand).
   Sample n of the frame from doStep(t, h) is the value at t + (n-1)·h/N (docs/interfaces.md,
   "Time and frames"), written as an exact decimal from the integer clock. A whole 2-D port
   (``rail.e_coil``) gives one column per row.
-* ProgressBar: a terminal progress line on stderr.
+* Progress: the run's progress on stderr, a bar on a terminal or a line every few seconds
+  into a log (``--progress``).
 
 A results file that cannot be written (no space left, no permission, a read-only file system,
 a name too long, a folder in its place) stops the run with :class:`ResultsWriteError`: one line
@@ -21,6 +22,7 @@ import csv
 import math
 import re
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -267,34 +269,139 @@ class WaveformCapture(Observer):
             close_file(self.path, handle)
 
 
-class ProgressBar(Observer):
-    """A one-line progress indicator on a terminal's stderr, refreshed twice a second."""
+#: how a run shows its progress on stderr (``--progress``): a bar redrawn in place on a terminal,
+#: a line every few seconds of wall time into a log, or nothing
+PROGRESS_MODES = ("bar", "lines", "none")
+DEFAULT_PROGRESS_INTERVAL_S = 5.0
 
-    def __init__(self, stop_ticks: int, start_ticks: int = 0, stream=sys.stderr, min_seconds: float = 2.0):
-        self.stop_ticks = stop_ticks
-        self.start_ticks = start_ticks
-        self.stream = stream
-        self.min_seconds = min_seconds
-        self._began = time.monotonic()
-        self._last = 0.0
-        self._shown = False
+
+def duration_text(seconds: float) -> str:
+    """``12 s``, ``1 m 30 s``, ``2 h 5 m``: a wall-clock duration as a person reads it."""
+    seconds = max(0.0, seconds)
+    if seconds < 59.5:
+        return f"{seconds:.0f} s"
+    whole = round(seconds)
+    if whole < 3600:
+        return f"{whole // 60} m {whole % 60} s"
+    return f"{whole // 3600} h {whole % 3600 // 60} m"
+
+
+class Progress(Observer):
+    """A run's progress on ``stream`` (stderr): while the components are initialised
+    (``initialising N components…`` and how long it took), then the simulated time against the
+    stop time, the wall time elapsed (initialisation included), the real-time factor of the
+    stepping so far and the time still to go at that rate.
+
+    ``bar`` (a terminal): the initialisation line at once, the bar from ``bar_after_s`` of
+    stepping on, redrawn in place twice a second. ``lines`` (a log): nothing for the first
+    ``interval_s`` of wall time — a short run prints no progress at all — then one line every
+    ``interval_s`` (``t=123.4/1100 s  11%  elapsed 12 s  ETA 1 m 30 s  RTF 9.8×``); an
+    initialisation still going on at ``interval_s`` is said then, and how long it took when done.
+    """
+
+    def __init__(self, mode: str, start_s: float, stop_s: float, components: int,
+                 interval_s: float = DEFAULT_PROGRESS_INTERVAL_S, stream=None, clock=time.monotonic,
+                 bar_after_s: float = 2.0):
+        if mode not in ("bar", "lines"):
+            raise ValueError(f"progress mode {mode!r}")
+        self.mode, self.start_s, self.stop_s, self.components = mode, start_s, stop_s, components
+        self.interval_s, self.bar_after_s = interval_s, bar_after_s
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._timer = None
+        self._began = self._stepping = self._next = None
+        self._open_line = False          # a bar or an initialisation line not ended yet
+        self._init_said = False          # ``initialising …`` was written
+
+    # ---- initialisation ------------------------------------------------------------------------
+    def initialising(self) -> None:
+        """Before the components are made: the clock starts."""
+        self._began = self.clock()
+        if self.mode == "bar":
+            self._write(self._init_text(), end="")
+            self._open_line = self._init_said = True
+        else:
+            self._timer = threading.Timer(self.interval_s, self._still_initialising)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def _init_text(self) -> str:
+        return f"initialising {self.components} component{'s' if self.components != 1 else ''}…"
+
+    def _still_initialising(self) -> None:
+        with self._lock:
+            if self._stepping is None and not self._init_said:
+                self._init_said = True
+                self._write_locked(self._init_text(), end="\n")
 
     def started(self, master: MasterView, step: StepRecord) -> None:
-        self._began = time.monotonic()
+        now = self.clock()
+        self._cancel_timer()
+        if self._began is None:
+            self._began = now
+        with self._lock:
+            self._stepping = now
+            took = f"initialised {self.components} component{'s' if self.components != 1 else ''} in {now - self._began:.1f} s"
+            if self.mode == "bar":
+                self._write_locked("\r" + took + "\x1b[K", end="\n")
+                self._open_line = False
+            elif self._init_said:
+                self._write_locked(took, end="\n")
+        # lines: the first after interval_s of the run, and after some stepping to rate it
+        self._next = max(self._began + self.interval_s, now + min(self.interval_s, 1.0))
+        if self.mode == "bar":
+            self._next = now + self.bar_after_s
 
+    # ---- stepping ------------------------------------------------------------------------------
     def after_tick(self, master: MasterView, step: StepRecord) -> None:
-        now = time.monotonic()
-        if now - self._last < 0.5 or now - self._began < self.min_seconds:
+        now = self.clock()
+        if now < self._next:
             return
-        self._last = now
-        span = max(self.stop_ticks - self.start_ticks, 1)
-        share = (step.tick - self.start_ticks) / span
-        bar = "#" * int(share * 30)
-        self.stream.write(f"\r[{bar:<30}] {share * 100:5.1f}%  t = {step.time_s:8.1f} s")
-        self.stream.flush()
-        self._shown = True
+        text = self.status(step.time_s, now)
+        if self.mode == "bar":
+            self._next = now + 0.5
+            share = self._share(step.time_s)
+            self._write(f"\r[{'#' * int(share * 30):<30}] {text}\x1b[K", end="")
+            self._open_line = True
+        else:
+            self._next = now + self.interval_s
+            self._write(text, end="\n")
+
+    def _share(self, time_s: float) -> float:
+        span = self.stop_s - self.start_s
+        return min(max((time_s - self.start_s) / span, 0.0), 1.0) if span > 0 else 1.0
+
+    def status(self, time_s: float, now: float) -> str:
+        """``t=123.4/1100 s  11%  elapsed 12 s  ETA 1 m 30 s  RTF 9.8×`` at the master's time."""
+        simulated = time_s - self.start_s
+        stepping = now - self._stepping
+        rate = simulated / stepping if stepping > 0 else 0.0
+        left = self.stop_s - time_s
+        eta = duration_text(left / rate) if rate > 0 else "?"
+        return (f"t={time_s:.1f}/{self.stop_s:g} s  {self._share(time_s) * 100:.0f}%  "
+                f"elapsed {duration_text(now - self._began)}  ETA {eta}  RTF {rate:.1f}×")
 
     def close(self) -> None:
-        if self._shown:
-            self.stream.write("\n")
+        self._cancel_timer()
+        with self._lock:
+            if self._open_line:           # a bar ends its line; an initialisation that failed is erased
+                self._write_locked("\n" if self._stepping is not None else "\r\x1b[K", end="")
+                self._open_line = False
+
+    # ---- output --------------------------------------------------------------------------------
+    def _cancel_timer(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _write(self, text: str, end: str) -> None:
+        with self._lock:
+            self._write_locked(text, end)
+
+    def _write_locked(self, text: str, end: str) -> None:
+        try:
+            self.stream.write(text + end)
             self.stream.flush()
+        except (OSError, ValueError):     # a closed or full stderr: progress is not worth failing for
+            pass

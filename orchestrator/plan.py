@@ -9,14 +9,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from orchestrator.components import Components, interface_of, plan_components
 from orchestrator.dcp.master import DcpTarget
-from orchestrator.errors import UserError, print_warning
-from orchestrator.graph import MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, seconds_to_ticks
-from orchestrator.observers import CaptureRequest, scalar_outputs
+from orchestrator.errors import UserError, did_you_mean, print_warning
+from orchestrator.graph import (MAX_TIME_S, TICKS_PER_SECOND, SystemGraph, build_graph, closest_variable,
+                                 seconds_to_ticks)
+from orchestrator.observers import DEFAULT_PROGRESS_INTERVAL_S, PROGRESS_MODES, CaptureRequest, scalar_outputs
 from orchestrator.pacing import check_factor
+from orchestrator.ports import base_of
 from orchestrator.process_policy import ProcessPolicy
 from orchestrator.protocols import ALGORITHMS, AlgorithmName, Manipulator, SummaryObserver
 from orchestrator.scenario import ScenarioManipulator, load_scenario
@@ -43,7 +45,11 @@ class RunOptions:
     in_process: bool = False
     fmu_dirs: Sequence[Path] = ()
     record: Optional[Sequence[str]] = None    # "comp.var"; None → all scalar outputs
-    progress: bool = False
+    #: the run's progress on stderr (orchestrator/observers.py Progress): "bar" (a terminal),
+    #: "lines" (a log: one every ``progress_interval`` seconds of wall time) or "none" (True:
+    #: "bar", False: "none")
+    progress: str = "none"
+    progress_interval: float = DEFAULT_PROGRESS_INTERVAL_S
     manipulators: Sequence[Manipulator] = ()
     scenario: Optional[Path] = None           # timed events (orchestrator/scenario.py)
     default_scenario: bool = True             # use the system's scenario.json when no scenario is given
@@ -51,6 +57,10 @@ class RunOptions:
     #: graph once it is built (the railway verdicts: orchestrator.verdicts.verdict.railway_verdicts,
     #: bound to ``warn`` with functools.partial for its warnings to go there too)
     summaries: Optional[Callable[[SystemGraph], Sequence[SummaryObserver]]] = None
+    #: the labels of the enumerations among the graph's ports, (component, port) → value →
+    #: label, for columns.json (the railway's: orchestrator.verdicts.labels.railway_labels);
+    #: None: a Boolean's false/true only
+    labels: Optional[Callable[[SystemGraph], Mapping[Tuple[str, str], Mapping[int, str]]]] = None
     #: one line per suspicious thing that still runs: a capture window or scenario event beyond
     #: the stop time, a rounded stop time, a paced run that could not keep pace (default: stderr)
     warn: Callable[[str], None] = print_warning
@@ -71,6 +81,12 @@ class RunOptions:
                 _check_time(label, value)
         if self.real_time is not None:
             check_factor(self.real_time)
+        if isinstance(self.progress, bool):
+            object.__setattr__(self, "progress", "bar" if self.progress else "none")
+        if self.progress not in PROGRESS_MODES:
+            raise UserError(f"--progress {self.progress}: choose {', '.join(PROGRESS_MODES)}")
+        if not (math.isfinite(self.progress_interval) and self.progress_interval > 0):
+            raise UserError(f"--progress-interval {self.progress_interval!r}: must be a positive number of seconds")
         if self.output_interval is not None and self.output_interval <= 0:
             raise UserError(f"--output-interval {self.output_interval}: must be positive")
         for name in ("param_sets", "captures", "record", "fmu_dirs"):
@@ -227,7 +243,8 @@ def _recorded(graph: SystemGraph, record) -> List[tuple]:
         comp, _, var = item.partition(".")
         node = graph.nodes.get(comp)
         if node is None or var not in node.interface.variables:
-            raise UserError(f"--record {item}: no such variable")
+            raise UserError(f"--record {item}: no such variable"
+                            + closest_variable(graph.nodes, item, lambda v: v.causality == "output"))
         if node.interface.variables[var].causality != "output":
             raise UserError(f"--record {item}: only outputs can be recorded")
         chosen.append((comp, var))
@@ -240,6 +257,17 @@ def _captures(graph: SystemGraph, texts: Sequence[str]) -> List[Capture]:
     for text in texts:
         request = CaptureRequest.parse(text)
         if request.component not in graph.nodes:
-            raise UserError(f"--capture {text}: no component {request.component!r}")
-        captures.append((request, request.elements(graph.nodes[request.component].interface)))
+            raise UserError(f"--capture {text}: no component {request.component!r}"
+                            + did_you_mean(request.component, graph.nodes))
+        interface = graph.nodes[request.component].interface
+        try:
+            elements = request.elements(interface)
+        except UserError as error:
+            frames = [f"{request.component}.{port}" for port in sorted(interface.frame_ports)
+                      if any(base_of(n) == port and v.causality == "output" for n, v in interface.variables.items())]
+            given = f"{request.component}.{request.port}"
+            if f"{request.component}.{base_of(request.port)}" in frames:
+                raise
+            raise UserError(f"{error}{did_you_mean(given, frames)}") from None
+        captures.append((request, elements))
     return captures

@@ -18,6 +18,7 @@ from typing import Dict, List, Optional, Sequence
 from orchestrator.errors import UserError, os_error, shown_paths
 from orchestrator.folders import FolderLock, refuse_link, replace_file
 from orchestrator.graph import TICKS_PER_SECOND
+from orchestrator.ports import base_of
 from orchestrator.interrupts import Interrupted
 from orchestrator.master import Master
 from orchestrator.observers import cannot_write
@@ -28,9 +29,11 @@ from orchestrator.protocols import Slave
 
 #: what a run (and `railcosim report` into the run folder) writes; a run removes these before it
 #: starts, so the folder never mixes two runs. Nothing else in the folder is touched.
-RUN_FILES = ("results.csv", "summary.json", "metadata.json")
+RUN_FILES = ("results.csv", "columns.json", "summary.json", "metadata.json")
 RUN_PATTERNS = ("capture_*.csv",)
 REPORT_FILES = ("speed_distance.png", "time_distance.png", "coil_emf.png", "energy.png", "report.html")
+#: what ``railcosim plot`` draws into the run folder (orchestrator/reports/plot.py), cleared with it
+REPORT_PATTERNS = ("plot_*.png", "plot_*.svg")
 
 
 class OutputFolder:
@@ -63,7 +66,7 @@ class OutputFolder:
         pipe at results.csv was put there on purpose and is written through); a symbolic link at
         one of these names is refused, before anything is removed."""
         names = list(RUN_FILES) + list(REPORT_FILES)
-        for pattern in RUN_PATTERNS:
+        for pattern in RUN_PATTERNS + REPORT_PATTERNS:
             names.extend(p.name for p in self.path.glob(pattern))
         for name in names:
             refuse_link(self.path / name)
@@ -98,7 +101,7 @@ class OutputFolder:
 class Outcome:
     """What the stepping left, however it ended."""
 
-    wall_s: float                       # stepping time, initialisation included
+    wall_s: float                       # the components made, initialised and stepped
     failure: Optional[BaseException]    # what stopped the run (an interruption included), if anything
     problems: List[str]                 # what closing the files and shutting the slaves down met
     master: Optional[Master]
@@ -106,15 +109,24 @@ class Outcome:
     pacer: Optional[Pacer] = None
     hil: Dict[str, Slave] = field(default_factory=dict)     # the remote DCP slaves, by name
     streamed: List[Path] = field(default_factory=list)       # results.csv and the captures
+    init_s: Optional[float] = None      # of wall_s: the components made and initialised (None: none made)
 
 
-def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Optional[BaseException]) -> dict:
-    """summary.json's own keys: what was simulated, how fast, and how the run ended."""
+def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Optional[BaseException],
+               init_s: Optional[float] = None) -> dict:
+    """summary.json's own keys: what was simulated, how fast, and how the run ended. The wall
+    time and ``realtime_factor`` are the whole run's (the components made and initialised, then
+    stepped); ``init_wall_time_s``, ``stepping_wall_time_s`` and ``stepping_realtime_factor``
+    part them: the stepping's factor is the rate a run keeps (``--real-time``'s)."""
+    stepping_s = wall_s - init_s if init_s is not None else None
     summary = {
         "system": system_name,
         "sim_time_s": sim_time_s,
         "wall_time_s": wall_s,
         "realtime_factor": sim_time_s / wall_s if wall_s > 0 else None,
+        "init_wall_time_s": init_s,
+        "stepping_wall_time_s": stepping_s,
+        "stepping_realtime_factor": sim_time_s / stepping_s if stepping_s else None,
         "completed": failure is None,
         "interrupted": failure.signal_name if isinstance(failure, Interrupted) else None,
     }
@@ -126,7 +138,7 @@ def summary_of(system_name: str, sim_time_s: float, wall_s: float, failure: Opti
 def summary(plan: RunPlan, sim_time_s: float, outcome: Outcome) -> dict:
     """summary.json: the run's own keys, then each judge's section, the pacer's, the remote
     slaves' and the scenario's."""
-    summary = summary_of(plan.graph.name, sim_time_s, outcome.wall_s, outcome.failure)
+    summary = summary_of(plan.graph.name, sim_time_s, outcome.wall_s, outcome.failure, outcome.init_s)
     for judge in plan.judges:
         summary.update(judge.summary_section())
     if outcome.pacer is not None:
@@ -174,6 +186,39 @@ def metadata(plan: RunPlan, steps_taken: Dict[str, int]) -> dict:
             } for name, node in graph.nodes.items()
         },
     }
+
+
+def columns(plan: RunPlan) -> dict:
+    """columns.json: every column of results.csv in its order, with its unit, FMI type and
+    description as the component's modelDescription states them, and for an enumeration the
+    label of each value (``plan.options.labels``; a Boolean: false, true). A unit the
+    modelDescription gives (on the variable, else its declaredType) is the unit; else an Integer
+    is a count or an index, "1", and an enumeration, a Boolean or a Real without a unit have "".
+    """
+    named = plan.options.labels(plan.graph) if plan.options.labels is not None else {}
+    entries = [{"name": "time", "unit": "s", "type": "Real", "description": "simulated time"}]
+    for component, name in plan.recorded:
+        variable = plan.graph.nodes[component].interface.variables[name]
+        labels = named.get((component, base_of(name)))
+        if labels is None and variable.type == "Boolean":
+            labels = {0: "false", 1: "true"}
+        unit = variable.unit or variable.declared_unit or ("1" if variable.type == "Integer" and not labels else "")
+        entry = {"name": f"{component}.{name}", "unit": unit, "type": variable.type,
+                 "description": variable.description}
+        if labels:
+            entry["labels"] = {str(value): text for value, text in sorted(labels.items())}
+        entries.append(entry)
+    return {"file": "results.csv", "columns": entries}
+
+
+def write_columns(out: Path, plan: RunPlan) -> None:
+    """columns.json beside results.csv, written whole before the run steps (a file that cannot
+    be written stops the run before it starts: one line naming it)."""
+    path = out / "columns.json"
+    try:
+        replace_file(path, json.dumps(columns(plan), indent=1, ensure_ascii=False) + "\n")
+    except OSError as error:
+        raise cannot_write(path, error) from None
 
 
 def write_results(out: Path, summary: dict, metadata: Optional[dict]) -> List[str]:

@@ -18,15 +18,15 @@ from typing import Callable, Dict, List, Optional
 from orchestrator import interrupts
 from orchestrator.errors import os_error
 from orchestrator.fmu import extractions_kept, new_workdir, remove_workdir
-from orchestrator.graph import SystemGraph
+from orchestrator.graph import TICKS_PER_SECOND, SystemGraph
 from orchestrator.interrupts import InterruptFlag, Interrupted
 from orchestrator.master import Master, shutdown_slaves
-from orchestrator.observers import ProgressBar, Recorder, WaveformCapture
+from orchestrator.observers import Progress, Recorder, WaveformCapture
 from orchestrator.pacing import Pacer
 from orchestrator.plan import RunOptions, RunPlan, plan_run
 from orchestrator.protocols import Observer, Slave
 from orchestrator.results import (Outcome, OutputFolder, interrupted_before_start, metadata, raise_failure,
-                                  summary, write_results)
+                                  summary, write_columns, write_results)
 from orchestrator.ssp import SystemDescription, open_system
 
 
@@ -80,6 +80,7 @@ def _run_system(system_path, options: RunOptions, flag: InterruptFlag) -> RunRes
     workdir: Optional[Path] = None
     try:
         out.claim()                       # from here on the folder holds this run's files
+        write_columns(out.path, plan)
         # the FMUs' extractions: in a folder of the run's, unless the process keeps them
         workdir = None if extractions_kept() else new_workdir()
         outcome = _run(plan, out.path, workdir, flag)
@@ -122,8 +123,9 @@ def _observers(plan: RunPlan, out: Path) -> List[Observer]:
         safe_port = request.port.replace("[", "_").replace("]", "").replace(",", "_")
         observers.append(WaveformCapture(out / f"capture_{request.component}_{safe_port}.csv",
                                          request, elements))
-    if plan.options.progress:
-        observers.append(ProgressBar(plan.stop_ticks, plan.start_ticks))
+    if plan.options.progress != "none":
+        observers.append(Progress(plan.options.progress, plan.system.start_time, plan.stop_ticks / TICKS_PER_SECOND,
+                                  len(plan.graph.nodes), plan.options.progress_interval))
     observers.extend(plan.judges)
     return observers
 
@@ -163,16 +165,23 @@ def _run(plan: RunPlan, out: Path, workdir: Optional[Path], flag: InterruptFlag)
     if factor is None and plan.components.needs_real_time:
         factor = 1.0
     pacer = Pacer(factor, flag) if factor is not None else None
+    initialised: Optional[float] = None
     try:
         with process.blas_limited():
             observers = _observers(plan, out)
+            for observer in observers:
+                if isinstance(observer, Progress):
+                    observer.initialising()
             master = start_master(plan, slaves, lambda name, node: plan.components.make(name, node, workdir),
                                   observers, flag, pacer)
+            initialised = time.perf_counter()
             with process.stepping():
                 master.run_until(plan.stop_ticks)
     except BaseException as error:  # a failure or an interruption: results so far are still written
         failure = error
-    wall = time.perf_counter() - began
+    ended = time.perf_counter()
+    wall = ended - began
+    init_s = (initialised if initialised is not None else ended) - began
     problems: List[str] = []
     for observer in observers:       # every one, even when an earlier one cannot close its file
         try:
@@ -186,4 +195,4 @@ def _run(plan: RunPlan, out: Path, workdir: Optional[Path], flag: InterruptFlag)
     steps = dict(master.steps_taken) if master is not None else {name: 0 for name in graph.nodes}
     streamed = [observer.path for observer in observers if isinstance(observer, (Recorder, WaveformCapture))]
     hil = {name: slave for name, slave in slaves.items() if name in plan.components.remote}
-    return Outcome(wall, failure, problems, master, steps, pacer, hil, streamed)
+    return Outcome(wall, failure, problems, master, steps, pacer, hil, streamed, init_s)

@@ -1,6 +1,7 @@
 """Small helpers the tests share: write a system, run it through the CLI entry point."""
 import csv
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +27,16 @@ def cli_environment(**extra) -> dict:
     env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     env.update({key: str(value) for key, value in extra.items()})
     return env
+
+
+#: a run's progress on stderr without a terminal (``--progress lines``, orchestrator/observers.py
+#: Progress): written every few seconds of a long run, before whatever ends it
+PROGRESS_LINE = re.compile(r"^(t=[\d.]+/[\d.e+-]+ s  \d+%  elapsed |initialis(ing|ed) \d+ components?)")
+
+
+def without_progress(stderr: str) -> str:
+    """``stderr`` without the run's progress lines (a long run's failure comes after them)."""
+    return "\n".join(line for line in stderr.splitlines() if not PROGRESS_LINE.match(line))
 
 
 def railcosim(*args, cwd=None, env=None, **popen):

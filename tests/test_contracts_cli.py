@@ -200,7 +200,8 @@ def test_bad_manifests_fmus_and_roles_are_one_line_exit_2(capsys, tmp_path, prod
     port_lacking = _write(tmp_path / "port.json", _edited(receiver, lambda m: m["ports"]["level"].pop("unit")))
     assert "ports.level lacks the field(s) unit" in _one_line_error(
         capsys, "contract", "check", fmu, "--manifest", port_lacking)
-    assert "neither a manifest file nor a role (roles: wayside_coder, rail_line, loco_receiver" in _one_line_error(
+    assert ("neither a manifest file nor a role; did you mean loco_receiver? (roles: wayside_coder, rail_line, "
+            "loco_receiver") in _one_line_error(
         capsys, "contract", "check", fmu, "--manifest", "receiver")
     assert "--manifest missing.json: no such file" in _one_line_error(
         capsys, "contract", "check", fmu, "--manifest", "missing.json")

@@ -18,7 +18,7 @@ import zipfile
 
 import pytest
 
-from helpers import ComponentSpec, ConnectionSpec, cli_environment, railcosim, write_ssd
+from helpers import ComponentSpec, ConnectionSpec, cli_environment, railcosim, without_progress, write_ssd
 from orchestrator.errors import UserError
 from orchestrator.interrupts import Interrupted
 from orchestrator.protocols import Manipulator, SummaryObserver
@@ -27,8 +27,9 @@ from orchestrator.run import RunOptions, run_system
 
 # ---- helpers ---------------------------------------------------------------------------------------
 def _one_error_line(code, stderr, *fragments):
+    """One line says what stopped the run (after the progress lines of a run that went on a while)."""
     assert code == 2, stderr
-    lines = [line for line in stderr.splitlines() if line.strip()]
+    lines = [line for line in without_progress(stderr).splitlines() if line.strip()]
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     for fragment in fragments:
         assert fragment in lines[0], lines[0]
@@ -298,7 +299,8 @@ def test_a_run_failing_at_initialisation_leaves_no_earlier_results(tmp_path, pro
     _one_error_line(code, stderr, "mass_scale")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["completed"] is False and "mass_scale" in summary["error"]
-    assert sorted(os.listdir(out)) == [".railcosim.lock", "metadata.json", "notes.txt", "summary.json"]
+    assert sorted(os.listdir(out)) == [".railcosim.lock", "columns.json", "metadata.json", "notes.txt",
+                                     "summary.json"]
     code, _, stderr = railcosim("report", out)
     assert code != 0                         # nothing of the earlier run left to plot
     _no_leftovers(private_tmp, out)
@@ -366,7 +368,8 @@ def test_links_at_the_temporary_files_are_replaced_never_followed(tmp_path, test
     for name in ("summary.json", "metadata.json"):
         assert not (out / name).is_symlink() and json.loads((out / name).read_text())["system"] == "pair"
     assert json.loads((out / "summary.json").read_text())["completed"] is True
-    assert sorted(os.listdir(out)) == [".railcosim.lock", "metadata.json", "results.csv", "summary.json"]
+    assert sorted(os.listdir(out)) == [".railcosim.lock", "columns.json", "metadata.json", "results.csv",
+                                     "summary.json"]
 
 
 def test_an_output_folder_that_is_a_link_is_refused(tmp_path, test_fmus, private_tmp):

@@ -89,6 +89,7 @@ CAB_SIGNAL_MODES: Dict[str, Type[CabSignalMode]] = {
     AtoMode.ALSN: AlsnMode, AtoMode.ALSU: AlsuMode, AtoMode.DIGITAL: DigitalMode, AtoMode.TVM430: Tvm430Mode,
     AtoMode.TVM300: Tvm300Mode, AtoMode.OFF: NoCabSignal}
 NO_INTERVENTION, SERVICE_INTERVENTION, EMERGENCY_INTERVENTION = 0, 1, 2
+INTERVENTION_NAMES = {NO_INTERVENTION: "none", SERVICE_INTERVENTION: "service", EMERGENCY_INTERVENTION: "emergency"}
 _INF = math.inf
 # below this the train stands (a tachometer's resolution; the ATO's arrival test uses the same)
 STANDSTILL_MPS = 1e-3

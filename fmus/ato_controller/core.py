@@ -38,6 +38,8 @@ _INF = math.inf
 
 # mode output (Integer)
 MODE_STANDSTILL, MODE_TRACTION, MODE_COAST, MODE_BRAKE, MODE_ATP_SERVICE, MODE_ATP_EMERGENCY = range(6)
+MODE_NAMES = {MODE_STANDSTILL: "standstill", MODE_TRACTION: "traction", MODE_COAST: "coast", MODE_BRAKE: "brake",
+              MODE_ATP_SERVICE: "ATP service", MODE_ATP_EMERGENCY: "ATP emergency"}
 WAITING, RUNNING, DWELLING, FINISHED = "waiting", "running", "dwelling", "finished"
 # no train brakes harder: the adhesion limit is about 0.35 g (declared maximum of the decelerations)
 MAX_DECEL_MPS2 = 5.0

@@ -3,11 +3,13 @@ from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
 from fmus.data.loader import DEFAULT_LINE, DEFAULT_ROLLING_STOCK, DEFAULT_TIMETABLE, load_line, load_rolling_stock, load_timetable
+from fmus.fmi.ports import enumeration_text
 from fmus.fmi.slave import FacadeSlave, Port, line_file_port
-from fmus.ato_controller.atp import CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION
+from fmus.ato_controller.atp import CAB_SIGNAL_MODES, EMERGENCY_INTERVENTION, INTERVENTION_NAMES
+from fmus.signalling.aspects import ASPECT_NAMES
 from fmus.signalling.ato_modes import AtoMode
-from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, MODE_ATP_EMERGENCY, TSR_SLOTS, AtoCore, AtoSettings,
-                                      event_restrictions, judged_measurements)
+from fmus.ato_controller.core import (MAX_DECEL_MPS2, MAX_SPEED_MPS, MODE_ATP_EMERGENCY, MODE_NAMES, TSR_SLOTS, AtoCore,
+                                      AtoSettings, event_restrictions, judged_measurements)
 
 
 class AtoController(FacadeSlave):
@@ -60,7 +62,7 @@ class AtoController(FacadeSlave):
             Port("v", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
                  description="below -0.2 m/s or not a number: emergency brake"),
             Port("aspect", "input", "Integer", start=0, min=0, max=4, bad_input="unit",
-                 description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
+                 description=enumeration_text(ASPECT_NAMES)),
             Port("code_valid", "input", "Boolean", start=False,
                  description="the receiver shows a received code; false: the fail-safe memory of the last valid code applies"),
             Port("v_permitted", "input", unit="m/s", start=0.0, min=0.0, bad_input="unit",
@@ -93,7 +95,7 @@ class AtoController(FacadeSlave):
             Port("emergency_brake", "output", "Boolean", start=False, fail_safe=True,
                  description="ATP emergency brake (to traction.emergency_brake)"),
             Port("mode", "output", "Integer", start=0, fail_safe=MODE_ATP_EMERGENCY,
-                 description="0 standstill, 1 traction, 2 coast, 3 brake, 4 ATP service, 5 ATP emergency"),
+                 description=enumeration_text(MODE_NAMES)),
             Port("v_ref", "output", unit="m/s", core_field="v_ref_mps", description="reference programme speed here"),
             Port("schedule_deviation", "output", unit="s", core_field="schedule_deviation_s", description="late > 0"),
             Port("v_ceiling", "output", unit="m/s", core_field="v_ceiling_mps",
@@ -103,7 +105,7 @@ class AtoController(FacadeSlave):
             Port("atp_aspect", "output", "Integer", start=0, core_field="aspect",
                  description="aspect the ATP acts upon (fail-safe rules applied)"),
             Port("atp_intervention", "output", "Integer", start=0, fail_safe=EMERGENCY_INTERVENTION,
-                 description="0 none, 1 service, 2 emergency"),
+                 description=enumeration_text(INTERVENTION_NAMES)),
             Port("atp_interventions", "output", "Integer", start=0, description="ATP interventions so far (service or emergency)"),
             Port("emergency_brakings", "output", "Integer", start=0, description="emergency brakings so far"),
             Port("signals_passed_at_danger", "output", "Integer", start=0,

@@ -9,7 +9,7 @@ from __future__ import annotations
 import inspect
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -96,6 +96,12 @@ def keyword_defaults(function) -> Dict[str, Any]:
     ports that set them (a core without a settings record)."""
     return {name: p.default for name, p in inspect.signature(function).parameters.items()
             if p.default is not inspect.Parameter.empty}
+
+
+def enumeration_text(names: Mapping[int, str]) -> str:
+    """An enumeration's values and names as a port's description says them: ``0 white, 1 red``
+    (the names are stated once, beside the values, and the results' legends read them there)."""
+    return ", ".join(f"{value} {name}" for value, name in sorted(names.items()))
 
 
 def line_file_port() -> Port:

@@ -5,6 +5,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling import alsn, cab_systems
 from fmus.signalling import aspects as sig
 from fmus.loco_receiver.tvm430 import Tvm430ReceiverSettings
+from fmus.fmi.ports import enumeration_text
 from fmus.fmi.slave import FrameFacadeSlave, Port, cab_system_port, sample_rate_port
 from fmus.loco_receiver.core import CHANNELS, ReceiverSettings
 from fmus.loco_receiver.cores import receiver_kind
@@ -66,7 +67,7 @@ class LocoReceiver(FrameFacadeSlave):
             # name); the fail-safe ones are what a DCP master shows while the receiver is not
             # heard: the no-code indication, and no speed at all (more restrictive than white's)
             Port("aspect", "output", "Integer", start=0, fail_safe=sig.WHITE,
-                 description="0 white, 1 red, 2 red-yellow, 3 yellow, 4 green"),
+                 description=enumeration_text(cab_systems.ASPECT_LABELS)),
             Port("code", "output", "Integer", start=0, fail_safe=alsn.NO_CODE,
                  description="ALSN: last decoded cycle (0 none/invalid, 2 КЖ, 3 Ж, 4 З); ALSU and digital: the code shown, "
                              "TVM430: the 27-bit word shown; TVM300: the sub-frequency shown (1-18); 0 none"),

@@ -32,6 +32,9 @@ from fmus.signalling import alsn
 from fmus.signalling import aspects as sig
 
 SIGNAL_DARK, SIGNAL_RED, SIGNAL_YELLOW, SIGNAL_YELLOW_GREEN, SIGNAL_GREEN = 0, 1, 2, 3, 4
+#: a block signal's aspects; dark: no signal at the section's exit (a track circuit inside a block)
+SIGNAL_NAMES = {SIGNAL_DARK: "no signal", SIGNAL_RED: "red", SIGNAL_YELLOW: "yellow",
+                SIGNAL_YELLOW_GREEN: "yellow-green", SIGNAL_GREEN: "green"}
 NO_CODE_FREE_BLOCKS = -1        # free_blocks of a circuit whose code is cut
 LINE_FREE_BLOCKS = 1 << 20      # "no occupied block ahead within the modelled line"
 #: ALSN code keyed for the exit signal's aspect (yellow-green as З [U]: docs/wayside_coder.md)

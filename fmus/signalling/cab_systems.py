@@ -77,12 +77,35 @@ class CabSystem:
     receiver_outputs: Callable[..., dict] = field(default=None, repr=False)
     #: the indication in the system's own terms: "КЖ", "code 4", "270→220", …
     label: Callable[[Mapping[str, float]], str] = field(default=None, repr=False)
+    #: the values a coder's ``code_tx`` and a receiver's ``code`` take besides 0 (no code), from
+    #: the system object; None where they are too many to name (TVM-430's 27-bit words)
+    code_values: Optional[Callable[[object], Tuple[int, ...]]] = field(default=None, repr=False)
     #: its indications are speed steps (TVM), drawn by step rather than in the aspect colours
     speed_steps: bool = False
 
     def system(self, codes_file: Optional[str] = None):
         """The system object (None for ALSN: its codes are aspects)."""
         return self.make_system(codes_file)
+
+    def code_labels(self, system=None, category: str = "passenger") -> Dict[int, str]:
+        """What each value of a coder's ``code_tx`` and a receiver's ``code`` stands for, in the
+        system's own terms (:attr:`label` of the indication a receiver of ``category`` shows for
+        it, and its aspect; 0: none), for the legends of a run's results (columns.json); empty
+        where the values are not named (:attr:`code_values` None). ``system``: the system object (None: the
+        bundled table's)."""
+        if self.code_values is None:
+            return {}
+        system = system if system is not None or self.family == NUMERIC else self.system()
+        labels = {0: "none"}
+        for value in self.code_values(system):
+            command = value if self.family == NUMERIC else system.command_of_code(value)
+            if command is None:
+                continue
+            received = self.receiver_outputs(system, command, category, 0.0, 0.0)
+            shown = self.label(received)
+            # a numeric code is its aspect's letter; another's label is told apart by its aspect
+            labels[int(value)] = shown if self.family == NUMERIC else f"{shown} ({ASPECT_LABELS[received['aspect']]})"
+        return labels
 
     def ato_parameters(self) -> dict:
         latency = self.atp_latency_s()
@@ -144,6 +167,12 @@ def _digital_latency(system: DigitalSystem) -> Callable[[Mapping[str, object]], 
     return latency
 
 
+def _digital_codes(system: DigitalSystem) -> Tuple[int, ...]:
+    """The ids a digital coder's ``code_tx`` and receiver's ``code`` show (ALS-EN: the KLUB
+    registers; FIRE_DQPSK: the commands)."""
+    return tuple(sorted({system.indication(command, "passenger").code for command in system.commands()}))
+
+
 def _digital_descriptor(system: DigitalSystem, title: str, summary: str) -> CabSystem:
     return CabSystem(
         name=system.name, title=title, summary=summary, family=DIGITAL_FAMILY, ato_mode=AtoMode.DIGITAL,
@@ -151,7 +180,7 @@ def _digital_descriptor(system: DigitalSystem, title: str, summary: str) -> CabS
         latency_s=_digital_latency(system),
         atp_latency_s=lambda: digital.atp_allowance_s(system.message_s(system.carrier_hz)),
         chain_parameters=lambda: ({"system": system.name}, {"carrier": system.carrier_hz}, {"system": system.name}),
-        one_carrier=True, receiver_outputs=_digital_outputs, label=_digital_label)
+        one_carrier=True, receiver_outputs=_digital_outputs, label=_digital_label, code_values=_digital_codes)
 
 
 #: ALSU's coder keys the 4-aspect block (its codes are read against the signal after next)
@@ -170,13 +199,15 @@ ALSN = CabSystem(
     load_codes=alsn.load_transmitters, make_system=lambda _codes_file=None: None,
     latency_s=lambda _parameters: alsn.STATED_LATENCY_S, atp_latency_s=lambda: None,
     chain_parameters=lambda: ({}, {}, {}), one_carrier=True, line_carrier=True, receiver_outputs=_alsn_outputs,
-    label=lambda received: ALSN_LETTERS[int(received["aspect"])])
+    label=lambda received: ALSN_LETTERS[int(received["aspect"])],
+    code_values=lambda _system: tuple(sorted(alsn.CODE_NAMES.values())))
 ALSU = CabSystem(
     name=alsu.NAME, title="ALSU", summary="two of six tones per code, 13 codes (alsu_codes.json)",
     family=TABLE, ato_mode=AtoMode.ALSU, transmitter=KPT, codes_file=alsu.CODES_FILE, load_codes=alsu.load_codes,
     make_system=lambda codes_file=None: alsu.system(codes_file), latency_s=lambda _parameters: alsu.STATED_LATENCY_S,
     atp_latency_s=lambda: alsu.STATED_LATENCY_S, chain_parameters=_alsu_chain, ato_links=(("code", "cab_code"),),
-    receiver_outputs=_alsu_outputs, label=lambda received: f"code {int(received['code'])}")
+    receiver_outputs=_alsu_outputs, label=lambda received: f"code {int(received['code'])}",
+    code_values=lambda system: system.codes())
 ALS_EN = _digital_descriptor(als_en.SYSTEM, "ALS-EN", "double relative phase modulation at 175 Hz, Bauer-coded words")
 FIRE_DQPSK = _digital_descriptor(fire_dqpsk.SYSTEM, "Fire/π/4-DQPSK",
                                  "16 commands with a Fire code over π/4-DQPSK (the thesis' proposal)")
@@ -196,7 +227,11 @@ TVM300 = CabSystem(
     latency_s=lambda _parameters: tvm300.STATED_LATENCY_S, atp_latency_s=lambda: tvm300.STATED_LATENCY_S,
     chain_parameters=lambda: ({"system": tvm300.NAME}, {}, {"system": tvm300.NAME}),
     ato_links=(("word_carrier", "word_carrier"),), sample_rate_hz=12000.0, build_sections=(8, 16, 32, 64),
-    default_stock="high_speed_tgv.json", receiver_outputs=_tvm300_outputs, label=_steps_label, speed_steps=True)
+    default_stock="high_speed_tgv.json", receiver_outputs=_tvm300_outputs, label=_steps_label, speed_steps=True,
+    code_values=lambda system: tuple(c for c in range(1, tvm300.SUB_FREQUENCY_COUNT + 1) if system.reading(c)))
+
+#: the aspect enumeration every system's receiver shows (its ``aspect``, the ATO's ``atp_aspect``)
+ASPECT_LABELS: Mapping[int, str] = sig.ASPECT_NAMES
 
 REGISTRY: Dict[str, CabSystem] = {s.name: s for s in (ALSN, ALSU, ALS_EN, FIRE_DQPSK, TVM430, TVM300)}
 NAMES = tuple(REGISTRY)

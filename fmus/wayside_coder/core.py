@@ -42,6 +42,7 @@ from fmus.errors import FmuInputError
 from fmus.sizes import DEFAULT_SAMPLE_RATE_HZ
 
 STATUS_OK, STATUS_PARTIAL, STATUS_FAILED = 0, 1, 2
+STATUS_NAMES = {STATUS_OK: "ok", STATUS_PARTIAL: "one transmitter/controller failed", STATUS_FAILED: "both failed"}
 _WAVE_MAX_SAMPLES = 1 << 16     # longest repeating output kept as a table, per section and code
 
 

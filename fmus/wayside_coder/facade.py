@@ -3,8 +3,10 @@ WaysideCoderCore for ALSN, AlsuCoderCore, Tvm430CoderCore, DigitalCoderCore for 
 FIRE_DQPSK, …). No logic here."""
 from fmus.signalling import cab_systems
 from fmus.data.loader import DEFAULT_LINE, load_line
+from fmus.fmi.ports import enumeration_text
 from fmus.fmi.slave import FrameFacadeSlave, Port, line_file_port, cab_system_port, sample_rate_port
-from fmus.wayside_coder.core import CoderSettings, bind_outputs
+from fmus.signalling.block_rules import SIGNAL_NAMES
+from fmus.wayside_coder.core import STATUS_NAMES, CoderSettings, bind_outputs
 from fmus.wayside_coder.cores import make_coder
 
 
@@ -62,8 +64,8 @@ class WaysideCoder(FrameFacadeSlave):
                  description="code in the frame's last sample, 0 none; ALSN 2 КЖ, 3 Ж, 4 З; ALSU code 1-13; "
                              "FIRE_DQPSK command 1-16; ALS-EN KLUB register; TVM430 the 27-bit word; TVM300 the sub-frequency 1-18"),
             Port("signal", "output", "Integer", start=0, shape=(k,),
-                 description="signal at each section's exit: 1 red, 2 yellow, 3 yellow-green, 4 green"),
-            Port("status", "output", "Integer", start=0, description="0 ok, 1 one transmitter/controller failed, 2 both"),
+                 description="signal at each section's exit: " + enumeration_text(SIGNAL_NAMES)),
+            Port("status", "output", "Integer", start=0, description=enumeration_text(STATUS_NAMES)),
         ]
 
     def make_default_experiment(self):

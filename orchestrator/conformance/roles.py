@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Dict, List, Tuple
 
 import fmus
-from orchestrator.errors import UserError
+from orchestrator.errors import UserError, did_you_mean
 from orchestrator.ports import manifest_of, read_manifest  # noqa: F401 (the contract API)
 
 #: the roles whose reference manifests ship in the package (fmus/<role>/contract.json)
@@ -31,7 +31,8 @@ def resolve_manifest(name: str) -> Tuple[Path, str]:
         return role_manifest_path(name), name
     if path.suffix == ".json" or "/" in name or path.exists():
         raise UserError(f"--manifest {name}: no such file")
-    raise UserError(f"--manifest {name}: neither a manifest file nor a role (roles: {', '.join(ROLES)})")
+    raise UserError(f"--manifest {name}: neither a manifest file nor a role{did_you_mean(name, ROLES)} "
+                    f"(roles: {', '.join(ROLES)})")
 
 
 def diff(manifest: Dict[str, dict], built: Dict[str, dict]) -> List[str]:

@@ -18,7 +18,7 @@ from orchestrator.conformance.port_io import PortIO
 from orchestrator.conformance.report import RoleReport
 from orchestrator.conformance.target import Target, open_target
 from orchestrator.conformance.vectors import RoleVectors, load_role
-from orchestrator.errors import SimulationError, UserError
+from orchestrator.errors import SimulationError, UserError, did_you_mean
 
 PLANT_PREFIX = "plant."
 
@@ -152,7 +152,7 @@ def _parameter_values(target: Target, role: RoleVectors, parameters: Mapping) ->
 def conform(role_name: str, target_name: str, vectors_dir=None) -> RoleReport:
     """Every vector of ``role_name`` against ``target_name``."""
     if role_name not in ROLES:
-        raise UserError(f"--role {role_name!r}: not a role (roles: {', '.join(ROLES)})")
+        raise UserError(f"--role {role_name!r}: not a role{did_you_mean(role_name, ROLES)} (roles: {', '.join(ROLES)})")
     role = load_role(role_name, vectors_dir)
     target = open_target(target_name, role_name, role.required_ports)
     try:

@@ -148,6 +148,7 @@ def _run_judged(system: Path, run_dir: Path, stop_s: float, fmu_dirs: Sequence[P
     """The run with the railway verdicts in its summary.json (as ``railcosim run``)."""
     from functools import partial
 
+    from orchestrator.verdicts.labels import railway_labels
     from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.run import RunOptions, run_system
     from orchestrator.study.collect import DERIVED
@@ -158,7 +159,7 @@ def _run_judged(system: Path, run_dir: Path, stop_s: float, fmu_dirs: Sequence[P
 
     options = RunOptions(stop_time=stop_s, output_dir=run_dir, output_interval=OUTPUT_INTERVAL_S, in_process=True,
                          fmu_dirs=list(fmu_dirs), default_scenario=False, progress=False, warn=silent,
-                         summaries=partial(railway_verdicts, warn=silent))
+                         summaries=partial(railway_verdicts, warn=silent), labels=railway_labels)
     run_system(system, options)
     summary = json.loads((run_dir / "summary.json").read_text())
     return {key: derive(summary) for key, derive in DERIVED.items()

@@ -148,6 +148,7 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool
     (:func:`_serve`)."""
     from functools import partial
 
+    from orchestrator.verdicts.labels import railway_labels
     from orchestrator.verdicts.verdict import railway_verdicts
     from orchestrator.process_policy import ProcessPolicy
     from orchestrator.run import RunOptions, run_system
@@ -165,7 +166,7 @@ def _run_system_here(job: dict, run_dir: Path, warnings: List[str], opened: bool
         algorithm=opts.get("algorithm", "gauss-seidel"), in_process=opts.get("in_process", False),
         fmu_dirs=[Path(p) for p in job["fmu_dirs"]], scenario=Path(scenario) if scenario else None,
         default_scenario=not opts.get("no_scenario", False), progress=False, warn=warnings.append,
-        summaries=partial(railway_verdicts, warn=warnings.append),
+        summaries=partial(railway_verdicts, warn=warnings.append), labels=railway_labels,
         process=ProcessPolicy(host_keeps_frozen=host_keeps_frozen))
     system = _opened_system(job["system"], job["fmu_dirs"]) if opened else job["system"]
     return run_system(system, options).summary
