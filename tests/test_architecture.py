@@ -83,7 +83,7 @@ ENGINE = Row("`orchestrator/` (top level)", ("fmpy", "lxml", "numpy"))
 RUN = Row("`orchestrator/plan.py`, `orchestrator/run.py`, `orchestrator/components.py`, `orchestrator/results.py`, "
           "`orchestrator/process_policy.py`, `orchestrator/validation.py`", (ENGINE, "orchestrator.dcp", "threadpoolctl"))
 VERDICTS = Row("`orchestrator/verdicts/`", (ENGINE, *FMUS_LIBRARIES, CORES))
-REPORTS = Row("`orchestrator/reports/`", (ENGINE, VERDICTS, *FMUS_LIBRARIES, CORES, "matplotlib"))
+REPORTS = Row("`orchestrator/reports/`", (ENGINE, VERDICTS, *FMUS_LIBRARIES, CORES, "matplotlib", "bokeh"))
 RAILML = Row("`orchestrator/railml/` (+ `schema/`)",
              ("lxml", "jsonschema", "fmus.data", "fmus.errors", "orchestrator.errors", "orchestrator.ssp",
               "orchestrator.graph", "orchestrator.verdicts.system_checks"))
