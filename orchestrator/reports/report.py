@@ -26,13 +26,14 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from fmus.signalling.aspects import ASPECT_NAMES
 from orchestrator.verdicts.verdict import RECEIVER_MODEL, safety_parts, safety_verdict, stop_cells
 from orchestrator.errors import UserError, print_warning
 from orchestrator.folders import create_file
 from orchestrator.ports import split_element
 
-ASPECT_COLOURS = {"white": "#d0d0d0", "red": "#d62728", "red-yellow": "#ff7f0e", "yellow": "#ffd700", "green": "#2ca02c"}
-ASPECT_BY_CODE = {0: "white", 1: "red", 2: "red-yellow", 3: "yellow", 4: "green"}
+#: the aspect enumeration's names (fmus/signalling/aspects.py), by value
+ASPECT_BY_CODE = ASPECT_NAMES
 
 
 def _cell(text: str) -> float:
