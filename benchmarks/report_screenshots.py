@@ -52,7 +52,7 @@ def main() -> int:
         summary = json.loads((run / "summary.json").read_text())
         metadata = json.loads((run / "metadata.json").read_text())
         causes: dict = {}
-        for chain in chain_view.chains(read_results(run), summary, metadata["components"]):
+        for chain in chain_view.chains(read_results(run), summary, metadata["components"])[0]:
             for error in chain.errors:
                 causes[error.cause] = causes.get(error.cause, 0) + error.count
         image = FIGURES / f"report_{system}.png"

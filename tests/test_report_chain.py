@@ -16,7 +16,9 @@ def _chains(run):
 
     summary = json.loads((run / "summary.json").read_text())
     metadata = json.loads((run / "metadata.json").read_text())
-    return chain_view.chains(read_results(run), summary, metadata["components"]), summary, metadata
+    chains, missing = chain_view.chains(read_results(run), summary, metadata["components"])
+    assert not missing, missing
+    return chains, summary, metadata
 
 
 def _run(tmp_path, system, stop_s):
@@ -83,6 +85,10 @@ def test_each_receiver_error_is_explained_by_what_happened_under_the_coils():
     for t in (1.0, 31.0, 51.0, 69.5, 82.0, 95.0):
         errors[time >= t] += 1
     found = explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=2.0)
+    # as in a real run, the coils come onto the line from no circuit at the first row: that is
+    # no crossing, and an error just after it is the receiver acquiring the code
+    keys[0, 0] = 0
+    assert explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=2.0)[0].cause == "acquisition"
     assert [(e.t_s, e.cause) for e in found] == [
         (1.0, "acquisition"), (31.0, "section change"), (51.0, "code change"), (69.5, "section change"),
         (82.0, "no code"), (95.0, "steady code")]
@@ -195,9 +201,10 @@ def test_a_code_whose_current_does_not_reach_the_first_axle_is_told_apart():
     pulsed = np.where((time % 1.6) < 0.6, 3.0, 0.0)                 # 3 A pulses, gaps of 1 s
     current = np.where(time < 30.0, 0.0, pulsed)                    # nothing reaches the axle before 30 s
     sent = np.ones(len(time), dtype=bool)
-    arrives = code_arrives(time, current, sent)
+    arrives = code_arrives(time, current, sent, reference_a=3.0)
     assert not arrives[time < 28.0].any() and arrives[time >= 30.0].all()
-    assert code_arrives(time, np.full(len(time), np.nan), sent).all()     # not recorded: not judged
+    assert code_arrives(time, np.full(len(time), np.nan), sent, 3.0).all()     # not recorded: not judged
+    assert code_arrives(time, current, sent, None).all()                      # no reference: not judged
     keys = np.column_stack((np.ones(len(time), dtype=int), np.full(len(time), 4), arrives))
     errors = (time >= 20.0).astype(float)
     (error,) = explain_errors(time, errors, keys, np.zeros(len(time)), latency_s=4.5)
@@ -214,6 +221,61 @@ def test_a_code_reads_the_same_sent_and_decoded(system, code, label):
     from orchestrator.reports.chain_view import ChainReader
 
     reader = ChainReader(cab_systems.lookup(system), {"system": system}, top_kmh=160.0)
-    assert reader.sent((2, code, 1))[0] == label
+    assert reader.sent((2, code, 1))[0] == label and reader.sent((2, -1, 1))[0] == "not recorded"
     assert reader.decoded((1, code))[0] == label
     assert reader.decoded((0, code))[0] == "none"
+
+
+def test_the_follower_under_a_code_its_leader_shunts_is_shown_so(tmp_path, product_fmus):
+    """following to 300 s: the follower (slot 2 of the rail line) stands behind its leader in
+    circuit 1 for its first 180 s: the codes sent there never reach its first axle, and the
+    page says so (hatched, ✕) for those seconds only — although that is more than half of its
+    own rows, the reference is the rail line's (the leader's) current."""
+    from orchestrator.reports.chain_view import NOT_ARRIVING
+
+    chains, summary, _ = _chains(_run(tmp_path, "following", 300))
+    follower = next(c for c in chains if c.train == "follower")
+    assert follower.slot == 2 and follower.rail == "rail"
+    hatched = [s for s in follower.sent if s.hatched]
+    assert hatched and all(s.label.endswith(NOT_ARRIVING) for s in hatched)
+    assert hatched[0].t0_s < 5.0 and 150.0 < hatched[-1].t1_s < 190.0
+    assert not any(s.hatched for s in next(c for c in chains if c.train == "leader").sent)
+
+
+@pytest.mark.parametrize("record", [(), ("rail.coil_section[1]", "coder.code_tx[1]", "coder.code_tx[3]", "rx.aspect",
+                                         "rx.code", "train.x")], ids=["one row", "few columns"])
+def test_the_report_of_a_run_with_little_in_it_is_a_page(tmp_path, product_fmus, record):
+    """A run of one output row, or one recorded with a few --record columns: report.html is
+    written with what there is (a circuit whose code_tx was not recorded says so), no traceback."""
+    run = tmp_path / "run"
+    options = [x for column in record for x in ("--record", column)]
+    code, _, stderr = railcosim("run", "free_run", "--output", run, "--no-build", "--in-process", "--stop-time",
+                                "0.05" if not record else "300", *options)
+    assert code == 0, stderr
+    code, _, stderr = railcosim("report", run)
+    assert code == 0 and "Traceback" not in stderr, stderr
+    page = (run / "report.html").read_text(encoding="utf-8")
+    assert "<h2>The signal chain over time</h2>" in page
+    if record:
+        assert "not recorded" in "\n".join(bokeh_documents(page))
+        assert "the run did not record its speed (train.v)" in page
+
+
+def test_a_run_whose_metadata_names_no_components_reads_its_system_from_the_summary():
+    """TVM-430 codes under a run's summary alone (metadata.json without components): read as
+    TVM-430 steps, not as ALSN aspects."""
+    from orchestrator.reports.chain_view import chains
+
+    time = np.round(np.arange(0.0, 10.0, 0.1), 1)
+    from fmus.signalling import cab_systems
+
+    tvm = cab_systems.lookup("TVM430").system()
+    word = next(c for c in (98398806, 85029484) if tvm.command_of_code(c) is not None)
+    results = {"time": time, "rail.coil_section[1]": np.ones(len(time)), "coder.code_tx[1]": np.full(len(time), word),
+               "rx.aspect": np.full(len(time), 4.0), "rx.code": np.full(len(time), float(word)),
+               "rx.code_valid": np.ones(len(time))}
+    summary = {"receivers": [{"receiver": "rx", "train": "train", "system": "TVM430", "rail": "rail",
+                              "coder": "coder", "slot": 1, "latency_s": 3.5}]}
+    (chain,), missing = chains(results, summary, {})
+    assert not missing and chain.cab.name == "TVM430"
+    assert re.fullmatch(r"\d+→\d+", chain.sent[0].label) and chain.sent[0].label == chain.decoded[0].label

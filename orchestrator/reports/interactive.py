@@ -54,7 +54,7 @@ def chain_figure(chain: TrainChain, x_range):
     segments = {"row": [], "left": [], "right": [], "label": [], "colour": [], "detail": [], "hatch": []}
     for row, parts in zip(ROWS, (chain.shown, chain.decoded, chain.sent)):
         for seg in parts:
-            hatch = "x" if seg.label.endswith(chain_view.NOT_ARRIVING) else " "
+            hatch = "x" if seg.hatched else " "
             for key, value in zip(segments, (row, seg.t0_s, seg.t1_s, seg.label, seg.colour, seg.detail, hatch)):
                 segments[key].append(value)
     source = ColumnDataSource(segments)
@@ -63,7 +63,7 @@ def chain_figure(chain: TrainChain, x_range):
     fig.add_tools(HoverTool(renderers=[bars], tooltips=[("", "@row: @label"), ("from", "@left{0.0} s"),
                                                          ("to", "@right{0.0} s"), ("", "@detail")]))
     # each run of one label named once, where its name fits (at ~1100 px for the whole run)
-    span = max((s.t1_s for s in chain.sent), default=1.0) - min((s.t0_s for s in chain.sent), default=0.0)
+    span = max(max((s.t1_s for s in chain.sent), default=1.0) - min((s.t0_s for s in chain.sent), default=0.0), 1e-9)
     named = {"row": [], "middle": [], "label": []}
     for row, parts in zip(ROWS, (chain.shown, chain.decoded, chain.sent)):
         for label, left, right in merged_labels(parts):
@@ -192,7 +192,8 @@ def time_distance_figure(results: Mapping[str, np.ndarray], trains: Sequence[str
     drawn = []
     for k, train in enumerate(trains):
         time, x = _thin(results["time"], results[f"{train}.x"] / 1000.0)
-        speed = _thin(results[f"{train}.v"] * KMH_PER_MPS)[0]
+        speed = _thin(results[f"{train}.v"] * KMH_PER_MPS if f"{train}.v" in results
+                      else np.full(len(results["time"]), np.nan))[0]
         source = ColumnDataSource({"time": time, "x_km": x, "speed": speed, "train": [train] * len(time)})
         drawn.append(fig.line(x="time", y="x_km", color=Category10_10[k % 10], line_width=1.6, legend_label=train,
                               line_dash=("solid", "dashed", "dotted", "dotdash")[(k // 10) % 4], source=source))
@@ -213,13 +214,26 @@ def _legend_outside(fig) -> None:
 
 
 def coil_figure(capture: Mapping[str, np.ndarray], column: str):
+    """The captured EMF; a capture of more than :data:`MAX_POINTS` samples as its envelope (the
+    minimum and maximum of each run of samples): keeping every k-th sample of a 12 kHz capture
+    would alias a 2300 Hz carrier to 1700 Hz."""
     from bokeh.models import ColumnDataSource, HoverTool
     from bokeh.plotting import figure
 
-    time, emf = _thin(capture["time"], capture[column])
+    time, emf = np.asarray(capture["time"]), np.asarray(capture[column])
     fig = figure(height=260, sizing_mode="stretch_width", tools="xpan,xwheel_zoom,box_zoom,reset,save",
-                 active_scroll="xwheel_zoom", title=f"captured coil EMF ({column})", toolbar_location="above",
-                 x_axis_label="time (s)", y_axis_label="V")
+                 active_scroll="xwheel_zoom", toolbar_location="above", x_axis_label="time (s)", y_axis_label="V",
+                 title=f"captured coil EMF ({column})")
+    if len(time) > MAX_POINTS:
+        per = -(-len(time) // (MAX_POINTS // 2))
+        usable = len(time) // per * per
+        buckets = emf[:usable].reshape(-1, per)
+        source = ColumnDataSource({"time": time[:usable:per], "low": buckets.min(axis=1), "high": buckets.max(axis=1)})
+        band = fig.varea(x="time", y1="low", y2="high", source=source, fill_alpha=0.6,
+                         legend_label=f"envelope (min–max of every {per} samples)")
+        fig.add_tools(HoverTool(renderers=[band], mode="vline",
+                                tooltips=[("t", "@time{0.0000} s"), ("min", "@low{0.0000} V"), ("max", "@high{0.0000} V")]))
+        return fig
     line = fig.line(x="time", y="emf", source=ColumnDataSource({"time": time, "emf": emf}), line_width=0.7)
     fig.add_tools(HoverTool(renderers=[line], mode="vline", tooltips=[("t", "@time{0.0000} s"), ("EMF", "@emf{0.0000} V")]))
     return fig
@@ -258,6 +272,14 @@ def completion(summary: Mapping[str, object], metadata: Mapping[str, object]) ->
             f"over 0–{simulated:.1f} s only")
 
 
+def top_speed_kmh(line) -> float:
+    """The line's highest speed limit for any category (km/h): the top of TVM's step colours,
+    the same for every train of a page; 0 without a line."""
+    if line is None:
+        return 0.0
+    return max((max(limits, default=0.0) for limits in line.limits_mps.values()), default=0.0) * KMH_PER_MPS
+
+
 def page(summary: Mapping[str, object], metadata: Mapping[str, object], results: Mapping[str, np.ndarray],
          line, tables_html: str, pictures_html: str, capture: Optional[tuple]) -> str:
     """The whole page as one string."""
@@ -267,19 +289,24 @@ def page(summary: Mapping[str, object], metadata: Mapping[str, object], results:
     from bokeh.resources import Resources
 
     component_info = metadata.get("components", {})
-    chains = chain_view.chains(results, summary, component_info)
+    chains, missing = chain_view.chains(results, summary, component_info, top_speed_kmh(line))
     by_train: Dict[str, TrainChain] = {c.train: c for c in chains}
     trains = [t for t in summary.get("trains", []) if f"{t['name']}.x" in results]
     time = results["time"]
-    x_range = Range1d(float(time[0]) if len(time) else 0.0, float(time[-1]) if len(time) else 1.0)
-    figures, notes = [], []
+    x_range = Range1d(float(time[0]) if len(time) else 0.0,
+                      float(time[-1]) if len(time) > 1 else (float(time[0]) + 1.0 if len(time) else 1.0))
+    figures, notes = [], [escape(reason) for reason in missing]
     for train in trains:
         chain = by_train.get(train["name"])
         if chain is not None:
             figures.append(chain_figure(chain, x_range))
-        figures.append(speed_figure(results, train["name"], train.get("ato"), chain.receiver if chain else None,
-                                    x_range, chain.episodes if chain else ()))
-    if not chains:
+        if f"{train['name']}.v" in results:
+            figures.append(speed_figure(results, train["name"], train.get("ato"), chain.receiver if chain else None,
+                                        x_range, chain.episodes if chain else ()))
+        else:
+            notes.append(f"train {escape(train['name'])}: the run did not record its speed ({escape(train['name'])}.v): "
+                         "no speed figure")
+    if not summary.get("receivers"):
         notes.append("This system has no cab-signal chain judged (no receiver fed by a rail line): the trains' "
                      "speeds alone are drawn.")
     rails = sorted({r["rail"] for r in summary.get("receivers", []) if r.get("rail")})
@@ -287,7 +314,7 @@ def page(summary: Mapping[str, object], metadata: Mapping[str, object], results:
         figures.append(time_distance_figure(results, [t["name"] for t in trains], line, rails, x_range))
     if capture is not None:
         figures.append(coil_figure(*capture))
-    else:
+    elif chains:
         hint = capture_hint(str(summary.get("system")), chains, float(summary.get("sim_time_s") or 0.0))
         notes.append(f"No coil EMF was captured in this run. To see it (and the receiver's band-pass output in "
                      f"coil_emf.png), capture a window: <code>{escape(hint)}</code>, then "

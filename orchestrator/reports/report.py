@@ -122,11 +122,16 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
     components = metadata.get("components", {})
     trains = [t for t in summary.get("trains", []) if f"{t['name']}.x" in results]
     written = []
-    if trains:
-        written.append(_speed_distance(output, results, trains, components,
+    # a run recorded with --record may lack a train's speed or energy: that picture leaves it out
+    moving = [t for t in trains if f"{t['name']}.v" in results]
+    metered = [t for t in trains if f"{t['name']}.energy" in results]
+    if moving:
+        written.append(_speed_distance(output, results, moving, components,
                                        summary.get("scenario", {}).get("events_applied", [])))
+    if trains:
         written.append(_time_distance(output, results, trains, components))
-        written.append(_energy(output, results, trains))
+    if metered:
+        written.append(_energy(output, results, metered))
     capture = _coil_capture(run_dir, output, components, at_s)
     if capture:
         written.append(capture)
@@ -252,7 +257,7 @@ def _speed_distance(output: Path, results, trains, components, summary_events=()
         ax.plot(x, speed, "k-", lw=1.3, label="speed")
         top = max(float(np.nanmax(speed, initial=0.0)), 10.0)
         key = []
-        if ato and f"{ato}.v_atp" in results:
+        if ato and all(f"{ato}.{port}" in results for port in ("v_atp", "v_ceiling", "atp_aspect")):
             static, curves, decel = static_speed_profile(line, _parameters_of(components, ato), grid_m)
             ax.plot(grid_m / 1000.0, static * 3.6, "r-", lw=1.0, label="static permitted speed (line limits)")
             ax.plot(grid_m / 1000.0, np.where(curves < static, curves, np.nan) * 3.6, "r--", lw=0.9,

@@ -197,7 +197,7 @@ class _Headways:
         lengths = train_lengths(graph)
         groups: Dict[str, List[_Train]] = {}
         for train in trains:
-            line = str(_data_file(_parameter(graph, train.name, "line_file"), DEFAULT_LINE))
+            line = str(data_file(_parameter(graph, train.name, "line_file"), DEFAULT_LINE))
             groups.setdefault(line, []).append(train)
         self.groups = [(group, [lengths[t.name] for t in group]) for group in groups.values() if len(group) > 1]
         self._shared = {t.name for group, _ in self.groups for t in group}
@@ -230,7 +230,7 @@ def _parameter(graph: SystemGraph, component: str, name: str, default=None):
     return default if var is None or var.start is None else var.start
 
 
-def _data_file(value, default):
+def data_file(value, default):
     """A ``*_file`` parameter as the FMU opens it: resolved by the graph, else a bundled file."""
     from pathlib import Path
 
@@ -258,7 +258,7 @@ def train_lengths(graph: SystemGraph) -> Dict[str, float]:
     for name in graph.order:
         if graph.nodes[name].interface.model_identifier == TRAIN_MODEL:
             try:
-                stock = _data_file(_parameter(graph, name, "rolling_stock_file"), DEFAULT_ROLLING_STOCK)
+                stock = data_file(_parameter(graph, name, "rolling_stock_file"), DEFAULT_ROLLING_STOCK)
                 lengths[name] = max(lengths.get(name, 0.0), load_rolling_stock(stock).length_m)
             except FmuInputError:
                 lengths.setdefault(name, 0.0)   # the FMU itself reports the bad file at initialisation
@@ -369,7 +369,7 @@ def tracks_of(graph: SystemGraph, rails) -> Dict[str, _Track]:
     tracks = {}
     for rail, coder in rails.items():
         try:
-            line = load_line(_data_file(_parameter(graph, rail, "line_file"), DEFAULT_LINE))
+            line = load_line(data_file(_parameter(graph, rail, "line_file"), DEFAULT_LINE))
         except FmuInputError:
             continue
         aspects = int(_parameter(graph, coder, "block_aspects", 3))
@@ -457,7 +457,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         try:
             cab = cab_systems.of_parameters(params)
             table = params.get("codes_file")
-            system = cab.system(str(_data_file(table, cab.codes_file)) if table and cab.codes_file else None)
+            system = cab.system(str(data_file(table, cab.codes_file)) if table and cab.codes_file else None)
         except FmuInputError:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
