@@ -3,9 +3,14 @@ into every run's metadata.json and shown by ``railcosim --version`` and ``report
 from __future__ import annotations
 
 import hashlib
+import subprocess
 from datetime import datetime, timezone
 from importlib import metadata as package_metadata
 from pathlib import Path
+from typing import Dict, Mapping, Optional
+
+#: the checkout railcosim runs from, when it runs from one (an editable install)
+CHECKOUT = Path(__file__).resolve().parents[1]
 
 
 def railcosim_version() -> str:
@@ -33,3 +38,32 @@ def content_hash(path: Path) -> str:
 def utc_now_iso() -> str:
     """The present instant, UTC, to the second (ISO 8601)."""
     return datetime.now(timezone.utc).replace(microsecond=0).isoformat()
+
+
+def source_revision() -> Optional[str]:
+    """The git commit railcosim runs from (``describe --always --dirty``: ``-dirty`` when the
+    checkout has changes), None when it is not run from a git checkout: an editable install
+    keeps one version number through every commit."""
+    if not (CHECKOUT / ".git").exists():
+        return None
+    try:
+        done = subprocess.run(["git", "-C", str(CHECKOUT), "describe", "--always", "--dirty", "--abbrev=12"],
+                              capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() or None if done.returncode == 0 else None
+
+
+def data_file_hashes(components: Mapping[str, Mapping[str, object]]) -> Dict[str, str]:
+    """SHA-256 of every data file a component's ``*_file`` parameter names (resolved paths, as
+    metadata.json records them): the line, timetable, rolling stock and code tables that a
+    system's folder does not hold. A bundled default (no parameter set) is railcosim's own:
+    its version and source revision say which."""
+    found = {}
+    for parameters in components.values():
+        for name, value in parameters.items():
+            if name.endswith("_file") and value and str(value) not in found:
+                path = Path(str(value))
+                if path.is_file():
+                    found[str(value)] = content_hash(path)
+    return dict(sorted(found.items()))

@@ -24,7 +24,8 @@ from orchestrator.master import Master
 from orchestrator.observers import cannot_write
 from orchestrator.pacing import Pacer
 from orchestrator.plan import RunPlan
-from orchestrator.provenance import content_hash, railcosim_version, utc_now_iso
+from orchestrator.provenance import (content_hash, data_file_hashes, railcosim_version, source_revision,
+                                     utc_now_iso)
 from orchestrator.protocols import Slave
 
 #: what a run (and `railcosim report` into the run folder) writes; a run removes these before it
@@ -159,9 +160,11 @@ def metadata(plan: RunPlan, steps_taken: Dict[str, int]) -> dict:
         "system": graph.name,
         "ssd": str(system.ssd_path),
         "railcosim_version": railcosim_version(),
+        "railcosim_source": source_revision(),
         "date_utc": utc_now_iso(),
         # of the system folder (an .ssp: of what it unpacked to), so an edited copy is told apart
         "system_sha256": content_hash(system.folder),
+        "data_files_sha256": data_file_hashes({name: node.parameters for name, node in graph.nodes.items()}),
         "overrides": dict(plan.options.overrides),
         "param_sets": list(plan.options.param_sets),
         "algorithm": plan.options.algorithm,

@@ -142,7 +142,7 @@ def test_report_html_is_one_offline_page_with_the_chain_and_its_provenance(tmp_p
     5 MB), the chain figure and the speed figure of the train, the time–distance figure, a line
     telling how to capture the coil EMF, and a provenance block naming this railcosim, the system
     and its hash, the parameters set and the date."""
-    from orchestrator.provenance import content_hash, railcosim_version
+    from orchestrator.provenance import content_hash, railcosim_version, source_revision
 
     run = tmp_path / "run"
     code, _, stderr = railcosim("run", "free_run", "--output", run, "--no-build", "--in-process", "--stop-time", "300",
@@ -154,6 +154,8 @@ def test_report_html_is_one_offline_page_with_the_chain_and_its_provenance(tmp_p
     figures = check_offline(page, 5_000_000)
     metadata = json.loads((run / "metadata.json").read_text())
     assert metadata["railcosim_version"] == railcosim_version() and metadata["overrides"]
+    assert metadata["railcosim_source"] == source_revision()          # this checkout's commit
+    assert metadata["data_files_sha256"] == {}        # free_run names no data file: the bundled ones
     assert metadata["system_sha256"] == content_hash(REPO / "ssp" / "free_run")
     provenance = re.search(r'<table id="provenance">(.*?)</table>', page, re.S).group(1)
     for shown in (railcosim_version(), metadata["system_sha256"], metadata["date_utc"],
@@ -279,3 +281,16 @@ def test_a_run_whose_metadata_names_no_components_reads_its_system_from_the_summ
     (chain,), missing = chains(results, summary, {})
     assert not missing and chain.cab.name == "TVM430"
     assert re.fullmatch(r"\d+→\d+", chain.sent[0].label) and chain.sent[0].label == chain.decoded[0].label
+
+
+def test_the_data_files_a_run_names_are_hashed(tmp_path):
+    """A line or timetable file outside the system folder is part of what was run: metadata.json
+    gives its SHA-256, so an edited copy is told apart."""
+    from orchestrator.provenance import content_hash, data_file_hashes
+
+    line = tmp_path / "line.json"
+    line.write_text('{"name": "x"}')
+    hashes = data_file_hashes({"ato": {"line_file": str(line), "v_max": 40.0}, "train": {"line_file": str(line)}})
+    assert hashes == {str(line): content_hash(line)}
+    line.write_text('{"name": "y"}')
+    assert data_file_hashes({"ato": {"line_file": str(line)}})[str(line)] != hashes[str(line)]

@@ -252,9 +252,15 @@ def capture_hint(system: str, chains: Sequence[TrainChain], stop_s: float) -> st
 def provenance_rows(summary: Mapping[str, object], metadata: Mapping[str, object]) -> List[tuple]:
     """(what, value) rows: version, system and its hash, parameters set, date, how the run ended."""
     overrides = metadata.get("overrides") or {}
-    rows = [("railcosim", str(metadata.get("railcosim_version", "not recorded (a run of an earlier version)"))),
+    version = str(metadata.get("railcosim_version", "not recorded (a run of an earlier version)"))
+    if metadata.get("railcosim_source"):
+        version += f" (checkout {metadata['railcosim_source']})"
+    data_files = metadata.get("data_files_sha256") or {}
+    rows = [("railcosim", version),
             ("system", f"{metadata.get('system', summary.get('system'))} ({metadata.get('ssd', '?')})"),
             ("system SHA-256", str(metadata.get("system_sha256", "not recorded"))),
+            ("data files named (SHA-256)", "; ".join(f"{path}: {digest[:16]}…" for path, digest in data_files.items())
+             or "none besides railcosim's bundled defaults"),
             ("parameters set (--set)", ", ".join(f"{k} = {v}" for k, v in overrides.items()) or "none"),
             ("parameter sets", ", ".join(metadata.get("param_sets") or []) or "none"),
             ("run written (UTC)", str(metadata.get("date_utc", "not recorded"))),
