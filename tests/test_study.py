@@ -274,7 +274,8 @@ def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):
     # the same on one page: a row per point, the two plots inlined (nothing to fetch), no worst run
     page = (out / "report.html").read_text()
     assert page.count('<tr class="point">') == 4 and page.count('src="data:image/png;base64,') == 2
-    assert "Not plotted (one value over the sweep, or a single point): trains.train.energy_kwh, verdict" in page
+    assert ('<li class="left-out">trains.train.energy_kwh: one value over the sweep, or figures at a single '
+            'train.v0</li>') in page and '<li class="left-out">verdict: not a number at every point</li>' in page
     assert 'src="http' not in page and "none: no safety key above zero, no failed run" in page
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Dict, List, Optional, TextIO, Tuple
 
 from orchestrator.errors import UserError
+from orchestrator.folders import create_file
 
 WORST_SHOWN = 5
 #: more pictures per key than this: no plots (the table says it all)
@@ -94,7 +95,8 @@ def _worst_runs(study: dict, rows: List[dict]) -> List[Tuple[str, str, str]]:
     safety key, then every run that did not end ok."""
     found = []
     for key in study.get("safety", []):
-        hits = sorted(((v, r) for r in rows if (v := _number(r.get(key, ""))) is not None and v > 0),
+        hits = sorted(((v, r) for r in rows          # a failed run's figures are not its verdict
+                       if r["status"] == "ok" and (v := _number(r.get(key, ""))) is not None and v > 0),
                       key=lambda item: -item[0])
         for value, r in hits[:WORST_SHOWN]:
             found.append((r["id"], f"{_axes_text(study, r)}, seed {r['seed'] or '—'}", f"{key} = {value:g}"))
@@ -139,16 +141,23 @@ def informative(table: List[dict], key: str, x_axis: str) -> bool:
     return len(xs) >= 2 and len(figures) >= 2
 
 
-def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
+def plot(study: dict, table: List[dict], folder: Path, left_out: Optional[Dict[str, str]] = None) -> List[Path]:
     """PNGs of every numeric key: its mean (min–max as error bars) against the axis with
     numeric values that has the most of them, one line per value of the last other axis; with
-    more axes, one picture per combination of the rest (``study_<key>_<axis>-<value>.png``)."""
+    more axes, one picture per combination of the rest (``study_<key>_<axis>-<value>.png``).
+    ``left_out`` gets each key not plotted → why."""
+    left_out = {} if left_out is None else left_out
     axes = study["axes"]
-    if not axes or not table:
+
+    def none_because(reason: str) -> List[Path]:
+        left_out.update({key: reason for key in study["collect"]})
         return []
+
+    if not axes or not table:
+        return none_because("the study has no axis" if not axes else "no point has a run")
     numeric = [a for a in axes if all(_number(e["axes"][a]) is not None for e in table)]
     if not numeric:
-        return []
+        return none_because("no axis has numeric values to draw against")
     x_axis = max(numeric, key=lambda a: len({e["axes"][a] for e in table}))
     rest = [a for a in axes if a != x_axis]
     line_axis = rest[-1] if rest else None
@@ -157,7 +166,7 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
     for entry in table:
         facets.setdefault(tuple(entry["axes"][a] for a in facet_axes), []).append(entry)
     if len(facets) > MAX_FACETS:
-        return []
+        return none_because(f"more than {MAX_FACETS} pictures per key (the table says it all)")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -166,8 +175,10 @@ def plot(study: dict, table: List[dict], folder: Path) -> List[Path]:
     written = []
     for key in study["collect"]:
         if not all("mean" in e["keys"][key] or e["runs"] == e["failed"] for e in table):
+            left_out[key] = "not a number at every point"
             continue
         if not informative(table, key, x_axis):
+            left_out[key] = f"one value over the sweep, or figures at a single {x_axis}"
             continue
         for facet, members in facets.items():
             figure, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -221,12 +232,13 @@ def make_study_report(folder: Path, stream: Optional[TextIO] = None) -> List[Pat
         stream.write(text)
     report = folder / "report.txt"
     report.write_text(text)
-    pictures = plot(study, table, folder)
-    return [report, write_html(folder / "report.html", study, table, worst, pictures), *pictures]
+    left_out: Dict[str, str] = {}
+    pictures = plot(study, table, folder, left_out)
+    return [report, write_html(folder / "report.html", study, table, worst, pictures, left_out), *pictures]
 
 
 def write_html(path: Path, study: dict, table: List[dict], worst: List[Tuple[str, str, str]],
-               pictures: List[Path]) -> Path:
+               pictures: List[Path], left_out: Dict[str, str]) -> Path:
     """report.html: the study on one page, offline — its counts, the table per point, the plots
     that carry information (inlined), the worst runs linked to their folders and reports."""
     import base64
@@ -237,8 +249,6 @@ def write_html(path: Path, study: dict, table: List[dict], worst: List[Tuple[str
     rows = "\n".join("<tr class=\"point\">" + "".join(f"<td>{escape(str(c))}</td>" for c in (
         entry["point"], *entry["axes"].values(), entry["runs"], entry["failed"],
         *[_format(entry["keys"][k]) for k in study["collect"]])) + "</tr>" for entry in table)
-    plotted = {p.name for p in pictures}
-    left_out = [k for k in study["collect"] if not any(n.startswith(f"study_{_slug(k)}") for n in plotted)]
     figures = "\n".join(
         f"<figure><img alt=\"{escape(p.stem)}\" src=\"data:image/png;base64,"
         f"{base64.b64encode(p.read_bytes()).decode()}\"><figcaption>{escape(p.name)}</figcaption></figure>"
@@ -276,8 +286,10 @@ total over the runs and the run with the most.</p>
 <ul>{worst_items}</ul>
 <h2>Plots</h2>
 {figures or "<p>No plot carries more than the table.</p>"}
-{f"<p>Not plotted (one value over the sweep, or a single point): {escape(', '.join(left_out))}.</p>" if left_out else ""}
+{"<p>Not plotted:</p><ul>" + "".join(f'<li class="left-out">{escape(k)}: {escape(why)}</li>'
+                                    for k, why in left_out.items()) + "</ul>" if left_out else ""}
 </body></html>
 """
-    path.write_text(text, encoding="utf-8")
+    with create_file(path) as handle:      # never through a link planted at its name
+        handle.write(text)
     return path
