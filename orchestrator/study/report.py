@@ -87,9 +87,15 @@ def _format(stats: dict) -> str:
     return f"{g(stats['mean'])} [{g(stats['min'])}, {g(stats['max'])}]"
 
 
+def _uncollected_safety(study: dict) -> List[str]:
+    """Safety keys of a study.json written before a study refused them uncollected: study.csv has
+    no column for them, so nothing is known of them."""
+    return [key for key in study.get("safety", []) if key not in study["collect"]]
+
+
 def _worst_runs(study: dict, rows: List[dict]) -> List[str]:
     lines = []
-    for key in study.get("safety", []):
+    for key in (k for k in study.get("safety", []) if k not in _uncollected_safety(study)):
         hits = sorted(((v, r) for r in rows if (v := _number(r.get(key, ""))) is not None and v > 0),
                       key=lambda item: -item[0])
         for value, r in hits[:WORST_SHOWN]:
@@ -117,7 +123,13 @@ def _markdown(study: dict, table: List[dict], worst: List[str]) -> str:
         cells = [str(entry["point"]), *entry["axes"].values(), str(entry["runs"]), str(entry["failed"]),
                  *[_format(entry["keys"][k]) for k in study["collect"]]]
         lines.append("| " + " | ".join(cells) + " |")
-    lines += ["", "## Worst runs", ""] + (worst or ["none: no safety key above zero, no failed run"])
+    uncollected = _uncollected_safety(study)
+    if uncollected:
+        lines += ["", f"Safety keys not collected (no run reports them; not judged): {', '.join(uncollected)}."]
+    collected = [key for key in study.get("safety", []) if key not in uncollected]
+    none = (f"none: no collected safety key above zero ({', '.join(collected)})" if collected
+            else "none: no safety key collected") + ", no failed run"
+    lines += ["", "## Worst runs", ""] + (worst or [none])
     return "\n".join(lines) + "\n"
 
 
