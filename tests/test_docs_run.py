@@ -216,6 +216,9 @@ def _check_data(block: Block, folder: Path, env) -> List[str]:
         path = folder / "example_sidecar.json"
         path.write_text(block.text, encoding="utf-8")
         load_sidecar(path)                   # checked against its schema; a UserError says why not
+        shipped = d["railml sidecar"]        # the file the block shows, which the page's commands use
+        if shipped and json.loads((ROOT / shipped).read_text(encoding="utf-8")) != json.loads(block.text):
+            return [f"{block.where}: the block is not {shipped} (the file the commands read)"]
         return []
     if "ssd fragment" in d:
         from lxml import etree
