@@ -216,18 +216,10 @@ def _run_command(args) -> int:
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in "
           f"{summary['wall_time_s']:.3f} s ({summary['realtime_factor']:.1f}x real time); "
           f"results in {result.output_dir}")
-    from orchestrator.verdicts.verdict import stop_text
+    from orchestrator.verdicts.verdict import verdict_lines
 
-    for train in summary["trains"]:
-        stops = ", ".join(stop_text(s) for s in train.get("stops", []))
-        atp = (f"; ATP interventions {train['atp_interventions']}, SPAD {train['signals_passed_at_danger']}"
-               if "atp_interventions" in train else "")
-        print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
-              + (f"; arrivals {stops}" if stops else "") + atp)
-    if summary.get("receivers"):
-        from orchestrator.verdicts.verdict import safety_verdict
-
-        print(f"  {safety_verdict(summary)[1]}")
+    for line in verdict_lines(summary):
+        print(f"  {line}")
     return 0
 
 

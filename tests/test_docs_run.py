@@ -293,7 +293,7 @@ def _run_page(page: Path, folder: Path) -> List[str]:
             tolerances = docs.parse_tolerances(d.get("tolerance", ""))
             problems += [f"{block.where}: {p}" for p in docs.compare_output(block.lines, last_output, tolerances)]
         elif block.kind == "verdict table":
-            problems += _check_verdict_table(block, folder)
+            problems += _check_verdict_table(block, folder) + _printed_verdict_problems(block, last_output)
         elif block.kind in CHECK_KINDS:
             continue                       # their own tests, which need no run of the page
         timings.append(f"{block.where} {block.kind}: {time.perf_counter() - started:.1f} s")
@@ -369,6 +369,54 @@ def _check_verdict_table(block: Block, folder: Path) -> List[str]:
         verdict = "no signal chain" if not receivers else ("safe" if unsafe == 0 else "UNSAFE")
         if not row["safety"].startswith(verdict):
             problems.append(f"{where}: safety {row['safety']!r} on the page, {verdict!r} from the run")
+    return problems
+
+
+_SIMULATED = re.compile(r"^(?P<system>\S+): \d+(?:\.\d+)? s simulated")
+_PRINTED_HOLD = re.compile(r"held at departure (?P<hold>\d+(?:\.\d+)?) s")
+_PRINTED_EMERGENCY = re.compile(r"emergency brakings (?P<count>\d+)")
+
+
+def _printed_verdict_problems(block: Block, printed: List[str]) -> List[str]:
+    """What the table quotes as the CLI's verdict lines (``held at departure``, emergency
+    brakings, the safety verdict) against the lines the runs above printed: each system's lines
+    follow its ``SYSTEM: … s simulated`` line."""
+    tolerance = docs.parse_tolerances(block.directives.get("tolerance", "")).get("s", 0.0)
+    sections: Dict[str, List[str]] = {}
+    current = None
+    for line in printed:
+        match = _SIMULATED.match(line)
+        if match:
+            current = sections.setdefault(match.group("system"), [])
+        elif current is not None and line.startswith("  "):
+            current.append(line.strip())
+    problems = []
+    for row in docs.verdict_rows(block):
+        where = f"{block.where}: {row['system']}"
+        lines = sections.get(row["system"])
+        if lines is None:
+            problems.append(f"{where}: no verdict lines printed (the command block above prints them)")
+            continue
+        trains = {line.split(":", 1)[0]: line for line in lines if not line.startswith("safety:")}
+        for train in row["trains"]:
+            line = trains.get(train["name"])
+            if line is None:
+                problems.append(f"{where}: no line printed for train {train['name']}")
+                continue
+            hold = _PRINTED_HOLD.search(line)
+            if train["departure_hold_s"] is not None and (
+                    hold is None or abs(float(hold.group("hold")) - train["departure_hold_s"]) > tolerance + 1e-9):
+                problems.append(f"{where}: {train['name']} held at departure {train['departure_hold_s']:g} s on the "
+                                f"page; printed: {line!r}")
+        if row["emergency_brakings"] is not None:
+            printed_count = sum(int(m.group("count")) for line in trains.values()
+                                for m in [_PRINTED_EMERGENCY.search(line)] if m)
+            if printed_count != row["emergency_brakings"]:
+                problems.append(f"{where}: {row['emergency_brakings']} emergency brakings on the page, "
+                                f"{printed_count} printed")
+        safety = next((line for line in lines if line.startswith("safety:")), None)
+        if safety is None or not safety.startswith(f"safety: {row['safety']}"):
+            problems.append(f"{where}: safety {row['safety']!r} on the page; printed: {safety!r}")
     return problems
 
 
@@ -471,6 +519,33 @@ def test_the_verdict_table_rows_are_read_figure_by_figure():
     assert following["atp_interventions"] == [0, 0] and following["safety"] == "safe"
     assert same_block["trains"][1]["departure_hold_s"] == 208.5
     assert faults["emergency_brakings"] == 0 and faults["atp_interventions"] == [0]
+
+
+def test_the_verdict_lines_a_table_quotes_are_the_ones_the_runs_print(tmp_path, product_fmus):
+    """A departure hold, emergency brakings and the safety verdict the table quotes as the CLI's
+    are the lines `railcosim run` prints (the CLI once printed none of the three): real runs,
+    short ones, against a table of their figures, right and wrong."""
+    env = _workspace(tmp_path)
+    done = _shell("railcosim run same_block --stop-time 120 --in-process --no-build --output results/same_block\n"
+                  "railcosim run ato_only --stop-time 20 --in-process --no-build --output results/ato_only",
+                  tmp_path, env, 300)
+    assert done["code"] == 0, done["stderr"]
+    printed = done["stdout"].splitlines()
+
+    def table(hold: str, emergency: str, safety: str) -> Block:
+        return Block(ROOT / "docs" / "scenarios.md", 1, "", "\n".join([
+            "| system | trains | ATP | safety |", "|---|---|---|---|",
+            f"| same_block | leader: C −1.5 s / −0.04 m; 5.0 kWh · follower: B +0.0 s / −0.00 m; 5.0 kWh "
+            f"(held at departure {hold} s) | 0 · 0 | safe |",
+            f"| ato_only | train: B +0.5 s / −0.12 m; 0.8 kWh | 0 ({emergency} emergency brakings) | {safety} |"]),
+            {"tolerance": "0.5 s"})
+
+    assert _printed_verdict_problems(table("60.0", "0", "no signal chain"), printed) == []
+    wrong = _printed_verdict_problems(table("70.0", "1", "safe"), printed)
+    assert len(wrong) == 3, wrong
+    assert "follower held at departure 70 s on the page" in wrong[0]
+    assert "1 emergency brakings on the page, 0 printed" in wrong[1]
+    assert "safety 'safe' on the page; printed: 'safety: no signal chain" in wrong[2]
 
 
 def test_an_annotation_changes_only_what_it_declares():
