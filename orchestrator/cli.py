@@ -142,6 +142,8 @@ def cmd_build(args) -> int:
         print(f"{'built ' if result.rebuilt else 'up to date'} {result.path}")
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
+    if args.dest:                      # --dest: the FMUs there and nothing else (docs/contracts.md)
+        return 0
     repacked: List[Path] = []
     for archive in pack_systems(SSP_ROOT, dest, dest.parent, force=args.force, repacked=repacked):
         print(f"{'packed    ' if archive in repacked else 'up to date'} {archive}")
@@ -706,7 +708,8 @@ def make_parser() -> argparse.ArgumentParser:
                        help=f"trains M (default 2, at most {MAX_TRAINS})")
     build.add_argument("--frame", action=_Number, kind=int, minimum=1, maximum=MAX_FRAME, default=40,
                        help=f"samples per frame N (default 40, at most {MAX_FRAME})")
-    build.add_argument("--dest", help="output folder (default build/fmus)")
+    build.add_argument("--dest", help="write the FMUs into this folder and nothing else (default build/fmus, "
+                                      "with the shipped systems' .ssp archives packed beside it in build/)")
     build.add_argument("--force", action="store_true", help="rebuild even when up to date")
     build.set_defaults(func=cmd_build)
 
