@@ -69,3 +69,37 @@ def test_the_dat_pdu_sizes_on_the_pages_are_the_receivers(receiver_dcpx):
     for page in (HIL, PERFORMANCE):
         stated = {int(n) for n in re.findall(r"(\d+)-byte DAT", page.read_text(encoding="utf-8"))}
         assert stated and stated <= {in_pdu, out_pdu}, f"{page.name}: {sorted(stated)}, the receiver's {in_pdu}, {out_pdu}"
+
+
+INTERFACES = ROOT / "docs" / "interfaces.md"
+
+
+def _table_rows(lines, first: int) -> list:
+    rows = []
+    for line in lines[first:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
+
+
+def test_every_receiver_output_is_defined_for_every_system_it_takes():
+    """docs/interfaces.md's table of the receiver's outputs per system: a row for each output of
+    the port table, a column for each system of fmus/loco_receiver/cores.py (ALSU's `errors` and
+    `decoded_codes` were defined nowhere), no cell empty."""
+    from fmus.loco_receiver.cores import RECEIVERS
+
+    lines = INTERFACES.read_text(encoding="utf-8").splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith("<!-- ports of LocoReceiver"))
+    ports = _table_rows(lines, next(k for k in range(start, len(lines)) if lines[k].startswith("|")))
+    outputs = [row[0] for row in ports[2:] if row[1] == "output"]
+    assert outputs
+    header = next((k for k, line in enumerate(lines) if line.startswith("| output | ")), None)
+    assert header is not None, "docs/interfaces.md: no table of the receiver's outputs per system"
+    rows = _table_rows(lines, header)
+    columns = [system.strip() for cell in rows[0][1:] for system in cell.split(",")]
+    assert sorted(columns) == sorted(RECEIVERS), columns
+    named = [row[0].strip("`") for row in rows[2:]]
+    assert named == outputs
+    empty = [(row[0], rows[0][k]) for row in rows[2:] for k, cell in enumerate(row) if not cell]
+    assert not empty and all(len(row) == len(rows[0]) for row in rows[2:]), empty
