@@ -6,6 +6,8 @@ reads the pages).
   the checkout (its top-level entries linked), as a reader runs them from the repository root;
   `railcosim` and `python` there are the interpreter under test and this checkout's code. A
   block fails on any non-zero exit; a transcript's command only where it shows `echo $?`.
+  What the page leaves at the top of that folder must be something .gitignore ignores: a reader
+  who follows it from the root of a checkout finds `git status` as it was.
 * An output block, a transcript's lines and the shipped systems' verdict table are compared
   with what the runs printed or wrote: every line in order, every figure as printed or within
   the tolerance its annotation states.
@@ -473,7 +475,33 @@ def test_page_runs_as_written_and_quotes_its_runs(page, tmp_path, product_fmus):
             b.page == page and b.kind == "shell" and re.search(r"^\s*ngspice\b", b.text, re.M) for b in BLOCKS):
         pytest.skip(f"{page.name} runs ngspice, which is not on PATH (apt-get install ngspice; .ci/run does)")
     problems = _run_page(page, tmp_path)
+    problems += _not_ignored(page, tmp_path)
     assert not problems, "\n\n".join(problems)
+
+
+# ---- what a page leaves behind ---------------------------------------------------------------------
+
+#: what the test itself writes into a page's folder (the shims, the python blocks' files)
+OWN_ENTRIES = re.compile(r"\.docs-test-bin|docs_block_\d+\.py")
+
+
+def _git(*args) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+
+
+def _not_ignored(page: Path, folder: Path) -> List[str]:
+    """Everything a page's commands make at the top of the folder they run in is what a reader
+    running them from the repository root finds there: each must be something git ignores
+    (.gitignore), so that following the docs leaves `git status` as it was. (What they write
+    through the links, into build/, is ignored there already.)"""
+    if _git("rev-parse", "--is-inside-work-tree").returncode != 0:
+        return []                      # not a git checkout: nothing to compare with
+    made = sorted(entry.name + ("/" if entry.is_dir() else "") for entry in folder.iterdir()
+                  if not entry.is_symlink() and not OWN_ENTRIES.fullmatch(entry.name))
+    shown = [name for name in made if _git("check-ignore", "-q", "--no-index", "--", name).returncode != 0]
+    return [f"{page.relative_to(ROOT)}: its commands leave {', '.join(shown)} in the folder they run from, which "
+            ".gitignore does not ignore: a reader following the page from the repository root finds them in "
+            "git status"] if shown else []
 
 
 # ---- the checks themselves: they fail where a page and a run differ ---------------------------
