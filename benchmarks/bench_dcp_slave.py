@@ -11,7 +11,8 @@ has. Needs `railcosim build` first.
 
     python benchmarks/bench_dcp_slave.py [--frames 3000] [--fmu build/fmus/LocoReceiver.fmu]
 
-Prints median, p99 and max of the round trip, and the share of the 10 ms frame the p99 takes.
+Prints the sizes of the DAT PDUs (inputs, outputs) and their payloads, median, p99 and max of
+the round trip, and the share of the 10 ms frame the p99 takes.
 """
 import argparse
 import statistics
@@ -30,6 +31,11 @@ from orchestrator.dcp.pdu import PayloadCodec, Pdu, PduType, State  # noqa: E402
 from orchestrator.fmu import read_interface  # noqa: E402
 
 FRAME_NS = 10_000_000
+
+
+def dat_size(payload_bytes: int) -> int:
+    """The bytes of a DAT_input_output PDU carrying a payload of this size (docs/hil.md#pdus)."""
+    return len(Pdu(PduType.DAT_input_output, pdu_seq_id=0, data_id=0, payload=bytes(payload_bytes)).encode())
 
 
 def main() -> None:
@@ -77,7 +83,8 @@ def main() -> None:
             proc.kill()
     ms = np.array(round_trips) * 1e3
     p99 = float(np.percentile(ms, 99))
-    print(f"{fmu.name}: {len(ms)} frames, payload in {codec_in.size} B / out {codec_out.size} B")
+    print(f"{fmu.name}: {len(ms)} frames, DAT PDUs in {dat_size(codec_in.size)} B / out {dat_size(codec_out.size)} B "
+          f"(payloads {codec_in.size} B / {codec_out.size} B)")
     print(f"round trip per frame: median {statistics.median(ms):.3f} ms, p99 {p99:.3f} ms, max {ms.max():.3f} ms")
     print(f"p99 against the 10 ms frame: {p99 / 10 * 100:.1f} %")
 

@@ -63,6 +63,21 @@ def counted_run(warm_s: float, stop_s: float, in_process: bool, sample_by_sample
         scratch_run(sample_by_sample_system(Path(folder), fmus), in_process, [fmus], stop_s)
 
 
+def counted_interpreter(env: dict) -> str:
+    """The interpreter valgrind runs: this one as it was started (``sys.executable``). In a
+    virtual environment that is the environment's ``bin/python``, a link to the base
+    interpreter: started by that name it finds the environment's pyvenv.cfg and its packages,
+    where the link's target, the base interpreter, finds neither. An executable that is a script
+    (a launcher) would be what valgrind counts instead: then the base interpreter is run, given
+    this one's import path (the environment's packages included) in ``env``."""
+    with open(sys.executable, "rb") as f:
+        script = f.read(2) == b"#!"
+    if not script:
+        return sys.executable
+    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    return getattr(sys, "_base_executable", None) or os.path.realpath(sys.executable)
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--warm", type=float, default=20.0)
@@ -85,9 +100,8 @@ def main():
         env["RAILCOSIM_NO_BULK"] = "1"
     with tempfile.TemporaryDirectory() as folder:
         out = Path(folder) / "callgrind.out"
-        # the interpreter itself (a launcher script such as pyenv's would be what valgrind counts)
         subprocess.run(["valgrind", "--tool=callgrind", "--instr-atstart=no", f"--callgrind-out-file={out}",
-                        os.path.realpath(sys.executable), *sys.argv], env=env, check=True,
+                        counted_interpreter(env), *sys.argv], env=env, check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         total = int(re.search(r"^totals:\s*(\d+)", out.read_text(), re.M).group(1))
     mode = "in process" if not args.fmi else ("through FMI" + (", bulk route off" if args.no_bulk else ""))

@@ -143,6 +143,8 @@ def cmd_build(args) -> int:
         print(f"{'built ' if result.rebuilt else 'up to date'} {result.path}")
     if not results:
         print("no unit under fmus/ has a model yet; nothing to build")
+    if args.dest:                      # --dest: the FMUs there and nothing else (docs/contracts.md)
+        return 0
     repacked: List[Path] = []
     for archive in pack_systems(SSP_ROOT, dest, dest.parent, force=args.force, repacked=repacked):
         print(f"{'packed    ' if archive in repacked else 'up to date'} {archive}")
@@ -218,18 +220,10 @@ def _run_command(args) -> int:
     summary = result.summary
     print(f"{summary['system']}: {summary['sim_time_s']:.3f} s simulated in {summary['wall_time_s']:.3f} s "
           f"({_timing(summary)}); results in {result.output_dir}")
-    from orchestrator.verdicts.verdict import stop_text
+    from orchestrator.verdicts.verdict import verdict_lines
 
-    for train in summary["trains"]:
-        stops = ", ".join(stop_text(s) for s in train.get("stops", []))
-        atp = (f"; ATP interventions {train['atp_interventions']}, SPAD {train['signals_passed_at_danger']}"
-               if "atp_interventions" in train else "")
-        print(f"  {train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh"
-              + (f"; arrivals {stops}" if stops else "") + atp)
-    if summary.get("receivers"):
-        from orchestrator.verdicts.verdict import safety_verdict
-
-        print(f"  {safety_verdict(summary)[1]}")
+    for line in verdict_lines(summary):
+        print(f"  {line}")
     import shlex
 
     print(f"  draw it: railcosim report {shlex.quote(str(result.output_dir))}")
@@ -741,7 +735,8 @@ def make_parser() -> argparse.ArgumentParser:
                        help=f"trains M (default 2, at most {MAX_TRAINS})")
     build.add_argument("--frame", action=_Number, kind=int, minimum=1, maximum=MAX_FRAME, default=40,
                        help=f"samples per frame N (default 40, at most {MAX_FRAME})")
-    build.add_argument("--dest", help="output folder (default build/fmus)")
+    build.add_argument("--dest", help="write the FMUs into this folder and nothing else (default build/fmus, "
+                                      "with the shipped systems' .ssp archives packed beside it in build/)")
     build.add_argument("--force", action="store_true", help="rebuild even when up to date")
     build.set_defaults(func=cmd_build)
 

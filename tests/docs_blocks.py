@@ -27,7 +27,8 @@ Directives (each ``name`` or ``name: value``):
 * ``tolerance: 0.5 s, 0.01 m`` — a figure with that unit may differ from the run's by that
   much (figures of other units: as printed);
 * ``study file``, ``scenario for SYSTEM``, ``scenario event for SYSTEM``, ``line file fragment``,
-  ``ssd fragment``, ``ci job``, ``railml sidecar`` — an example file read by what reads it (not run);
+  ``ssd fragment``, ``ci job``, ``railml sidecar`` — an example file read by what reads it (not run;
+  ``railml sidecar: FILE``: also the content of FILE, which the page's commands use);
 * ``verdict table: results/SYSTEM`` — above a Markdown table (not a fence): the table of the
   shipped systems' verdicts, compared with each run's summary.json in that folder.
 

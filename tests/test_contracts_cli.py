@@ -348,3 +348,16 @@ def test_the_python_packages_each_fmu_needs_are_the_ones_documented():
                               capture_output=True, text=True, timeout=300, env=cli_environment())
         imported = set(json.loads(proc.stdout.strip().splitlines()[-1])) & set(_PACKAGES)
         assert imported == documented[spec.model_identifier], spec.model_identifier
+
+
+def test_build_dest_writes_the_fmus_there_and_nothing_beside_them(tmp_path):
+    """docs/contracts.md's `railcosim build --frame 20 --dest supplier/fmus`: the FMUs in
+    supplier/fmus and nothing else; the shipped systems' .ssp archives (packed with these
+    20-sample FMUs they would not even run) were written into supplier/ too."""
+    code, stdout, stderr = railcosim("build", "--frame", "20", "--dest", "supplier/fmus", cwd=tmp_path)
+    assert code == 0, stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["supplier"]
+    assert sorted(p.name for p in (tmp_path / "supplier").iterdir()) == ["fmus"]
+    assert sorted(p.name for p in (tmp_path / "supplier" / "fmus").iterdir() if p.suffix == ".fmu") == sorted(
+        f"{identifier}.fmu" for _, identifier in UNITS)
+    assert "packed" not in stdout

@@ -6,6 +6,8 @@ reads the pages).
   the checkout (its top-level entries linked), as a reader runs them from the repository root;
   `railcosim` and `python` there are the interpreter under test and this checkout's code. A
   block fails on any non-zero exit; a transcript's command only where it shows `echo $?`.
+  What the page leaves at the top of that folder must be something .gitignore ignores: a reader
+  who follows it from the root of a checkout finds `git status` as it was.
 * An output block, a transcript's lines and the shipped systems' verdict table are compared
   with what the runs printed or wrote: every line in order, every figure as printed or within
   the tolerance its annotation states.
@@ -216,6 +218,9 @@ def _check_data(block: Block, folder: Path, env) -> List[str]:
         path = folder / "example_sidecar.json"
         path.write_text(block.text, encoding="utf-8")
         load_sidecar(path)                   # checked against its schema; a UserError says why not
+        shipped = d["railml sidecar"]        # the file the block shows, which the page's commands use
+        if shipped and json.loads((ROOT / shipped).read_text(encoding="utf-8")) != json.loads(block.text):
+            return [f"{block.where}: the block is not {shipped} (the file the commands read)"]
         return []
     if "ssd fragment" in d:
         from lxml import etree
@@ -290,7 +295,7 @@ def _run_page(page: Path, folder: Path) -> List[str]:
             tolerances = docs.parse_tolerances(d.get("tolerance", ""))
             problems += [f"{block.where}: {p}" for p in docs.compare_output(block.lines, last_output, tolerances)]
         elif block.kind == "verdict table":
-            problems += _check_verdict_table(block, folder)
+            problems += _check_verdict_table(block, folder) + _printed_verdict_problems(block, last_output)
         elif block.kind in CHECK_KINDS:
             continue                       # their own tests, which need no run of the page
         timings.append(f"{block.where} {block.kind}: {time.perf_counter() - started:.1f} s")
@@ -369,6 +374,54 @@ def _check_verdict_table(block: Block, folder: Path) -> List[str]:
     return problems
 
 
+_SIMULATED = re.compile(r"^(?P<system>\S+): \d+(?:\.\d+)? s simulated")
+_PRINTED_HOLD = re.compile(r"held at departure (?P<hold>\d+(?:\.\d+)?) s")
+_PRINTED_EMERGENCY = re.compile(r"emergency brakings (?P<count>\d+)")
+
+
+def _printed_verdict_problems(block: Block, printed: List[str]) -> List[str]:
+    """What the table quotes as the CLI's verdict lines (``held at departure``, emergency
+    brakings, the safety verdict) against the lines the runs above printed: each system's lines
+    follow its ``SYSTEM: … s simulated`` line."""
+    tolerance = docs.parse_tolerances(block.directives.get("tolerance", "")).get("s", 0.0)
+    sections: Dict[str, List[str]] = {}
+    current = None
+    for line in printed:
+        match = _SIMULATED.match(line)
+        if match:
+            current = sections.setdefault(match.group("system"), [])
+        elif current is not None and line.startswith("  "):
+            current.append(line.strip())
+    problems = []
+    for row in docs.verdict_rows(block):
+        where = f"{block.where}: {row['system']}"
+        lines = sections.get(row["system"])
+        if lines is None:
+            problems.append(f"{where}: no verdict lines printed (the command block above prints them)")
+            continue
+        trains = {line.split(":", 1)[0]: line for line in lines if not line.startswith("safety:")}
+        for train in row["trains"]:
+            line = trains.get(train["name"])
+            if line is None:
+                problems.append(f"{where}: no line printed for train {train['name']}")
+                continue
+            hold = _PRINTED_HOLD.search(line)
+            if train["departure_hold_s"] is not None and (
+                    hold is None or abs(float(hold.group("hold")) - train["departure_hold_s"]) > tolerance + 1e-9):
+                problems.append(f"{where}: {train['name']} held at departure {train['departure_hold_s']:g} s on the "
+                                f"page; printed: {line!r}")
+        if row["emergency_brakings"] is not None:
+            printed_count = sum(int(m.group("count")) for line in trains.values()
+                                for m in [_PRINTED_EMERGENCY.search(line)] if m)
+            if printed_count != row["emergency_brakings"]:
+                problems.append(f"{where}: {row['emergency_brakings']} emergency brakings on the page, "
+                                f"{printed_count} printed")
+        safety = next((line for line in lines if line.startswith("safety:")), None)
+        if safety is None or not safety.startswith(f"safety: {row['safety']}"):
+            problems.append(f"{where}: safety {row['safety']!r} on the page; printed: {safety!r}")
+    return problems
+
+
 # ---- the tests -----------------------------------------------------------------------------------
 
 def _ids(block):
@@ -422,7 +475,33 @@ def test_page_runs_as_written_and_quotes_its_runs(page, tmp_path, product_fmus):
             b.page == page and b.kind == "shell" and re.search(r"^\s*ngspice\b", b.text, re.M) for b in BLOCKS):
         pytest.skip(f"{page.name} runs ngspice, which is not on PATH (apt-get install ngspice; .ci/run does)")
     problems = _run_page(page, tmp_path)
+    problems += _not_ignored(page, tmp_path)
     assert not problems, "\n\n".join(problems)
+
+
+# ---- what a page leaves behind ---------------------------------------------------------------------
+
+#: what the test itself writes into a page's folder (the shims, the python blocks' files)
+OWN_ENTRIES = re.compile(r"\.docs-test-bin|docs_block_\d+\.py")
+
+
+def _git(*args) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+
+
+def _not_ignored(page: Path, folder: Path) -> List[str]:
+    """Everything a page's commands make at the top of the folder they run in is what a reader
+    running them from the repository root finds there: each must be something git ignores
+    (.gitignore), so that following the docs leaves `git status` as it was. (What they write
+    through the links, into build/, is ignored there already.)"""
+    if _git("rev-parse", "--is-inside-work-tree").returncode != 0:
+        return []                      # not a git checkout: nothing to compare with
+    made = sorted(entry.name + ("/" if entry.is_dir() else "") for entry in folder.iterdir()
+                  if not entry.is_symlink() and not OWN_ENTRIES.fullmatch(entry.name))
+    shown = [name for name in made if _git("check-ignore", "-q", "--no-index", "--", name).returncode != 0]
+    return [f"{page.relative_to(ROOT)}: its commands leave {', '.join(shown)} in the folder they run from, which "
+            ".gitignore does not ignore: a reader following the page from the repository root finds them in "
+            "git status"] if shown else []
 
 
 # ---- the checks themselves: they fail where a page and a run differ ---------------------------
@@ -468,6 +547,33 @@ def test_the_verdict_table_rows_are_read_figure_by_figure():
     assert following["atp_interventions"] == [0, 0] and following["safety"] == "safe"
     assert same_block["trains"][1]["departure_hold_s"] == 208.5
     assert faults["emergency_brakings"] == 0 and faults["atp_interventions"] == [0]
+
+
+def test_the_verdict_lines_a_table_quotes_are_the_ones_the_runs_print(tmp_path, product_fmus):
+    """A departure hold, emergency brakings and the safety verdict the table quotes as the CLI's
+    are the lines `railcosim run` prints (the CLI once printed none of the three): real runs,
+    short ones, against a table of their figures, right and wrong."""
+    env = _workspace(tmp_path)
+    done = _shell("railcosim run same_block --stop-time 120 --in-process --no-build --output results/same_block\n"
+                  "railcosim run ato_only --stop-time 20 --in-process --no-build --output results/ato_only",
+                  tmp_path, env, 300)
+    assert done["code"] == 0, done["stderr"]
+    printed = done["stdout"].splitlines()
+
+    def table(hold: str, emergency: str, safety: str) -> Block:
+        return Block(ROOT / "docs" / "scenarios.md", 1, "", "\n".join([
+            "| system | trains | ATP | safety |", "|---|---|---|---|",
+            f"| same_block | leader: C −1.5 s / −0.04 m; 5.0 kWh · follower: B +0.0 s / −0.00 m; 5.0 kWh "
+            f"(held at departure {hold} s) | 0 · 0 | safe |",
+            f"| ato_only | train: B +0.5 s / −0.12 m; 0.8 kWh | 0 ({emergency} emergency brakings) | {safety} |"]),
+            {"tolerance": "0.5 s"})
+
+    assert _printed_verdict_problems(table("60.0", "0", "no signal chain"), printed) == []
+    wrong = _printed_verdict_problems(table("70.0", "1", "safe"), printed)
+    assert len(wrong) == 3, wrong
+    assert "follower held at departure 70 s on the page" in wrong[0]
+    assert "1 emergency brakings on the page, 0 printed" in wrong[1]
+    assert "safety 'safe' on the page; printed: 'safety: no signal chain" in wrong[2]
 
 
 def test_an_annotation_changes_only_what_it_declares():

@@ -237,6 +237,32 @@ def test_bad_options_and_sidecars_are_refused(tmp_path):
     assert code == 2 and "is a folder" in stderr and "Traceback" not in stderr
 
 
+@pytest.mark.parametrize("extras, named", [
+    # docs/railml.md's sidecar once chose track 2 and gave tvd_1 and ij_0 of track 1: ignored in silence
+    ({"via": ["ne_t2"], "sections": {"tvd_1": {"name": "1П"}}, "joints": {"ij_0": {"impedance_bond": False}}},
+     "sections.tvd_1: no block section 'tvd_1' on the running path (ne_t2) (and 1 more: joints.ij_0)"),
+    ({"joints": {"ij_00": {"impedance_bond": False}}}, "joints.ij_00: no insulated joint 'ij_00' on the running path"),
+    ({"zones": {"tde_nowhere": {}}}, "zones.tde_nowhere: no trainDetectionElement 'tde_nowhere' on the running path"),
+])
+def test_a_sidecar_key_the_import_would_not_use_is_refused_naming_it_and_the_sidecar(tmp_path, extras, named):
+    sidecar = tmp_path / "mine.json"
+    sidecar.write_text(json.dumps(extras))
+    stderr = _refused(tmp_path, FIXTURE_32, "--sidecar", sidecar)
+    assert f"--sidecar: {sidecar}: {named}" in stderr, stderr
+
+
+def test_stock_that_cannot_run_on_the_imported_line_is_named_with_the_railml_file(tmp_path):
+    """The line imported is the user's railML file to the user: a message names it, never the
+    temporary file the import wrote (the DC stock on an AC line named /tmp/railcosim_railml_…)."""
+    sidecar = tmp_path / "ac.json"
+    sidecar.write_text(json.dumps({"via": ["ne_t2"], "electrification": {"system": "AC25000", "nominal_voltage_v": 25000}}))
+    stock = REPO / "fmus" / "data" / "shipped" / "emu_er2.json"
+    for timetable in ([], ["--timetable", REPO / "docs" / "examples" / "short_timetable.json"]):
+        stderr = _refused(tmp_path, FIXTURE_32, "--sidecar", sidecar, "--rolling-stock", stock, *timetable)
+        assert f"cannot run on {FIXTURE_32} (the line imported from it)" in stderr, stderr
+        assert "railcosim_railml_" not in stderr
+
+
 LONG = "9" * 4001       # int() reads it, float() of it overflows: an OverflowError came out of the import
 BAD_ATTRIBUTES = [      # (old text, new text, what the one line says) in the 3.2 fixture
     # an id missing where the import names and links the element, or given twice

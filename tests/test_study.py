@@ -276,7 +276,7 @@ def test_report_aggregates_per_point_and_plots_two_axes(grid_study, capsys):
     assert page.count('<tr class="point">') == 4 and page.count('src="data:image/png;base64,') == 2
     assert ('<li class="left-out">trains.train.energy_kwh: one value over the sweep, or figures at a single '
             'train.v0</li>') in page and '<li class="left-out">verdict: not a number at every point</li>' in page
-    assert 'src="http' not in page and "none: no safety key above zero, no failed run" in page
+    assert 'src="http' not in page and "none: no safety key collected, no failed run" in page
 
 
 def test_only_plots_that_carry_information_are_drawn():
@@ -331,6 +331,64 @@ def test_failing_and_timed_out_runs_are_recorded_and_the_rest_complete(tmp_path)
     # resuming runs the failed and timed-out points again, and only those
     again = run_study(spec, tmp_path / "out", None, [], workers=1, resume=True)
     assert again.skipped == 4 and again.counts["ok"] == 4
+
+
+FLAKY_MODULE = """
+from pathlib import Path
+
+def work(x, marker, seed=None):
+    if x > 2 and not Path(marker).exists():
+        raise ValueError("not yet")
+    return {"y": x}
+"""
+
+
+def test_resume_keeps_the_earlier_sessions_in_study_json(tmp_path):
+    """study.json after a --resume: both sessions, each with its wall time, workers and runs;
+    the study's wall time their sum, its start the first session's (a resume used to replace
+    them with its own)."""
+    _write(tmp_path, "flaky_module_of_test.py", FLAKY_MODULE)
+    marker = tmp_path / "go"
+    study = _write(tmp_path, "f.json", json.dumps({
+        "function": "flaky_module_of_test:work", "arguments": {"marker": str(marker)}, "grid": {"x": [1, 2, 3, 4]},
+        "collect": ["y"]}))
+    spec = load_study(study)
+    first = run_study(spec, tmp_path / "out", None, [], workers=2)
+    assert first.counts["ok"] == 2 and first.counts["failed"] == 2, first.records
+    marker.touch()
+    time.sleep(1.0)                                   # the second session starts a second later at least
+    again = run_study(spec, tmp_path / "out", None, [], workers=1, resume=True)
+    assert again.skipped == 2 and again.counts["ok"] == 4
+    data = json.loads((tmp_path / "out" / "study.json").read_text())
+    sessions = data["sessions"]
+    assert [(s["workers"], s["runs"], s["interrupted"]) for s in sessions] == [(2, 4, None), (1, 2, None)]
+    assert sessions[0]["started"] < sessions[1]["started"] and data["started"] == sessions[0]["started"]
+    assert all(s["wall_time_s"] > 0 for s in sessions)
+    assert data["wall_time_s"] == pytest.approx(sum(s["wall_time_s"] for s in sessions))
+    assert data["workers"] == 1
+
+
+def test_the_report_does_not_call_a_safety_key_never_collected_zero(tmp_path, capsys):
+    """A study.json of an earlier version naming a safety key its runs did not collect: the
+    report says that key is not collected, and does not count it among the keys found zero."""
+    _write(tmp_path, "worker_module_of_test.py", WORKER_MODULE)
+    study = _write(tmp_path, "f.json", json.dumps({
+        "function": "worker_module_of_test:work", "grid": {"x": [1, 4]}, "seeds": [0], "collect": ["y"],
+        "safety": ["y"]}))
+    run_study(load_study(study), tmp_path / "out", None, [], workers=1)
+    path = tmp_path / "out" / "study.json"
+    data = json.loads(path.read_text())
+    data["safety"] = ["signals_passed_at_danger", "y"]       # as the earlier version wrote it
+    path.write_text(json.dumps(data))
+    assert main(["study", "report", str(tmp_path / "out")]) == 0
+    text = capsys.readouterr().out
+    assert "Safety keys not collected (no run reports them; not judged): signals_passed_at_danger." in text
+    assert "- r0001 (x 4, seed 0): y = 16" in text
+    data["safety"] = ["signals_passed_at_danger"]
+    path.write_text(json.dumps(data))
+    assert main(["study", "report", str(tmp_path / "out")]) == 0
+    text = capsys.readouterr().out
+    assert "none: no safety key collected, no failed run" in text and "no safety key above zero" not in text
 
 
 def test_runs_taken_several_per_task_are_each_recorded_in_order(tmp_path):
@@ -554,6 +612,11 @@ def test_tvm300_noise_study_is_never_wrong_side_and_errs_more_in_more_noise(tmp_
     ('system = "ato_only"\n[grid]\n"train.mass_scale" = [1.0, nan]\n',
      "field grid.train.mass_scale[1]: nan is not a finite number"),
     ('system = "ato_only"\nstop_time = inf\n', "field stop_time: inf is not a finite number"),
+    # a safety key no run collects would be summed from nothing (docs/studies.md's example did so)
+    ('system = "ato_only"\ncollect = ["verdict"]\nsafety = ["signals_passed_at_danger"]\n',
+     "field safety.0: 'signals_passed_at_danger' is not collected"),
+    ('system = "ato_only"\nsafety = ["signals_passed_at_danger", "atp_interventions"]\n',
+     "field safety.1: 'atp_interventions' is not collected"),
 ])
 def test_bad_study_files_are_one_line_and_exit_2(product_fmus, tmp_path, capsys, text, message):
     study = _write(tmp_path, "s.toml", text)

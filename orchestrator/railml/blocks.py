@@ -288,13 +288,16 @@ class _Assumed:
 
 
 def block_sections(doc: Document, locate: Locator, detectors: List[Detector], signals: List[BlockSignal],
-                   electrification: str, extras, notes) -> List[dict]:
+                   electrification: str, extras, notes, section_ids: Optional[List[str]] = None) -> List[dict]:
     """Block sections: the path between consecutive train detectors, each the TVD section that
     both demarcate (docs/railml.md#block-sections), with the block signal at its exit and its
-    track circuit's transmitter, carrier and ballast."""
+    track circuit's transmitter, carrier and ballast. ``section_ids`` gets the id of each
+    (the keys the sidecar's ``sections`` may use)."""
     tvds = _tvd_sections(doc)
     demarcates, exit_signals = _demarcation(doc, tvds)
     stretches = _stretches(doc, _bounds(doc, locate, detectors, signals, notes), tvds, demarcates, notes)
+    if section_ids is not None:
+        section_ids.extend(s.ident for s in stretches)
     section_extras = extras.get("sections", {})
     assumed = _Assumed(extras.get("defaults", {}), electrification)
     used = set()

@@ -59,8 +59,10 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
     document["electrification"] = _electrification(doc, fi, locate, extras, notes)
     found, joints = detectors(doc, fi, locate, extras, notes)
     signals = block_signals(doc, fi, locate, notes)
+    section_ids: List[str] = []
     document["block_sections"] = block_sections(doc, locate, found, signals, document["electrification"]["system"],
-                                                extras, notes)
+                                                extras, notes, section_ids)
+    _refuse_unused_keys(sidecar, extras, section_ids, found, path_)
     if joints:           # none and an empty list are the same to the loader; a TVM line lists none
         document["insulated_joints"] = joints
     zones = [d.zone for d in found if d.zone is not None]
@@ -75,6 +77,25 @@ def import_railml(path, line_id: Optional[str] = None, sidecar=None) -> RailmlIm
     document["speed_limits"] = limits
     notes.extend(_ignored(doc, fi))
     return RailmlImport(document, version, [s.id for s in path_.steps], notes)
+
+
+def _refuse_unused_keys(sidecar, extras: dict, section_ids: List[str], found, path_: RunningPath) -> None:
+    """Every id the sidecar's ``sections``, ``joints`` and ``zones`` name is one the import uses:
+    a block section of the running path, an insulated joint on it, a train detection element on
+    it. A key for an element off the path (another track, a typing error) would be ignored in
+    silence; it is refused in one line naming it and the sidecar."""
+    on_path = {
+        "sections": (set(section_ids), "block section"),           # a tvdSection's id, or S1, S2, …
+        "joints": ({d.id for d in found if d.kind == "insulatedRailJoint"}, "insulated joint"),
+        "zones": ({d.id for d in found if d.id}, "trainDetectionElement"),
+    }
+    unused = [(group, key) for group, (ids, _) in on_path.items() for key in extras.get(group, {}) if key not in ids]
+    if unused:
+        group, key = unused[0]
+        more = f" (and {len(unused) - 1} more: {', '.join(f'{g}.{k}' for g, k in unused[1:])})" if len(unused) > 1 else ""
+        raise UserError(f"--sidecar: {sidecar}: {group}.{key}: no {on_path[group][1]} {key!r} on the running path "
+                        f"({', '.join(s.id for s in path_.steps)}){more}; the import would not use it: remove it, "
+                        "or choose the path with line_id or via")
 
 
 def _line_element(doc: Document, fi, line_id: Optional[str], path_: RunningPath, macro):

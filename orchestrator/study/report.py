@@ -90,11 +90,24 @@ def _format(stats: dict) -> str:
     return f"{g(stats['mean'])} [{g(stats['min'])}, {g(stats['max'])}]"
 
 
+def _uncollected_safety(study: dict) -> List[str]:
+    """Safety keys of a study.json written before a study refused them uncollected: study.csv has
+    no column for them, so nothing is known of them."""
+    return [key for key in study.get("safety", []) if key not in study["collect"]]
+
+
+def _no_worst_run(study: dict) -> str:
+    """What the worst runs' list says when it has none."""
+    collected = [key for key in study.get("safety", []) if key not in _uncollected_safety(study)]
+    return (f"none: no collected safety key above zero ({', '.join(collected)})" if collected
+            else "none: no safety key collected") + ", no failed run"
+
+
 def _worst_runs(study: dict, rows: List[dict]) -> List[Tuple[str, str, str]]:
     """(run id, its point and seed, what is wrong with it): the runs with the most of each
-    safety key, then every run that did not end ok."""
+    collected safety key, then every run that did not end ok."""
     found = []
-    for key in study.get("safety", []):
+    for key in (k for k in study.get("safety", []) if k not in _uncollected_safety(study)):
         hits = sorted(((v, r) for r in rows          # a failed run's figures are not its verdict
                        if r["status"] == "ok" and (v := _number(r.get(key, ""))) is not None and v > 0),
                       key=lambda item: -item[0])
@@ -123,8 +136,11 @@ def _markdown(study: dict, table: List[dict], worst: List[Tuple[str, str, str]])
         cells = [str(entry["point"]), *entry["axes"].values(), str(entry["runs"]), str(entry["failed"]),
                  *[_format(entry["keys"][k]) for k in study["collect"]]]
         lines.append("| " + " | ".join(cells) + " |")
+    uncollected = _uncollected_safety(study)
+    if uncollected:
+        lines += ["", f"Safety keys not collected (no run reports them; not judged): {', '.join(uncollected)}."]
     lines += ["", "## Worst runs", ""] + ([f"- {run} ({where}): {what}" for run, where, what in worst]
-                                          or ["none: no safety key above zero, no failed run"])
+                                          or [_no_worst_run(study)])
     return "\n".join(lines) + "\n"
 
 
@@ -260,7 +276,7 @@ def write_html(path: Path, study: dict, table: List[dict], worst: List[Tuple[str
         return f"<a href=\"{escape(target)}\">{escape(run)}</a>"
 
     worst_items = "\n".join(f"<li class=\"worst\">{link(run)} ({escape(where)}): {escape(what)}</li>"
-                             for run, where, what in worst) or "<li>none: no safety key above zero, no failed run</li>"
+                             for run, where, what in worst) or f"<li>{escape(_no_worst_run(study))}</li>"
     text = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>railcosim study: {escape(study['name'])}</title>
@@ -284,6 +300,8 @@ total over the runs and the run with the most.</p>
 </tbody></table>
 <h2>Worst runs</h2>
 <ul>{worst_items}</ul>
+{f"<p>Safety keys not collected (no run reports them; not judged): {escape(', '.join(_uncollected_safety(study)))}.</p>"
+ if _uncollected_safety(study) else ""}
 <h2>Plots</h2>
 {figures or "<p>No plot carries more than the table.</p>"}
 {"<p>Not plotted:</p><ul>" + "".join(f'<li class="left-out">{escape(k)}: {escape(why)}</li>'

@@ -322,6 +322,7 @@ def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, pro
 
     records: Dict[str, dict] = _clear_runs(output, spec, resume)
     skipped = len(records)
+    earlier = _earlier_sessions(output / STUDY_JSON, spec) if resume else []
     common = _common_job(spec, output, system, fmu_dirs, python_path)
     todo = [run for run in spec.runs if run.id not in records]
     began = time.time()
@@ -388,8 +389,10 @@ def _run_claimed(spec, output, system, fmu_dirs, workers, scheduler, resume, pro
     if stopped:
         counts["not_run"] = stopped
     files = [_write_csv(output / STUDY_CSV, spec, ordered),
-             _write_json(output / STUDY_JSON, spec, counts, began, worker_count, scheduler, system,
-                         interrupted=signal_name(flag.signum) if stopped else None)]
+             _write_json(output / STUDY_JSON, spec, counts, earlier + [{
+                 "started": _timestamp(began), "wall_time_s": time.time() - began, "workers": worker_count,
+                 "scheduler": scheduler, "runs": len(ordered) - skipped,
+                 "interrupted": signal_name(flag.signum) if stopped else None}], system)]
     if stopped:
         from orchestrator.interrupts import Interrupted
 
@@ -436,13 +439,38 @@ def _write_csv(path: Path, spec: StudySpec, records: List[dict]) -> Path:
     return path
 
 
-def _write_json(path: Path, spec: StudySpec, counts: dict, began: float, workers: int,
-                scheduler: Optional[str], system: Optional[Path], interrupted: Optional[str] = None) -> Path:
+def _timestamp(seconds: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(seconds))
+
+
+#: what study.json says of each session (the first run of a study, each --resume)
+SESSION_KEYS = ("started", "wall_time_s", "workers", "scheduler", "runs", "interrupted")
+
+
+def _earlier_sessions(path: Path, spec: StudySpec) -> List[dict]:
+    """The sessions the study.json in the folder records, when it is this study's (a --resume
+    goes on from them); a study.json of before sessions were recorded is its one session."""
+    try:
+        earlier = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return []
+    if not isinstance(earlier, dict) or earlier.get("hash") != spec.hash:
+        return []
+    sessions = earlier.get("sessions")
+    if isinstance(sessions, list):
+        return [{k: s.get(k) for k in SESSION_KEYS} for s in sessions if isinstance(s, dict)]
+    return [{k: earlier.get(k) for k in SESSION_KEYS}]
+
+
+def _write_json(path: Path, spec: StudySpec, counts: dict, sessions: List[dict], system: Optional[Path]) -> Path:
+    """study.json: the study, its counts, and every session that ran its runs (``sessions``, the
+    last this one); ``started`` is the first session's, ``wall_time_s`` their sum, ``workers``,
+    ``scheduler`` and ``interrupted`` the last one's."""
+    last = sessions[-1]
     data = {"name": spec.name, "file": str(spec.path.resolve()), "hash": spec.hash, "spec": spec.data,
             "system": str(system) if system else None, "axes": spec.axes, "collect": spec.collect,
-            "safety": spec.safety, "counts": counts,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(began)),
-            "wall_time_s": time.time() - began, "workers": workers, "scheduler": scheduler,
-            "interrupted": interrupted}
+            "safety": spec.safety, "counts": counts, "started": sessions[0]["started"],
+            "wall_time_s": sum(float(s.get("wall_time_s") or 0.0) for s in sessions), "workers": last["workers"],
+            "scheduler": last["scheduler"], "interrupted": last["interrupted"], "sessions": sessions}
     replace_file(path, json.dumps(data, indent=1, default=str) + "\n")
     return path

@@ -193,6 +193,11 @@ def _validate(path: Path, data: dict) -> None:
     if "function" in data and "collect" not in data:
         raise UserError(f"study {path}: field collect: a function study names the keys of its "
                         "function's result to collect")
+    collected = data.get("collect", DEFAULT_COLLECT)
+    for k, key in enumerate(data.get("safety", [])):
+        if key not in collected:      # the report would sum a column study.csv does not have
+            raise UserError(f"study {path}: field safety.{k}: {key!r} is not collected; the report sums "
+                            f"and searches only collected keys: add it to collect ({', '.join(collected)})")
     if "seed_variables" in data and "function" in data:
         raise UserError(f"study {path}: field seed_variables: a function study receives its seed as "
                         "the keyword 'seed'")

@@ -308,19 +308,25 @@ def new_system_from_railml(folder: Path, railml_file: Path, timetable_files: Seq
     imported = import_railml(railml_file, line_id=line_id, sidecar=sidecar)
     with tempfile.TemporaryDirectory(prefix="railcosim_railml_") as work:
         line_path = Path(work) / f"{railml_file.stem}.json"
+        generated = Path(work) / f"{railml_file.stem}_timetable.json"
         line_path.write_text(json.dumps(imported.document, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
         try:
             load_line(line_path)
         except FmuInputError as error:
             raise UserError(f"{railml_file}: the imported line is refused: {str(error).split(': ', 1)[1]}") from None
-        if not timetable_files:
-            stock = Path(rolling_stock_file) if rolling_stock_file else default_stock(system, (
-                traction or next(k for k, v in TRACTION.items() if v == imported.document["electrification"]["system"])))
-            generated = Path(work) / f"{railml_file.stem}_timetable.json"
-            generated.write_text(json.dumps(timetable_for(line_path, stock), indent=1, ensure_ascii=False) + "\n",
-                                 encoding="utf-8")
-            timetable_files = [generated]
-            imported.notes.append(f"no --timetable: {generated.name} made (every station with room for the train, "
-                                  f"minimum running times + {TIMETABLE_MARGIN:.0%}, {DWELL_S:g} s stops)")
-        ssd = new_system(folder, line_path, timetable_files, rolling_stock_file, system, trains, traction, fmu_dir)
+        try:
+            if not timetable_files:
+                stock = Path(rolling_stock_file) if rolling_stock_file else default_stock(system, (
+                    traction or next(k for k, v in TRACTION.items()
+                                     if v == imported.document["electrification"]["system"])))
+                generated.write_text(json.dumps(timetable_for(line_path, stock), indent=1, ensure_ascii=False) + "\n",
+                                     encoding="utf-8")
+                timetable_files = [generated]
+                imported.notes.append(f"no --timetable: {generated.name} made (every station with room for the "
+                                      f"train, minimum running times + {TIMETABLE_MARGIN:.0%}, {DWELL_S:g} s stops)")
+            ssd = new_system(folder, line_path, timetable_files, rolling_stock_file, system, trains, traction, fmu_dir)
+        except UserError as error:
+            # the files made here are the user's railML file to the user, not a temporary folder
+            raise UserError(str(error).replace(str(line_path), f"{railml_file} (the line imported from it)")
+                            .replace(str(generated), f"the timetable made for {railml_file}")) from None
     return ssd, imported.notes

@@ -687,6 +687,29 @@ def safety_verdict(summary: dict) -> Tuple[bool, str]:
     return safe, f"safety: {text}"
 
 
+def verdict_lines(summary: dict) -> List[str]:
+    """What `railcosim run` prints after its first line (docs/scenarios.md quotes them): per
+    train its energy, arrivals, ATP interventions, emergency brakings, SPADs and, when it stood
+    past a departure time for want of a permissive code, how long; then the safety verdict, or
+    ``no signal chain`` for a run without a receiver to judge."""
+    lines = []
+    for train in summary.get("trains", []):
+        stops = ", ".join(stop_text(s) for s in train.get("stops", []))
+        line = f"{train['name']}: {train.get('energy_kwh', 0.0):.1f} kWh" + (f"; arrivals {stops}" if stops else "")
+        if "atp_interventions" in train:
+            line += (f"; ATP interventions {train['atp_interventions']}, emergency brakings "
+                     f"{train['emergency_brakings']}, SPAD {train['signals_passed_at_danger']}")
+        if train.get("departure_hold_s"):
+            line += f"; held at departure {train['departure_hold_s']:.1f} s"
+        lines.append(line)
+    if summary.get("receivers"):
+        lines.append(safety_verdict(summary)[1])
+    elif summary.get("trains"):
+        spad = sum(t.get("signals_passed_at_danger", 0) for t in summary["trains"])
+        lines.append(f"safety: no signal chain (no receiver to judge; signals passed at danger {spad})")
+    return lines
+
+
 def railway_verdicts(graph: SystemGraph, warn: Callable[[str], None] = print_warning) -> list:
     """The summary observers of a railway run: per train (arrivals, stops, energy, ATP,
     headway) and per receiver (codes, errors, wrong-side failures, unsafe indications). Pass as
