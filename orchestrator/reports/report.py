@@ -14,7 +14,9 @@ the line and timetables the run's components used, and writes into RUN_DIR (or -
   middle of the capture) and the receiver band-pass output computed from it with the
   receiver's own filter design (needs a run with ``--capture rail.e_coil@T0:T1``);
 * ``energy.png`` — each train's energy over time;
-* ``report.html`` — the verdict tables and the pictures on one page, for a browser;
+* ``report.html`` — one offline page for a browser: provenance, the verdict tables, the signal
+  chain per train over time and the other interactive figures (orchestrator/reports/interactive.py),
+  and these pictures;
 
 and prints the verdict as a short text table.
 """
