@@ -7,7 +7,7 @@ import subprocess
 from datetime import datetime, timezone
 from importlib import metadata as package_metadata
 from pathlib import Path
-from typing import Dict, Mapping, Optional
+from typing import Dict, List, Mapping, Optional
 
 #: the checkout railcosim runs from, when it runs from one (an editable install)
 CHECKOUT = Path(__file__).resolve().parents[1]
@@ -21,17 +21,31 @@ def railcosim_version() -> str:
         return "unknown (not installed)"
 
 
-def content_hash(path: Path) -> str:
-    """SHA-256 of a file, or of a folder's files (their relative names and bytes, sorted), so
-    that a system folder and the .ssp packed from it are each told apart from an edited copy."""
+def system_files(folder: Path) -> List[Path]:
+    """A system folder's files, sorted, bytecode caches left out: what it is made of (its hash
+    here, what the packer puts in its .ssp: orchestrator/packaging/packing.py)."""
+    return [p for p in sorted(Path(folder).rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
+
+
+def file_digest(path: Path) -> bytes:
+    """SHA-256 of a file's bytes, read a megabyte at a time."""
     digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.digest()
+
+
+def content_hash(path: Path) -> str:
+    """SHA-256 (hex) of a file, or of a folder's files (their relative names and digests, in
+    :func:`system_files` order), so that a system folder and the .ssp packed from it are each
+    told apart from an edited copy."""
     path = Path(path)
-    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-    for file in files:
-        if path.is_dir():
-            digest.update(file.relative_to(path).as_posix().encode() + b"\0")
-        digest.update(file.read_bytes())
-        digest.update(b"\0")
+    if path.is_file():
+        return file_digest(path).hex()
+    digest = hashlib.sha256()
+    for file in system_files(path):
+        digest.update(file.relative_to(path).as_posix().encode() + b"\0" + file_digest(file))
     return digest.hexdigest()
 
 

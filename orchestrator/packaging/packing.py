@@ -21,6 +21,7 @@ from lxml import etree
 
 from orchestrator.folders import replacing
 from orchestrator.packaging.builder import stored_hash
+from orchestrator.provenance import file_digest, system_files
 from orchestrator.ssp import NS, in_build_folder
 
 
@@ -28,31 +29,19 @@ from orchestrator.ssp import NS, in_build_folder
 PACK_FORMAT = b"railcosim-pack 1"
 
 
-def _system_files(folder: Path) -> List[Path]:
-    return [p for p in sorted(folder.rglob("*")) if p.is_file() and "__pycache__" not in p.parts]
-
-
-def _file_digest(path: Path) -> bytes:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.digest()
-
-
 def _fmu_digest(fmu: Path) -> bytes:
     """What an FMU is made from: the content hash our build stores in it (the same whenever it
     is built from the same sources), else the hash of its bytes (a foreign FMU)."""
     built = stored_hash(fmu)
-    return b"content_hash " + built.encode() if built else b"sha256 " + _file_digest(fmu)
+    return b"content_hash " + built.encode() if built else b"sha256 " + file_digest(fmu)
 
 
 def fingerprint(folder: Path, fmu_dir: Path, sources: List[str]) -> bytes:
     """What the archive of ``folder`` is made from: its files' names and bytes and the FMUs it
     takes from ``fmu_dir`` (:func:`_fmu_digest`)."""
     digest = hashlib.sha256(PACK_FORMAT)
-    for path in _system_files(folder):
-        digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + _file_digest(path))
+    for path in system_files(folder):
+        digest.update(path.relative_to(folder).as_posix().encode() + b"\0" + file_digest(path))
     for source in sorted(set(sources)):
         if not (folder / source).is_file():
             digest.update(source.encode() + b"\0" + _fmu_digest(fmu_dir / in_build_folder(source)))
@@ -90,7 +79,7 @@ def _pack(folder: Path, sources: List[str], fmu_dir: Path, dest: Path, force: bo
     with replacing(target, binary=True, concurrent=True) as handle:
         with zipfile.ZipFile(handle, "w", zipfile.ZIP_DEFLATED) as archive:
             archive.comment = stamp
-            for path in _system_files(folder):
+            for path in system_files(folder):
                 archive.write(path, path.relative_to(folder).as_posix())
             data_files = sorted(p for p in (folder / "resources").glob("*")
                                 if p.is_file() and p.suffix != ".fmu")

@@ -20,7 +20,7 @@ from fmus.errors import FmuInputError
 from fmus.signalling import aspects as sig
 from fmus.signalling import cab_systems
 from fmus.units import KMH_PER_MPS, MPS_PER_KMH
-from orchestrator.verdicts.verdict import data_file, transmitted_indication
+from orchestrator.verdicts.verdict import system_object, transmitted_indication
 
 #: an aspect's colour (ALSN, ALSU and the digital systems are drawn by their aspect)
 ASPECT_COLOURS = {sig.WHITE: "#d0d0d0", sig.RED: "#d62728", sig.RED_YELLOW: "#ff7f0e",
@@ -157,8 +157,7 @@ class ChainReader:
     def __init__(self, cab: cab_systems.CabSystem, parameters: Mapping[str, object], top_kmh: float):
         self.cab, self.top_kmh = cab, top_kmh
         self.category = str(parameters.get("train_category", "passenger"))
-        table = parameters.get("codes_file")
-        self.system = cab.system(str(data_file(table, cab.codes_file)) if table and cab.codes_file else None)
+        self.system = system_object(cab, parameters)
         self.v_max_mps = float(parameters.get("v_max", 0.0) or 0.0)
 
     def _of_code(self, code: int) -> Optional[Tuple[int, float, float, int, int]]:

@@ -101,14 +101,15 @@ def merged_labels(parts: Sequence[chain_view.Segment]) -> List[tuple]:
     return [tuple(m) for m in merged]
 
 
-def _episodes(fig, found: Sequence[chain_view.Episode], row) -> None:
+def _episodes(fig, found: Sequence[chain_view.Episode], row=None) -> None:
+    """Each episode a dashed line across ``fig``; with ``row``, a marker on it to hover."""
     from bokeh.models import ColumnDataSource, HoverTool, Span
 
-    if not found:
-        return
     for episode in found:
         fig.add_layout(Span(location=episode.t_s, dimension="height", line_color=EPISODE_COLOURS[episode.kind],
-                            line_dash="dashed", line_width=1.5))
+                            line_dash="dashed", line_width=1.5 if row is not None else 1.0))
+    if not found or row is None:
+        return
     source = ColumnDataSource({"t": [e.t_s for e in found], "row": [row] * len(found),
                                "kind": [e.kind for e in found], "text": [e.text for e in found],
                                "colour": [EPISODE_COLOURS[e.kind] for e in found]})
@@ -118,7 +119,7 @@ def _episodes(fig, found: Sequence[chain_view.Episode], row) -> None:
 
 def speed_figure(results: Mapping[str, np.ndarray], train: str, ato: Optional[str], receiver: Optional[str], x_range,
                  found: Sequence[chain_view.Episode] = ()):
-    from bokeh.models import ColumnDataSource, HoverTool, Span
+    from bokeh.models import ColumnDataSource, HoverTool
     from bokeh.plotting import figure
 
     fig = figure(height=260, sizing_mode="stretch_width", x_range=x_range, tools="xpan,xwheel_zoom,box_zoom,reset,save",
@@ -146,9 +147,7 @@ def speed_figure(results: Mapping[str, np.ndarray], train: str, ato: Optional[st
     fig.legend.click_policy = "hide"
     fig.legend.label_text_font_size = "8pt"
     _legend_outside(fig)
-    for episode in found:
-        fig.add_layout(Span(location=episode.t_s, dimension="height", line_color=EPISODE_COLOURS[episode.kind],
-                            line_dash="dashed", line_width=1.0))
+    _episodes(fig, found)
     return fig
 
 

@@ -134,27 +134,31 @@ def make_report(run_dir: Path, output: Optional[Path] = None, at_s: Optional[flo
         written.append(_time_distance(output, results, trains, components))
     if metered:
         written.append(_energy(output, results, metered))
-    capture = _coil_capture(run_dir, output, components, at_s)
-    if capture:
-        written.append(capture)
+    captured = _capture_data(run_dir)         # read once: the PNG and the page both draw it
+    picture = _coil_capture(captured, output, components, at_s) if captured else None
+    if picture:
+        written.append(picture)
     elif at_s is not None:
         print_warning(f"--at {at_s:g}: {run_dir} has no coil-EMF capture, so there is no coil_emf.png to centre; "
                       f"run with --capture rail.e_coil@T0:T1 for one")
     print(verdict_table(summary))
     line = _line_of(components, trains[0].get("ato")) if trains else None
-    written.append(write_html(output / "report.html", summary, written, metadata, results, line,
-                              _capture_data(run_dir)))
+    written.append(write_html(output / "report.html", summary, written, metadata, results, line, captured))
     return written
 
 
 def _capture_data(run_dir: Path) -> Optional[tuple]:
-    """(the first coil-EMF capture's columns, its EMF column's name), or None for no capture."""
+    """(the first coil-EMF capture's columns, its EMF column's name), or None for no capture; a
+    capture without rows or without an EMF column is one line naming the file."""
     captures = sorted(run_dir.glob("capture_*e_coil*.csv"))
     if not captures:
         return None
     capture = read_results_file(captures[0])
     columns = [name for name in capture if name != "time"]
-    return (capture, columns[0]) if columns and len(capture["time"]) else None
+    if not columns or not len(capture["time"]):
+        raise UserError(f"{captures[0]}: {'no rows' if columns else 'no EMF column'} (not a capture a railcosim "
+                        "run wrote)")
+    return capture, columns[0]
 
 
 def _parameters_of(components: Dict[str, dict], name: Optional[str]) -> dict:
@@ -399,20 +403,14 @@ def _energy(output: Path, results, trains) -> Path:
     return _save(fig, output / "energy.png")
 
 
-def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]) -> Optional[Path]:
+def _coil_capture(captured: tuple, output: Path, components, at_s: Optional[float]) -> Path:
+    """coil_emf.png from a capture (:func:`_capture_data`)."""
     import matplotlib.pyplot as plt
     from scipy.signal import sosfilt
 
-    captures = sorted(run_dir.glob("capture_*e_coil*.csv"))
-    if not captures:
-        return None
-    capture = read_results_file(captures[0])
-    columns = [name for name in capture if name != "time"]
-    if not columns or not len(capture["time"]):
-        raise UserError(f"{captures[0]}: {'no rows' if columns else 'no EMF column'} (not a capture a railcosim "
-                        "run wrote)")
+    capture, column = captured
     t = capture["time"]
-    emf = capture[columns[0]]
+    emf = capture[column]
     receiver = next((n for n, c in components.items() if c.get("model_identifier") == RECEIVER_MODEL), None)
     params = _parameters_of(components, receiver)
     band = _receiver_band_pass(params)
@@ -422,7 +420,7 @@ def _coil_capture(run_dir: Path, output: Path, components, at_s: Optional[float]
     if not window.any():
         raise UserError(f"--at {at_s}: outside the capture ({t[0]:g}…{t[-1]:g} s)")
     fig, ax = plt.subplots(figsize=(11, 4))
-    ax.plot(t[window], emf[window], lw=0.6, color="0.5", label=f"coil EMF ({columns[0]})")
+    ax.plot(t[window], emf[window], lw=0.6, color="0.5", label=f"coil EMF ({column})")
     if filtered is not None:
         ax.plot(t[window], filtered[window], lw=0.9, color="C0", label="receiver band-pass output")
     ax.set_xlabel("time (s)")

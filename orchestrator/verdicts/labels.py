@@ -22,7 +22,7 @@ from fmus.signalling.block_rules import SIGNAL_NAMES
 from fmus.wayside_coder.core import STATUS_NAMES
 from orchestrator.graph import Node, SystemGraph
 from orchestrator.ports import base_of
-from orchestrator.verdicts.verdict import data_file
+from orchestrator.verdicts.verdict import system_object
 
 ATO, RECEIVER, CODER = (ato_controller.MODEL_IDENTIFIER, loco_receiver.MODEL_IDENTIFIER,
                         wayside_coder.MODEL_IDENTIFIER)
@@ -41,8 +41,7 @@ def _codes(node: Node) -> Mapping[int, str]:
     """The codes of the cab system the component's ``system`` names, from its code table (its
     ``codes_file``, else the bundled one), as a receiver of its ``train_category`` reads them."""
     cab = cab_systems.lookup(_parameter(node, "system", cab_systems.DEFAULT.name))
-    table = node.parameters.get("codes_file")
-    system = cab.system(str(data_file(table, cab.codes_file)) if table and cab.codes_file else None)
+    system = system_object(cab, node.parameters)
     return cab.code_labels(system, _parameter(node, "train_category", "passenger"))
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import bisect
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -228,6 +228,13 @@ def _parameter(graph: SystemGraph, component: str, name: str, default=None):
         return node.parameters[name]
     var = node.interface.variables.get(name)
     return default if var is None or var.start is None else var.start
+
+
+def system_object(cab: cab_systems.CabSystem, parameters: Mapping[str, object]):
+    """The cab system's object as a component with these parameters reads it: its
+    ``codes_file`` where one is set (resolved as the FMU opens it), else the bundled table."""
+    table = parameters.get("codes_file")
+    return cab.system(str(data_file(table, cab.codes_file)) if table and cab.codes_file else None)
 
 
 def data_file(value, default):
@@ -456,8 +463,7 @@ def receivers_of(graph: SystemGraph) -> List[_Receiver]:
         params = node.parameters
         try:
             cab = cab_systems.of_parameters(params)
-            table = params.get("codes_file")
-            system = cab.system(str(data_file(table, cab.codes_file)) if table and cab.codes_file else None)
+            system = system_object(cab, params)
         except FmuInputError:
             continue                  # the receiver itself reports it at initialisation
         category = str(params.get("train_category", "passenger"))
